@@ -1,0 +1,116 @@
+"""Collision of the body square and the booms with the cave's rock polygons, vectorised.
+
+Rock is a set of closed polygons. A segment collides when it crosses a polygon edge or lies
+inside a polygon; the body collides when an edge of its square crosses rock, when it lies inside
+rock, or when rock lies inside it. A boom may touch rock only at its own anchor, so boom segments
+are checked from the shoulder to a point `ANCHOR_CLEARANCE` short of the anchor.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+ANCHOR_CLEARANCE = 0.02  # m; a boom's last 2 cm, at its gripper, may touch the rock it grasps.
+
+
+class Rock:
+    """The cave's rock polygons packed as edge arrays for vectorised tests."""
+
+    def __init__(self, polygons: Sequence[np.ndarray]):
+        self.polygons = [np.asarray(p, dtype=float) for p in polygons]
+        if self.polygons:
+            self.edge_start = np.concatenate(self.polygons)
+            self.edge_end = np.concatenate([np.roll(p, -1, axis=0) for p in self.polygons])
+            self.vertex = np.array([p[0] for p in self.polygons])  # one vertex per polygon
+        else:
+            self.edge_start = self.edge_end = np.zeros((0, 2))
+            self.vertex = np.zeros((0, 2))
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Whether each point (shape (..., 2)) lies inside some polygon (even-odd rule)."""
+        pts = np.asarray(points, dtype=float)
+        flat = pts.reshape(-1, 2)
+        inside = np.zeros(flat.shape[0], dtype=bool)
+        for poly in self.polygons:
+            inside |= _points_in_polygon(flat, poly)
+        return inside.reshape(pts.shape[:-1])
+
+    def segments_hit(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Whether each segment a -> b (shapes (..., 2)) crosses an edge or lies inside rock."""
+        a = np.asarray(a, dtype=float)
+        b = np.asarray(b, dtype=float)
+        shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
+        a2 = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
+        b2 = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
+        hit = _segments_cross(a2, b2, self.edge_start, self.edge_end).any(axis=1)
+        hit |= self.contains(a2)
+        return hit.reshape(shape)
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """Distance from each point to the nearest rock edge, shape points.shape[:-1]."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        e = self.edge_end - self.edge_start
+        rel = pts[:, None, :] - self.edge_start[None]
+        t = np.clip(np.sum(rel * e, -1) / np.maximum(np.sum(e * e, -1), 1e-300), 0.0, 1.0)
+        closest = self.edge_start[None] + t[..., None] * e[None]
+        d = np.linalg.norm(pts[:, None, :] - closest, axis=-1).min(axis=1)
+        return d.reshape(np.asarray(points).shape[:-1])
+
+
+def _points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    x, y = points[:, 0:1], points[:, 1:2]
+    x0, y0 = poly[None, :, 0], poly[None, :, 1]
+    q = np.roll(poly, -1, axis=0)
+    x1, y1 = q[None, :, 0], q[None, :, 1]
+    straddle = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_cross = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (np.sum(straddle & (x < x_cross), axis=1) % 2) == 1
+
+
+def _orient(ax, ay, bx, by, cx, cy):
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+def _segments_cross(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Proper or touching intersection of segments a_i b_i with c_j d_j, shape (I, J)."""
+    ax, ay = a[:, 0:1], a[:, 1:2]
+    bx, by = b[:, 0:1], b[:, 1:2]
+    cx, cy = c[None, :, 0], c[None, :, 1]
+    dx, dy = d[None, :, 0], d[None, :, 1]
+    o1 = _orient(ax, ay, bx, by, cx, cy)
+    o2 = _orient(ax, ay, bx, by, dx, dy)
+    o3 = _orient(cx, cy, dx, dy, ax, ay)
+    o4 = _orient(cx, cy, dx, dy, bx, by)
+    return (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0))
+
+
+def polygon_is_simple(poly: np.ndarray) -> tuple[bool, str]:
+    """Whether a closed polygon is simple (no two non-adjacent edges meet); the reason if not."""
+    poly = np.asarray(poly, dtype=float)
+    n = len(poly)
+    if n < 3:
+        return False, f"needs at least 3 vertices, has {n}"
+    q = np.roll(poly, -1, axis=0)
+    if np.any(np.linalg.norm(q - poly, axis=1) < 1e-12):
+        return False, "has a repeated vertex (an edge of zero length)"
+    cross = _segments_cross(poly, q, poly, q)
+    idx = np.arange(n)
+    adjacent = (np.abs(idx[:, None] - idx[None, :]) <= 1) | (
+        np.abs(idx[:, None] - idx[None, :]) == n - 1)
+    bad = np.argwhere(cross & ~adjacent)
+    if len(bad):
+        i, j = bad[0]
+        return False, f"edges {i} and {j} intersect (the polygon crosses itself)"
+    area = 0.5 * np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
+    if abs(area) < 1e-12:
+        return False, "has zero area"
+    return True, ""
+
+
+def signed_area(poly: np.ndarray) -> float:
+    poly = np.asarray(poly, dtype=float)
+    q = np.roll(poly, -1, axis=0)
+    return float(0.5 * np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1]))

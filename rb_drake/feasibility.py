@@ -1,0 +1,195 @@
+"""Pose feasibility in a stance: kinematic limits, collisions, statics and probability.
+
+`check_poses` is vectorised over poses and reports the first failing test per pose (a reason
+code and the boom concerned); `diagnose_pose` explains one pose in words, listing every problem.
+"""
+
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+from rb_drake import geometry
+from rb_drake.collision import ANCHOR_CLEARANCE, Rock
+from rb_drake.grasp import HALF_PI
+from rb_drake.params import RobotParams
+from rb_drake.stance import Stance
+from rb_drake.statics import Allocation, allocate
+
+
+class World(Protocol):
+    """What feasibility needs of a scenario."""
+
+    robot: RobotParams
+
+    @property
+    def rock(self) -> Rock: ...
+
+    @property
+    def gravity_vector(self) -> np.ndarray: ...
+
+
+class Reason(IntEnum):
+    """Why a pose is infeasible, in the order the tests are applied."""
+
+    FEASIBLE = 0
+    BOOM_LENGTH = 1
+    SHOULDER_ANGLE = 2
+    BODY_COLLISION = 3
+    BOOM_COLLISION = 4
+    PULL_ANGLE = 5
+    SHOULDER_TORQUE = 6
+    STATICS = 7
+    PROBABILITY = 8
+
+
+REASON_TEXT = {
+    Reason.FEASIBLE: "feasible",
+    Reason.BOOM_LENGTH: "boom length out of range",
+    Reason.SHOULDER_ANGLE: "shoulder angle out of range",
+    Reason.BODY_COLLISION: "body collides with rock",
+    Reason.BOOM_COLLISION: "boom collides with rock",
+    Reason.PULL_ANGLE: "grasp pulled at 90 degrees or more from its normal",
+    Reason.SHOULDER_TORQUE: "free limb's shoulder torque over the limit",
+    Reason.STATICS: "no tensions within bounds balance the load",
+    Reason.PROBABILITY: "probability of success below p_min",
+}
+
+
+class PoseCheck(NamedTuple):
+    feasible: np.ndarray       # (P,) bool
+    reason: np.ndarray         # (P,) Reason codes (first failure)
+    boom: np.ndarray           # (P,) boom concerned, -1 where not one boom
+    allocation: Allocation     # tensions and probabilities at every pose
+    lengths: np.ndarray        # (P, 4)
+    shoulder_angles: np.ndarray  # (P, 4)
+
+    @property
+    def probability(self) -> np.ndarray:
+        return np.exp(self.allocation.robustness)
+
+
+def _targets(stance: Stance, free_tip: np.ndarray | None) -> np.ndarray:
+    targets = np.where(stance.attached[:, None], stance.positions, np.nan)
+    j = stance.free_boom
+    if j is not None and free_tip is not None:
+        targets[j] = free_tip
+    return targets
+
+
+def check_poses(world: World, stance: Stance, poses: np.ndarray,
+                free_tip: np.ndarray | None = None) -> PoseCheck:
+    """Feasibility of each pose in `stance` (a 3-stance also needs its free gripper's position)."""
+    robot = world.robot
+    poses = geometry.as_poses(poses)
+    P = poses.shape[0]
+    targets = _targets(stance, free_tip)
+    geo = geometry.boom_geometry(robot, poses, targets)
+    used = np.isfinite(targets[:, 0])  # booms with a tip position: attached, or the free one
+
+    reason = np.full(P, int(Reason.FEASIBLE))
+    boom = np.full(P, -1)
+
+    def flag(bad: np.ndarray, code: Reason) -> None:
+        """Record `code` where a boom (bad: (P, 4)) or the pose (bad: (P,)) fails first."""
+        if bad.ndim == 2:
+            first = np.argmax(bad, axis=1)
+            bad_pose = bad.any(axis=1)
+        else:
+            first, bad_pose = np.full(P, -1), bad
+        new = bad_pose & (reason == Reason.FEASIBLE)
+        reason[new] = int(code)
+        boom[new] = first[new]
+
+    lo, hi = robot.boom_length
+    flag(used & ((geo.length < lo) | (geo.length > hi)), Reason.BOOM_LENGTH)
+    flag(used & (np.abs(geo.shoulder_angle) > robot.shoulder_range + 1e-12),
+         Reason.SHOULDER_ANGLE)
+    rock = world.rock
+    if rock.polygons:
+        corners = geometry.body_corners(robot, poses)
+        body_hit = rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
+        body_hit |= _rock_inside_body(rock, corners)
+        flag(body_hit, Reason.BODY_COLLISION)
+        with np.errstate(invalid="ignore"):
+            end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u)
+        boom_hit = rock.segments_hit(geo.shoulders, np.nan_to_num(end)) & used
+        flag(boom_hit, Reason.BOOM_COLLISION)
+
+    alloc = allocate(robot, world.gravity_vector, poses, stance, free_tip)
+    flag(stance.attached & ~(np.abs(np.nan_to_num(alloc.pull_angles)) < HALF_PI),
+         Reason.PULL_ANGLE)
+    if stance.free_boom is not None:
+        flag(np.abs(alloc.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE)
+    flag(~alloc.statics_ok, Reason.STATICS)
+    flag(alloc.robustness < robot.log_p_min, Reason.PROBABILITY)
+    feasible = reason == Reason.FEASIBLE
+    return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle)
+
+
+def _rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
+    """Whether some rock polygon lies entirely inside the body square (its vertex inside)."""
+    if not len(rock.vertex):
+        return np.zeros(corners.shape[0], dtype=bool)
+    c = corners[:, None, :, :]        # (P, 1, 4, 2)
+    v = rock.vertex[None, :, None, :]  # (1, W, 1, 2)
+    e = np.roll(corners, -1, axis=1)[:, None] - c
+    side = e[..., 0] * (v[..., 1] - c[..., 1]) - e[..., 1] * (v[..., 0] - c[..., 0])
+    return (side > 0).all(axis=2).any(axis=1)
+
+
+def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
+                  free_tip: np.ndarray | None = None) -> list[str]:
+    """Every reason `pose` is infeasible, in words with the values; [] when it is feasible."""
+    robot = world.robot
+    pose = np.asarray(pose, dtype=float)
+    check = check_poses(world, stance, pose, free_tip)
+    if check.feasible[0]:
+        return []
+    targets = _targets(stance, free_tip)
+    geo = geometry.boom_geometry(robot, pose, targets)
+    out: list[str] = []
+    lo, hi = robot.boom_length
+    rng = robot.shoulder_range_deg
+    for i in range(4):
+        if not np.isfinite(targets[i, 0]):
+            continue
+        L, th = geo.length[0, i], np.degrees(geo.shoulder_angle[0, i])
+        if not lo <= L <= hi:
+            out.append(f"boom {i}: length {L:.3f} m outside [{lo}, {hi}] m")
+        if abs(th) > rng + 1e-9:
+            out.append(f"boom {i}: shoulder angle {th:+.1f} deg outside +-{rng} deg")
+    rock = world.rock
+    if rock.polygons:
+        corners = geometry.body_corners(robot, pose)
+        if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any() or _rock_inside_body(
+                rock, corners)[0]:
+            out.append("body collides with rock")
+        end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[0])
+        for i in range(4):
+            if np.isfinite(targets[i, 0]) and rock.segments_hit(geo.shoulders[0, i],
+                                                                 end[i])[()]:
+                out.append(f"boom {i}: collides with rock")
+    alloc = check.allocation
+    for i in np.flatnonzero(stance.attached):
+        psi = np.degrees(alloc.pull_angles[0, i])
+        if not abs(psi) < 90.0:
+            out.append(f"boom {i}: anchor {stance.ids[i]} pulled at {psi:+.1f} deg from its "
+                       "normal (must be within +-90)")
+    j = stance.free_boom
+    if j is not None and abs(alloc.shoulder_torque[0]) > robot.shoulder_torque_max:
+        out.append(f"boom {j} (free): shoulder torque {alloc.shoulder_torque[0]:.2f} N m over "
+                   f"the limit {robot.shoulder_torque_max} N m")
+    if not alloc.statics_ok[0]:
+        out.append(f"statics: no tensions within [{robot.boom_tension[0]}, "
+                   f"{robot.boom_tension[1]}] N balance gravity at this pose")
+    elif alloc.robustness[0] < robot.log_p_min:
+        probs = ", ".join(f"boom {i} {np.exp(alloc.log_probs[0, i]):.3f}"
+                          for i in np.flatnonzero(stance.attached))
+        out.append(f"probability {np.exp(alloc.robustness[0]):.3f} below p_min "
+                   f"{robot.p_min} ({probs})")
+    if not out:  # the vectorised check failed on something the words above do not cover
+        out.append(REASON_TEXT[Reason(int(check.reason[0]))])
+    return out

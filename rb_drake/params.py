@@ -1,0 +1,160 @@
+"""Robot parameters: the one source of truth for ReachBot's geometry, masses and limits.
+
+Units are SI (m, kg, N, N m); angles are stored in radians inside the dataclass and in degrees
+in files (the `*_deg` names), because people write degrees.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+NUM_BOOMS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotParams:
+    """Planar ReachBot: a square body with four extendable booms.
+
+    Boom i leaves the body at shoulder i (body frame), with its equilibrium direction
+    `shoulder_directions[i]` and a range of +-`shoulder_range` about it.
+    """
+
+    body_size: tuple[float, float] = (0.30, 0.30)
+    body_mass: float = 2.0
+    shoulders: tuple[tuple[float, float], ...] = (
+        (0.15, 0.15),
+        (-0.15, 0.15),
+        (-0.15, -0.15),
+        (0.15, -0.15),
+    )
+    shoulder_directions_deg: tuple[float, ...] = (45.0, 135.0, 225.0, 315.0)
+    shoulder_range_deg: float = 45.0
+    boom_length: tuple[float, float] = (0.01, 2.0)
+    boom_tension: tuple[float, float] = (0.5, 50.0)
+    shoulder_torque_max: float = 5.0
+    gripper_mass: float = 0.10
+    boom_linear_density: float = 0.12
+    attach_failure: float = 0.01
+    p_min: float = 0.95
+
+    # Derived arrays, for the vectorised kernels.
+    @property
+    def shoulder_array(self) -> np.ndarray:
+        """Shoulder positions in the body frame, shape (4, 2)."""
+        return np.asarray(self.shoulders, dtype=float)
+
+    @property
+    def shoulder_directions(self) -> np.ndarray:
+        """Equilibrium directions in radians, shape (4,)."""
+        return np.radians(np.asarray(self.shoulder_directions_deg, dtype=float))
+
+    @property
+    def shoulder_range(self) -> float:
+        return math.radians(self.shoulder_range_deg)
+
+    @property
+    def log_p_min(self) -> float:
+        """r_min: the smallest allowed configuration robustness, log(p_min)."""
+        return math.log(self.p_min)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The resolved parameters with the names used in scenario and plan files."""
+        return {
+            "body_size": list(self.body_size),
+            "body_mass": self.body_mass,
+            "shoulders": [list(s) for s in self.shoulders],
+            "shoulder_directions_deg": list(self.shoulder_directions_deg),
+            "shoulder_range_deg": self.shoulder_range_deg,
+            "boom_length": list(self.boom_length),
+            "boom_tension": list(self.boom_tension),
+            "shoulder_torque_max": self.shoulder_torque_max,
+            "gripper_mass": self.gripper_mass,
+            "boom_linear_density": self.boom_linear_density,
+            "attach_failure": self.attach_failure,
+            "p_min": self.p_min,
+        }
+
+    def replace(self, **changes: Any) -> RobotParams:
+        return dataclasses.replace(self, **changes)
+
+
+class ParamError(ValueError):
+    """A robot parameter override is malformed. `field` is its name inside `robot:`."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+def _number(field: str, value: Any, lo: float | None = None, hi: float | None = None,
+            lo_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParamError(field, f"expected a number, got {type(value).__name__} {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ParamError(field, f"must be finite, got {value!r}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        raise ParamError(field, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+    if hi is not None and v > hi:
+        raise ParamError(field, f"must be <= {hi}, got {v}")
+    return v
+
+
+def _vector(field: str, value: Any, n: int) -> tuple[float, ...]:
+    if not isinstance(value, list | tuple) or len(value) != n:
+        raise ParamError(field, f"expected a list of {n} numbers, got {value!r}")
+    return tuple(_number(f"{field}[{k}]", v) for k, v in enumerate(value))
+
+
+def _interval(field: str, value: Any, lo: float) -> tuple[float, float]:
+    a, b = _vector(field, value, 2)
+    if a < lo:
+        raise ParamError(f"{field}[0]", f"must be >= {lo}, got {a}")
+    if not a < b:
+        raise ParamError(field, f"expected [min, max] with min < max, got {[a, b]}")
+    return a, b
+
+
+def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
+    """Defaults updated by `overrides` (a scenario's `robot:` block); raises ParamError."""
+    if overrides is None:
+        return RobotParams()
+    if not isinstance(overrides, Mapping):
+        raise ParamError("robot", f"expected a mapping of parameter names, got {overrides!r}")
+    known = {f.name for f in dataclasses.fields(RobotParams)}
+    changes: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if key not in known:
+            raise ParamError(str(key), f"unknown robot parameter; known: {', '.join(sorted(known))}")
+        if key == "body_size":
+            w, h = _vector(key, value, 2)
+            if w <= 0 or h <= 0:
+                raise ParamError(key, f"sides must be positive, got {[w, h]}")
+            changes[key] = (w, h)
+        elif key == "shoulders":
+            if not isinstance(value, list | tuple) or len(value) != NUM_BOOMS:
+                raise ParamError(key, f"expected {NUM_BOOMS} [x, y] pairs, got {value!r}")
+            changes[key] = tuple(_vector(f"{key}[{i}]", s, 2) for i, s in enumerate(value))
+        elif key == "shoulder_directions_deg":
+            changes[key] = _vector(key, value, NUM_BOOMS)
+        elif key == "shoulder_range_deg":
+            changes[key] = _number(key, value, 0.0, 180.0, lo_open=True)
+        elif key == "boom_length":
+            changes[key] = _interval(key, value, 0.0)
+        elif key == "boom_tension":
+            changes[key] = _interval(key, value, 0.0)
+        elif key in ("body_mass",):
+            changes[key] = _number(key, value, 0.0, lo_open=True)
+        elif key in ("shoulder_torque_max", "gripper_mass", "boom_linear_density"):
+            changes[key] = _number(key, value, 0.0)
+        elif key == "attach_failure":
+            changes[key] = _number(key, value, 0.0, 1.0)
+        elif key == "p_min":
+            changes[key] = _number(key, value, 0.0, 1.0, lo_open=True)
+    return RobotParams(**changes)

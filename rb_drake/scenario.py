@@ -1,0 +1,330 @@
+"""Scenarios (caves): walls, anchors with their limit surfaces, the robot, start and goal.
+
+File format `reachbot-scenario/1` (YAML; docs/formats.md). `load_scenario` refuses malformed
+input with one `ScenarioError` naming the file, the field and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from rb_drake.collision import Rock, polygon_is_simple, signed_area
+from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
+from rb_drake.stance import Stance
+
+FORMAT = "reachbot-scenario/1"
+MARS_GRAVITY = (0.0, -3.71)
+ANCHOR_DEPTH_TOL = 0.01  # m: an anchor may sit this far inside its rock (numerical slack)
+
+
+class ScenarioError(ValueError):
+    """A scenario the planner refuses: `source` (file), `field` (dotted path) and `reason`."""
+
+    def __init__(self, source: str, field: str, reason: str):
+        super().__init__(f"{source}: {field}: {reason}")
+        self.source = source
+        self.field = field
+        self.reason = reason
+
+
+@dataclasses.dataclass(frozen=True)
+class Anchor:
+    """A grasp site: position on the rock, outward unit normal, limit-surface parameters."""
+
+    id: str
+    position: tuple[float, float]
+    normal: tuple[float, float]
+    f_normal: float
+    f_lateral: float
+    sigma_normal: float
+    sigma_lateral: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "position": [float(v) for v in self.position],
+            "normal": [float(v) for v in self.normal],
+            "limit": {"normal": float(self.f_normal), "lateral": float(self.f_lateral)},
+            "sigma": {"normal": float(self.sigma_normal), "lateral": float(self.sigma_lateral)},
+        }
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    name: str
+    gravity: tuple[float, float]
+    robot: RobotParams
+    walls: tuple[np.ndarray, ...]
+    anchors: tuple[Anchor, ...]
+    start_pose: tuple[float, float, float]
+    start_stance: tuple[str, ...]
+    goal_position: tuple[float, float]
+    goal_tolerance: float
+    source: str = "<scenario>"
+    robot_overrides: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    @cached_property
+    def rock(self) -> Rock:
+        return Rock(self.walls)
+
+    @cached_property
+    def anchor_index(self) -> dict[str, int]:
+        return {a.id: k for k, a in enumerate(self.anchors)}
+
+    @cached_property
+    def anchor_positions(self) -> np.ndarray:
+        return np.array([a.position for a in self.anchors], dtype=float).reshape(-1, 2)
+
+    @cached_property
+    def anchor_normals(self) -> np.ndarray:
+        return np.array([a.normal for a in self.anchors], dtype=float).reshape(-1, 2)
+
+    @property
+    def gravity_vector(self) -> np.ndarray:
+        return np.asarray(self.gravity, dtype=float)
+
+    def stance(self, ids: Sequence[str | None]) -> Stance:
+        """Stance arrays for anchor ids per boom (None: the boom is free)."""
+        if len(ids) != NUM_BOOMS:
+            raise ValueError(f"a stance names {NUM_BOOMS} anchors (None for free), got {ids!r}")
+        rows = [self.anchors[self.anchor_index[i]] if i is not None else None for i in ids]
+        nan2 = (math.nan, math.nan)
+
+        def col(get, default):
+            return np.array([get(a) if a is not None else default for a in rows], dtype=float)
+
+        return Stance(
+            ids=tuple(ids),
+            attached=np.array([a is not None for a in rows]),
+            positions=col(lambda a: a.position, nan2),
+            normals=col(lambda a: a.normal, nan2),
+            f_normal=col(lambda a: a.f_normal, math.nan),
+            f_lateral=col(lambda a: a.f_lateral, math.nan),
+            sigma_normal=col(lambda a: a.sigma_normal, math.nan),
+            sigma_lateral=col(lambda a: a.sigma_lateral, math.nan),
+        )
+
+    def to_dict(self, resolved: bool = False) -> dict[str, Any]:
+        """The file form; `resolved` writes every robot parameter, not just the overrides."""
+        return {
+            "format": FORMAT,
+            "name": self.name,
+            "gravity": [float(g) for g in self.gravity],
+            "robot": self.robot.to_dict() if resolved else dict(self.robot_overrides),
+            "walls": [[[float(x), float(y)] for x, y in w] for w in self.walls],
+            "anchors": [a.to_dict() for a in self.anchors],
+            "start": {"pose": [float(v) for v in self.start_pose],
+                      "stance": list(self.start_stance)},
+            "goal": {"position": [float(v) for v in self.goal_position],
+                     "tolerance": float(self.goal_tolerance)},
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# Parsing and validation
+
+
+class _Reader:
+    """Typed field access that raises ScenarioError with the field's path."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, field: str, reason: str) -> ScenarioError:
+        return ScenarioError(self.source, field, reason)
+
+    def mapping(self, field: str, value: Any) -> Mapping[str, Any]:
+        if not isinstance(value, Mapping):
+            raise self.fail(field, f"expected a mapping, got {_describe(value)}")
+        return value
+
+    def require(self, field: str, m: Mapping[str, Any], key: str) -> Any:
+        if key not in m:
+            raise self.fail(f"{field}.{key}" if field else key, "missing required field")
+        return m[key]
+
+    def number(self, field: str, value: Any, positive: bool = False,
+               nonnegative: bool = False) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.fail(field, f"expected a number, got {_describe(value)}")
+        v = float(value)
+        if not math.isfinite(v):
+            raise self.fail(field, f"must be a finite number, got {value!r}")
+        if positive and v <= 0:
+            raise self.fail(field, f"must be positive, got {v}")
+        if nonnegative and v < 0:
+            raise self.fail(field, f"must not be negative, got {v}")
+        return v
+
+    def vector(self, field: str, value: Any, n: int) -> tuple[float, ...]:
+        if not isinstance(value, list | tuple) or len(value) != n:
+            raise self.fail(field, f"expected a list of {n} numbers, got {_describe(value)}")
+        return tuple(self.number(f"{field}[{k}]", v) for k, v in enumerate(value))
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+TOP_LEVEL = {"format", "name", "gravity", "robot", "walls", "anchors", "start", "goal"}
+
+
+def scenario_from_dict(data: Any, source: str = "<scenario>",
+                       check_start: bool = True) -> Scenario:
+    """Parse and validate a scenario mapping; raises ScenarioError."""
+    rd = _Reader(source)
+    data = rd.mapping("(top level)", data)
+    unknown = sorted(set(data) - TOP_LEVEL)
+    if unknown:
+        raise rd.fail(str(unknown[0]), f"unknown field; expected one of {sorted(TOP_LEVEL)}")
+    fmt = rd.require("", data, "format")
+    if fmt != FORMAT:
+        raise rd.fail("format", f"expected {FORMAT!r}, got {fmt!r}")
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str):
+        raise rd.fail("name", f"expected a string, got {_describe(name)}")
+    gravity = rd.vector("gravity", data.get("gravity", list(MARS_GRAVITY)), 2)
+
+    overrides = data.get("robot") or {}
+    try:
+        robot = robot_from_dict(overrides)
+    except ParamError as e:
+        raise rd.fail(f"robot.{e.field}", e.reason) from None
+
+    walls_raw = rd.require("", data, "walls")
+    if not isinstance(walls_raw, list):
+        raise rd.fail("walls", f"expected a list of polygons, got {_describe(walls_raw)}")
+    walls = []
+    for k, poly in enumerate(walls_raw):
+        field = f"walls[{k}]"
+        if not isinstance(poly, list) or len(poly) < 3:
+            raise rd.fail(field, f"expected a polygon of >= 3 [x, y] points, got {_describe(poly)}")
+        pts = np.array([rd.vector(f"{field}[{i}]", p, 2) for i, p in enumerate(poly)])
+        simple, why = polygon_is_simple(pts)
+        if not simple:
+            raise rd.fail(field, f"not a simple polygon: {why}")
+        if signed_area(pts) < 0:
+            raise rd.fail(field, "vertices are listed clockwise; list them counter-clockwise")
+        walls.append(pts)
+    rock = Rock(walls)
+
+    anchors_raw = rd.require("", data, "anchors")
+    if not isinstance(anchors_raw, list) or not anchors_raw:
+        raise rd.fail("anchors", f"expected a non-empty list, got {_describe(anchors_raw)}")
+    anchors: list[Anchor] = []
+    seen: set[str] = set()
+    for k, raw in enumerate(anchors_raw):
+        anchors.append(_parse_anchor(rd, f"anchors[{k}]", raw, seen, rock))
+
+    start = rd.mapping("start", rd.require("", data, "start"))
+    pose = rd.vector("start.pose", rd.require("start", start, "pose"), 3)
+    stance_raw = rd.require("start", start, "stance")
+    if not isinstance(stance_raw, list) or len(stance_raw) != NUM_BOOMS:
+        raise rd.fail("start.stance", f"expected {NUM_BOOMS} anchor ids (one per boom), "
+                      f"got {_describe(stance_raw)}")
+    for i, aid in enumerate(stance_raw):
+        if not isinstance(aid, str) or aid not in seen:
+            raise rd.fail(f"start.stance[{i}]", f"unknown anchor id {aid!r}")
+    if len(set(stance_raw)) != NUM_BOOMS:
+        raise rd.fail("start.stance", f"each boom needs its own anchor, got {stance_raw}")
+
+    goal = rd.mapping("goal", rd.require("", data, "goal"))
+    goal_pos = rd.vector("goal.position", rd.require("goal", goal, "position"), 2)
+    tol = rd.number("goal.tolerance", goal.get("tolerance", 0.5), positive=True)
+
+    scn = Scenario(name=name, gravity=(gravity[0], gravity[1]), robot=robot, walls=tuple(walls),
+                   anchors=tuple(anchors), start_pose=(pose[0], pose[1], pose[2]),
+                   start_stance=tuple(stance_raw), goal_position=(goal_pos[0], goal_pos[1]),
+                   goal_tolerance=tol, source=source, robot_overrides=dict(overrides))
+    if check_start:
+        from rb_drake.feasibility import diagnose_pose
+
+        problems = diagnose_pose(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
+        if problems:
+            raise rd.fail("start", "the start pose is not feasible in the start stance: "
+                          + "; ".join(problems))
+    return scn
+
+
+def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock) -> Anchor:
+    raw = rd.mapping(field, raw)
+    known = {"id", "position", "normal", "limit", "sigma"}
+    extra = sorted(set(raw) - known)
+    if extra:
+        raise rd.fail(f"{field}.{extra[0]}", f"unknown field; expected one of {sorted(known)}")
+    aid = rd.require(field, raw, "id")
+    if not isinstance(aid, str | int) or isinstance(aid, bool):
+        raise rd.fail(f"{field}.id", f"expected a string, got {_describe(aid)}")
+    aid = str(aid)
+    if aid in seen:
+        raise rd.fail(f"{field}.id", f"duplicate anchor id {aid!r}")
+    seen.add(aid)
+    pos = rd.vector(f"{field}.position", rd.require(field, raw, "position"), 2)
+    normal_raw = rd.require(field, raw, "normal")
+    if isinstance(normal_raw, int | float) and not isinstance(normal_raw, bool):
+        deg = rd.number(f"{field}.normal", normal_raw)
+        normal = (math.cos(math.radians(deg)), math.sin(math.radians(deg)))
+    else:
+        nx, ny = rd.vector(f"{field}.normal", normal_raw, 2)
+        norm = math.hypot(nx, ny)
+        if norm < 1e-9:
+            raise rd.fail(f"{field}.normal", "the zero vector has no direction")
+        normal = (nx / norm, ny / norm)
+    limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
+    sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
+    fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),
+                   positive=True)
+    ft = rd.number(f"{field}.limit.lateral", rd.require(f"{field}.limit", limit, "lateral"),
+                   positive=True)
+    sn = rd.number(f"{field}.sigma.normal", rd.require(f"{field}.sigma", sigma, "normal"),
+                   positive=True)
+    st = rd.number(f"{field}.sigma.lateral", rd.require(f"{field}.sigma", sigma, "lateral"),
+                   positive=True)
+    p = np.array(pos)
+    if rock.polygons and rock.contains(p) and rock.distance(p) > ANCHOR_DEPTH_TOL:
+        raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is inside rock "
+                      f"({float(rock.distance(p)):.3f} m from the surface)")
+    if rock.polygons and rock.contains(p + 0.05 * np.array(normal)):
+        raise rd.fail(f"{field}.normal", f"anchor {aid!r}: the normal points into the rock; "
+                      "it must point out of the wall, into free space")
+    return Anchor(aid, pos, normal, fn, ft, sn, st)
+
+
+def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
+    """Read and validate a scenario file; raises ScenarioError (never a bare parser error)."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ScenarioError(source, "(file)", "no such file") from None
+    except OSError as e:
+        raise ScenarioError(source, "(file)", f"cannot read: {e.strerror}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
+        raise ScenarioError(source, where, f"not valid YAML: {getattr(e, 'problem', e)}") from None
+    return scenario_from_dict(data, source, check_start=check_start)
+
+
+def scenario_to_yaml(scn: Scenario) -> str:
+    return yaml.safe_dump(scn.to_dict(), sort_keys=False, default_flow_style=None, width=100)
+
+
+def bundled_caves() -> dict[str, Path]:
+    """The caves shipped with the package, by name."""
+    folder = Path(__file__).parent / "data" / "caves"
+    return {p.stem: p for p in sorted(folder.glob("*.yaml"))}

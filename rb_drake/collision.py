@@ -44,7 +44,14 @@ class Rock:
         shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
         a2 = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
         b2 = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
-        hit = _segments_cross(a2, b2, self.edge_start, self.edge_end).any(axis=1)
+        # Only edges whose bounding box meets the batch's can be hit: the robot spans a few metres
+        # of a cave that may be tens of metres long.
+        lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
+        hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
+        e_lo = np.minimum(self.edge_start, self.edge_end)
+        e_hi = np.maximum(self.edge_start, self.edge_end)
+        near = np.all((e_hi >= lo) & (e_lo <= hi), axis=1)
+        hit = _segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]).any(axis=1)
         hit |= self.contains(a2)
         return hit.reshape(shape)
 

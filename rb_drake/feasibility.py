@@ -80,8 +80,14 @@ def _targets(stance: Stance, free_tip: np.ndarray | None) -> np.ndarray:
 
 
 def check_poses(world: World, stance: Stance, poses: np.ndarray,
-                free_tip: np.ndarray | None = None) -> PoseCheck:
-    """Feasibility of each pose in `stance` (a 3-stance also needs its free gripper's position)."""
+                free_tip: np.ndarray | None = None, full: bool = False,
+                ignore_grasps: bool = False) -> PoseCheck:
+    """Feasibility of each pose in `stance` (a 3-stance also needs its free gripper's position).
+
+    Tests run cheapest first, and each runs only on the poses that passed the ones before; with
+    `full` every test runs on every pose (for diagnosis), at a higher cost. `ignore_grasps`
+    drops the grasp tests (pull angle, probability): the naive baseline's notion of feasible.
+    """
     robot = world.robot
     poses = geometry.as_poses(poses)
     P = poses.shape[0]
@@ -92,16 +98,20 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     reason = np.full(P, int(Reason.FEASIBLE))
     boom = np.full(P, -1)
 
-    def flag(bad: np.ndarray, code: Reason) -> None:
-        """Record `code` where a boom (bad: (P, 4)) or the pose (bad: (P,)) fails first."""
+    def flag(bad: np.ndarray, code: Reason, rows: np.ndarray | None = None) -> None:
+        """Record `code` where a boom (bad: (n, 4)) or the pose (bad: (n,)) fails first."""
+        rows = np.arange(P) if rows is None else rows
         if bad.ndim == 2:
             first = np.argmax(bad, axis=1)
             bad_pose = bad.any(axis=1)
         else:
-            first, bad_pose = np.full(P, -1), bad
-        new = bad_pose & (reason == Reason.FEASIBLE)
-        reason[new] = int(code)
-        boom[new] = first[new]
+            first, bad_pose = np.full(len(rows), -1), bad
+        new = bad_pose & (reason[rows] == Reason.FEASIBLE)
+        reason[rows[new]] = int(code)
+        boom[rows[new]] = first[new]
+
+    def survivors() -> np.ndarray:
+        return np.arange(P) if full else np.flatnonzero(reason == Reason.FEASIBLE)
 
     lo, hi = robot.boom_length
     flag(used & ((geo.length < lo) | (geo.length > hi)), Reason.BOOM_LENGTH)
@@ -109,24 +119,42 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
          Reason.SHOULDER_ANGLE)
     rock = world.rock
     if rock.polygons:
-        corners = geometry.body_corners(robot, poses)
+        rows = survivors()
+        corners = geometry.body_corners(robot, poses[rows])
         body_hit = rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
         body_hit |= _rock_inside_body(rock, corners)
-        flag(body_hit, Reason.BODY_COLLISION)
+        flag(body_hit, Reason.BODY_COLLISION, rows)
+        rows = survivors()
         with np.errstate(invalid="ignore"):
-            end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u)
-        boom_hit = rock.segments_hit(geo.shoulders, np.nan_to_num(end)) & used
-        flag(boom_hit, Reason.BOOM_COLLISION)
+            end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
+        boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end)) & used
+        flag(boom_hit, Reason.BOOM_COLLISION, rows)
 
-    alloc = allocate(robot, world.gravity_vector, poses, stance, free_tip)
-    flag(stance.attached & ~(np.abs(np.nan_to_num(alloc.pull_angles)) < HALF_PI),
-         Reason.PULL_ANGLE)
+    rows = survivors()
+    part = allocate(robot, world.gravity_vector, poses[rows], stance, free_tip)
+    alloc = Allocation(*(_scatter(v, rows, P, -np.inf if name == "robustness" else np.nan)
+                         for name, v in zip(Allocation._fields, part, strict=True)))
+    if not ignore_grasps:
+        flag(stance.attached & ~(np.abs(np.nan_to_num(part.pull_angles)) < HALF_PI),
+             Reason.PULL_ANGLE, rows)
     if stance.free_boom is not None:
-        flag(np.abs(alloc.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE)
-    flag(~alloc.statics_ok, Reason.STATICS)
-    flag(alloc.robustness < robot.log_p_min, Reason.PROBABILITY)
+        flag(np.abs(part.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE,
+             rows)
+    flag(~part.statics_ok, Reason.STATICS, rows)
+    if not ignore_grasps:
+        flag(part.robustness < robot.log_p_min, Reason.PROBABILITY, rows)
     feasible = reason == Reason.FEASIBLE
     return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle)
+
+
+def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.ndarray:
+    """Values computed for `rows` placed in an array for all P poses (the rest: fill, False)."""
+    if values.dtype == bool:
+        out = np.zeros((P,) + values.shape[1:], dtype=bool)
+    else:
+        out = np.full((P,) + values.shape[1:], fill, dtype=float)
+    out[rows] = values
+    return out
 
 
 def _rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
@@ -145,7 +173,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     """Every reason `pose` is infeasible, in words with the values; [] when it is feasible."""
     robot = world.robot
     pose = np.asarray(pose, dtype=float)
-    check = check_poses(world, stance, pose, free_tip)
+    check = check_poses(world, stance, pose, free_tip, full=True)
     if check.feasible[0]:
         return []
     targets = _targets(stance, free_tip)

@@ -10,8 +10,9 @@ the 3x4 wrench matrix. Allocation maximises the robustness r = sum_i log Phi(z_i
 regulariser `REGULARISATION/2 |f|^2` that makes the optimum unique where every grasp is so safe
 that log Phi is flat) subject to the tension bounds. Two implementations share that objective:
 
-* `allocate` - vectorised over poses: a closed-form 3x3 solve, or bisection on the derivative
-  of the concave one-dimensional objective along the family. For the planner's hot loops.
+* `allocate` - vectorised over poses: a closed-form 3x3 solve, or root finding on the derivative
+  of the concave one-dimensional objective along the family (safeguarded Newton). For the
+  planner's hot loops.
 * `ForceAllocator` - a Newton-SQP on a reused Drake `MathematicalProgram` solved with OSQP or
   Clarabel, for any stance; the general reference the tests hold `allocate` against.
 """
@@ -23,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rb_drake import geometry
-from rb_drake.grasp import HALF_PI, log_ndtr_derivatives
+from rb_drake.grasp import HALF_PI, log_ndtr_derivatives, mills_ratio
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
 
@@ -100,7 +101,7 @@ def null_vector(A: np.ndarray) -> np.ndarray:
 
 
 def allocate(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance: Stance,
-             free_tip: np.ndarray | None = None, bisection_steps: int = 60) -> Allocation:
+             free_tip: np.ndarray | None = None, newton_steps: int = 12) -> Allocation:
     """The most robust tensions within bounds at every pose (vectorised; see module doc)."""
     prob = statics_problem(robot, gravity, poses, stance, free_tip)
     A, b, psi = prob.A, prob.b, prob.pull_angles
@@ -135,19 +136,38 @@ def allocate(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance:
         t_lo = np.where(ok, t_lo, 0.0)
         t_hi = np.where(ok, t_hi, 0.0)
 
-        def slope(t: np.ndarray) -> np.ndarray:
-            _, grad, _, _ = _objective_terms(stance, fp + t[:, None] * n, psi)
-            return np.sum(grad * n, axis=1)
+        # mu and sigma depend on the pose only: compute them once, outside the bisection.
+        valid = att & (np.abs(psi) < HALF_PI)
+        psi_v = np.where(valid, psi, 0.0)
+        sigma = np.where(valid, stance.sigma(psi_v), 1.0)
+        mu = np.where(valid, stance.mean_limit(psi_v), 1e6)
+        dz = np.where(valid, -n / sigma, 0.0)  # dz_i / dt
 
+        def slope(t: np.ndarray, curvature: bool = False):
+            f_t = fp + t[:, None] * n
+            z = (mu - f_t) / sigma
+            lam = mills_ratio(z)
+            d1 = np.sum(lam * dz, axis=1) - REGULARISATION * np.sum(f_t * n, axis=1)
+            if not curvature:
+                return d1
+            d2 = np.sum(-lam * (z + lam) * dz * dz, axis=1) - REGULARISATION * np.sum(n * n, 1)
+            return d1, d2
+
+        # The objective is concave in t: find the root of its slope in [t_lo, t_hi] by Newton
+        # steps kept inside a shrinking bracket (bisection where Newton would leave it).
         lo, hi = t_lo.copy(), t_hi.copy()
         at_lo = slope(lo) <= 0.0
         at_hi = slope(hi) >= 0.0
-        for _ in range(bisection_steps):
-            mid = 0.5 * (lo + hi)
-            up = slope(mid) > 0.0
-            lo = np.where(up, mid, lo)
-            hi = np.where(up, hi, mid)
-        t = np.where(at_lo, t_lo, np.where(at_hi, t_hi, 0.5 * (lo + hi)))
+        t = 0.5 * (lo + hi)
+        for _ in range(newton_steps):
+            d1, d2 = slope(t, curvature=True)
+            lo = np.where(d1 > 0.0, t, lo)
+            hi = np.where(d1 > 0.0, hi, t)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = t - d1 / d2
+            inside = np.isfinite(step) & (step > lo) & (step < hi)
+            t = np.where(inside, step, 0.5 * (lo + hi))
+        t = np.where(at_lo, t_lo, np.where(at_hi, t_hi, t))
         f = fp + t[:, None] * n
         f[~ok] = np.nan
     else:

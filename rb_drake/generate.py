@@ -1,0 +1,226 @@
+"""Seeded random caves: a vertical shaft to climb, or a horizontal passage with a crevasse or a
+rockfall to cross. Anchors are scattered along the rock surfaces with normals that follow the
+wall with noise and randomised limit-surface magnitudes (as in the paper's trials). Every cave
+comes with a feasible start stance: a generated cave where none exists is redrawn from the same
+random stream, so a seed always gives the same cave.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+
+from rb_drake.collision import Rock
+from rb_drake.feasibility import check_poses
+from rb_drake.params import RobotParams
+from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
+
+KINDS = ("shaft", "crevasse", "rockfall")
+
+
+@dataclasses.dataclass(frozen=True)
+class CaveConfig:
+    """Knobs of the generator; the defaults reproduce the benchmark caves."""
+
+    anchor_density: float = 2.0            # anchors per metre of rock surface
+    normal_noise_deg: float = 20.0         # std of the normal about the wall's
+    limit_normal: tuple[float, float] = (15.0, 50.0)   # N, uniform range of F_n
+    lateral_ratio: tuple[float, float] = (0.25, 0.7)   # F_t / F_n
+    sigma_normal: tuple[float, float] = (1.5, 4.0)     # N
+    sigma_lateral: tuple[float, float] = (2.0, 6.0)    # N
+    length: tuple[float, float] = (7.0, 9.0)           # m, shaft height or passage length
+    width: tuple[float, float] = (2.1, 2.6)            # m, shaft width or passage height
+    roughness: float = 0.08                # m, std of wall vertex jitter
+    gravity: tuple[float, float] = MARS_GRAVITY
+    max_redraws: int = 20
+
+
+class Surface:
+    """A rock surface to put anchors on: a polyline whose outward side is `side` (+1: left)."""
+
+    def __init__(self, points: np.ndarray, side: int):
+        self.points = np.asarray(points, dtype=float)
+        self.side = side
+
+    def sample(self, rng: np.random.Generator, density: float) -> list[tuple[np.ndarray, float]]:
+        """Points along the polyline (uniform in arclength) with their outward normal angle."""
+        seg = np.diff(self.points, axis=0)
+        seg_len = np.linalg.norm(seg, axis=1)
+        total = float(seg_len.sum())
+        n = rng.poisson(density * total)
+        out = []
+        cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+        for s in np.sort(rng.uniform(0.0, total, n)):
+            k = min(int(np.searchsorted(cum, s, side="right")) - 1, len(seg) - 1)
+            t = seg[k] / seg_len[k]
+            p = self.points[k] + (s - cum[k]) * t
+            normal = self.side * np.array([-t[1], t[0]])
+            out.append((p, math.atan2(normal[1], normal[0])))
+        return out
+
+
+def _jagged(rng: np.random.Generator, start: np.ndarray, end: np.ndarray, step: float,
+            roughness: float) -> np.ndarray:
+    """A rough polyline from start to end, jittered perpendicular to it."""
+    n = max(2, int(np.linalg.norm(end - start) / step) + 1)
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    pts = start + t * (end - start)
+    d = (end - start) / np.linalg.norm(end - start)
+    off = rng.normal(0.0, roughness, n)
+    off[[0, -1]] = 0.0
+    return pts + off[:, None] * np.array([-d[1], d[0]])
+
+
+def _shaft(rng: np.random.Generator, cfg: CaveConfig):
+    H = rng.uniform(*cfg.length)
+    W = rng.uniform(*cfg.width)
+    left = _jagged(rng, np.array([-W / 2, -0.5]), np.array([-W / 2, H + 0.5]), 0.5,
+                   cfg.roughness)
+    right = _jagged(rng, np.array([W / 2, -0.5]), np.array([W / 2, H + 0.5]), 0.5,
+                    cfg.roughness)
+    xo_l, xo_r = -W / 2 - 1.0, W / 2 + 1.0
+    walls = [
+        np.vstack([[xo_l, -0.5], left, [xo_l, H + 0.5]]),
+        np.vstack([[xo_r, -0.5], [xo_r, H + 0.5], right[::-1]]),
+    ]
+    # Walking up the left wall, free space is on the right (side -1); the right wall, the left.
+    surfaces = [Surface(left, -1), Surface(right, +1)]
+    start = np.array([0.0, 1.0, 0.0])
+    goal = np.array([0.0, H - 1.0])
+    return walls, surfaces, start, goal
+
+
+def _passage(rng: np.random.Generator, cfg: CaveConfig, obstacle: str):
+    L = rng.uniform(*cfg.length)
+    H = rng.uniform(*cfg.width)
+    ceiling = _jagged(rng, np.array([-0.5, H]), np.array([L + 0.5, H]), 0.5, cfg.roughness)
+    walls = [np.vstack([ceiling, [L + 0.5, H + 1.0], [-0.5, H + 1.0]])]
+    surfaces = [Surface(ceiling, -1)]
+    mid = rng.uniform(0.4, 0.6) * L
+    if obstacle == "crevasse":
+        gap = rng.uniform(1.0, 1.6)
+        a, b = mid - gap / 2, mid + gap / 2
+        floor_a = _jagged(rng, np.array([-0.5, 0.0]), np.array([a, 0.0]), 0.5, cfg.roughness)
+        floor_b = _jagged(rng, np.array([b, 0.0]), np.array([L + 0.5, 0.0]), 0.5, cfg.roughness)
+        walls.append(np.vstack([[-0.5, -3.0], [a, -3.0], floor_a[::-1]]))
+        walls.append(np.vstack([[b, -3.0], [L + 0.5, -3.0], floor_b[::-1]]))
+        surfaces += [Surface(floor_a, +1), Surface(floor_b, +1),
+                     Surface(np.array([[a, 0.0], [a, -3.0]]), +1),
+                     Surface(np.array([[b, -3.0], [b, 0.0]]), +1)]
+    else:
+        floor = _jagged(rng, np.array([-0.5, 0.0]), np.array([L + 0.5, 0.0]), 0.5, cfg.roughness)
+        walls.append(np.vstack([[-0.5, -1.0], [L + 0.5, -1.0], floor[::-1]]))
+        surfaces.append(Surface(floor, +1))
+        h = rng.uniform(0.5, 0.8) * H * 0.45
+        w = rng.uniform(0.8, 1.3)
+        ang = np.linspace(0.0, math.pi, 9)
+        rad = 1.0 + rng.normal(0.0, 0.08, ang.size)
+        top = np.stack([mid + 0.5 * w * np.cos(ang) * rad, h * np.sin(ang) * rad], axis=1)
+        top[[0, -1], 1] = -0.3  # sink the boulder's feet into the floor
+        walls.append(np.vstack([top, [[mid - 0.5 * w, -0.5], [mid + 0.5 * w, -0.5]]]))
+        surfaces.append(Surface(top, -1))  # the arc runs right to left: free space on its right
+    start = np.array([1.0, H / 2, 0.0])
+    goal = np.array([L - 1.0, H / 2])
+    return walls, surfaces, start, goal
+
+
+def _ccw(poly: np.ndarray) -> np.ndarray:
+    q = np.roll(poly, -1, axis=0)
+    area = 0.5 * np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
+    return poly if area > 0 else poly[::-1]
+
+
+def _anchors(rng: np.random.Generator, cfg: CaveConfig, surfaces: list[Surface],
+             rock: Rock) -> list[Anchor]:
+    anchors: list[Anchor] = []
+    for surf in surfaces:
+        for p, normal_angle in surf.sample(rng, cfg.anchor_density):
+            ang = normal_angle + math.radians(rng.normal(0.0, cfg.normal_noise_deg))
+            n = np.array([math.cos(ang), math.sin(ang)])
+            fn = rng.uniform(*cfg.limit_normal)
+            ft = fn * rng.uniform(*cfg.lateral_ratio)
+            sn = rng.uniform(*cfg.sigma_normal)
+            st = rng.uniform(*cfg.sigma_lateral)
+            # Skip sites buried under other rock or facing into it (boulder feet, pit rims).
+            if rock.contains(p + 0.05 * n) or (rock.contains(p) and rock.distance(p) > 0.005):
+                continue
+            anchors.append(Anchor(f"a{len(anchors)}", (round(float(p[0]), 4),
+                                                       round(float(p[1]), 4)),
+                                  (round(float(n[0]), 6), round(float(n[1]), 6)),
+                                  round(fn, 3), round(ft, 3), round(sn, 3), round(st, 3)))
+    return anchors
+
+
+def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
+                exclude: tuple[str, ...] = ()) -> tuple[np.ndarray, tuple[str, ...], float] | None:
+    """The most robust feasible 4-stance at any of `poses` (the pose, anchor ids, probability).
+
+    Candidates per boom are the `per_boom` reachable anchors nearest its equilibrium direction.
+    Poses are tried in order; the search stops at the first pose that has a feasible stance.
+    """
+    from rb_drake import geometry
+
+    robot = scn.robot
+    best = None
+    pos = scn.anchor_positions
+    for pose in np.atleast_2d(poses):
+        sh = geometry.shoulder_positions(robot, pose)[0]
+        cands = []
+        for i in range(4):
+            d = pos - sh[i]
+            L = np.linalg.norm(d, axis=1)
+            th = geometry.wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2]
+                                     - robot.shoulder_directions[i])
+            ok = (L >= robot.boom_length[0]) & (L <= robot.boom_length[1]) & (
+                np.abs(th) <= robot.shoulder_range)
+            ok &= ~np.isin([a.id for a in scn.anchors], exclude)
+            idx = np.flatnonzero(ok)
+            cands.append(idx[np.argsort(np.abs(th[idx]))][:per_boom])
+        for combo in itertools.product(*cands):
+            if len(set(combo)) < 4:
+                continue
+            ids = tuple(scn.anchors[k].id for k in combo)
+            check = check_poses(scn, scn.stance(ids), pose)
+            if check.feasible[0] and (best is None or check.probability[0] > best[2]):
+                best = (pose.copy(), ids, float(check.probability[0]))
+        if best is not None:
+            break
+    return best
+
+
+def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
+                  robot: RobotParams | None = None) -> Scenario:
+    """A random cave of `kind` ('shaft', 'crevasse' or 'rockfall'); the same seed, the same cave."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    cfg = config or CaveConfig()
+    robot = robot or RobotParams()
+    rng = np.random.default_rng(seed)
+    for _ in range(cfg.max_redraws):
+        if kind == "shaft":
+            walls, surfaces, start, goal = _shaft(rng, cfg)
+        else:
+            walls, surfaces, start, goal = _passage(rng, cfg, kind)
+        walls = [_ccw(np.round(w, 4)) for w in walls]
+        rock = Rock(walls)
+        anchors = _anchors(rng, cfg, surfaces, rock)
+        if len(anchors) < 4:
+            continue
+        scn = Scenario(name=f"{kind}-{seed}", gravity=cfg.gravity, robot=robot,
+                       walls=tuple(walls), anchors=tuple(anchors),
+                       start_pose=tuple(start), start_stance=("",) * 4,
+                       goal_position=tuple(goal), goal_tolerance=0.5,
+                       source=f"generated:{kind}:{seed}")
+        offsets = np.array([[0, 0, 0], [0.15, 0, 0], [-0.15, 0, 0], [0, 0.15, 0], [0, -0.15, 0],
+                            [0, 0, 0.2], [0, 0, -0.2]])
+        found = best_stance(scn, start + offsets)
+        if found is None:
+            continue
+        pose, ids, _ = found
+        return dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
+                                   start_stance=ids)
+    raise RuntimeError(f"no cave of kind {kind!r} with a feasible start stance after "
+                       f"{cfg.max_redraws} draws from seed {seed}; loosen the CaveConfig")

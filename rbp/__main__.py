@@ -1,0 +1,3 @@
+from rbp.cli import main
+import sys
+sys.exit(main())

@@ -1,0 +1,168 @@
+"""The `rbp` command line. Heavy modules are imported inside each command, so --help is instant.
+
+A user's mistake (a bad scenario, a missing file) ends with one line on stderr naming the file,
+the field and the reason, and exit status 2; never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+EXIT_USAGE = 2
+
+
+class UserError(Exception):
+    """A mistake in the user's input: printed as one line, exit status 2."""
+
+
+def _load(spec: str, check_start: bool = True):
+    """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`)."""
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    caves = bundled_caves()
+    if not Path(spec).exists() and spec in caves:
+        return load_scenario(caves[spec], check_start=check_start)
+    return load_scenario(spec, check_start=check_start)
+
+
+def cmd_scenario_generate(args: argparse.Namespace) -> int:
+    from rb_drake.files import atomic_write_text
+    from rb_drake.generate import CaveConfig, generate_cave
+    from rb_drake.scenario import scenario_to_yaml
+
+    cfg = CaveConfig(anchor_density=args.anchor_density)
+    scn = generate_cave(args.kind, args.seed, cfg)
+    atomic_write_text(args.output, scenario_to_yaml(scn))
+    print(f"wrote {args.output}: {scn.name}, {len(scn.anchors)} anchors, "
+          f"start stance {list(scn.start_stance)}")
+    return 0
+
+
+def cmd_scenario_check(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from rb_drake.feasibility import check_poses
+
+    scn = _load(args.scenario)
+    check = check_poses(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
+    alloc = check.allocation
+    print(f"{scn.source}: ok: {scn.name}")
+    print(f"  {len(scn.walls)} rock polygons, {len(scn.anchors)} anchors, gravity "
+          f"{list(scn.gravity)} m/s^2")
+    print(f"  start pose {list(scn.start_pose)} in stance {list(scn.start_stance)}: "
+          f"P = {check.probability[0]:.5f} (p_min {scn.robot.p_min})")
+    for i, aid in enumerate(scn.start_stance):
+        print(f"    boom {i} -> {aid}: tension {alloc.tensions[0, i]:6.2f} N, pull angle "
+              f"{np.degrees(alloc.pull_angles[0, i]):+6.1f} deg, P = "
+              f"{np.exp(alloc.log_probs[0, i]):.5f}")
+    print(f"  goal {list(scn.goal_position)} +- {scn.goal_tolerance} m")
+    return 0
+
+
+def cmd_scenario_show(args: argparse.Namespace) -> int:
+    from rb_drake.draw import scenario_figure
+    from rb_drake.files import atomic_save_figure
+
+    scn = _load(args.scenario, check_start=False)
+    fig = scenario_figure(scn)
+    atomic_save_figure(fig, args.output, dpi=args.dpi)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def cmd_scenario_list(args: argparse.Namespace) -> int:
+    from rb_drake.scenario import bundled_caves
+
+    for name, path in bundled_caves().items():
+        print(f"{name:20s} {path}")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job on the bundled demo cave: check it, picture it, report the start stance."""
+    import numpy as np
+
+    from rb_drake.draw import scenario_figure
+    from rb_drake.feasibility import check_poses
+    from rb_drake.files import atomic_save_figure, atomic_write_text
+
+    out = Path(args.out)
+    scn = _load(args.scenario)
+    stance = scn.stance(scn.start_stance)
+    check = check_poses(scn, stance, np.array(scn.start_pose))
+    alloc = check.allocation
+    picture = atomic_save_figure(scenario_figure(scn), out / "cave.png", dpi=120)
+    report = {
+        "scenario": scn.to_dict(resolved=True),
+        "start": {
+            "pose": list(scn.start_pose),
+            "stance": list(scn.start_stance),
+            "tension": [float(f) for f in alloc.tensions[0]],
+            "pull_angle_deg": [float(np.degrees(a)) for a in alloc.pull_angles[0]],
+            "p_grasp": [float(np.exp(v)) for v in alloc.log_probs[0]],
+            "p_success": float(check.probability[0]),
+        },
+    }
+    data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
+    print(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
+          f"wrote {picture} and {data}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    demo = sub.add_parser("demo", help="run the main job on the bundled demo cave")
+    demo.add_argument("--scenario", default="demo-shaft",
+                      help="scenario file or bundled cave name (default: demo-shaft)")
+    demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
+    demo.set_defaults(func=cmd_demo)
+
+    scn = sub.add_parser("scenario", help="generate, check and show caves")
+    ssub = scn.add_subparsers(dest="scenario_command", required=True)
+    gen = ssub.add_parser("generate", help="a seeded random cave")
+    gen.add_argument("--kind", choices=("shaft", "crevasse", "rockfall"), default="shaft")
+    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("--anchor-density", type=float, default=2.0,
+                     help="anchors per metre of rock surface (default 2.0)")
+    gen.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
+    gen.set_defaults(func=cmd_scenario_generate)
+    chk = ssub.add_parser("check", help="validate a scenario and summarise it")
+    chk.add_argument("scenario")
+    chk.set_defaults(func=cmd_scenario_check)
+    show = ssub.add_parser("show", help="draw a scenario with the robot in its start stance")
+    show.add_argument("scenario")
+    show.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
+    show.add_argument("--dpi", type=int, default=120)
+    show.set_defaults(func=cmd_scenario_show)
+    lst = ssub.add_parser("list", help="the bundled caves")
+    lst.set_defaults(func=cmd_scenario_list)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from rb_drake.scenario import ScenarioError
+
+    try:
+        return int(args.func(args) or 0)
+    except ScenarioError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as e:
+        print(f"error: {e.filename or ''}: {e.strerror}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

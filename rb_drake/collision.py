@@ -42,8 +42,8 @@ class Rock:
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
         shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
-        a2 = np.broadcast_to(a, shape + (2,)).reshape(-1, 2)
-        b2 = np.broadcast_to(b, shape + (2,)).reshape(-1, 2)
+        a2 = np.broadcast_to(a, (*shape, 2)).reshape(-1, 2)
+        b2 = np.broadcast_to(b, (*shape, 2)).reshape(-1, 2)
         # Only edges whose bounding box meets the batch's can be hit: the robot spans a few metres
         # of a cave that may be tens of metres long.
         lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)

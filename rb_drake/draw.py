@@ -13,15 +13,15 @@ import math
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import Normalize  # noqa: E402
-from matplotlib.patches import Circle, Polygon  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import Normalize
+from matplotlib.patches import Circle, Polygon
 
-from rb_drake import geometry, grasp  # noqa: E402
-from rb_drake.params import RobotParams  # noqa: E402
-from rb_drake.scenario import Scenario  # noqa: E402
-from rb_drake.stance import Stance  # noqa: E402
+from rb_drake import geometry, grasp
+from rb_drake.params import RobotParams
+from rb_drake.scenario import Scenario
+from rb_drake.stance import Stance
 
 ROCK = "#8c6d4f"
 GLYPH_SCALE = 0.006  # m of glyph per N of mean limit

@@ -98,14 +98,16 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     reason = np.full(P, int(Reason.FEASIBLE))
     boom = np.full(P, -1)
 
-    def flag(bad: np.ndarray, code: Reason, rows: np.ndarray | None = None) -> None:
-        """Record `code` where a boom (bad: (n, 4)) or the pose (bad: (n,)) fails first."""
+    def flag(bad: np.ndarray, code: Reason, rows: np.ndarray | None = None,
+             which: int = -1) -> None:
+        """Record `code` where a boom (bad: (n, 4)) or the pose (bad: (n,), boom `which`)
+        fails first."""
         rows = np.arange(P) if rows is None else rows
         if bad.ndim == 2:
             first = np.argmax(bad, axis=1)
             bad_pose = bad.any(axis=1)
         else:
-            first, bad_pose = np.full(len(rows), -1), bad
+            first, bad_pose = np.full(len(rows), which), bad
         new = bad_pose & (reason[rows] == Reason.FEASIBLE)
         reason[rows[new]] = int(code)
         boom[rows[new]] = first[new]
@@ -139,7 +141,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
              Reason.PULL_ANGLE, rows)
     if stance.free_boom is not None:
         flag(np.abs(part.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE,
-             rows)
+             rows, which=stance.free_boom)
     flag(~part.statics_ok, Reason.STATICS, rows)
     if not ignore_grasps:
         flag(part.robustness < robot.log_p_min, Reason.PROBABILITY, rows)
@@ -150,9 +152,9 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
 def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.ndarray:
     """Values computed for `rows` placed in an array for all P poses (the rest: fill, False)."""
     if values.dtype == bool:
-        out = np.zeros((P,) + values.shape[1:], dtype=bool)
+        out = np.zeros((P, *values.shape[1:]), dtype=bool)
     else:
-        out = np.full((P,) + values.shape[1:], fill, dtype=float)
+        out = np.full((P, *values.shape[1:]), fill, dtype=float)
     out[rows] = values
     return out
 
@@ -221,3 +223,60 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     if not out:  # the vectorised check failed on something the words above do not cover
         out.append(REASON_TEXT[Reason(int(check.reason[0]))])
     return out
+
+
+def violation(world: World, stance: Stance, poses: np.ndarray, check: PoseCheck,
+              free_tip: np.ndarray | None = None, ignore_grasps: bool = False) -> np.ndarray:
+    """A continuous measure of how far each pose is from feasible (0 where feasible).
+
+    Sums the excess over every limit, each in its natural unit scaled to about one at a
+    'clear' violation: boom length (m), shoulder angle (rad), tension (per 10 N), shoulder torque
+    (per limit), robustness shortfall (log P), and 1 per collision. For a 4-stance whose tension
+    family leaves the bounds everywhere it takes the least violating member of the family. The
+    transition search descends it to find feasible poses where random samples miss them.
+    `check` must come from `check_poses(..., full=True)` on the same poses.
+    """
+    from rb_drake.statics import null_vector, statics_problem
+
+    robot = world.robot
+    poses = geometry.as_poses(poses)
+    used = np.isfinite(_targets(stance, free_tip)[:, 0])
+    lo, hi = robot.boom_length
+    L, th = check.lengths, check.shoulder_angles
+    v = np.sum(np.where(used, np.maximum(0, L - hi) + np.maximum(0, lo - L)
+                        + np.maximum(0, np.abs(th) - robot.shoulder_range), 0.0), axis=1)
+    v += np.isin(check.reason, (Reason.BODY_COLLISION, Reason.BOOM_COLLISION)).astype(float)
+    alloc = check.allocation
+    f_lo, f_hi = robot.boom_tension
+    att = stance.attached
+    prob = statics_problem(robot, world.gravity_vector, poses, stance, free_tip)
+    if att.sum() == 3:
+        A3 = prob.A[:, :, att]
+        det = np.linalg.det(A3)
+        ok = np.abs(det) > 1e-9
+        f = np.linalg.solve(np.where(ok[:, None, None], A3, np.eye(3)), prob.b[..., None])[..., 0]
+        ten = np.sum(np.maximum(0, f_lo - f) + np.maximum(0, f - f_hi), axis=1)
+        ten = np.where(ok, ten, 100.0)
+    else:
+        A = prob.A
+        n = null_vector(A)
+        AAt = A @ np.swapaxes(A, 1, 2)
+        ok = np.abs(np.linalg.det(AAt)) > 1e-14
+        fp = (np.swapaxes(A, 1, 2) @ np.linalg.solve(np.where(ok[:, None, None], AAt, np.eye(3)),
+                                                     prob.b[..., None]))[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ts = np.concatenate([(f_lo - fp) / n, (f_hi - fp) / n], axis=1)  # breakpoints
+        ts = np.nan_to_num(ts, nan=0.0, posinf=0.0, neginf=0.0)
+        f = fp[:, None, :] + ts[:, :, None] * n[:, None, :]           # (P, 8, 4)
+        ten = np.sum(np.maximum(0, f_lo - f) + np.maximum(0, f - f_hi), axis=2).min(axis=1)
+        ten = np.where(ok, ten, 100.0)
+    v += ten / 10.0
+    if stance.free_boom is not None:
+        v += np.maximum(0, np.abs(prob.shoulder_torque) - robot.shoulder_torque_max) / max(
+            robot.shoulder_torque_max, 1e-9)
+    if not ignore_grasps:
+        psi = np.abs(np.nan_to_num(prob.pull_angles))
+        v += np.sum(np.where(att, np.maximum(0, psi - (HALF_PI - 1e-3)), 0.0), axis=1)
+        r = np.where(np.isfinite(alloc.robustness), alloc.robustness, robot.log_p_min - 1.0)
+        v += np.where(alloc.statics_ok, np.maximum(0, robot.log_p_min - r), 0.0)
+    return np.where(check.feasible, 0.0, np.maximum(v, 1e-6))

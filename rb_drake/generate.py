@@ -174,7 +174,7 @@ def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
             L = np.linalg.norm(d, axis=1)
             th = geometry.wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2]
                                      - robot.shoulder_directions[i])
-            ok = (L >= robot.boom_length[0]) & (L <= robot.boom_length[1]) & (
+            ok = (robot.boom_length[0] <= L) & (robot.boom_length[1] >= L) & (
                 np.abs(th) <= robot.shoulder_range)
             ok &= ~np.isin([a.id for a in scn.anchors], exclude)
             idx = np.flatnonzero(ok)
@@ -213,7 +213,8 @@ def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
                        walls=tuple(walls), anchors=tuple(anchors),
                        start_pose=tuple(start), start_stance=("",) * 4,
                        goal_position=tuple(goal), goal_tolerance=0.5,
-                       source=f"generated:{kind}:{seed}")
+                       source=f"generated:{kind}:{seed}",
+                       robot_overrides={} if robot == RobotParams() else robot.to_dict())
         offsets = np.array([[0, 0, 0], [0.15, 0, 0], [-0.15, 0, 0], [0, 0.15, 0], [0, -0.15, 0],
                             [0, 0, 0.2], [0, 0, -0.2]])
         found = best_stance(scn, start + offsets)

@@ -18,7 +18,8 @@ from rb_drake.params import RobotParams
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
     """Wrap to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+    w = (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+    return np.where(w >= np.pi, w - 2.0 * np.pi, w)  # rounding in % can land on +pi
 
 
 def cross2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -173,7 +174,7 @@ def tip_positions(robot: RobotParams, pose: np.ndarray, shoulder_angles: np.ndar
 
 def tip_jacobian(robot: RobotParams, pose: np.ndarray, shoulder_angles: np.ndarray,
                  lengths: np.ndarray, boom: int) -> np.ndarray:
-    """d tip_boom / d q, q = [x, y, phi, theta_0, L_0, ..., theta_3, L_3] (Drake's order), (2, 11)."""
+    """d tip / d q, q = [x, y, phi, theta_0, L_0, ..., theta_3, L_3] (Drake's order): (2, 11)."""
     pose = np.asarray(pose, dtype=float)
     a = pose[2] + robot.shoulder_directions[boom] + shoulder_angles[boom]
     e = np.array([np.cos(a), np.sin(a)])

@@ -131,7 +131,8 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
     changes: dict[str, Any] = {}
     for key, value in overrides.items():
         if key not in known:
-            raise ParamError(str(key), f"unknown robot parameter; known: {', '.join(sorted(known))}")
+            raise ParamError(str(key),
+                             f"unknown robot parameter; known: {', '.join(sorted(known))}")
         if key == "body_size":
             w, h = _vector(key, value, 2)
             if w <= 0 or h <= 0:
@@ -145,9 +146,7 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
             changes[key] = _vector(key, value, NUM_BOOMS)
         elif key == "shoulder_range_deg":
             changes[key] = _number(key, value, 0.0, 180.0, lo_open=True)
-        elif key == "boom_length":
-            changes[key] = _interval(key, value, 0.0)
-        elif key == "boom_tension":
+        elif key == "boom_length" or key == "boom_tension":
             changes[key] = _interval(key, value, 0.0)
         elif key in ("body_mass",):
             changes[key] = _number(key, value, 0.0, lo_open=True)

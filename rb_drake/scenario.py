@@ -185,7 +185,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     """Parse and validate a scenario mapping; raises ScenarioError."""
     rd = _Reader(source)
     data = rd.mapping("(top level)", data)
-    unknown = sorted(set(data) - TOP_LEVEL)
+    unknown = sorted(str(k) for k in set(data) - TOP_LEVEL)
     if unknown:
         raise rd.fail(str(unknown[0]), f"unknown field; expected one of {sorted(TOP_LEVEL)}")
     fmt = rd.require("", data, "format")
@@ -200,7 +200,8 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     try:
         robot = robot_from_dict(overrides)
     except ParamError as e:
-        raise rd.fail(f"robot.{e.field}", e.reason) from None
+        field = "robot" if e.field == "robot" else f"robot.{e.field}"
+        raise rd.fail(field, e.reason) from None
 
     walls_raw = rd.require("", data, "walls")
     if not isinstance(walls_raw, list):
@@ -260,7 +261,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
 def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock) -> Anchor:
     raw = rd.mapping(field, raw)
     known = {"id", "position", "normal", "limit", "sigma"}
-    extra = sorted(set(raw) - known)
+    extra = sorted(str(k) for k in set(raw) - known)
     if extra:
         raise rd.fail(f"{field}.{extra[0]}", f"unknown field; expected one of {sorted(known)}")
     aid = rd.require(field, raw, "id")
@@ -311,12 +312,16 @@ def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
         raise ScenarioError(source, "(file)", "no such file") from None
     except OSError as e:
         raise ScenarioError(source, "(file)", f"cannot read: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise ScenarioError(source, "(file)", f"not UTF-8 text (byte {e.start}): is this the "
+                            "right file?") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
-        raise ScenarioError(source, where, f"not valid YAML: {getattr(e, 'problem', e)}") from None
+        problem = getattr(e, "problem", None) or " ".join(str(e).split())
+        raise ScenarioError(source, where, f"not valid YAML: {problem}") from None
     return scenario_from_dict(data, source, check_start=check_start)
 
 

@@ -165,7 +165,7 @@ def allocate(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance:
             hi = np.where(d1 > 0.0, hi, t)
             with np.errstate(divide="ignore", invalid="ignore"):
                 step = t - d1 / d2
-            inside = np.isfinite(step) & (step > lo) & (step < hi)
+            inside = np.isfinite(step) & (step >= lo) & (step <= hi)
             t = np.where(inside, step, 0.5 * (lo + hi))
         t = np.where(at_lo, t_lo, np.where(at_hi, t_hi, t))
         f = fp + t[:, None] * n
@@ -237,7 +237,11 @@ class ForceAllocator:
         self.cost.evaluator().UpdateCoefficients(np.diag(H), q, 0.0, is_convex=True)
         result = self.solver.Solve(self.prog, guess, self.options)
         if not result.is_success():
-            self.last_infeasible = list(result.GetInfeasibleConstraintNames(self.prog))
+            from pydrake.solvers import SolutionResult
+
+            if result.get_solution_result() in (SolutionResult.kInfeasibleConstraints,
+                                                 SolutionResult.kInfeasibleOrUnbounded):
+                self.last_infeasible = list(result.GetInfeasibleConstraintNames(self.prog))
             return None
         return result.GetSolution(self.f)
 
@@ -256,7 +260,7 @@ class ForceAllocator:
             return _finish(self.robot, stance, prob, np.full((1, 4), np.nan))
 
         def value(x: np.ndarray) -> float:
-            lp, _, _, valid = _objective_terms(stance, x, psi)
+            lp, _, _, _ = _objective_terms(stance, x, psi)
             return float(lp.sum() - 0.5 * REGULARISATION * np.sum(x[att] ** 2))
 
         current = value(f)
@@ -264,7 +268,9 @@ class ForceAllocator:
             _, grad, hess, _ = _objective_terms(stance, f, psi)
             H = np.where(att, -hess, 1.0)
             scale = 1.0 / max(np.max(H[att]), 1e-300)  # normalise: OSQP tolerances are absolute
-            H = H * scale
+            # A small floor on the curvature (damped Newton) keeps the QP well conditioned where
+            # log Phi is flat; the line search on the exact objective keeps every step honest.
+            H = H * scale + 1e-3
             q = -(grad * scale) - H * f
             f_qp = self._solve_qp(H, q, f)
             if f_qp is None:

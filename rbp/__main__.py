@@ -1,3 +1,5 @@
-from rbp.cli import main
 import sys
+
+from rbp.cli import main
+
 sys.exit(main())

@@ -1,0 +1,135 @@
+"""The `rbp` command line, run as a subprocess: generate, check, show, list, demo, --help."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from rb_drake.params import RobotParams
+from rb_drake.scenario import bundled_caves, load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_rbp(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-m", "rbp", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+
+
+def assert_ok(proc: subprocess.CompletedProcess[str]) -> None:
+    assert proc.returncode == 0, (
+        f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}")
+    assert "Traceback" not in proc.stderr, proc.stderr
+
+
+def leftovers(folder: Path) -> list[str]:
+    """Temporary files of atomic writes (.NAME.XXXX.tmp) left in `folder`."""
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".tmp"))
+
+
+def assert_picture(path: Path) -> None:
+    """A PNG with real content: not one flat colour."""
+    assert path.is_file() and path.stat().st_size > 1000, f"{path} missing or tiny"
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    img = mpimg.imread(path)
+    assert img.ndim == 3 and img.shape[2] in (3, 4), f"image shape {img.shape}"
+    assert img.shape[0] >= 200 and img.shape[1] >= 200, f"image only {img.shape[:2]} pixels"
+    rgb = np.asarray(img[..., :3], dtype=float)
+    std = float(rgb.std())
+    assert std > 0.1, f"pixel standard deviation {std:.4f}: the picture is nearly blank"
+    colours = np.unique(np.round(rgb * 255).astype(int).reshape(-1, 3), axis=0)
+    assert len(colours) >= 50, f"only {len(colours)} distinct colours"
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess[str]]:
+    folder = tmp_path_factory.mktemp("cli")
+    proc = run_rbp("scenario", "generate", "--kind", "crevasse", "--seed", "3", "-o", "X.yaml",
+                   cwd=folder)
+    return folder, proc
+
+
+def test_generate_writes_a_scenario(generated):
+    folder, proc = generated
+    assert_ok(proc)
+    path = folder / "X.yaml"
+    assert path.is_file(), f"no X.yaml; stdout:\n{proc.stdout}"
+    assert "X.yaml" in proc.stdout and "crevasse-3" in proc.stdout, proc.stdout
+    scn = load_scenario(path, check_start=True)
+    assert scn.name == "crevasse-3", f"name {scn.name!r}"
+    assert len(scn.anchors) >= 4 and len(scn.walls) == 3
+    assert leftovers(folder) == [], f"temporary files left: {leftovers(folder)}"
+
+
+def test_check_generated(generated):
+    folder, gen = generated
+    assert_ok(gen)
+    proc = run_rbp("scenario", "check", "X.yaml", cwd=folder)
+    assert_ok(proc)
+    first = proc.stdout.splitlines()[0]
+    assert "X.yaml" in first and "ok" in first, f"first line {first!r}"
+    assert proc.stderr.strip() == "", proc.stderr
+    for i in range(4):
+        assert f"boom {i} ->" in proc.stdout, f"boom {i} missing from:\n{proc.stdout}"
+
+
+def test_show_generated(generated):
+    folder, gen = generated
+    assert_ok(gen)
+    proc = run_rbp("scenario", "show", "X.yaml", "-o", "X.png", cwd=folder)
+    assert_ok(proc)
+    assert_picture(folder / "X.png")
+    assert leftovers(folder) == [], f"temporary files left: {leftovers(folder)}"
+
+
+def test_demo(tmp_path):
+    out = tmp_path / "demo"
+    proc = run_rbp("demo", "--out", str(out), cwd=tmp_path)
+    assert_ok(proc)
+    assert_picture(out / "cave.png")
+    report = json.loads((out / "start.json").read_text())
+    start = report["start"]
+    p = start["p_success"]
+    assert isinstance(p, float) and math.isfinite(p), f"p_success {p!r}"
+    assert 0.95 <= p <= 1.0 + 1e-12, f"p_success {p} below 0.95"
+    robot = RobotParams()
+    assert report["scenario"]["robot"]["boom_tension"] == list(robot.boom_tension)
+    lo, hi = robot.boom_tension
+    tension = start["tension"]
+    assert len(tension) == 4, f"tensions {tension}"
+    for i, t in enumerate(tension):
+        assert lo - 1e-6 <= t <= hi + 1e-6, f"boom {i}: tension {t} N outside [{lo}, {hi}] N"
+    p_grasp = start["p_grasp"]
+    assert len(p_grasp) == 4 and all(0.0 <= q <= 1.0 + 1e-12 for q in p_grasp), p_grasp
+    assert p <= min(p_grasp) + 1e-9, f"p_success {p} above a single grasp's {min(p_grasp)}"
+    assert all(abs(a) < 90.0 for a in start["pull_angle_deg"]), start["pull_angle_deg"]
+    demo = load_scenario(bundled_caves()["demo-shaft"])
+    assert start["stance"] == list(demo.start_stance), f"stance {start['stance']}"
+    assert start["pose"] == list(demo.start_pose), f"pose {start['pose']}"
+    assert sorted(p.name for p in out.iterdir()) == ["cave.png", "start.json"]
+
+
+def test_list(tmp_path):
+    proc = run_rbp("scenario", "list", cwd=tmp_path)
+    assert_ok(proc)
+    names = [line.split()[0] for line in proc.stdout.splitlines() if line.strip()]
+    assert "demo-shaft" in names, f"demo-shaft not listed:\n{proc.stdout}"
+    assert set(names) == set(bundled_caves()), f"listed {names}"
+
+
+def test_help(tmp_path):
+    proc = run_rbp("--help", cwd=tmp_path)
+    assert_ok(proc)
+    assert "usage:" in proc.stdout, proc.stdout
+    for command in ("demo", "scenario"):
+        assert command in proc.stdout, f"{command!r} missing from --help"

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rb_drake import geometry
-from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
+from rb_drake.feasibility import REASON_TEXT, Reason, check_poses, violation
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -26,13 +26,15 @@ CONFIG_NAMES = ("old 4-stance", "3-stance, gripper at old anchor",
 
 @dataclasses.dataclass(frozen=True)
 class TransitionConfig:
-    candidates: int = 1500         # cheap random poses, filtered by reach alone
-    samples: int = 96              # of those, poses evaluated in full
-    refine_rounds: int = 2         # cross-entropy rounds after sampling
+    candidates: int = 2000         # cheap random poses, ranked by reach alone
+    samples: int = 64              # of those, the best poses evaluated in full
+    search_rounds: int = 5         # cross-entropy rounds at most
+    refine_rounds: int = 2         # rounds spent raising robustness once feasible
     refine_samples: int = 32       # poses per round
     elite: int = 8
     spread: float = 0.6            # m, std of the initial position samples
-    phi_spread: float = 0.35       # rad, std of the initial orientation samples
+    phi_range: float = 0.8         # rad, orientations drawn uniformly in +-phi_range
+    max_reach_violation: float = 0.5  # give up at once when no sample comes this near
     ignore_grasps: bool = False    # the naive baseline: limit surfaces play no part
 
 
@@ -53,25 +55,33 @@ def transition_stances(scn: Scenario, old: tuple[str, ...], boom: int,
 
 def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str, poses: np.ndarray,
            ignore_grasps: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """min robustness over the four configurations (-inf if any is infeasible), the four
-    robustnesses, and the first failure reason per pose."""
+    """Per pose: a search key (the worst robustness of the four configurations where all are
+    feasible; minus their summed violation, below -VIOLATION_OFFSET, where not), the four
+    robustnesses, and the first failure code (10 * configuration + Reason)."""
     s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
-    tip_old = s_old.positions[boom]
-    tip_new = s_new.positions[boom]
     world = scn if not ignore_grasps else _NaiveWorld(scn)
     P = poses.shape[0]
     r = np.full((P, 4), -np.inf)
+    total_violation = np.zeros(P)
     reason = np.zeros(P, dtype=int)
-    alive = np.arange(P)
-    for k, (stance, tip) in enumerate(((s_old, None), (s_three, tip_old), (s_three, tip_new),
-                                      (s_new, None))):
-        if not len(alive):
-            break
-        check = check_poses(world, stance, poses[alive], tip, ignore_grasps=ignore_grasps)
-        r[alive, k] = np.where(check.feasible, check.allocation.robustness, -np.inf)
-        reason[alive[~check.feasible]] = check.reason[~check.feasible] + 10 * k
-        alive = alive[check.feasible]
-    return r.min(axis=1), r, reason
+    feasible = np.ones(P, dtype=bool)
+    configs = ((s_old, None), (s_three, s_old.positions[boom]), (s_three, s_new.positions[boom]),
+               (s_new, None))
+    for k, (stance, tip) in enumerate(configs):
+        check = check_poses(world, stance, poses, tip, full=True, ignore_grasps=ignore_grasps)
+        r[:, k] = np.where(check.feasible, check.allocation.robustness, -np.inf)
+        feasible &= check.feasible
+        total_violation += violation(world, stance, poses, check, tip, ignore_grasps)
+        first = (reason == 0) & ~check.feasible
+        reason[first] = check.reason[first] + 10 * k
+    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
+        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
+    else:
+        key = np.where(feasible, r.min(axis=1), -VIOLATION_OFFSET - total_violation)
+    return key, r, reason
+
+
+VIOLATION_OFFSET = 1e3  # keys of infeasible poses sit below every feasible robustness
 
 
 class _NaiveWorld:
@@ -99,85 +109,93 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     centres = anchors - robot.shoulder_array[booms] - reach * np.stack(
         [np.cos(directions), np.sin(directions)], axis=1)
     centre = centres.mean(axis=0)
-    # Draw cheap candidates and keep those whose five booms are within length and shoulder
-    # range (pure geometry, microseconds a pose) before the expensive statics.
+    # Draw cheap candidates and keep the `samples` whose five booms come closest to their length
+    # and shoulder ranges (pure geometry, microseconds a pose) before the expensive statics.
     m = cfg.candidates
     cand = np.empty((m, 3))
     cand[:, :2] = centre + rng.normal(0.0, cfg.spread, (m, 2))
-    cand[:, 2] = rng.normal(0.0, cfg.phi_spread, m)
-    if guess is not None:
-        k = m // 3
+    cand[:, 2] = rng.uniform(-cfg.phi_range, cfg.phi_range, m)
+    if guess is not None:  # half of them near the pose the robot holds now
+        k = m // 2
         cand[:k, :2] = guess[:2] + rng.normal(0.0, 0.5 * cfg.spread, (k, 2))
-        cand[:k, 2] = guess[2] + rng.normal(0.0, cfg.phi_spread, k)
-    reach_ok = _kinematics_ok(robot, cand, anchors, booms)
-    if not reach_ok.any():
-        return Transition(False, None, None, "no pose found: no sampled pose reaches all five "
-                          "anchors within boom length and shoulder range", m)
-    poses = cand[reach_ok][:cfg.samples]
-    n = len(poses)
-    score, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps)
-    evaluated = n
-    if not np.isfinite(score).any():
-        return Transition(False, None, None, _explain(reason), evaluated)
-    best_pose, best_score = poses[np.argmax(score)], score.max()
-    best_r4 = r4[np.argmax(score)]
-    if not cfg.ignore_grasps:
-        feasible = np.flatnonzero(np.isfinite(score))
-        elite = poses[feasible[np.argsort(score[feasible])[::-1][:cfg.elite]]]
-        for _ in range(cfg.refine_rounds):
-            mean = elite.mean(axis=0)
-            std = np.maximum(elite.std(axis=0), [0.01, 0.01, 0.01])
-            cand = mean + rng.normal(0.0, 1.0, (cfg.refine_samples, 3)) * std
-            s, r, _ = _score(scn, old, boom, new_anchor, cand, False)
-            evaluated += len(cand)
-            pool = np.vstack([elite, cand])
-            pool_s = np.concatenate([np.full(len(elite), -np.inf), s])
-            if s.max() > best_score:
-                best_score, best_pose, best_r4 = s.max(), cand[np.argmax(s)], r[np.argmax(s)]
-            ok = np.isfinite(pool_s)
-            if ok.sum() >= 2:
-                order = np.argsort(pool_s)[::-1][:cfg.elite]
-                elite = np.vstack([best_pose[None], pool[order]])[:cfg.elite]
-    return Transition(True, best_pose.copy(), np.exp(best_r4), "", evaluated)
+        cand[:k, 2] = np.where(rng.uniform(size=k) < 0.5, guess[2] + rng.normal(0.0, 0.3, k),
+                               rng.uniform(-cfg.phi_range, cfg.phi_range, k))
+    kin = _kinematic_violation(robot, cand, anchors, booms)
+    if kin.min() > cfg.max_reach_violation:
+        return Transition(False, None, None, "no pose found: no sampled pose comes near "
+                          "reaching all five anchors within boom length and shoulder range", m)
+    order = np.argsort(kin, kind="stable")
+    poses = cand[order[:cfg.samples]]
+    key, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps)
+    evaluated = len(poses)
+    best = int(np.argmax(key))
+    best_pose, best_key, best_r4 = poses[best].copy(), key[best], r4[best]
+    best_reason = int(reason[best])
+    top = np.argsort(key)[::-1][:cfg.elite]
+    elite, elite_key = poses[top], key[top]
+    # Cross-entropy search: descend the violation until feasible, then raise the robustness.
+    rounds = 0
+    while rounds < cfg.search_rounds and (best_key < -VIOLATION_OFFSET
+                                          or (rounds < cfg.refine_rounds
+                                              and not cfg.ignore_grasps)):
+        rounds += 1
+        mean = elite.mean(axis=0)
+        std = np.maximum(elite.std(axis=0), [0.02, 0.02, 0.02])
+        cand = mean + rng.normal(0.0, 1.0, (cfg.refine_samples, 3)) * std
+        k2, r2, reason2 = _score(scn, old, boom, new_anchor, cand, cfg.ignore_grasps)
+        evaluated += len(cand)
+        if k2.max() > best_key:
+            b = int(np.argmax(k2))
+            best_key, best_pose, best_r4 = k2[b], cand[b].copy(), r2[b]
+            best_reason = int(reason2[b])
+        pool = np.vstack([elite, cand])
+        pool_key = np.concatenate([elite_key, k2])
+        top = np.argsort(pool_key)[::-1][:cfg.elite]
+        elite, elite_key = pool[top], pool_key[top]
+    if best_key < -VIOLATION_OFFSET:
+        return Transition(False, None, None, _explain(best_reason), evaluated)
+    return Transition(True, best_pose, np.exp(best_r4), "", evaluated)
 
 
-def _kinematics_ok(robot, poses: np.ndarray, anchors: np.ndarray, booms: np.ndarray) -> np.ndarray:
-    """Whether boom booms[k] at each pose can reach anchors[k] for every k (length and angle)."""
+def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
+                         booms: np.ndarray) -> np.ndarray:
+    """How far boom booms[k] at each pose is from reaching anchors[k], summed over k (m + rad)."""
     sh = geometry.shoulder_positions(robot, poses)[:, booms, :]
     d = anchors - sh
     length = np.linalg.norm(d, axis=-1)
     theta = geometry.wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[:, 2, None]
                                 - robot.shoulder_directions[booms])
     lo, hi = robot.boom_length
-    return np.all((length >= lo) & (length <= hi) & (np.abs(theta) <= robot.shoulder_range),
-                  axis=1)
+    return np.sum(np.maximum(0, length - hi) + np.maximum(0, lo - length)
+                  + np.maximum(0, np.abs(theta) - robot.shoulder_range), axis=1)
 
 
-def _explain(codes: np.ndarray) -> str:
-    """The most common first failure among the samples, in words."""
-    values, counts = np.unique(codes, return_counts=True)
-    code = int(values[np.argmax(counts)])
+def _explain(code: int) -> str:
+    """Why the pose that came nearest to feasible (the least violation) failed, in words."""
     config, reason = divmod(code, 10)
-    share = counts.max() / counts.sum()
-    return (f"no pose found: {REASON_TEXT[Reason(reason)]} in the {CONFIG_NAMES[config]} "
-            f"({share:.0%} of samples)")
+    return (f"no pose found: nearest miss fails with {REASON_TEXT[Reason(reason)]} in the "
+            f"{CONFIG_NAMES[config]}")
 
 
-def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int,
-                      pose: np.ndarray, slack: float = 1.0) -> np.ndarray:
-    """Indices of anchors boom `boom` might reach from near `pose`: within its length and
-    shoulder range of a body moved by at most `slack` metres (a cheap filter before search)."""
+def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: np.ndarray,
+                      rng: np.random.Generator, samples: int = 400) -> np.ndarray:
+    """Indices of anchors boom `boom` can reach from some pose that also reaches the stance's
+    four anchors (boom length and shoulder range only): the cheap filter before any search.
+    Poses are sampled around `pose`; the anchors come nearest-first to nothing in particular."""
     robot = scn.robot
-    pts = scn.anchor_positions
-    centre = np.asarray(pose[:2])
-    sh = geometry.shoulder_positions(robot, pose)[0, boom]
-    d = pts - sh
-    dist = np.linalg.norm(d, axis=1)
-    ok = (dist <= robot.boom_length[1] + slack) & (dist >= robot.boom_length[0])
-    # Direction from the body centre within the shoulder's range, widened by the slack.
-    ang = geometry.wrap_angle(np.arctan2(pts[:, 1] - centre[1], pts[:, 0] - centre[0])
-                              - pose[2] - robot.shoulder_directions[boom])
-    ok &= np.abs(ang) <= robot.shoulder_range + 0.6
-    ids = {scn.anchor_index[a] for a in stance if a is not None}
-    ok[list(ids)] = False
-    return np.flatnonzero(ok)
+    held = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
+    poses = np.column_stack([pose[0] + rng.normal(0.0, 0.5, samples),
+                             pose[1] + rng.normal(0.0, 0.5, samples),
+                             rng.uniform(-0.8, 0.8, samples)])
+    ok = _kinematic_violation(robot, poses, held, np.arange(4)) == 0.0
+    if not ok.any():
+        return np.zeros(0, dtype=int)
+    sh = geometry.shoulder_positions(robot, poses[ok])[:, boom, :]          # (P, 2)
+    d = scn.anchor_positions[None, :, :] - sh[:, None, :]                  # (P, A, 2)
+    length = np.linalg.norm(d, axis=-1)
+    theta = geometry.wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[ok, 2, None]
+                                - robot.shoulder_directions[boom])
+    lo, hi = robot.boom_length
+    reach = ((length >= lo) & (length <= hi) & (np.abs(theta) <= robot.shoulder_range)).any(0)
+    reach[[scn.anchor_index[a] for a in stance]] = False
+    return np.flatnonzero(reach)

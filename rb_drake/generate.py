@@ -25,14 +25,17 @@ KINDS = ("shaft", "crevasse", "rockfall")
 class CaveConfig:
     """Knobs of the generator; the defaults reproduce the benchmark caves."""
 
-    anchor_density: float = 2.0            # anchors per metre of rock surface
+    anchor_density: float = 3.0            # anchors per metre of rock surface
     normal_noise_deg: float = 20.0         # std of the normal about the wall's
     limit_normal: tuple[float, float] = (15.0, 50.0)   # N, uniform range of F_n
     lateral_ratio: tuple[float, float] = (0.25, 0.7)   # F_t / F_n
     sigma_normal: tuple[float, float] = (1.5, 4.0)     # N
     sigma_lateral: tuple[float, float] = (2.0, 6.0)    # N
     length: tuple[float, float] = (7.0, 9.0)           # m, shaft height or passage length
-    width: tuple[float, float] = (2.1, 2.6)            # m, shaft width or passage height
+    # Booms leave the body along its diagonals, so hanging from one upper boom while the other
+    # moves needs steep booms: shafts wider than about 2 m leave few feasible transitions.
+    width: tuple[float, float] = (1.5, 1.9)            # m, shaft width
+    passage_height: tuple[float, float] = (2.1, 2.6)   # m
     roughness: float = 0.08                # m, std of wall vertex jitter
     gravity: tuple[float, float] = MARS_GRAVITY
     max_redraws: int = 20
@@ -95,7 +98,7 @@ def _shaft(rng: np.random.Generator, cfg: CaveConfig):
 
 def _passage(rng: np.random.Generator, cfg: CaveConfig, obstacle: str):
     L = rng.uniform(*cfg.length)
-    H = rng.uniform(*cfg.width)
+    H = rng.uniform(*cfg.passage_height)
     ceiling = _jagged(rng, np.array([-0.5, H]), np.array([L + 0.5, H]), 0.5, cfg.roughness)
     walls = [np.vstack([ceiling, [L + 0.5, H + 1.0], [-0.5, H + 1.0]])]
     surfaces = [Surface(ceiling, -1)]

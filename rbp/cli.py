@@ -81,6 +81,88 @@ def cmd_scenario_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _progress(label: str):
+    """A one-line progress display on stderr (only on a terminal)."""
+    interactive = sys.stderr.isatty()
+
+    def show(expansions: int, tested: int) -> None:
+        if interactive:
+            print(f"\r{label}: {expansions} stances expanded, {tested} transitions tested",
+                  end="", file=sys.stderr, flush=True)
+
+    def done() -> None:
+        if interactive:
+            print(file=sys.stderr)
+
+    return show, done
+
+
+def run_planner(scn, planner: str, seed: int, expansions: int):
+    """Footstep plan (rbp or naive) -> plan dictionary."""
+    from planning.baseline import plan_naive
+    from planning.footsteps import FootstepConfig, plan_footsteps
+    from planning.plan import build_plan
+
+    cfg = FootstepConfig(seed=seed, max_expansions=expansions)
+    show, done = _progress(f"{planner} on {scn.name}")
+    fp = plan_footsteps(scn, cfg, progress=show) if planner == "rbp" else plan_naive(scn, cfg)
+    done()
+    return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
+
+
+def _summary(plan: dict) -> str:
+    if not plan["success"]:
+        return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s")
+    return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}, "
+            f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s")
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from planning.figures import snapshots_figure
+    from planning.plan import write_plan
+    from rb_drake.files import atomic_save_figure
+
+    scn = _load(args.scenario)
+    plan = run_planner(scn, args.planner, args.seed, args.max_expansions)
+    out = Path(args.output)
+    write_plan(plan, out)
+    picture = out.with_suffix(".png")
+    atomic_save_figure(snapshots_figure(scn, plan), picture, dpi=110)
+    print(f"wrote {out} and {picture}")
+    print(_summary(plan))
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from planning.check import check_plan
+    from planning.plan import validate
+
+    path = Path(args.plan)
+    try:
+        plan = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: (file): no such file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
+    import jsonschema
+
+    try:
+        validate(plan)
+    except jsonschema.ValidationError as e:
+        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise UserError(f"{path}: {field}: {e.message}") from None
+    problems = check_plan(plan, str(path))
+    for p in problems:
+        print(f"{path}: {p}")
+    if problems:
+        print(f"{path}: {len(problems)} problems")
+        return 1
+    n = sum(len(p["steps"]) for p in plan["phases"])
+    print(f"{path}: ok: {len(plan['phases'])} phases, {n} configurations verified; "
+          + _summary(plan))
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job on the bundled demo cave: check it, picture it, report the start stance."""
     import numpy as np
@@ -109,6 +191,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
     print(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
           f"wrote {picture} and {data}")
+    if args.plan:
+        from planning.figures import snapshots_figure
+        from planning.plan import write_plan
+
+        plan = run_planner(scn, "rbp", 0, 400)
+        write_plan(plan, out / "plan.json")
+        atomic_save_figure(snapshots_figure(scn, plan), out / "plan.png", dpi=110)
+        print(f"wrote {out / 'plan.json'} and {out / 'plan.png'}")
+        print(_summary(plan))
     return 0
 
 
@@ -120,15 +211,30 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--scenario", default="demo-shaft",
                       help="scenario file or bundled cave name (default: demo-shaft)")
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
+    demo.add_argument("--no-plan", dest="plan", action="store_false",
+                      help="only check and draw the cave (skip the footstep plan)")
     demo.set_defaults(func=cmd_demo)
+
+    plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture")
+    plan.add_argument("scenario", help="scenario file or bundled cave name")
+    plan.add_argument("-o", "--output", required=True, help="plan file to write (.json)")
+    plan.add_argument("--planner", choices=("rbp", "naive"), default="rbp")
+    plan.add_argument("--seed", type=int, default=0, help="seed of the planner's sampling")
+    plan.add_argument("--max-expansions", type=int, default=400,
+                      help="give up after expanding this many stances (default 400)")
+    plan.set_defaults(func=cmd_plan)
+
+    check = sub.add_parser("check", help="re-verify a plan file from scratch")
+    check.add_argument("plan")
+    check.set_defaults(func=cmd_check)
 
     scn = sub.add_parser("scenario", help="generate, check and show caves")
     ssub = scn.add_subparsers(dest="scenario_command", required=True)
     gen = ssub.add_parser("generate", help="a seeded random cave")
     gen.add_argument("--kind", choices=("shaft", "crevasse", "rockfall"), default="shaft")
     gen.add_argument("--seed", type=int, default=0)
-    gen.add_argument("--anchor-density", type=float, default=2.0,
-                     help="anchors per metre of rock surface (default 2.0)")
+    gen.add_argument("--anchor-density", type=float, default=3.0,
+                     help="anchors per metre of rock surface (default 3.0)")
     gen.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
     gen.set_defaults(func=cmd_scenario_generate)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")

@@ -116,7 +116,18 @@ def test_demo(tmp_path):
     demo = load_scenario(bundled_caves()["demo-shaft"])
     assert start["stance"] == list(demo.start_stance), f"stance {start['stance']}"
     assert start["pose"] == list(demo.start_pose), f"pose {start['pose']}"
-    assert sorted(p.name for p in out.iterdir()) == ["cave.png", "start.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["cave.png", "plan.json", "plan.png",
+                                                     "start.json"]
+    # The demo plans the climb: the plan must follow the schema and verify from scratch.
+    from planning.check import check_plan
+    from planning.plan import validate
+
+    plan = json.loads((out / "plan.json").read_text())
+    validate(plan)
+    assert plan["success"], f"demo plan failed: {plan['reason']}"
+    assert check_plan(plan) == [], "the demo plan does not verify"
+    assert proc.stdout.strip().splitlines()[-1].startswith("success: true"), proc.stdout
+    assert_picture(out / "plan.png")
 
 
 def test_list(tmp_path):

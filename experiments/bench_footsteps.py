@@ -1,0 +1,74 @@
+"""Benchmark the footstep planners: RBP against the naive baseline on the same generated caves.
+
+Prints, per planner, the median and spread of the planning time, the success count, p_path and
+regrasps, and writes every trial and the summary to OUT/bench_footsteps.json.
+
+    python -m experiments.bench_footsteps --kind shaft --trials 5 --out out/bench
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+from planning.baseline import plan_naive
+from planning.footsteps import FootstepConfig, plan_footsteps
+from planning.plan import build_plan
+from rb_drake.files import atomic_write_text
+from rb_drake.generate import generate_cave
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
+    parser.add_argument("--trials", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--max-expansions", type=int, default=400)
+    parser.add_argument("--out", default="out/bench")
+    args = parser.parse_args(argv)
+    records = []
+    for seed in range(args.first_seed, args.first_seed + args.trials):
+        scn = generate_cave(args.kind, seed)
+        cfg = FootstepConfig(max_expansions=args.max_expansions)
+        for name, run in (("rbp", plan_footsteps), ("naive", plan_naive)):
+            t0 = time.perf_counter()
+            fp = run(scn, cfg)
+            seconds = time.perf_counter() - t0
+            plan = build_plan(scn, fp, name)
+            records.append({"seed": seed, "kind": args.kind, "planner": name,
+                            "success": plan["success"], "seconds": seconds,
+                            "p_path": plan["p_path"], "p_min": plan["p_min"],
+                            "regrasps": plan["regrasps"],
+                            "transitions_tested": fp.transitions_tested,
+                            "reason": plan["reason"]})
+            print(f"{args.kind} seed {seed} {name:5s}: success {plan['success']!s:5s} "
+                  f"{seconds:7.2f} s, p_path {plan['p_path']}, regrasps {plan['regrasps']}",
+                  flush=True)
+    summary = {}
+    for name in ("rbp", "naive"):
+        rows = [r for r in records if r["planner"] == name]
+        times = [r["seconds"] for r in rows]
+        ok = [r for r in rows if r["success"]]
+        summary[name] = {
+            "trials": len(rows), "successes": len(ok),
+            "seconds_median": statistics.median(times),
+            "seconds_min": min(times), "seconds_max": max(times),
+            "p_path_median": statistics.median([r["p_path"] for r in ok]) if ok else None,
+        }
+        print(f"{name}: {len(ok)}/{len(rows)} succeeded; time median "
+              f"{summary[name]['seconds_median']:.2f} s (min {min(times):.2f}, max "
+              f"{max(times):.2f}); p_path median {summary[name]['p_path_median']}")
+    result = {"machine": f"{platform.machine()}, {platform.python_implementation()} "
+                         f"{platform.python_version()}", "summary": summary, "trials": records}
+    out = Path(args.out) / "bench_footsteps.json"
+    atomic_write_text(out, json.dumps(result, indent=1))
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

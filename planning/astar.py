@@ -1,0 +1,112 @@
+"""Lazy weighted A*: edges are evaluated only when the search pops them.
+
+Successors are pushed with a cheap lower bound on their edge cost; when one is popped, its edge
+is evaluated (in our use, a transition-feasibility search costing milliseconds); an infeasible
+edge is dropped, a feasible one is pushed again with its true cost. A node is expanded only when
+popped with an evaluated edge; one found again through a cheaper path after its expansion is
+reopened. So with an admissible heuristic and `weight = 1` the first goal expanded is optimal,
+and with `weight = w > 1` its cost is at most w times the optimum.
+networkx's A* needs the graph's edges up front, which is exactly what we cannot afford, so the
+loop is ours; the explored graph is kept in a networkx DiGraph for analysis.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable, Hashable, Iterable
+from typing import Any, NamedTuple
+
+import networkx as nx
+
+
+class Edge(NamedTuple):
+    cost: float
+    data: Any
+
+
+class SearchResult(NamedTuple):
+    success: bool
+    path: list[Hashable]           # nodes from start to goal
+    edges: list[Any]               # edge data along the path
+    goal_data: Any                 # what the goal test returned for the goal node
+    cost: float
+    expansions: int
+    evaluations: int
+    graph: nx.DiGraph              # every evaluated feasible edge
+    reason: str
+
+
+def lazy_astar(
+    start: Hashable,
+    successors: Callable[[Hashable, Any], Iterable[tuple[Hashable, Any, float]]],
+    evaluate: Callable[[Hashable, Hashable, Any, Any], Edge | None],
+    heuristic: Callable[[Hashable], float],
+    is_goal: Callable[[Hashable, Any], Any],
+    weight: float = 1.0,
+    max_expansions: int = 1000,
+    start_data: Any = None,
+    on_expand: Callable[[int, Hashable], None] | None = None,
+) -> SearchResult:
+    """Search from `start` to the first node for which `is_goal(node, node_data)` is truthy.
+
+    successors(node, node_data) yields (child, edge_key, lower_bound_cost);
+    evaluate(node, child, edge_key, node_data) returns Edge(cost, data) or None (infeasible);
+    the edge's data becomes the child's node_data when it is reached through that edge.
+    """
+    tie = itertools.count()
+    graph = nx.DiGraph()
+    graph.add_node(start)
+    g_best: dict[Hashable, float] = {start: 0.0}
+    parent: dict[Hashable, tuple[Hashable, Any]] = {}
+    node_data: dict[Hashable, Any] = {start: start_data}
+    closed: dict[Hashable, float] = {}  # expanded nodes and the g they were expanded with
+    # entries: (f, tie, g, node, parent, edge_key, evaluated, edge_data); for an unevaluated
+    # entry g is the parent's g plus the edge's lower bound.
+    open_list: list = [(weight * heuristic(start), next(tie), 0.0, start, None, None, True, None)]
+    expansions = evaluations = 0
+    while open_list:
+        _, _, g, node, par, key, evaluated, data = heapq.heappop(open_list)
+        if node in closed and g >= closed[node] - 1e-15:
+            continue
+        if not evaluated:
+            evaluations += 1
+            edge = evaluate(par, node, key, node_data[par])
+            if edge is None:
+                continue
+            g_true = g_best[par] + edge.cost
+            graph.add_edge(par, node, cost=edge.cost, data=edge.data)
+            if g_true < g_best.get(node, float("inf")) - 1e-15 or node not in parent:
+                g_best[node] = min(g_true, g_best.get(node, float("inf")))
+                heapq.heappush(open_list, (g_true + weight * heuristic(node), next(tie), g_true,
+                                           node, par, key, True, edge.data))
+            continue
+        if par is not None:
+            if g > g_best.get(node, float("inf")) + 1e-15:
+                continue
+            parent[node] = (par, data)
+            node_data[node] = data
+        closed[node] = g
+        expansions += 1
+        if on_expand is not None:
+            on_expand(expansions, node)
+        goal = is_goal(node, node_data[node])
+        if goal:
+            path, edges = [node], []
+            while path[-1] in parent:
+                p, d = parent[path[-1]]
+                edges.append(d)
+                path.append(p)
+            return SearchResult(True, path[::-1], edges[::-1], goal, g, expansions, evaluations,
+                                graph, "")
+        if expansions >= max_expansions:
+            return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
+                                f"gave up after {expansions} expansions without reaching the goal")
+        for child, edge_key, lower in successors(node, node_data[node]):
+            g_child = g + lower
+            if child in closed and g_child >= closed[child] - 1e-15:
+                continue
+            heapq.heappush(open_list, (g_child + weight * heuristic(child), next(tie), g_child,
+                                       child, node, edge_key, False, None))
+    return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
+                        "every reachable stance was explored without reaching the goal")

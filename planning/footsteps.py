@@ -1,0 +1,205 @@
+"""Footstep planning: A* over the graph of 4-stances linked by feasible transitions.
+
+A vertex is a 4-stance (an anchor id per boom); an edge moves one boom to another anchor and
+exists when `find_transition` finds a pose holding all four configurations of the move. The
+graph is explored lazily (`planning.astar`): candidate anchors come from reach alone, and a
+transition is searched only when A* pops it.
+
+Cost. The plan's success probability is p_path = prod_holdings min_t P_i(t) * (1 - p_att)^regrasps
+(planning.probability). An edge costs -log(1 - p_att) plus, for each boom, the worst -log P_i over
+the four configurations at the transition pose; summed along a path this bounds -log p_path
+from above (over the configurations the footstep plan knows), so minimising it favours both few
+regrasps and robust grasps.
+
+Heuristic. A regrasp moves one of four anchors by at most 2 (L_max + |s|), so the anchors'
+centroid advances at most `max_step` per regrasp: h = -log(1 - p_att) * distance / max_step
+never overestimates. Real steps advance the centroid by a few centimetres to a few decimetres,
+so that bound is weak and exact A* (weight 1) explores every short detour. Multiplying it by
+`heuristic_weight` (default 300: progress toward the goal dominates, the paper's
+distance-driven search) bounds the suboptimality (cost <= weight * optimum) and makes the
+search goal-directed; the cost still decides between equally promising stances.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import zlib
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from planning.astar import Edge, SearchResult, lazy_astar
+from planning.transition import (
+    Transition,
+    TransitionConfig,
+    find_transition,
+    reachable_anchors,
+    transition_stances,
+)
+from rb_drake.feasibility import check_poses
+from rb_drake.scenario import Scenario
+
+Stance4 = tuple[str, str, str, str]
+
+
+@dataclasses.dataclass(frozen=True)
+class FootstepConfig:
+    heuristic_weight: float = 300.0
+    candidates_per_boom: int = 8
+    max_expansions: int = 400
+    goal_samples: int = 96
+    seed: int = 0
+    transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
+
+
+class Step(NamedTuple):
+    """One regrasp: boom `boom` moves `from_anchor` -> `to_anchor`, holding `pose` throughout."""
+
+    boom: int
+    from_anchor: str
+    to_anchor: str
+    pose: np.ndarray
+    probabilities: np.ndarray  # the four configurations' P (transition.CONFIG_NAMES order)
+
+
+class FootstepPlan(NamedTuple):
+    success: bool
+    reason: str
+    stances: list[Stance4]       # S_0 .. S_n
+    steps: list[Step]            # n regrasps
+    start_pose: np.ndarray
+    goal_pose: np.ndarray | None  # a feasible pose in S_n within the goal tolerance
+    expansions: int
+    transitions_tested: int
+    seconds: float
+    search: SearchResult | None = None
+    transitions: dict | None = None   # every transition tested: (stance, boom, anchor) -> result
+
+
+def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.random.Generator:
+    """A generator that depends only on the edge, so results do not depend on search order."""
+    key = zlib.crc32(f"{stance}|{boom}|{anchor}".encode())
+    return np.random.default_rng([seed, key])
+
+
+def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
+               pose: np.ndarray) -> np.ndarray:
+    """Per boom, the worst -log P_i over the transition's four configurations at `pose`."""
+    s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
+    worst = np.zeros(4)
+    for stance, tip in ((s_old, None), (s_three, s_old.positions[boom]),
+                        (s_three, s_new.positions[boom]), (s_new, None)):
+        lp = check_poses(scn, stance, pose, tip).allocation.log_probs[0]
+        worst = np.maximum(worst, -np.nan_to_num(lp, nan=0.0))
+    return worst
+
+
+def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
+    c = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
+    return float(np.linalg.norm(c - np.asarray(scn.goal_position)))
+
+
+def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generator,
+                 samples: int, ignore_grasps: bool = False) -> np.ndarray | None:
+    """The most robust sampled pose within the goal tolerance that is feasible in `stance`."""
+    robot = scn.robot
+    goal = np.asarray(scn.goal_position)
+    reach = robot.boom_length[1] + float(np.max(np.linalg.norm(robot.shoulder_array, axis=1)))
+    pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
+    if np.any(np.linalg.norm(pts - goal, axis=1) > reach + scn.goal_tolerance):
+        return None
+    radius = scn.goal_tolerance * np.sqrt(rng.uniform(0.0, 1.0, samples))
+    ang = rng.uniform(0.0, 2 * math.pi, samples)
+    poses = np.column_stack([goal[0] + radius * np.cos(ang), goal[1] + radius * np.sin(ang),
+                             rng.normal(0.0, 0.3, samples)])
+    check = check_poses(scn, scn.stance(stance), poses, ignore_grasps=ignore_grasps)
+    if not check.feasible.any():
+        return None
+    # Among feasible poses the most robust; the naive planner's may all have r = -inf.
+    score = np.where(check.feasible, np.maximum(check.allocation.robustness, -1e300), -np.inf)
+    return poses[int(np.argmax(score))]
+
+
+def candidate_moves(scn: Scenario, stance: tuple[str, ...], pose: np.ndarray,
+                    per_boom: int, seed: int = 0) -> list[tuple[int, str]]:
+    """(boom, anchor) moves worth testing: reachable, nearest the goal first, per boom."""
+    goal = np.asarray(scn.goal_position)
+    moves = []
+    rng = np.random.default_rng([seed, zlib.crc32(str(stance).encode())])
+    for j in range(4):
+        idx = reachable_anchors(scn, stance, j, pose, rng)
+        order = np.argsort(np.linalg.norm(scn.anchor_positions[idx] - goal, axis=1))
+        moves += [(j, scn.anchors[k].id) for k in idx[order][:per_boom]]
+    return moves
+
+
+def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
+                   progress: Callable[[int, int], None] | None = None) -> FootstepPlan:
+    """RBP's footstep plan from the scenario's start stance to a stance that reaches the goal."""
+    cfg = config or FootstepConfig()
+    t0 = time.perf_counter()
+    c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
+    c_attach = max(c_attach, 1e-9)
+    robot = scn.robot
+    max_step = 2.0 * (robot.boom_length[1] + float(np.max(np.linalg.norm(
+        robot.shoulder_array, axis=1)))) / 4.0
+    start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
+    start_pose = np.asarray(scn.start_pose, dtype=float)
+    cache: dict[tuple, Transition] = {}
+    goal_rng = np.random.default_rng([cfg.seed, 1])
+    tested = 0
+
+    def successors(node: Stance4, pose: np.ndarray):
+        for j, anchor in candidate_moves(scn, node, pose, cfg.candidates_per_boom, cfg.seed):
+            child = tuple(anchor if i == j else a for i, a in enumerate(node))
+            yield child, (j, anchor), c_attach
+
+    def evaluate(node: Stance4, child: Stance4, key: tuple[int, str], pose: np.ndarray):
+        nonlocal tested
+        j, anchor = key
+        ck = (node, j, anchor)
+        if ck not in cache:
+            tested += 1
+            cache[ck] = find_transition(scn, node, j, anchor, edge_rng(cfg.seed, node, j, anchor),
+                                        guess=pose, config=cfg.transition)
+        tr = cache[ck]
+        if not tr.feasible:
+            return None
+        cost = c_attach + float(boom_costs(scn, node, j, anchor, tr.pose).sum())
+        return Edge(cost, tr.pose)
+
+    def heuristic(node: Stance4) -> float:
+        return c_attach * max(0.0, centroid_distance(scn, node) - scn.goal_tolerance) / max_step
+
+    def is_goal(node: Stance4, pose: np.ndarray):
+        return goal_pose_in(scn, node, goal_rng, cfg.goal_samples)
+
+    def on_expand(n: int, node: Stance4) -> None:
+        if progress is not None:
+            progress(n, tested)
+
+    result = lazy_astar(start, successors, evaluate, heuristic,
+                        is_goal=lambda n, d: _as_goal(is_goal(n, d)),
+                        weight=cfg.heuristic_weight, max_expansions=cfg.max_expansions,
+                        start_data=start_pose, on_expand=on_expand)
+    seconds = time.perf_counter() - t0
+    if not result.success:
+        return FootstepPlan(False, result.reason, [start], [], start_pose, None,
+                            result.expansions, tested, seconds, result, cache)
+    steps = []
+    for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
+        j = next(i for i in range(4) if a[i] != b[i])
+        steps.append(Step(j, a[j], b[j], pose, cache[(a, j, b[j])].probabilities))
+    return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
+                        result.expansions, tested, seconds, result, cache)
+
+
+class _Goal(NamedTuple):
+    pose: np.ndarray
+
+
+def _as_goal(pose: np.ndarray | None) -> Any:
+    return _Goal(pose) if pose is not None else None

@@ -1,0 +1,120 @@
+"""The plan file (format `reachbot-plan/1`): built from a footstep plan, written, validated.
+
+A plan alternates body phases (a 4-stance, the body moving) and reach phases (a 3-stance, the
+free gripper moving from one anchor to the next at a fixed pose). At the footstep stage each
+phase holds only the configurations the footstep planner found: a body phase from one
+transition pose to the next, a reach phase at its transition pose with the free gripper at the
+old and at the new anchor. Each configuration is evaluated with the robust force allocation,
+for either planner, so that plans are scored by the same model.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from planning.footsteps import FootstepPlan
+from planning.probability import Configuration, path_probability
+from rb_drake.feasibility import check_poses
+from rb_drake.files import atomic_write_text
+from rb_drake.scenario import Scenario
+
+FORMAT = "reachbot-plan/1"
+BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
+TURN_SPEED = 0.2      # rad/s
+REACH_DURATION = 5.0  # s for the free gripper to travel between anchors
+STAGES = ("footstep", "seed_body", "scp_body", "seed_reach", "scp_reach", "total")
+
+
+def _configuration(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
+                   free_tip: np.ndarray | None, t: float) -> dict[str, Any]:
+    stance = scn.stance(stance_ids)
+    check = check_poses(scn, stance, pose, free_tip, full=True)
+    alloc = check.allocation
+    step: dict[str, Any] = {
+        "t": round(float(t), 6),
+        "pose": [float(v) for v in pose],
+        "tension": [float(f) if stance.attached[i] and np.isfinite(f) else None
+                    for i, f in enumerate(alloc.tensions[0])],
+        "p_grasp": [float(np.exp(lp)) if stance.attached[i] else None
+                    for i, lp in enumerate(alloc.log_probs[0])],
+        "p_success": float(np.exp(alloc.robustness[0])),
+    }
+    if free_tip is not None:
+        step["free_tip"] = [float(v) for v in free_tip]
+        step["shoulder_torque"] = float(alloc.shoulder_torque[0])
+    return step
+
+
+def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
+               timing: dict[str, float] | None = None) -> dict[str, Any]:
+    """The plan-file dictionary for a footstep plan (phases at the footstep stage)."""
+    timing = {k: 0.0 for k in STAGES} | (timing or {})
+    plan: dict[str, Any] = {
+        "format": FORMAT,
+        "planner": planner,
+        "success": bool(fp.success),
+        "reason": fp.reason,
+        "p_min": None,
+        "p_path": None,
+        "regrasps": len(fp.steps),
+        "timing": timing,
+        "scenario": scn.to_dict(resolved=True),
+        "robot": scn.robot.to_dict(),
+        "phases": [],
+    }
+    t = 0.0
+    poses = [fp.start_pose] + [s.pose for s in fp.steps]
+    ends = [s.pose for s in fp.steps] + ([fp.goal_pose] if fp.goal_pose is not None else [])
+    for k, stance in enumerate(fp.stances):
+        if k < len(ends):
+            a, b = np.asarray(poses[k]), np.asarray(ends[k])
+            duration = max(1.0, float(np.linalg.norm(b[:2] - a[:2])) / BODY_SPEED,
+                           abs(float(b[2] - a[2])) / TURN_SPEED)
+            plan["phases"].append({
+                "kind": "body", "stance": list(stance), "free_boom": None,
+                "steps": [_configuration(scn, stance, a, None, t),
+                          _configuration(scn, stance, b, None, t + duration)]})
+            t += duration
+        if k < len(fp.steps):
+            step = fp.steps[k]
+            three = tuple(None if i == step.boom else x for i, x in enumerate(stance))
+            old = np.array(scn.anchors[scn.anchor_index[step.from_anchor]].position)
+            new = np.array(scn.anchors[scn.anchor_index[step.to_anchor]].position)
+            plan["phases"].append({
+                "kind": "reach", "stance": list(three), "free_boom": step.boom,
+                "from_anchor": step.from_anchor, "to_anchor": step.to_anchor,
+                "steps": [_configuration(scn, three, step.pose, old, t),
+                          _configuration(scn, three, step.pose, new, t + REACH_DURATION)]})
+            t += REACH_DURATION
+    if fp.success:
+        prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
+        plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    return plan
+
+
+def plan_configurations(plan: dict[str, Any]):
+    """Every configuration of a plan file, in time order, for `path_probability`."""
+    for phase in plan["phases"]:
+        for step in phase["steps"]:
+            yield Configuration(phase["stance"], step["p_grasp"], step["p_success"])
+
+
+def schema() -> dict[str, Any]:
+    return json.loads(resources.files("planning").joinpath("plan_schema.json").read_text())
+
+
+def validate(plan: dict[str, Any]) -> None:
+    """Raise jsonschema.ValidationError when `plan` does not follow the schema."""
+    import jsonschema
+
+    jsonschema.validate(plan, schema())
+
+
+def write_plan(plan: dict[str, Any], path: str | Path) -> Path:
+    validate(plan)
+    return atomic_write_text(path, json.dumps(plan, indent=1, allow_nan=False) + "\n")

@@ -1,0 +1,58 @@
+"""The success probability of a whole climb.
+
+A holding is boom i attached to one anchor from attach to detach. Each holding draws its grasp
+strength once, so it survives iff it survives its worst instant: its survival probability is
+the minimum of P_i over the configurations it goes through. Holdings are independent, and every
+regrasp must also take hold on contact (probability 1 - attach_failure):
+
+    p_path = prod_holdings min_t P_i(t) * (1 - attach_failure)^regrasps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import NamedTuple
+
+
+class PathProbability(NamedTuple):
+    p_path: float
+    p_min: float       # the smallest configuration probability along the plan
+    regrasps: int
+    holdings: list[tuple[int, str, float]]  # (boom, anchor, min P) in the order they end
+
+
+class Configuration(NamedTuple):
+    """One instant of a plan: anchor id per boom (None: free) and P per boom (None: free)."""
+
+    stance: Sequence[str | None]
+    p_grasp: Sequence[float | None]
+    p_success: float
+
+
+def path_probability(configurations: Iterable[Configuration],
+                     attach_failure: float) -> PathProbability:
+    current: list[str | None] = [None] * 4
+    worst = [1.0] * 4
+    holdings: list[tuple[int, str, float]] = []
+    regrasps = 0
+    p_min = 1.0
+    first = True
+    for config in configurations:
+        p_min = min(p_min, float(config.p_success))
+        for i, (anchor, p) in enumerate(zip(config.stance, config.p_grasp, strict=True)):
+            if anchor != current[i]:
+                if current[i] is not None:
+                    holdings.append((i, current[i], worst[i]))
+                if anchor is not None and not first:
+                    regrasps += 1
+                current[i], worst[i] = anchor, 1.0
+            if anchor is not None and p is not None:
+                worst[i] = min(worst[i], float(p))
+        first = False
+    for i in range(4):
+        if current[i] is not None:
+            holdings.append((i, current[i], worst[i]))
+    p_path = (1.0 - attach_failure) ** regrasps
+    for _, _, p in holdings:
+        p_path *= p
+    return PathProbability(p_path, p_min, regrasps, holdings)

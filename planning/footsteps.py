@@ -187,7 +187,10 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                         start_data=start_pose, on_expand=on_expand)
     seconds = time.perf_counter() - t0
     if not result.success:
-        return FootstepPlan(False, result.reason, [start], [], start_pose, None,
+        nearest = min(centroid_distance(scn, n) for n in result.graph.nodes)
+        reason = (f"{result.reason}; the nearest stance reached is {nearest:.2f} m from the "
+                  f"goal (the start is {centroid_distance(scn, start):.2f} m)")
+        return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache)
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):

@@ -35,6 +35,8 @@ class TransitionConfig:
     spread: float = 0.6            # m, std of the initial position samples
     phi_range: float = 0.8         # rad, orientations drawn uniformly in +-phi_range
     max_reach_violation: float = 0.5  # give up at once when no sample comes this near
+    hopeless_violation: float = 2.0   # ... or when the best full sample is this far off
+    patience: int = 2                 # rounds without progress before giving up
     ignore_grasps: bool = False    # the naive baseline: limit surfaces play no part
 
 
@@ -133,18 +135,22 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     best_reason = int(reason[best])
     top = np.argsort(key)[::-1][:cfg.elite]
     elite, elite_key = poses[top], key[top]
+    if best_key < -VIOLATION_OFFSET - cfg.hopeless_violation:
+        return Transition(False, None, None, _explain(best_reason), evaluated)
     # Cross-entropy search: descend the violation until feasible, then raise the robustness.
-    rounds = 0
-    while rounds < cfg.search_rounds and (best_key < -VIOLATION_OFFSET
-                                          or (rounds < cfg.refine_rounds
-                                              and not cfg.ignore_grasps)):
+    rounds = stalled = 0
+    while stalled < cfg.patience and rounds < cfg.search_rounds and (
+            best_key < -VIOLATION_OFFSET
+            or (rounds < cfg.refine_rounds and not cfg.ignore_grasps)):
         rounds += 1
         mean = elite.mean(axis=0)
         std = np.maximum(elite.std(axis=0), [0.02, 0.02, 0.02])
         cand = mean + rng.normal(0.0, 1.0, (cfg.refine_samples, 3)) * std
         k2, r2, reason2 = _score(scn, old, boom, new_anchor, cand, cfg.ignore_grasps)
         evaluated += len(cand)
+        stalled += 1
         if k2.max() > best_key:
+            stalled = 0
             b = int(np.argmax(k2))
             best_key, best_pose, best_r4 = k2[b], cand[b].copy(), r2[b]
             best_reason = int(reason2[b])

@@ -16,7 +16,7 @@ from rb_drake.collision import ANCHOR_CLEARANCE, Rock
 from rb_drake.grasp import HALF_PI
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
-from rb_drake.statics import Allocation, allocate
+from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, statics_problem
 
 
 class World(Protocol):
@@ -65,6 +65,7 @@ class PoseCheck(NamedTuple):
     allocation: Allocation     # tensions and probabilities at every pose
     lengths: np.ndarray        # (P, 4)
     shoulder_angles: np.ndarray  # (P, 4)
+    problem: StaticsProblem    # the equilibrium equations at every pose
 
     @property
     def probability(self) -> np.ndarray:
@@ -92,7 +93,8 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     poses = geometry.as_poses(poses)
     P = poses.shape[0]
     targets = _targets(stance, free_tip)
-    geo = geometry.boom_geometry(robot, poses, targets)
+    problem = statics_problem(robot, world.gravity_vector, poses, stance, free_tip)
+    geo = problem.geometry
     used = np.isfinite(targets[:, 0])  # booms with a tip position: attached, or the free one
 
     reason = np.full(P, int(Reason.FEASIBLE))
@@ -133,7 +135,8 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         flag(boom_hit, Reason.BOOM_COLLISION, rows)
 
     rows = survivors()
-    part = allocate(robot, world.gravity_vector, poses[rows], stance, free_tip)
+    part = allocate(robot, world.gravity_vector, poses[rows], stance, free_tip,
+                    problem=problem.take(rows))
     alloc = Allocation(*(_scatter(v, rows, P, -np.inf if name == "robustness" else np.nan)
                          for name, v in zip(Allocation._fields, part, strict=True)))
     if not ignore_grasps:
@@ -146,7 +149,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     if not ignore_grasps:
         flag(part.robustness < robot.log_p_min, Reason.PROBABILITY, rows)
     feasible = reason == Reason.FEASIBLE
-    return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle)
+    return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle, problem)
 
 
 def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.ndarray:
@@ -236,8 +239,6 @@ def violation(world: World, stance: Stance, poses: np.ndarray, check: PoseCheck,
     transition search descends it to find feasible poses where random samples miss them.
     `check` must come from `check_poses(..., full=True)` on the same poses.
     """
-    from rb_drake.statics import null_vector, statics_problem
-
     robot = world.robot
     poses = geometry.as_poses(poses)
     used = np.isfinite(_targets(stance, free_tip)[:, 0])
@@ -249,7 +250,7 @@ def violation(world: World, stance: Stance, poses: np.ndarray, check: PoseCheck,
     alloc = check.allocation
     f_lo, f_hi = robot.boom_tension
     att = stance.attached
-    prob = statics_problem(robot, world.gravity_vector, poses, stance, free_tip)
+    prob = check.problem
     if att.sum() == 3:
         A3 = prob.A[:, :, att]
         det = np.linalg.det(A3)

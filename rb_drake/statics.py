@@ -53,6 +53,12 @@ class StaticsProblem(NamedTuple):
     pull_angles: np.ndarray
     shoulder_torque: np.ndarray
 
+    def take(self, rows: np.ndarray) -> StaticsProblem:
+        """The problem at a subset of the poses."""
+        geo = geometry.BoomGeometry(*(a[rows] for a in self.geometry))
+        return StaticsProblem(self.A[rows], self.b[rows], geo, self.pull_angles[rows],
+                              self.shoulder_torque[rows])
+
 
 def statics_problem(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance: Stance,
                     free_tip: np.ndarray | None = None) -> StaticsProblem:
@@ -101,9 +107,12 @@ def null_vector(A: np.ndarray) -> np.ndarray:
 
 
 def allocate(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance: Stance,
-             free_tip: np.ndarray | None = None, newton_steps: int = 12) -> Allocation:
-    """The most robust tensions within bounds at every pose (vectorised; see module doc)."""
-    prob = statics_problem(robot, gravity, poses, stance, free_tip)
+             free_tip: np.ndarray | None = None, newton_steps: int = 12,
+             problem: StaticsProblem | None = None) -> Allocation:
+    """The most robust tensions within bounds at every pose (vectorised; see module doc).
+    `problem`, when given, is `statics_problem` at these poses, already computed."""
+    prob = problem if problem is not None else statics_problem(robot, gravity, poses, stance,
+                                                               free_tip)
     A, b, psi = prob.A, prob.b, prob.pull_angles
     P = A.shape[0]
     f_lo, f_hi = robot.boom_tension

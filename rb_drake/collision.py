@@ -24,6 +24,9 @@ class Rock:
             self.edge_start = np.concatenate(self.polygons)
             self.edge_end = np.concatenate([np.roll(p, -1, axis=0) for p in self.polygons])
             self.vertex = np.array([p[0] for p in self.polygons])  # one vertex per polygon
+            # which polygon each edge belongs to, as a (E, W) indicator for parity counts
+            owner = np.repeat(np.arange(len(self.polygons)), [len(p) for p in self.polygons])
+            self.edge_owner = np.eye(len(self.polygons))[owner]
         else:
             self.edge_start = self.edge_end = np.zeros((0, 2))
             self.vertex = np.zeros((0, 2))
@@ -32,9 +35,18 @@ class Rock:
         """Whether each point (shape (..., 2)) lies inside some polygon (even-odd rule)."""
         pts = np.asarray(points, dtype=float)
         flat = pts.reshape(-1, 2)
-        inside = np.zeros(flat.shape[0], dtype=bool)
-        for poly in self.polygons:
-            inside |= _points_in_polygon(flat, poly)
+        if not self.polygons:
+            return np.zeros(pts.shape[:-1], dtype=bool)
+        # Even-odd rule for every polygon at once: count, per polygon, the edges that a ray
+        # from the point towards +x crosses.
+        x, y = flat[:, 0:1], flat[:, 1:2]
+        x0, y0 = self.edge_start[None, :, 0], self.edge_start[None, :, 1]
+        x1, y1 = self.edge_end[None, :, 0], self.edge_end[None, :, 1]
+        straddle = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x_cross = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        crossings = (straddle & (x < x_cross)).astype(float) @ self.edge_owner
+        inside = (crossings.astype(int) % 2 == 1).any(axis=1)
         return inside.reshape(pts.shape[:-1])
 
     def segments_hit(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -64,17 +76,6 @@ class Rock:
         closest = self.edge_start[None] + t[..., None] * e[None]
         d = np.linalg.norm(pts[:, None, :] - closest, axis=-1).min(axis=1)
         return d.reshape(np.asarray(points).shape[:-1])
-
-
-def _points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    x, y = points[:, 0:1], points[:, 1:2]
-    x0, y0 = poly[None, :, 0], poly[None, :, 1]
-    q = np.roll(poly, -1, axis=0)
-    x1, y1 = q[None, :, 0], q[None, :, 1]
-    straddle = (y0 > y) != (y1 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_cross = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-    return (np.sum(straddle & (x < x_cross), axis=1) % 2) == 1
 
 
 def _orient(ax, ay, bx, by, cx, cy):

@@ -72,11 +72,13 @@ class PoseCheck(NamedTuple):
         return np.exp(self.allocation.robustness)
 
 
-def _targets(stance: Stance, free_tip: np.ndarray | None) -> np.ndarray:
+def _targets(stance: Stance, free_tip: np.ndarray | None, P: int) -> np.ndarray:
+    """Each boom's tip point at each of P poses (NaN for a free boom without a tip), (P, 4, 2)."""
     targets = np.where(stance.attached[:, None], stance.positions, np.nan)
+    targets = np.broadcast_to(targets, (P, 4, 2)).copy()
     j = stance.free_boom
     if j is not None and free_tip is not None:
-        targets[j] = free_tip
+        targets[:, j, :] = free_tip
     return targets
 
 
@@ -92,10 +94,10 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     robot = world.robot
     poses = geometry.as_poses(poses)
     P = poses.shape[0]
-    targets = _targets(stance, free_tip)
+    targets = _targets(stance, free_tip, P)
     problem = statics_problem(robot, world.gravity_vector, poses, stance, free_tip)
     geo = problem.geometry
-    used = np.isfinite(targets[:, 0])  # booms with a tip position: attached, or the free one
+    used = np.isfinite(targets[..., 0])  # booms with a tip position: attached, or the free one
 
     reason = np.full(P, int(Reason.FEASIBLE))
     boom = np.full(P, -1)
@@ -130,12 +132,12 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         flag(body_hit, Reason.BODY_COLLISION, rows)
         rows = survivors()
         with np.errstate(invalid="ignore"):
-            end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
-        boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end)) & used
+            end = targets[rows] - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
+        boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end)) & used[rows]
         flag(boom_hit, Reason.BOOM_COLLISION, rows)
 
     rows = survivors()
-    part = allocate(robot, world.gravity_vector, poses[rows], stance, free_tip,
+    part = allocate(robot, world.gravity_vector, poses[rows], stance.take(rows), free_tip,
                     problem=problem.take(rows))
     alloc = Allocation(*(_scatter(v, rows, P, -np.inf if name == "robustness" else np.nan)
                          for name, v in zip(Allocation._fields, part, strict=True)))
@@ -181,7 +183,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     check = check_poses(world, stance, pose, free_tip, full=True)
     if check.feasible[0]:
         return []
-    targets = _targets(stance, free_tip)
+    targets = _targets(stance, free_tip, 1)[0]
     geo = geometry.boom_geometry(robot, pose, targets)
     out: list[str] = []
     lo, hi = robot.boom_length
@@ -241,7 +243,7 @@ def violation(world: World, stance: Stance, poses: np.ndarray, check: PoseCheck,
     """
     robot = world.robot
     poses = geometry.as_poses(poses)
-    used = np.isfinite(_targets(stance, free_tip)[:, 0])
+    used = np.isfinite(_targets(stance, free_tip, poses.shape[0])[..., 0])
     lo, hi = robot.boom_length
     L, th = check.lengths, check.shoulder_angles
     v = np.sum(np.where(used, np.maximum(0, L - hi) + np.maximum(0, lo - L)

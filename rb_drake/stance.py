@@ -45,6 +45,30 @@ class Stance(NamedTuple):
     def sigma(self, psi: np.ndarray) -> np.ndarray:
         return grasp.sigma_limit(psi, self.sigma_normal, self.sigma_lateral)
 
+    @staticmethod
+    def mix(a: Stance, b: Stance, use_b: np.ndarray) -> Stance:
+        """A per-row stance: row k is b where use_b[k], else a (same booms attached).
+
+        Lets one vectorised check evaluate two stances that differ in one anchor, e.g. the old
+        and the new 4-stance of a transition, at once."""
+        if not np.array_equal(a.attached, b.attached):
+            raise ValueError("mixed stances must attach the same booms")
+        pick = use_b[:, None]
+        return Stance(a.ids, a.attached, np.where(pick[..., None], b.positions, a.positions),
+                      np.where(pick[..., None], b.normals, a.normals),
+                      np.where(pick, b.f_normal, a.f_normal),
+                      np.where(pick, b.f_lateral, a.f_lateral),
+                      np.where(pick, b.sigma_normal, a.sigma_normal),
+                      np.where(pick, b.sigma_lateral, a.sigma_lateral))
+
+    def take(self, rows: np.ndarray) -> Stance:
+        """The rows of a per-row stance (see `mix`); a plain stance is returned as it is."""
+        if self.positions.ndim == 2:
+            return self
+        return Stance(self.ids, self.attached, self.positions[rows], self.normals[rows],
+                      self.f_normal[rows], self.f_lateral[rows], self.sigma_normal[rows],
+                      self.sigma_lateral[rows])
+
     def without(self, boom: int) -> Stance:
         """The 3-stance that frees `boom`."""
         attached = self.attached.copy()

@@ -19,7 +19,7 @@ from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
 from rb_drake.files import atomic_write_text
-from rb_drake.generate import generate_cave
+from rb_drake.generate import CaveConfig, generate_cave
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,11 +28,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--first-seed", type=int, default=1)
     parser.add_argument("--max-expansions", type=int, default=400)
+    parser.add_argument("--length", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
+                        help="cave length range in m (default: the generator's, 7 to 9)")
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
     records = []
     for seed in range(args.first_seed, args.first_seed + args.trials):
-        scn = generate_cave(args.kind, seed)
+        config = CaveConfig(length=tuple(args.length)) if args.length else CaveConfig()
+        scn = generate_cave(args.kind, seed, config)
         cfg = FootstepConfig(max_expansions=args.max_expansions)
         for name, run in (("rbp", plan_footsteps), ("naive", plan_naive)):
             t0 = time.perf_counter()

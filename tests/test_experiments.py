@@ -1,0 +1,39 @@
+"""Experiment scripts run end to end at a tiny size, through runpy, in a temporary folder."""
+
+from __future__ import annotations
+
+import json
+import runpy
+import sys
+from pathlib import Path
+
+import pytest
+
+EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
+
+
+def run_script(name: str, args: list[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "argv", [name, *args])
+    with pytest.raises(SystemExit) as done:
+        runpy.run_path(str(EXPERIMENTS / f"{name}.py"), run_name="__main__")
+    assert done.value.code == 0, f"{name} exited with {done.value.code}"
+
+
+def test_bench_footsteps_tiny(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    run_script("bench_footsteps", ["--trials", "1", "--first-seed", "4", "--length", "3.0",
+                                   "3.2", "--max-expansions", "5", "--out", str(tmp_path)],
+               monkeypatch)
+    result = json.loads((tmp_path / "bench_footsteps.json").read_text())
+    trials = result["trials"]
+    assert {t["planner"] for t in trials} == {"rbp", "naive"}, trials
+    for t in trials:
+        assert t["seconds"] > 0.0, t
+        if t["success"]:
+            assert 0.0 <= t["p_path"] <= 1.0, t
+        else:
+            assert t["p_path"] is None and t["reason"], t
+    for name in ("rbp", "naive"):
+        summary = result["summary"][name]
+        assert summary["trials"] == 1, summary
+        assert summary["seconds_min"] <= summary["seconds_median"] <= summary["seconds_max"]

@@ -4,26 +4,16 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
+from cli_helpers import run_rbp
 
 from rb_drake.params import RobotParams
 from rb_drake.scenario import bundled_caves, load_scenario
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def run_rbp(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
-           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "rbp", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
 
 
 def assert_ok(proc: subprocess.CompletedProcess[str]) -> None:

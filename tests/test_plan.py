@@ -12,23 +12,21 @@ import json
 import math
 import os
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import jsonschema
 import numpy as np
 import pytest
+from cli_helpers import run_rbp
 
 from planning.check import check_plan
 from planning.footsteps import FootstepConfig, FootstepPlan, plan_footsteps
-from planning.plan import FORMAT, build_plan, plan_configurations, validate, write_plan
+from planning.plan import FORMAT, build_plan, plan_configurations, schema, validate, write_plan
 from planning.probability import path_probability
 from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario, scenario_from_dict, scenario_to_yaml
-
-ROOT = Path(__file__).resolve().parents[1]
 
 # generate_cave("shaft", SEED, short) with the goal moved 0.6 m above the start: RBP succeeds
 # with 2 regrasps in about 2 s (seeds 0, 1 and 5-11 need no regrasp, 3 has no route).
@@ -112,8 +110,11 @@ def test_plan_succeeds_with_regrasps(plan: dict[str, Any], fp: FootstepPlan) -> 
 
 
 def test_plan_validates_against_schema(plan: dict[str, Any]) -> None:
-    validate(plan)  # raises on a violation
-    json.dumps(plan, allow_nan=False)  # no NaN or infinity anywhere
+    errors = [e.message for e in jsonschema.Draft202012Validator(schema()).iter_errors(plan)]
+    assert errors == [], f"the plan breaks its schema: {errors}"
+    validate(plan)
+    text = json.dumps(plan, allow_nan=False)  # raises on NaN or infinity anywhere
+    assert json.loads(text) == plan, "the plan does not survive a JSON round trip"
 
 
 def test_check_plan_accepts_the_plan(plan: dict[str, Any]) -> None:
@@ -372,11 +373,6 @@ def test_no_route_gives_failure_with_reason(unreachable: Scenario, tmp_path: Pat
 # The command line
 
 
-def run_rbp(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
-           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "rbp", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
 
 
 def describe(proc: subprocess.CompletedProcess[str]) -> str:

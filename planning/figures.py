@@ -16,8 +16,6 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
     """The robot at successive stances (one panel per body phase's end), grasped anchors' normals
     in red, the body's path so far dotted blue, booms coloured by grasp probability."""
     body = [p for p in plan["phases"] if p["kind"] == "body"]
-    if not body:
-        body = []
     picks = np.unique(np.linspace(0, len(body) - 1, min(max_panels, len(body))).round().astype(int)
                       ) if body else []
     n = max(1, len(picks))

@@ -107,7 +107,7 @@ def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generato
     """The most robust sampled pose within the goal tolerance that is feasible in `stance`."""
     robot = scn.robot
     goal = np.asarray(scn.goal_position)
-    reach = robot.boom_length[1] + float(np.max(np.linalg.norm(robot.shoulder_array, axis=1)))
+    reach = robot.max_reach
     pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
     if np.any(np.linalg.norm(pts - goal, axis=1) > reach + scn.goal_tolerance):
         return None
@@ -144,8 +144,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
     c_attach = max(c_attach, 1e-9)
     robot = scn.robot
-    max_step = 2.0 * (robot.boom_length[1] + float(np.max(np.linalg.norm(
-        robot.shoulder_array, axis=1)))) / 4.0
+    max_step = 2.0 * robot.max_reach / 4.0
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cache: dict[tuple, Transition] = {}

@@ -199,7 +199,7 @@ def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: n
                       rng: np.random.Generator, samples: int = 400) -> np.ndarray:
     """Indices of anchors boom `boom` can reach from some pose that also reaches the stance's
     four anchors (boom length and shoulder range only): the cheap filter before any search.
-    Poses are sampled around `pose`; the anchors come nearest-first to nothing in particular."""
+    The poses are sampled around `pose`."""
     robot = scn.robot
     held = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
     poses = np.column_stack([pose[0] + rng.normal(0.0, 0.5, samples),
@@ -208,12 +208,14 @@ def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: n
     ok = _kinematic_violation(robot, poses, held, np.arange(4)) == 0.0
     if not ok.any():
         return np.zeros(0, dtype=int)
-    sh = geometry.shoulder_positions(robot, poses[ok])[:, boom, :]          # (P, 2)
-    d = scn.anchor_positions[None, :, :] - sh[:, None, :]                  # (P, A, 2)
-    length = np.linalg.norm(d, axis=-1)
-    theta = geometry.wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[ok, 2, None]
-                                - robot.shoulder_directions[boom])
-    lo, hi = robot.boom_length
-    reach = ((length >= lo) & (length <= hi) & (np.abs(theta) <= robot.shoulder_range)).any(0)
-    reach[[scn.anchor_index[a] for a in stance]] = False
-    return np.flatnonzero(reach)
+    pts = scn.anchor_positions
+    reachable = (geometry.reach(robot, poses[ok], pts, np.full(len(pts), boom)).violation
+                 == 0.0).any(axis=0)
+    reachable[[scn.anchor_index[a] for a in stance]] = False
+    return np.flatnonzero(reachable)
+
+
+def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
+                         booms: np.ndarray) -> np.ndarray:
+    """How far boom booms[k] at each pose is from reaching anchors[k], summed over k (m + rad)."""
+    return geometry.reach(robot, poses, anchors, booms).violation.sum(axis=1)

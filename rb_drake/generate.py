@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from rb_drake import geometry
 from rb_drake.collision import Rock
 from rb_drake.feasibility import check_poses
 from rb_drake.params import RobotParams
@@ -164,21 +165,15 @@ def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
     Candidates per boom are the `per_boom` reachable anchors nearest its equilibrium direction.
     Poses are tried in order; the search stops at the first pose that has a feasible stance.
     """
-    from rb_drake import geometry
-
     robot = scn.robot
     best = None
     pos = scn.anchor_positions
     for pose in np.atleast_2d(poses):
-        sh = geometry.shoulder_positions(robot, pose)[0]
         cands = []
         for i in range(4):
-            d = pos - sh[i]
-            L = np.linalg.norm(d, axis=1)
-            th = geometry.wrap_angle(np.arctan2(d[:, 1], d[:, 0]) - pose[2]
-                                     - robot.shoulder_directions[i])
-            ok = (robot.boom_length[0] <= L) & (robot.boom_length[1] >= L) & (
-                np.abs(th) <= robot.shoulder_range)
+            r = geometry.reach(robot, pose, pos, np.full(len(pos), i))
+            th = r.shoulder_angle[0]
+            ok = r.violation[0] == 0.0
             ok &= ~np.isin([a.id for a in scn.anchors], exclude)
             idx = np.flatnonzero(ok)
             cands.append(idx[np.argsort(np.abs(th[idx]))][:per_boom])

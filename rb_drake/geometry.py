@@ -134,6 +134,28 @@ def limb_load(robot: RobotParams, poses: np.ndarray, boom: int, tip: np.ndarray,
     return LimbLoad(force, moment, torque)
 
 
+class Reach(NamedTuple):
+    """Whether boom booms[k] at each pose can reach targets[k]: shapes (P, K)."""
+
+    length: np.ndarray
+    shoulder_angle: np.ndarray
+    violation: np.ndarray  # excess over the length and angle limits (m + rad); 0: reachable
+
+
+def reach(robot: RobotParams, poses: np.ndarray, targets: np.ndarray,
+          booms: np.ndarray) -> Reach:
+    """Kinematic reach of boom booms[k] to point targets[k] ((K, 2)) at every pose."""
+    poses = as_poses(poses)
+    d = np.asarray(targets, dtype=float) - shoulder_positions(robot, poses)[:, booms, :]
+    length = np.linalg.norm(d, axis=-1)
+    theta = wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[:, 2, None]
+                       - robot.shoulder_directions[booms])
+    lo, hi = robot.boom_length
+    excess = (np.maximum(0, length - hi) + np.maximum(0, lo - length)
+              + np.maximum(0, np.abs(theta) - robot.shoulder_range))
+    return Reach(length, theta, excess)
+
+
 class PoseJacobians(NamedTuple):
     """Derivatives with respect to the pose (x, y, phi), shapes (P, 4, 3)."""
 

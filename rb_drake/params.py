@@ -58,6 +58,11 @@ class RobotParams:
         return math.radians(self.shoulder_range_deg)
 
     @property
+    def max_reach(self) -> float:
+        """The farthest an anchor can be from the body centre: longest boom plus shoulder offset."""
+        return self.boom_length[1] + float(np.max(np.linalg.norm(self.shoulder_array, axis=1)))
+
+    @property
     def log_p_min(self) -> float:
         """r_min: the smallest allowed configuration robustness, log(p_min)."""
         return math.log(self.p_min)

@@ -102,6 +102,17 @@ def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
     return float(np.linalg.norm(c - np.asarray(scn.goal_position)))
 
 
+def goal_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
+    """How far a stance is from one that can hold the goal pose: the centroid's distance beyond
+    the goal tolerance, plus each anchor's distance beyond reach of the goal (a lagging boom
+    must step before the goal can be held, however close the centroid is)."""
+    pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
+    goal = np.asarray(scn.goal_position)
+    lag = np.maximum(0.0, np.linalg.norm(pts - goal, axis=1)
+                     - (scn.robot.max_reach + scn.goal_tolerance)).sum()
+    return max(0.0, centroid_distance(scn, stance) - scn.goal_tolerance) + float(lag)
+
+
 def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generator,
                  samples: int, ignore_grasps: bool = False) -> np.ndarray | None:
     """The most robust sampled pose within the goal tolerance that is feasible in `stance`."""
@@ -171,7 +182,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         return Edge(cost, tr.pose)
 
     def heuristic(node: Stance4) -> float:
-        return c_attach * max(0.0, centroid_distance(scn, node) - scn.goal_tolerance) / max_step
+        return c_attach * goal_distance(scn, node) / max_step
 
     def is_goal(node: Stance4, pose: np.ndarray):
         return goal_pose_in(scn, node, goal_rng, cfg.goal_samples)

@@ -33,7 +33,7 @@ class TransitionConfig:
     refine_samples: int = 32       # poses per round
     elite: int = 8
     spread: float = 0.6            # m, std of the initial position samples
-    phi_range: float = 0.8         # rad, orientations drawn uniformly in +-phi_range
+    phi_range: float = 1.2         # rad, orientations drawn uniformly in +-phi_range
     max_reach_violation: float = 0.5  # give up at once when no sample comes this near
     hopeless_violation: float = 2.0   # ... or when the best full sample is this far off
     patience: int = 2                 # rounds without progress before giving up
@@ -138,17 +138,22 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     if kin.min() > cfg.max_reach_violation:
         return Transition(False, None, None, "no pose found: no sampled pose comes near "
                           "reaching all five anchors within boom length and shoulder range", m)
-    order = np.argsort(kin, kind="stable")
+    # Rank by reach; many candidates reach all five anchors, so ties are broken at random (a
+    # stable sort would keep only the first-drawn, those near `guess`, and miss the rotated
+    # poses that releasing an upper boom needs).
+    order = np.lexsort((rng.uniform(size=m), kin))
     poses = cand[order[:cfg.samples]]
     key, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps)
     evaluated = len(poses)
     best = int(np.argmax(key))
     best_pose, best_key, best_r4 = poses[best].copy(), key[best], r4[best]
-    best_reason = int(reason[best])
+    # The explanation of a rejection comes from the sample that got furthest: most
+    # configurations passed, then the latest test failed (probability is the last).
+    miss = _furthest(reason, r4)
     top = np.argsort(key)[::-1][:cfg.elite]
     elite, elite_key = poses[top], key[top]
     if best_key < -VIOLATION_OFFSET - cfg.hopeless_violation:
-        return Transition(False, None, None, _explain(best_reason), evaluated)
+        return Transition(False, None, None, _explain(miss), evaluated)
     # Cross-entropy search: descend the violation until feasible, then raise the robustness.
     rounds = stalled = 0
     while stalled < cfg.patience and rounds < cfg.search_rounds and (
@@ -165,13 +170,13 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
             stalled = 0
             b = int(np.argmax(k2))
             best_key, best_pose, best_r4 = k2[b], cand[b].copy(), r2[b]
-            best_reason = int(reason2[b])
+        miss = max(miss, _furthest(reason2, r2))
         pool = np.vstack([elite, cand])
         pool_key = np.concatenate([elite_key, k2])
         top = np.argsort(pool_key)[::-1][:cfg.elite]
         elite, elite_key = pool[top], pool_key[top]
     if best_key < -VIOLATION_OFFSET:
-        return Transition(False, None, None, _explain(best_reason), evaluated)
+        return Transition(False, None, None, _explain(miss), evaluated)
     return Transition(True, best_pose, np.exp(best_r4), "", evaluated)
 
 
@@ -188,9 +193,18 @@ def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
                   + np.maximum(0, np.abs(theta) - robot.shoulder_range), axis=1)
 
 
-def _explain(code: int) -> str:
-    """Why the pose that came nearest to feasible (the least violation) failed, in words."""
-    config, reason = divmod(code, 10)
+def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:
+    """(progress, failure code) of the sample that got furthest: the most configurations
+    feasible, then the latest failing test (codes as `_score`'s)."""
+    passed = np.isfinite(r4).sum(axis=1)
+    progress = passed * 100 + reason % 10
+    k = int(np.argmax(progress))
+    return int(progress[k]), int(reason[k])
+
+
+def _explain(miss: tuple[int, int]) -> str:
+    """Why the sample that got furthest failed, in words."""
+    config, reason = divmod(miss[1], 10)
     return (f"no pose found: nearest miss fails with {REASON_TEXT[Reason(reason)]} in the "
             f"{CONFIG_NAMES[config]}")
 

@@ -36,7 +36,7 @@ class CaveConfig:
     # Booms leave the body along its diagonals, so hanging from one upper boom while the other
     # moves needs steep booms: shafts wider than about 2 m leave few feasible transitions.
     width: tuple[float, float] = (1.5, 1.9)            # m, shaft width
-    passage_height: tuple[float, float] = (2.1, 2.6)   # m
+    passage_height: tuple[float, float] = (1.5, 1.9)   # m, lower for the same reason
     roughness: float = 0.08                # m, std of wall vertex jitter
     gravity: tuple[float, float] = MARS_GRAVITY
     max_redraws: int = 20

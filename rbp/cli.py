@@ -247,6 +247,9 @@ def build_parser() -> argparse.ArgumentParser:
     show.set_defaults(func=cmd_scenario_show)
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
+    from systems.rig_cli import add_rig_commands
+
+    add_rig_commands(sub)
     return parser
 
 

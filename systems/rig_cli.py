@@ -1,0 +1,140 @@
+"""`rbp rig-run`, `rbp rig-replay` and `rbp rig-report`: a plan's body phase on the rig.
+
+Heavy modules are imported inside the handlers, so `rbp --help` stays instant. A user's mistake
+raises `rbp.cli.UserError` with one line: the file, the field and the reason.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+
+def add_rig_commands(subparsers) -> None:
+    """Declare the three rig subcommands on `rbp`'s subparsers."""
+    run = subparsers.add_parser("rig-run", help="run a body phase of a plan on the rig over LCM")
+    run.add_argument("plan", help="plan file (reachbot-plan/1, .json)")
+    run.add_argument("--phase", type=int, default=0,
+                     help="index of the body phase to run (default 0)")
+    run.add_argument("--lcm-url", default="memq://",
+                     help="LCM bus of the rig (default memq://, in-process; the hardware "
+                          "needs its udpm:// URL)")
+    run.add_argument("--sim-rig", action="store_true",
+                     help="answer with the simulated rig, in this process on memq://")
+    run.add_argument("--seed", type=int, default=0, help="seed of the simulated rig's noise")
+    run.add_argument("--period", type=float, default=0.1,
+                     help="seconds between commands (default 0.1)")
+    run.add_argument("--log", default="rig.lcm",
+                     help="LCM log of every message (default rig.lcm)")
+    run.set_defaults(func=cmd_rig_run)
+
+    replay = subparsers.add_parser("rig-replay",
+                                   help="replay a rig log through the grasp monitor")
+    replay.add_argument("log", help="LCM log written by rbp rig-run")
+    replay.set_defaults(func=cmd_rig_replay)
+
+    report = subparsers.add_parser("rig-report",
+                                   help="plot a rig log: grasp probabilities and tensions")
+    report.add_argument("log", help="LCM log written by rbp rig-run")
+    report.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf)")
+    report.add_argument("--dpi", type=int, default=120)
+    report.set_defaults(func=cmd_rig_report)
+
+
+def _read_plan(path: Path) -> dict:
+    import jsonschema
+
+    from planning.plan import validate
+    from rbp.cli import UserError
+
+    try:
+        plan = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: (file): no such file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
+    try:
+        validate(plan)
+    except jsonschema.ValidationError as e:
+        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise UserError(f"{path}: {field}: {e.message}") from None
+    return plan
+
+
+def _summary(record, stance_ids) -> list[str]:
+    lines = []
+    for i, anchor in enumerate(stance_ids):
+        k = int(record.p_grasp[:, i].argmin())
+        lines.append(f"  boom {i} -> {anchor}: min P = {record.p_grasp[k, i]:.5f} at "
+                     f"t = {record.time[k]:.2f} s (force {record.force[k, i]:.2f} N, pull "
+                     f"angle {math.degrees(record.pull_angle[k, i]):+.1f} deg)")
+    return lines
+
+
+def cmd_rig_run(args: argparse.Namespace) -> int:
+    from rbp.cli import UserError
+    from systems.rig import RigSimConfig
+    from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
+
+    path = Path(args.plan)
+    plan = _read_plan(path)
+    if not args.period > 0:
+        raise UserError(f"--period: must be positive, got {args.period}")
+    config = RigLcmConfig(url=args.lcm_url, period=args.period)
+    sim = RigSimConfig(seed=args.seed) if args.sim_rig else None
+    try:
+        run = run_rig(plan, args.phase, config, args.log, sim_rig=sim,
+                      plan_source=f"{path.name} phase {args.phase}")
+    except RigInputError as e:
+        where = "" if e.field.startswith("--") else f"{path}: "
+        raise UserError(f"{where}{e}") from None
+    stance = plan["phases"][args.phase]["stance"]
+    print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "
+          f"{run.statuses} statuses received; wrote {run.log}")
+    if not len(run.live.time):
+        print("  no status received: is the rig on this bus?")
+        return 1
+    print("\n".join(_summary(run.live, stance)))
+    return 0
+
+
+def _replay(log_path: str):
+    from rbp.cli import UserError
+    from systems.rig_interface import RigInputError, replay_log
+
+    path = Path(log_path)
+    if not path.is_file():
+        raise UserError(f"{path}: (file): no such file")
+    try:
+        return replay_log(path)
+    except RigInputError as e:
+        raise UserError(f"{path}: {e}") from None
+
+
+def cmd_rig_replay(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    log = _replay(args.log)
+    rec = log.replay
+    print(f"{args.log}: {log.scenario.name}, {log.plan_source or 'rig run'}: "
+          f"{len(log.command_time)} commands, {len(rec.time)} statuses")
+    if len(rec.time):
+        print("\n".join(_summary(rec, log.stance_ids)))
+        print(f"  min P(all grasps) = {float(np.prod(rec.p_grasp, axis=1).min()):.5f}")
+    return 0
+
+
+def cmd_rig_report(args: argparse.Namespace) -> int:
+    from rb_drake.files import atomic_save_figure
+    from rbp.cli import UserError
+    from systems.rig_interface import RigLcmConfig, report_figure
+
+    log = _replay(args.log)
+    if not len(log.replay.time):
+        channel = RigLcmConfig().status_channel
+        raise UserError(f"{args.log}: {channel}: no status messages to plot")
+    atomic_save_figure(report_figure(log), args.output, dpi=args.dpi)
+    print(f"wrote {args.output}")
+    return 0

@@ -1,0 +1,392 @@
+"""Running a body phase of a plan on the rig over LCM, and reading back what the rig measured.
+
+Two Drake systems talk to the rig through `DrakeLcm`: `RigCommandSource` streams commands
+(boom lengths from the planned pose, tension setpoints from the plan) to an
+`LcmPublisherSystem`, and `GraspMonitor` turns each status an `LcmSubscriberSystem` receives
+into each anchor's probability of grasp maintenance (the paper's Fig. 7) from the measured
+load-cell force and hinge angle. `run_rig` executes one phase and logs every message to an LCM
+log; `replay_log` feeds a log back through the same monitor; `report_figure` draws it.
+
+Python LeafSystems are never freed in pydrake 1.51 (STACK.md section 5): `run_rig` builds its
+diagram once per run, and `replay_log` one monitor per log.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import lcm
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, LeafSystem
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.trajectories import PiecewisePolynomial
+
+from rb_drake import geometry, grasp
+from rb_drake.files import atomic_write
+from rb_drake.params import RobotParams
+from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
+from rb_drake.stance import Stance
+from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
+from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
+
+MEMQ = "memq://"
+
+
+@dataclasses.dataclass(frozen=True)
+class RigLcmConfig:
+    """Where the rig is on LCM. The default bus is in-process (`memq://`), never the network:
+    pass a `udpm://` URL explicitly to reach the hardware."""
+
+    url: str = MEMQ
+    command_channel: str = "RIG_COMMAND"
+    status_channel: str = "RIG_STATUS"
+    setup_channel: str = "RIG_SETUP"
+    period: float = 0.1  # s between commands
+
+
+class RigInputError(ValueError):
+    """A plan or log the rig cannot use: `field` (path in the file) and `reason`."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+# ---------------------------------------------------------------------------------------------
+# The phase to execute
+
+
+class BodyPhase(NamedTuple):
+    """A body phase of a plan as trajectories in plan time (pose and tensions, linear in t)."""
+
+    scenario: Scenario
+    stance_ids: tuple[str, ...]
+    pose: PiecewisePolynomial     # (3,) [x, y, phi]
+    tension: PiecewisePolynomial  # (4,) N
+    start_time: float
+    end_time: float
+
+    @property
+    def stance(self) -> Stance:
+        return self.scenario.stance(self.stance_ids)
+
+
+def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
+    """Phase `index` of a plan dict (already schema-valid); raises RigInputError."""
+    phases = plan["phases"]
+    if not 0 <= index < len(phases):
+        raise RigInputError(f"phases[{index}]", f"no such phase; the plan has {len(phases)} "
+                            f"phases (0..{len(phases) - 1})")
+    phase = phases[index]
+    where = f"phases[{index}]"
+    if phase["kind"] != "body":
+        raise RigInputError(f"{where}.kind", f"a {phase['kind']} phase; the rig runs body "
+                            "phases only (its anchors are fixed)")
+    steps = phase["steps"]
+    times = np.array([s["t"] for s in steps], dtype=float)
+    if np.any(np.diff(times) <= 0):
+        k = int(np.flatnonzero(np.diff(times) <= 0)[0]) + 1
+        raise RigInputError(f"{where}.steps[{k}].t", "times must increase from step to step")
+    for k, s in enumerate(steps):
+        if any(f is None for f in s["tension"]):
+            raise RigInputError(f"{where}.steps[{k}].tension", "a body phase needs 4 tensions")
+    try:
+        scn = scenario_from_dict(plan["scenario"], "plan scenario", check_start=False)
+    except ScenarioError as e:
+        raise RigInputError(f"scenario.{e.field}", e.reason) from None
+    for i, anchor in enumerate(phase["stance"]):
+        if anchor not in scn.anchor_index:
+            raise RigInputError(f"{where}.stance[{i}]", f"{anchor!r} is not an anchor of the "
+                                "plan's scenario")
+    poses = np.array([s["pose"] for s in steps], dtype=float).T
+    tensions = np.array([s["tension"] for s in steps], dtype=float).T
+    if len(steps) == 1:  # hold still for a second
+        times = np.append(times, times[0] + 1.0)
+        poses, tensions = np.repeat(poses, 2, axis=1), np.repeat(tensions, 2, axis=1)
+    return BodyPhase(scn, tuple(phase["stance"]),
+                     PiecewisePolynomial.FirstOrderHold(times, poses),
+                     PiecewisePolynomial.FirstOrderHold(times, tensions),
+                     float(times[0]), float(times[-1]))
+
+
+# ---------------------------------------------------------------------------------------------
+# The two systems
+
+
+class RigCommandSource(LeafSystem):
+    """Output `command` (rig_command_t): the plan at plan time `time_offset` + context time.
+
+    Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
+    are the plan's tensions, both interpolated linearly in time.
+    """
+
+    def __init__(self, robot: RobotParams, anchors: np.ndarray, pose: PiecewisePolynomial,
+                 tension: PiecewisePolynomial, time_offset: float = 0.0):
+        super().__init__()
+        self._robot = robot
+        self._anchors = np.asarray(anchors, dtype=float)
+        self._pose = pose
+        self._tension = tension
+        self._time_offset = time_offset
+        self.command_port = self.DeclareAbstractOutputPort(
+            "command", lambda: AbstractValue.Make(rig_command_t()), self._calc_command)
+
+    def _calc_command(self, context, output) -> None:
+        t = self._time_offset + context.get_time()
+        pose = self._pose.value(t).ravel()
+        msg = rig_command_t()
+        msg.utime = round(t * 1e6)
+        msg.boom_length = geometry.boom_geometry(self._robot, pose, self._anchors).length[0]
+        msg.tension_setpoint = np.maximum(0.0, self._tension.value(t).ravel())
+        output.set_value(msg)
+
+
+class GraspMonitor(LeafSystem):
+    """Input `status` (rig_status_t) -> outputs `p_grasp` (4) and `pull_angle` (4, rad).
+
+    The pull angle is the hinge angle (anchor -> robot) measured from the anchor's outward
+    normal; the probability is the limit surface's at the measured load-cell force.
+    """
+
+    def __init__(self, stance: Stance):
+        super().__init__()
+        self._stance = stance
+        self._normal_angle = np.arctan2(stance.normals[:, 1], stance.normals[:, 0])
+        self.status_port = self.DeclareAbstractInputPort(
+            "status", AbstractValue.Make(rig_status_t()))
+        self.p_grasp_port = self.DeclareVectorOutputPort("p_grasp", 4, self._calc_p_grasp)
+        self.pull_angle_port = self.DeclareVectorOutputPort("pull_angle", 4,
+                                                            self._calc_pull_angle)
+
+    def _pull_angle(self, context) -> np.ndarray:
+        status = self.status_port.Eval(context)
+        return geometry.wrap_angle(np.asarray(status.hinge_angle) - self._normal_angle)
+
+    def _calc_pull_angle(self, context, output) -> None:
+        output.SetFromVector(self._pull_angle(context))
+
+    def _calc_p_grasp(self, context, output) -> None:
+        force = np.asarray(self.status_port.Eval(context).load_cell_force)
+        s = self._stance
+        output.SetFromVector(grasp.prob(force, self._pull_angle(context), s.f_normal,
+                                        s.f_lateral, s.sigma_normal, s.sigma_lateral))
+
+
+class RigDiagram(NamedTuple):
+    diagram: Diagram
+    source: RigCommandSource
+    subscriber: LcmSubscriberSystem
+    monitor: GraspMonitor
+
+
+def build_rig_diagram(phase: BodyPhase, bus: DrakeLcm, config: RigLcmConfig) -> RigDiagram:
+    """Command source -> LCM publisher; LCM subscriber -> grasp monitor; the bus pump."""
+    builder = DiagramBuilder()
+    builder.AddSystem(LcmInterfaceSystem(bus))
+    scn = phase.scenario
+    source = builder.AddNamedSystem("command_source", RigCommandSource(
+        scn.robot, phase.stance.positions, phase.pose, phase.tension, phase.start_time))
+    publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
+        channel=config.command_channel, lcm_type=rig_command_t, lcm=bus,
+        publish_period=config.period))
+    subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
+        channel=config.status_channel, lcm_type=rig_status_t, lcm=bus))
+    monitor = builder.AddNamedSystem("grasp_monitor", GraspMonitor(phase.stance))
+    builder.Connect(source.command_port, publisher.get_input_port())
+    builder.Connect(subscriber.get_output_port(), monitor.status_port)
+    return RigDiagram(builder.Build(), source, subscriber, monitor)
+
+
+# ---------------------------------------------------------------------------------------------
+# Running, logging, replaying
+
+
+class GraspRecord(NamedTuple):
+    """The monitor's output per status message (N rows, in arrival order)."""
+
+    time: np.ndarray        # (N,) s, the status's utime
+    p_grasp: np.ndarray     # (N, 4)
+    pull_angle: np.ndarray  # (N, 4) rad
+    force: np.ndarray       # (N, 4) N, measured
+
+
+class RigRun(NamedTuple):
+    live: GraspRecord
+    commands: int           # published
+    statuses: int           # received
+    lcm_url: str
+    log: Path
+
+
+class _LogWriter:
+    """Every message on the rig's channels, into an LCM event log stamped with its utime."""
+
+    def __init__(self, bus: DrakeLcm, config: RigLcmConfig, path: Path):
+        self.events = lcm.EventLog(str(path), "w", overwrite=True)
+        self.counts = {config.command_channel: 0, config.status_channel: 0}
+        for channel, kind in ((config.command_channel, rig_command_t),
+                              (config.status_channel, rig_status_t)):
+            bus.Subscribe(channel, lambda data, c=channel, k=kind: self.write(c, data, k))
+
+    def write(self, channel: str, data: bytes, kind) -> None:
+        self.events.write_event(kind.decode(data).utime, channel, data)
+        self.counts[channel] += 1
+
+
+def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
+            sim_rig: RigSimConfig | None = None, plan_source: str = "") -> RigRun:
+    """Execute body phase `phase_index` of `plan` against the rig on `config.url`.
+
+    With `sim_rig`, the rig simulator answers on the same in-process bus and the run goes as
+    fast as it can; otherwise the run keeps to real time for the hardware. The log (written
+    atomically when the run ends) starts with a `rig_setup_t` naming the scenario and stance.
+    """
+    phase = body_phase(plan, phase_index)
+    if sim_rig is not None and not config.url.startswith(MEMQ):
+        raise RigInputError("--lcm-url", f"the simulated rig runs in-process on {MEMQ}, "
+                            f"not on {config.url}")
+    bus = DrakeLcm(config.url)
+    if sim_rig is not None:
+        start = phase.pose.value(phase.start_time).ravel()
+        rig = RigSimulator(phase.scenario.robot, phase.stance.positions, start, sim_rig)
+        RigSimulatorLcm(rig, bus, config.command_channel, config.status_channel)
+    parts = build_rig_diagram(phase, bus, config)
+    with tempfile.TemporaryDirectory(prefix="rig-log-") as tmp:
+        partial = Path(tmp) / "run.lcm"
+        writer = _LogWriter(bus, config, partial)
+        setup = rig_setup_t()
+        setup.utime = round(phase.start_time * 1e6)
+        setup.scenario_json = json.dumps(phase.scenario.to_dict(resolved=True))
+        setup.stance = list(phase.stance_ids)
+        setup.plan_source = plan_source
+        writer.events.write_event(setup.utime, config.setup_channel, setup.encode())
+
+        live = _simulate(parts, phase, config, realtime=sim_rig is None)
+        writer.events.close()
+        with partial.open("rb") as src:
+            atomic_write(log, lambda f: shutil.copyfileobj(src, f))
+    return RigRun(live, writer.counts[config.command_channel],
+                  writer.counts[config.status_channel], bus.get_lcm_url(), Path(log))
+
+
+def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
+              realtime: bool) -> GraspRecord:
+    """Advance through the phase, recording the monitor's output for each new status."""
+    simulator = Simulator(parts.diagram)
+    if realtime:
+        simulator.set_target_realtime_rate(1.0)
+    root = simulator.get_mutable_context()
+    sub_context = parts.subscriber.GetMyContextFromRoot(root)
+    mon_context = parts.monitor.GetMyContextFromRoot(root)
+    rows: list[tuple] = []
+    last = [rig_status_t().encode()]  # the subscriber's output before any message
+
+    def record(_context) -> EventStatus:
+        msg = parts.subscriber.get_output_port().Eval(sub_context)
+        data = msg.encode()
+        if data != last[0]:
+            last[0] = data
+            rows.append((msg.utime * 1e-6, parts.monitor.p_grasp_port.Eval(mon_context).copy(),
+                         parts.monitor.pull_angle_port.Eval(mon_context).copy(),
+                         np.asarray(msg.load_cell_force)))
+        return EventStatus.Succeeded()
+
+    simulator.set_monitor(record)
+    simulator.Initialize()
+    # Commands go out at k * period up to the phase's end; the half period after the last
+    # one lets its status come back and reach the monitor.
+    last_command = np.floor((phase.end_time - phase.start_time) / config.period + 1e-9)
+    simulator.AdvanceTo((last_command + 0.5) * config.period)
+    return _record(rows)
+
+
+def _record(rows: list[tuple]) -> GraspRecord:
+    if not rows:
+        return GraspRecord(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 4)))
+    t, p, psi, f = zip(*rows, strict=True)
+    return GraspRecord(np.array(t), np.array(p), np.array(psi), np.array(f))
+
+
+class RigLog(NamedTuple):
+    """A run's log, decoded, with the monitor's output per status (`replay_log`)."""
+
+    scenario: Scenario
+    stance_ids: tuple[str, ...]
+    plan_source: str
+    command_time: np.ndarray      # (M,) s
+    boom_length: np.ndarray       # (M, 4) m, commanded
+    tension_setpoint: np.ndarray  # (M, 4) N
+    replay: GraspRecord           # per status, in log order
+    winch_length: np.ndarray      # (N, 4) m, measured
+
+
+def replay_log(path: str | Path, config: RigLcmConfig = RigLcmConfig()) -> RigLog:
+    """Read a log written by `run_rig` and pass each status through a `GraspMonitor`."""
+    path = Path(path)
+    setup, commands, statuses = None, [], []
+    for event in lcm.EventLog(str(path), "r"):
+        if event.channel == config.setup_channel and setup is None:
+            setup = rig_setup_t.decode(event.data)
+        elif event.channel == config.command_channel:
+            commands.append(rig_command_t.decode(event.data))
+        elif event.channel == config.status_channel:
+            statuses.append(rig_status_t.decode(event.data))
+    if setup is None:
+        raise RigInputError(config.setup_channel, "no setup message: not a log written by "
+                            "rbp rig-run (or not an LCM log at all)")
+    try:
+        scn = scenario_from_dict(json.loads(setup.scenario_json), "log scenario",
+                                 check_start=False)
+    except (ScenarioError, json.JSONDecodeError) as e:
+        raise RigInputError(f"{config.setup_channel}.scenario_json", str(e)) from None
+    stance_ids = tuple(setup.stance)
+    unknown = [a for a in stance_ids if a not in scn.anchor_index]
+    if unknown:
+        raise RigInputError(f"{config.setup_channel}.stance", f"unknown anchor {unknown[0]!r}")
+    monitor = GraspMonitor(scn.stance(stance_ids))
+    context = monitor.CreateDefaultContext()
+    rows = []
+    for msg in statuses:
+        monitor.status_port.FixValue(context, AbstractValue.Make(msg))
+        rows.append((msg.utime * 1e-6, monitor.p_grasp_port.Eval(context).copy(),
+                     monitor.pull_angle_port.Eval(context).copy(),
+                     np.asarray(msg.load_cell_force)))
+    return RigLog(scn, stance_ids, setup.plan_source,
+                  np.array([c.utime * 1e-6 for c in commands]),
+                  np.array([c.boom_length for c in commands]).reshape(-1, 4),
+                  np.array([c.tension_setpoint for c in commands]).reshape(-1, 4),
+                  _record(rows), np.array([s.winch_length for s in statuses]).reshape(-1, 4))
+
+
+def report_figure(log: RigLog):
+    """The paper's Fig. 7 for a log: each anchor's probability of grasp maintenance over
+    time, and each boom's measured load-cell force against its commanded tension."""
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7.0, 6.0))
+    rec = log.replay
+    for i, anchor in enumerate(log.stance_ids):
+        color = f"C{i}"
+        top.plot(rec.time, rec.p_grasp[:, i], color=color, label=f"boom {i}: {anchor}")
+        bottom.plot(rec.time, rec.force[:, i], color=color, label=f"boom {i} measured")
+        bottom.plot(log.command_time, log.tension_setpoint[:, i], color=color, linestyle="--",
+                    label=f"boom {i} commanded")
+    top.set_ylabel("probability of grasp maintenance")
+    top.set_title(f"{log.scenario.name}: {log.plan_source or 'rig run'}")
+    top.legend(loc="lower left", fontsize="small")
+    top.grid(alpha=0.3)
+    bottom.set_ylabel("tension (N)")
+    bottom.set_xlabel("time (s)")
+    bottom.legend(ncol=2, fontsize="x-small")
+    bottom.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,377 @@
+"""The rig over LCM (paper section V-B): its scenario and straight-line plan, the simulated rig,
+a full `rig-run --sim-rig` on the in-process bus, its log, replay and report, and the CLI's
+refusals. Everything runs on `memq://`: no test touches UDP multicast.
+
+One simulated run (module fixture, about 0.1 s) feeds most tests; Python LeafSystems are never
+freed in pydrake 1.51, so the tests build few diagrams.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import re
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import lcm
+import numpy as np
+import pytest
+
+from rb_drake import geometry
+from rb_drake.feasibility import check_poses
+from rb_drake.scenario import Scenario
+from rbp.cli import UserError
+from systems.reachbot_lcm import rig_command_t, rig_status_t
+from systems.rig import RigSimConfig, RigSimulator, fit_pose, load_rig_scenario, rig_plan
+from systems.rig_cli import add_rig_commands, cmd_rig_replay, cmd_rig_report, cmd_rig_run
+from systems.rig_interface import (
+    GraspMonitor,
+    RigLcmConfig,
+    RigRun,
+    body_phase,
+    replay_log,
+)
+
+SIM = RigSimConfig(seed=7)
+# Measured minus planned tension is the load-cell noise alone while the winches keep up (the
+# plan moves the booms at <= 0.1 m/s, the winches at 0.5 m/s), so no sample may be 5 sigma off
+# (P < 6e-7 per sample) and the mean error per boom stays within 4 sigma / sqrt(N).
+NOISE_SIGMAS = 5.0
+
+
+@pytest.fixture(scope="module", autouse=True)
+def no_network_lcm() -> Iterator[None]:
+    """A default-constructed LCM would fall back to UDP multicast: pin it to memq://."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("LCM_DEFAULT_URL", "memq://")
+        yield
+
+
+@pytest.fixture(scope="module")
+def scn() -> Scenario:
+    return load_rig_scenario()
+
+
+@pytest.fixture(scope="module")
+def plan(scn: Scenario) -> dict[str, Any]:
+    return rig_plan(scn)
+
+
+@pytest.fixture(scope="module")
+def plan_file(plan: dict[str, Any], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("rig") / "plan.json"
+    path.write_text(json.dumps(plan))
+    return path
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="rbp")
+    add_rig_commands(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(list(argv))
+
+
+@pytest.fixture(scope="module")
+def sim_run(plan_file: Path) -> tuple[RigRun, Path]:
+    """`rbp rig-run plan.json --phase 0 --sim-rig --log rig.lcm`, through the CLI handler."""
+    import systems.rig_interface as rig_interface
+
+    runs: list[RigRun] = []
+    real = rig_interface.run_rig
+
+    def spy(*args, **kwargs) -> RigRun:
+        runs.append(real(*args, **kwargs))
+        return runs[-1]
+
+    log = plan_file.parent / "rig.lcm"
+    args = parse("rig-run", str(plan_file), "--phase", "0", "--sim-rig", "--seed",
+                 str(SIM.seed), "--log", str(log))
+    with pytest.MonkeyPatch.context() as mp:  # keep the run's result for the tests
+        mp.setattr(rig_interface, "run_rig", spy)
+        assert cmd_rig_run(args) == 0, "rig-run --sim-rig reported no status"
+    assert len(runs) == 1, "cmd_rig_run must call run_rig once"
+    return runs[0], log
+
+
+# ---------------------------------------------------------------------------------------------
+# Scenario and plan
+
+
+def test_rig_scenario(scn: Scenario) -> None:
+    assert scn.gravity == (0.0, -9.81), "the rig is on Earth"
+    assert len(scn.anchors) == 4 and len(set(scn.start_stance)) == 4, "four fixed anchors"
+    inner = np.array([[-0.8, -0.75], [0.8, 0.75]])  # the frame's inside
+    goal = np.array(scn.goal_position)
+    assert np.all((inner[0] < goal) & (goal < inner[1])), f"goal {goal} outside the frame"
+    check = check_poses(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
+    assert check.feasible[0], "load_scenario accepted an infeasible start"
+
+
+def test_rig_plan_is_a_feasible_straight_line(scn: Scenario, plan: dict[str, Any]) -> None:
+    assert plan["success"], plan["reason"]
+    (phase,) = plan["phases"]
+    assert phase["kind"] == "body" and phase["stance"] == list(scn.start_stance)
+    poses = np.array([s["pose"] for s in phase["steps"]])
+    goal = np.array([*scn.goal_position, scn.start_pose[2]])
+    np.testing.assert_allclose(poses[0], scn.start_pose, atol=1e-12, err_msg="first pose")
+    np.testing.assert_allclose(poses[-1], goal, atol=1e-12, err_msg="last pose")
+    along = geometry.cross2(poses[:, :2] - poses[0, :2], goal[:2] - poses[0, :2])
+    np.testing.assert_allclose(along, 0.0, atol=1e-12, err_msg="poses leave the straight line")
+    times = np.array([s["t"] for s in phase["steps"]])
+    assert np.all(np.diff(times) > 0), f"times must increase: {times}"
+    check = check_poses(scn, scn.stance(phase["stance"]), poses)
+    assert check.feasible.all(), f"infeasible poses: {np.flatnonzero(~check.feasible)}"
+    p_success = np.array([s["p_success"] for s in phase["steps"]])
+    assert np.all(p_success >= scn.robot.p_min), f"P below p_min: {p_success.min()}"
+    assert plan["p_min"] == pytest.approx(p_success.min(), abs=1e-12), "p_min"
+
+
+def test_rig_plan_reports_an_infeasible_line(scn: Scenario) -> None:
+    far = np.array([0.5, 0.0, 0.0])  # far off centre: no tensions balance the moment
+    plan = rig_plan(scn, goal_pose=far, num_steps=5)
+    assert not plan["success"] and "pose" in plan["reason"], plan["reason"]
+    assert plan["p_min"] is None, "a failed plan has no p_min"
+
+
+# ---------------------------------------------------------------------------------------------
+# The simulated rig, without LCM
+
+
+def command(utime: int, lengths: np.ndarray, tensions: np.ndarray) -> rig_command_t:
+    msg = rig_command_t()
+    msg.utime, msg.boom_length, msg.tension_setpoint = utime, lengths, tensions
+    return msg
+
+
+def test_simulator_without_noise_reproduces_the_plan(scn: Scenario,
+                                                     plan: dict[str, Any]) -> None:
+    """Noise-free: load cells read the setpoints, hinges the boom directions, and the monitor
+    gives back the plan's own probabilities."""
+    phase = body_phase(plan, 0)
+    stance = phase.stance
+    quiet = RigSimConfig(force_noise=0.0, hinge_noise=0.0)
+    rig = RigSimulator(scn.robot, stance.positions, np.array(scn.start_pose), quiet)
+    monitor = GraspMonitor(stance)
+    context = monitor.CreateDefaultContext()
+    for step in plan["phases"][0]["steps"]:
+        pose = np.array(step["pose"])
+        geo = geometry.boom_geometry(scn.robot, pose, stance.positions)
+        status = rig.handle(command(round(step["t"] * 1e6), geo.length[0], step["tension"]))
+        np.testing.assert_allclose(rig.pose, pose, atol=1e-9, err_msg="fitted pose")
+        np.testing.assert_allclose(status.load_cell_force, step["tension"], atol=1e-6,
+                                   err_msg=f"forces at t = {step['t']}")
+        monitor.status_port.FixValue(context, status)
+        psi = geometry.pull_angles(geo.u, stance.normals)[0]
+        np.testing.assert_allclose(monitor.pull_angle_port.Eval(context), psi, atol=1e-9,
+                                   err_msg="pull angle from the hinge angle")
+        np.testing.assert_allclose(monitor.p_grasp_port.Eval(context), step["p_grasp"],
+                                   atol=1e-7, err_msg=f"p_grasp at t = {step['t']}")
+
+
+def test_simulator_rate_limit_and_stretch(scn: Scenario) -> None:
+    """A winch commanded to pay out 0.1 m at once moves winch_speed * dt per step; the booms
+    that are stretched meanwhile pull harder than their setpoints, and none pushes."""
+    stance = scn.stance(scn.start_stance)
+    pose = np.array(scn.start_pose)
+    lengths = geometry.boom_geometry(scn.robot, pose, stance.positions).length[0]
+    setpoints = np.array([3.0, 3.0, 1.0, 1.0])
+    cfg = RigSimConfig(winch_speed=0.2, stiffness=100.0, force_noise=0.0, hinge_noise=0.0)
+    rig = RigSimulator(scn.robot, stance.positions, pose, cfg)
+    rig.handle(command(0, lengths, setpoints))
+    target = lengths + np.array([0.1, 0.0, 0.0, 0.0])
+    previous = lengths
+    for k in range(1, 8):
+        status = rig.handle(command(k * 100_000, target, setpoints))
+        moved = np.asarray(status.winch_length) - previous
+        expected = np.minimum(0.02, target - previous)  # 0.2 m/s * 0.1 s per command
+        np.testing.assert_allclose(moved, expected, atol=1e-12, err_msg=f"winch step {k}")
+        previous = np.asarray(status.winch_length)
+        force = np.asarray(status.load_cell_force)
+        assert np.all(force >= 0), f"a boom pushes: {force}"
+        geo = geometry.boom_geometry(scn.robot, rig.pose, stance.positions)
+        stretch = geo.length[0] - previous
+        np.testing.assert_allclose(force, np.maximum(0, setpoints + 100.0 * stretch),
+                                   atol=1e-9, err_msg="tension = setpoint + k * stretch")
+    # Four lengths for three pose coordinates: the fit leaves some booms stretched.
+    assert np.abs(stretch).max() > 1e-4, "four inconsistent lengths must stretch some boom"
+
+
+def test_fit_pose_recovers_a_pose(scn: Scenario) -> None:
+    stance = scn.stance(scn.start_stance)
+    truth = np.array([0.05, -0.03, 0.04])
+    lengths = geometry.boom_geometry(scn.robot, truth, stance.positions).length[0]
+    found = fit_pose(scn.robot, stance.positions, lengths, np.array(scn.start_pose))
+    np.testing.assert_allclose(found, truth, atol=1e-9, err_msg="Gauss-Newton pose")
+
+
+def test_simulator_noise_is_seeded(scn: Scenario) -> None:
+    stance = scn.stance(scn.start_stance)
+    pose = np.array(scn.start_pose)
+    cmd = command(0, geometry.boom_geometry(scn.robot, pose, stance.positions).length[0],
+                  [3.0, 3.0, 1.0, 1.0])
+
+    def reading(seed: int) -> tuple[float, ...]:
+        rig = RigSimulator(scn.robot, stance.positions, pose, RigSimConfig(seed=seed))
+        return tuple(rig.handle(cmd).load_cell_force)
+
+    assert reading(3) == reading(3), "same seed, same noise"
+    assert reading(3) != reading(4), "another seed, other noise"
+
+
+# ---------------------------------------------------------------------------------------------
+# A full run on memq://
+
+
+def test_run_uses_the_in_process_bus(sim_run: tuple[RigRun, Path]) -> None:
+    run, _ = sim_run
+    assert RigLcmConfig().url == "memq://", "the default bus must be in-process"
+    assert parse("rig-run", "p.json").lcm_url == "memq://", "the CLI default must be memq://"
+    assert run.lcm_url.startswith("memq://") and "udpm" not in run.lcm_url, run.lcm_url
+
+
+def test_log_holds_commands_and_statuses_in_time_order(sim_run: tuple[RigRun, Path],
+                                                       plan: dict[str, Any]) -> None:
+    run, log = sim_run
+    cfg = RigLcmConfig()
+    events = [(e.channel, e.timestamp, e.data) for e in lcm.EventLog(str(log), "r")]
+    assert events[0][0] == cfg.setup_channel, "the log starts with the setup message"
+    stamps = np.array([t for _, t, _ in events])
+    assert np.all(np.diff(stamps) >= 0), "log events out of time order"
+    commands = [rig_command_t.decode(d) for c, _, d in events if c == cfg.command_channel]
+    statuses = [rig_status_t.decode(d) for c, _, d in events if c == cfg.status_channel]
+    duration = plan["phases"][0]["steps"][-1]["t"] - plan["phases"][0]["steps"][0]["t"]
+    expected = int(np.floor(duration / cfg.period + 1e-9)) + 1
+    assert len(commands) == len(statuses) == expected == run.commands == run.statuses, (
+        f"{len(commands)} commands, {len(statuses)} statuses; expected {expected} each")
+    assert [c.utime for c in commands] == [s.utime for s in statuses], "a status per command"
+    assert all(e.timestamp == rig_command_t.decode(e.data).utime for e in lcm.EventLog(
+        str(log), "r") if e.channel == cfg.command_channel), "events stamped with their utime"
+    for a, b in zip(events[1::2], events[2::2], strict=True):
+        assert (a[0], b[0]) == (cfg.command_channel, cfg.status_channel), "command, status"
+
+
+def test_measured_tensions_track_the_plan(sim_run: tuple[RigRun, Path],
+                                          plan: dict[str, Any]) -> None:
+    _, log = sim_run
+    phase = body_phase(plan, 0)
+    rec = replay_log(log).replay
+    planned = np.array([phase.tension.value(t).ravel() for t in rec.time])
+    error = rec.force - planned
+    sigma = SIM.force_noise
+    worst = np.abs(error).max()
+    assert worst <= NOISE_SIGMAS * sigma, f"max |measured - planned| {worst:.3f} N"
+    bound = 4 * sigma / np.sqrt(len(rec.time))
+    assert np.all(np.abs(error.mean(axis=0)) <= bound), f"biased: {error.mean(axis=0)}"
+    assert error.std() > 0.5 * sigma, "the load cells must be noisy (seeded)"
+
+
+def test_replay_equals_live(sim_run: tuple[RigRun, Path]) -> None:
+    run, log = sim_run
+    first, second = replay_log(log), replay_log(log)
+    assert len(run.live.time) == run.statuses, "the live monitor missed a status"
+    for name in ("time", "p_grasp", "pull_angle", "force"):
+        live, replayed = getattr(run.live, name), getattr(first.replay, name)
+        np.testing.assert_array_equal(replayed, live, err_msg=f"replay != live: {name}")
+        np.testing.assert_array_equal(getattr(second.replay, name), replayed,
+                                      err_msg=f"two replays differ: {name}")
+    p = run.live.p_grasp
+    assert np.all((p > 0) & (p <= 1)), "probabilities in (0, 1]"
+    assert np.ptp(p, axis=0).max() > 0.01, "the movement must change some grasp's probability"
+
+
+def test_replay_and_report_commands(sim_run: tuple[RigRun, Path],
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    run, log = sim_run
+    assert cmd_rig_replay(parse("rig-replay", str(log))) == 0
+    out = capsys.readouterr().out
+    for i in range(4):
+        k = int(run.live.p_grasp[:, i].argmin())
+        assert f"boom {i}" in out and f"min P = {run.live.p_grasp[k, i]:.5f}" in out, out
+    figure = log.parent / "fig7.png"
+    assert cmd_rig_report(parse("rig-report", str(log), "-o", str(figure))) == 0
+    data = figure.read_bytes()
+    assert len(data) > 10_000 and data.startswith(b"\x89PNG\r\n\x1a\n"), "not a PNG figure"
+
+
+def test_run_without_a_rig_receives_nothing(scn: Scenario, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Nobody answers on this memq bus: the run ends on time (real time, 1 s) and says so."""
+    nearby = np.array(scn.start_pose) + np.array([0.005, 0.0, 0.0])
+    path = tmp_path / "short.json"
+    path.write_text(json.dumps(rig_plan(scn, goal_pose=nearby, num_steps=2)))
+    log = tmp_path / "alone.lcm"
+    assert cmd_rig_run(parse("rig-run", str(path), "--log", str(log), "--period", "0.5")) == 1
+    assert "no status received" in capsys.readouterr().out
+    channels = [e.channel for e in lcm.EventLog(str(log), "r")]
+    assert channels.count("RIG_STATUS") == 0 and channels.count("RIG_COMMAND") == 3, channels
+
+
+# ---------------------------------------------------------------------------------------------
+# Mistakes
+
+
+def with_reach_phase(plan: dict[str, Any]) -> dict[str, Any]:
+    plan = copy.deepcopy(plan)
+    body = plan["phases"][0]
+    step = copy.deepcopy(body["steps"][-1])
+    step.update(tension=[None, *step["tension"][1:]], p_grasp=[None, *step["p_grasp"][1:]],
+                free_tip=[0.45, 0.75], shoulder_torque=0.0)
+    plan["phases"].append({"kind": "reach", "stance": [None, *body["stance"][1:]],
+                           "free_boom": 0, "from_anchor": body["stance"][0],
+                           "to_anchor": body["stance"][0], "steps": [step]})
+    return plan
+
+
+@pytest.mark.parametrize(("case", "field"), [
+    ("missing", "(file)"),
+    ("not json", "(file)"),
+    ("schema", "phases/0/steps/0/pose"),
+    ("phase out of range", "phases[5]"),
+    ("negative phase", "phases[-1]"),
+    ("reach phase", "phases[1].kind"),
+    ("unknown anchor", "phases[0].stance[2]"),
+])
+def test_bad_plan_input(case: str, field: str, plan: dict[str, Any], tmp_path: Path) -> None:
+    path = tmp_path / "plan.json"
+    phase = {"phase out of range": "5", "negative phase": "-1", "reach phase": "1"}.get(case, "0")
+    if case == "not json":
+        path.write_text("{not json")
+    elif case in ("schema", "unknown anchor"):
+        bad = copy.deepcopy(plan)
+        if case == "schema":
+            bad["phases"][0]["steps"][0]["pose"] = [0.0, 0.0]
+        else:
+            bad["phases"][0]["stance"][2] = "nowhere"
+        path.write_text(json.dumps(bad))
+    elif case != "missing":
+        path.write_text(json.dumps(with_reach_phase(plan)))
+    log = tmp_path / "never.lcm"
+    with pytest.raises(UserError) as err:
+        cmd_rig_run(parse("rig-run", str(path), "--phase", phase, "--sim-rig", "--log",
+                          str(log)))
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"{path}: {field}:"), message
+    assert not log.exists(), "a refused run must not write a log"
+
+
+def test_sim_rig_refuses_a_network_url(plan_file: Path, tmp_path: Path) -> None:
+    url = "udpm://239.255.76.67:7667?ttl=0"
+    with pytest.raises(UserError, match=r"^--lcm-url: .*memq://"):
+        cmd_rig_run(parse("rig-run", str(plan_file), "--sim-rig", "--lcm-url", url, "--log",
+                          str(tmp_path / "x.lcm")))
+
+
+@pytest.mark.parametrize("command", ["rig-replay", "rig-report"])
+def test_bad_log_input(command: str, tmp_path: Path) -> None:
+    handler = {"rig-replay": cmd_rig_replay, "rig-report": cmd_rig_report}[command]
+    extra = ["-o", str(tmp_path / "f.png")] if command == "rig-report" else []
+    missing = tmp_path / "missing.lcm"
+    with pytest.raises(UserError, match=f"^{re.escape(f'{missing}: (file): no such file')}$"):
+        handler(parse(command, str(missing), *extra))
+    junk = tmp_path / "junk.lcm"
+    junk.write_text("not an LCM log\n" * 10)
+    with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: RIG_SETUP: no setup message')}"):
+        handler(parse(command, str(junk), *extra))
+    assert not (tmp_path / "f.png").exists(), "no figure from a bad log"

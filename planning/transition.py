@@ -180,19 +180,6 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     return Transition(True, best_pose, np.exp(best_r4), "", evaluated)
 
 
-def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
-                         booms: np.ndarray) -> np.ndarray:
-    """How far boom booms[k] at each pose is from reaching anchors[k], summed over k (m + rad)."""
-    sh = geometry.shoulder_positions(robot, poses)[:, booms, :]
-    d = anchors - sh
-    length = np.linalg.norm(d, axis=-1)
-    theta = geometry.wrap_angle(np.arctan2(d[..., 1], d[..., 0]) - poses[:, 2, None]
-                                - robot.shoulder_directions[booms])
-    lo, hi = robot.boom_length
-    return np.sum(np.maximum(0, length - hi) + np.maximum(0, lo - length)
-                  + np.maximum(0, np.abs(theta) - robot.shoulder_range), axis=1)
-
-
 def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:
     """(progress, failure code) of the sample that got furthest: the most configurations
     feasible, then the latest failing test (codes as `_score`'s)."""

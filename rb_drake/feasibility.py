@@ -128,7 +128,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         rows = survivors()
         corners = geometry.body_corners(robot, poses[rows])
         body_hit = rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
-        body_hit |= _rock_inside_body(rock, corners)
+        body_hit |= rock_inside_body(rock, corners)
         flag(body_hit, Reason.BODY_COLLISION, rows)
         rows = survivors()
         with np.errstate(invalid="ignore"):
@@ -164,7 +164,7 @@ def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.nd
     return out
 
 
-def _rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
+def rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
     """Whether some rock polygon lies entirely inside the body square (its vertex inside)."""
     if not len(rock.vertex):
         return np.zeros(corners.shape[0], dtype=bool)
@@ -199,7 +199,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     rock = world.rock
     if rock.polygons:
         corners = geometry.body_corners(robot, pose)
-        if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any() or _rock_inside_body(
+        if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any() or rock_inside_body(
                 rock, corners)[0]:
             out.append("body collides with rock")
         end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[0])

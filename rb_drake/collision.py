@@ -27,30 +27,39 @@ class Rock:
             # which polygon each edge belongs to, as a (E, W) indicator for parity counts
             owner = np.repeat(np.arange(len(self.polygons)), [len(p) for p in self.polygons])
             self.edge_owner = np.eye(len(self.polygons))[owner]
+            self.edge_lo = np.minimum(self.edge_start, self.edge_end)
+            self.edge_hi = np.maximum(self.edge_start, self.edge_end)
         else:
             self.edge_start = self.edge_end = np.zeros((0, 2))
             self.vertex = np.zeros((0, 2))
+            self.edge_lo = self.edge_hi = np.zeros((0, 2))
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """Whether each point (shape (..., 2)) lies inside some polygon (even-odd rule)."""
         pts = np.asarray(points, dtype=float)
         flat = pts.reshape(-1, 2)
-        if not self.polygons:
+        if not self.polygons or not len(flat):
             return np.zeros(pts.shape[:-1], dtype=bool)
         # Even-odd rule for every polygon at once: count, per polygon, the edges that a ray
-        # from the point towards +x crosses.
+        # from the point towards +x crosses. Only edges that reach the points' band of y and
+        # lie partly right of the leftmost point can be crossed.
+        lo, hi = flat.min(axis=0), flat.max(axis=0)
+        near = ((self.edge_hi[:, 1] >= lo[1]) & (self.edge_lo[:, 1] <= hi[1])
+                & (self.edge_hi[:, 0] >= lo[0]))
         x, y = flat[:, 0:1], flat[:, 1:2]
-        x0, y0 = self.edge_start[None, :, 0], self.edge_start[None, :, 1]
-        x1, y1 = self.edge_end[None, :, 0], self.edge_end[None, :, 1]
+        e0, e1 = self.edge_start[near], self.edge_end[near]
+        x0, y0 = e0[None, :, 0], e0[None, :, 1]
+        x1, y1 = e1[None, :, 0], e1[None, :, 1]
         straddle = (y0 > y) != (y1 > y)
         with np.errstate(divide="ignore", invalid="ignore"):
             x_cross = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
-        crossings = (straddle & (x < x_cross)).astype(float) @ self.edge_owner
+        crossings = (straddle & (x < x_cross)).astype(float) @ self.edge_owner[near]
         inside = (crossings.astype(int) % 2 == 1).any(axis=1)
         return inside.reshape(pts.shape[:-1])
 
-    def segments_hit(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Whether each segment a -> b (shapes (..., 2)) crosses an edge or lies inside rock."""
+    def segments_hit(self, a: np.ndarray, b: np.ndarray, inside: bool = True) -> np.ndarray:
+        """Whether each segment a -> b (shapes (..., 2)) crosses an edge or lies inside rock.
+        `inside=False` skips the second test, for segments known to start outside rock."""
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
         shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
@@ -60,11 +69,10 @@ class Rock:
         # of a cave that may be tens of metres long.
         lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
         hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
-        e_lo = np.minimum(self.edge_start, self.edge_end)
-        e_hi = np.maximum(self.edge_start, self.edge_end)
-        near = np.all((e_hi >= lo) & (e_lo <= hi), axis=1)
+        near = np.all((self.edge_hi >= lo) & (self.edge_lo <= hi), axis=1)
         hit = _segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]).any(axis=1)
-        hit |= self.contains(a2)
+        if inside:
+            hit |= self.contains(a2)
         return hit.reshape(shape)
 
     def distance(self, points: np.ndarray) -> np.ndarray:

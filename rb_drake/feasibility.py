@@ -133,7 +133,10 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         rows = survivors()
         with np.errstate(invalid="ignore"):
             end = targets[rows] - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
-        boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end)) & used[rows]
+        # Shoulders lie on the body, which is clear of rock wherever this result counts (a
+        # pose whose body collides already failed), so only edge crossings are tested.
+        boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end),
+                                     inside=False) & used[rows]
         flag(boom_hit, Reason.BOOM_COLLISION, rows)
 
     rows = survivors()

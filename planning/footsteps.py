@@ -33,10 +33,12 @@ import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
 from planning.transition import (
+    ReleaseSet,
     Transition,
     TransitionConfig,
     find_transition,
     reachable_anchors,
+    release_poses,
     transition_stances,
 )
 from rb_drake.feasibility import check_poses
@@ -159,6 +161,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cache: dict[tuple, Transition] = {}
+    releases: dict[tuple, ReleaseSet] = {}
     goal_rng = np.random.default_rng([cfg.seed, 1])
     tested = 0
 
@@ -173,8 +176,13 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         ck = (node, j, anchor)
         if ck not in cache:
             tested += 1
+            if (node, j) not in releases:  # shared by every move of boom j from this stance
+                releases[node, j] = release_poses(scn, node, j,
+                                                  edge_rng(cfg.seed, node, j, "release"),
+                                                  guess=pose, config=cfg.transition)
             cache[ck] = find_transition(scn, node, j, anchor, edge_rng(cfg.seed, node, j, anchor),
-                                        guess=pose, config=cfg.transition)
+                                        guess=pose, config=cfg.transition,
+                                        release=releases[node, j])
         tr = cache[ck]
         if not tr.feasible:
             return None

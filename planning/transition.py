@@ -2,10 +2,16 @@
 
 Boom j moves from anchor a to anchor b. The transition is feasible when a single pose q is
 feasible in the old 4-stance, in the new 4-stance, and in the common 3-stance with the free
-gripper at a and at b (the two limiting cantilever cases, paper section III-C). The search is
-random sampling of poses plus a local refinement (a cross-entropy search) that maximises the
-worst of the four configurations' robustness, all vectorised over poses, seeded and with a
-fixed sample budget.
+gripper at a and at b (the two limiting cantilever cases, paper section III-C).
+
+Two of the four configurations do not depend on b: the old 4-stance and the 3-stance with the
+gripper still at a. Poses feasible in both, the *release poses* of boom j, are searched once per
+(stance, boom) and shared by every move of that boom (`release_poses`); they are rare where a
+boom carries much of the load (an upper boom in a passage), so this is where the sampling budget
+goes. A move to b then checks only the release poses that reach b, in the other two
+configurations, and falls back to a cross-entropy search on all four from the nearest of them.
+A few refinement rounds raise the worst of the four robustnesses. Everything is vectorised over
+poses, seeded, and has a fixed sample budget.
 """
 
 from __future__ import annotations
@@ -22,22 +28,27 @@ from rb_drake.stance import Stance
 
 CONFIG_NAMES = ("old 4-stance", "3-stance, gripper at old anchor",
                 "3-stance, gripper at new anchor", "new 4-stance")
+RELEASE = (0, 1)   # the configurations that do not depend on the new anchor
+ARRIVE = (2, 3)
+ALL = (0, 1, 2, 3)
 
 
 @dataclasses.dataclass(frozen=True)
 class TransitionConfig:
-    candidates: int = 2000         # cheap random poses, ranked by reach alone
-    samples: int = 64              # of those, the best poses evaluated in full
-    search_rounds: int = 5         # cross-entropy rounds at most
-    refine_rounds: int = 2         # rounds spent raising robustness once feasible
-    refine_samples: int = 32       # poses per round
+    release_candidates: int = 3000  # cheap random poses per (stance, boom), ranked by reach
+    release_samples: int = 160      # the best of those, checked in the two release configurations
+    release_rounds: int = 3         # cross-entropy rounds toward release poses if none is found
+    samples: int = 48               # release poses reaching the new anchor, checked for arrival
+    search_rounds: int = 4          # cross-entropy rounds on all four configurations, at most
+    refine_rounds: int = 1          # rounds spent raising robustness once feasible
+    refine_samples: int = 32        # poses per round
     elite: int = 8
-    spread: float = 0.6            # m, std of the initial position samples
-    phi_range: float = 1.2         # rad, orientations drawn uniformly in +-phi_range
+    spread: float = 0.6             # m, std of the initial position samples
+    phi_range: float = 1.2          # rad, orientations drawn uniformly in +-phi_range
     max_reach_violation: float = 0.5  # give up at once when no sample comes this near
     hopeless_violation: float = 2.0   # ... or when the best full sample is this far off
     patience: int = 2                 # rounds without progress before giving up
-    ignore_grasps: bool = False    # the naive baseline: limit surfaces play no part
+    ignore_grasps: bool = False     # the naive baseline: limit surfaces play no part
 
 
 class Transition(NamedTuple):
@@ -45,54 +56,26 @@ class Transition(NamedTuple):
     pose: np.ndarray | None          # (3,)
     probabilities: np.ndarray | None  # (4,) P of the four configurations, CONFIG_NAMES order
     reason: str                      # why not, when infeasible
-    evaluated: int                   # poses evaluated
+    evaluated: int                   # poses evaluated (configurations / 4)
+
+
+class ReleaseSet(NamedTuple):
+    """Poses at which boom j can let go: feasible in the old 4-stance and in the 3-stance with
+    the gripper at its old anchor."""
+
+    poses: np.ndarray       # (R, 3)
+    robustness: np.ndarray  # (R, 4): the two release configurations' r, NaN for the others
+    reason: str             # why there are none
+    evaluated: int
 
 
 def transition_stances(scn: Scenario, old: tuple[str, ...], boom: int,
-                       new_anchor: str) -> tuple[Stance, Stance, Stance]:
-    new = tuple(new_anchor if i == boom else a for i, a in enumerate(old))
+                       new_anchor: str | None) -> tuple[Stance, Stance, Stance | None]:
     s_old = scn.stance(old)
+    if new_anchor is None:
+        return s_old, s_old.without(boom), None
+    new = tuple(new_anchor if i == boom else a for i, a in enumerate(old))
     return s_old, s_old.without(boom), scn.stance(new)
-
-
-def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str, poses: np.ndarray,
-           ignore_grasps: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pose: a search key (the worst robustness of the four configurations where all are
-    feasible; minus their summed violation, below -VIOLATION_OFFSET, where not), the four
-    robustnesses, and the first failure code (10 * configuration + Reason)."""
-    s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
-    world = scn if not ignore_grasps else _NaiveWorld(scn)
-    P = poses.shape[0]
-    # Two vectorised checks instead of four: the two 4-stances differ in one anchor (a per-row
-    # stance), the two 3-stances in where the free gripper is (a per-row tip). Rows [0, P)
-    # are the first configuration of each pair, rows [P, 2P) the second.
-    second = np.repeat([False, True], P)
-    both = np.vstack([poses, poses])
-    four = Stance.mix(s_old, s_new, second)
-    tips = np.where(second[:, None], s_new.positions[boom], s_old.positions[boom])
-    r = np.full((P, 4), -np.inf)
-    total_violation = np.zeros(P)
-    reason = np.zeros(P, dtype=int)
-    feasible = np.ones(P, dtype=bool)
-    results = {}
-    for name, stance, tip in (("four", four, None), ("three", s_three, tips)):
-        check = check_poses(world, stance, both, tip, full=True, ignore_grasps=ignore_grasps)
-        results[name] = (check, violation(world, stance, both, check, tip, ignore_grasps))
-    # configurations in CONFIG_NAMES order: old 4, 3 at old, 3 at new, new 4
-    for k, (name, half) in enumerate((("four", 0), ("three", 0), ("three", 1), ("four", 1))):
-        check, v = results[name]
-        rows = slice(half * P, (half + 1) * P)
-        ok = check.feasible[rows]
-        r[:, k] = np.where(ok, check.allocation.robustness[rows], -np.inf)
-        feasible &= ok
-        total_violation += v[rows]
-        first = (reason == 0) & ~ok
-        reason[first] = check.reason[rows][first] + 10 * k
-    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
-        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
-    else:
-        key = np.where(feasible, r.min(axis=1), -VIOLATION_OFFSET - total_violation)
-    return key, r, reason
 
 
 VIOLATION_OFFSET = 1e3  # keys of infeasible poses sit below every feasible robustness
@@ -107,83 +90,232 @@ class _NaiveWorld:
         self.gravity_vector = scn.gravity_vector
 
 
-def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
-                    rng: np.random.Generator, guess: np.ndarray | None = None,
-                    config: TransitionConfig | None = None) -> Transition:
-    """Search a pose that holds boom `boom`'s move to `new_anchor` (see module doc)."""
-    cfg = config or TransitionConfig()
-    robot = scn.robot
-    s_old, _, s_new = transition_stances(scn, old, boom, new_anchor)
-    # Centre the samples where the five anchors' booms can meet: each anchor less its boom's
-    # mid-range reach along the boom's equilibrium direction.
-    anchors = np.vstack([s_old.positions, s_new.positions[boom:boom + 1]])
-    booms = np.array([0, 1, 2, 3, boom])
-    directions = robot.shoulder_directions[booms]
-    reach = 0.5 * (robot.boom_length[0] + robot.boom_length[1])
-    centres = anchors - robot.shoulder_array[booms] - reach * np.stack(
-        [np.cos(directions), np.sin(directions)], axis=1)
-    centre = centres.mean(axis=0)
-    # Draw cheap candidates and keep the `samples` whose five booms come closest to their length
-    # and shoulder ranges (pure geometry, microseconds a pose) before the expensive statics.
-    m = cfg.candidates
+def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | None,
+           poses: np.ndarray, ignore_grasps: bool, configs: tuple[int, ...] = ALL,
+           known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pose: a search key, the four robustnesses (-inf where infeasible, NaN where not
+    evaluated) and the first failure code (10 * configuration + Reason; 0 if none).
+
+    Only `configs` are evaluated; `known` (P, 4) supplies robustnesses already computed for the
+    others (all feasible). The key is the worst robustness where every configuration is
+    feasible, and minus the evaluated configurations' summed violation, below
+    -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored)."""
+    s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
+    world = scn if not ignore_grasps else _NaiveWorld(scn)
+    P = poses.shape[0]
+    r = np.full((P, 4), np.nan) if known is None else known.astype(float, copy=True)
+    total_violation = np.zeros(P)
+    reason = np.zeros(P, dtype=int)
+    feasible = np.ones(P, dtype=bool)
+    tip_old = s_old.positions[boom]
+    tip_new = s_new.positions[boom] if s_new is not None else None
+    # One vectorised check per stance kind: the two 4-stances differ in one anchor (a per-row
+    # stance), the two 3-stances in where the free gripper is (a per-row tip).
+    groups = []
+    fours = [k for k in (0, 3) if k in configs]
+    threes = [k for k in (1, 2) if k in configs]
+    if fours:
+        second = np.repeat([k == 3 for k in fours], P)
+        stance = Stance.mix(s_old, s_new, second) if 3 in fours and 0 in fours else (
+            s_old if fours == [0] else s_new)
+        groups.append((fours, stance, None))
+    if threes:
+        tips = np.vstack([np.broadcast_to(tip_old if k == 1 else tip_new, (P, 2))
+                          for k in threes])
+        groups.append((threes, s_three, tips))
+    for ks, stance, tip in groups:
+        rows_all = np.vstack([poses] * len(ks))
+        check = check_poses(world, stance, rows_all, tip, full=True, ignore_grasps=ignore_grasps)
+        v = violation(world, stance, rows_all, check, tip, ignore_grasps)
+        for n, k in enumerate(ks):
+            rows = slice(n * P, (n + 1) * P)
+            ok = check.feasible[rows]
+            r[:, k] = np.where(ok, check.allocation.robustness[rows], -np.inf)
+            total_violation += v[rows]
+            codes = check.reason[rows] + 10 * k
+            first = (reason == 0) & ~ok | (~ok & (reason > codes))
+            reason[first] = codes[first]
+            feasible &= ok
+    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
+        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
+    else:
+        key = np.where(feasible, np.nanmin(np.where(np.isnan(r), np.inf, r), axis=1),
+                       -VIOLATION_OFFSET - total_violation)
+    return key, r, reason
+
+
+def _sample_around(rng: np.random.Generator, centre: np.ndarray, guess: np.ndarray | None,
+                   m: int, cfg: TransitionConfig) -> np.ndarray:
+    """m random poses: around `centre`, half of them near the pose held now (`guess`)."""
     cand = np.empty((m, 3))
     cand[:, :2] = centre + rng.normal(0.0, cfg.spread, (m, 2))
     cand[:, 2] = rng.uniform(-cfg.phi_range, cfg.phi_range, m)
-    if guess is not None:  # half of them near the pose the robot holds now
+    if guess is not None:
         k = m // 2
         cand[:k, :2] = guess[:2] + rng.normal(0.0, 0.5 * cfg.spread, (k, 2))
         cand[:k, 2] = np.where(rng.uniform(size=k) < 0.5, guess[2] + rng.normal(0.0, 0.3, k),
                                rng.uniform(-cfg.phi_range, cfg.phi_range, k))
-    kin = _kinematic_violation(robot, cand, anchors, booms)
-    if kin.min() > cfg.max_reach_violation:
-        return Transition(False, None, None, "no pose found: no sampled pose comes near "
-                          "reaching all five anchors within boom length and shoulder range", m)
-    # Rank by reach; many candidates reach all five anchors, so ties are broken at random (a
-    # stable sort would keep only the first-drawn, those near `guess`, and miss the rotated
-    # poses that releasing an upper boom needs).
-    order = np.lexsort((rng.uniform(size=m), kin))
-    poses = cand[order[:cfg.samples]]
-    key, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps)
-    evaluated = len(poses)
-    best = int(np.argmax(key))
-    best_pose, best_key, best_r4 = poses[best].copy(), key[best], r4[best]
-    # The explanation of a rejection comes from the sample that got furthest: most
-    # configurations passed, then the latest test failed (probability is the last).
-    miss = _furthest(reason, r4)
-    top = np.argsort(key)[::-1][:cfg.elite]
-    elite, elite_key = poses[top], key[top]
-    if best_key < -VIOLATION_OFFSET - cfg.hopeless_violation:
-        return Transition(False, None, None, _explain(miss), evaluated)
-    # Cross-entropy search: descend the violation until feasible, then raise the robustness.
-    rounds = stalled = 0
-    while stalled < cfg.patience and rounds < cfg.search_rounds and (
-            best_key < -VIOLATION_OFFSET
-            or (rounds < cfg.refine_rounds and not cfg.ignore_grasps)):
-        rounds += 1
+    return cand
+
+
+def _meeting_point(scn: Scenario, anchors: np.ndarray, booms: np.ndarray) -> np.ndarray:
+    """Where the booms can meet: each anchor less its boom's mid-range reach along the boom's
+    equilibrium direction, averaged."""
+    robot = scn.robot
+    directions = robot.shoulder_directions[booms]
+    reach = 0.5 * (robot.boom_length[0] + robot.boom_length[1])
+    centres = anchors - robot.shoulder_array[booms] - reach * np.stack(
+        [np.cos(directions), np.sin(directions)], axis=1)
+    return centres.mean(axis=0)
+
+
+def _best_by_reach(rng: np.random.Generator, kin: np.ndarray, n: int) -> np.ndarray:
+    """Indices of the n candidates nearest to reaching (ties, often many at zero, at random:
+    a stable order would favour the first drawn, those near the current pose)."""
+    return np.lexsort((rng.uniform(size=len(kin)), kin))[:n]
+
+
+def _cross_entropy(scn, old, boom, new_anchor, elite, elite_key, rng, cfg, configs, rounds,
+                   keep_going) -> tuple[np.ndarray, np.ndarray, np.ndarray, int,
+                                        tuple[int, int]]:
+    """Rounds of cross-entropy search from an elite set; returns every sample drawn with its
+    key and robustness, plus the evaluation count and the furthest miss."""
+    poses, keys, rs = [], [], []
+    evaluated = 0
+    miss = (-1, 0)
+    best = float(elite_key.max())
+    stalled = 0
+    for n in range(rounds):
+        if stalled >= cfg.patience or not keep_going(best, n):
+            break
         mean = elite.mean(axis=0)
         std = np.maximum(elite.std(axis=0), [0.02, 0.02, 0.02])
         cand = mean + rng.normal(0.0, 1.0, (cfg.refine_samples, 3)) * std
-        k2, r2, reason2 = _score(scn, old, boom, new_anchor, cand, cfg.ignore_grasps)
-        evaluated += len(cand)
-        stalled += 1
-        if k2.max() > best_key:
-            stalled = 0
-            b = int(np.argmax(k2))
-            best_key, best_pose, best_r4 = k2[b], cand[b].copy(), r2[b]
+        k2, r2, reason2 = _score(scn, old, boom, new_anchor, cand, cfg.ignore_grasps, configs)
+        evaluated += len(cand) * len(configs)
         miss = max(miss, _furthest(reason2, r2))
+        stalled = 0 if k2.max() > best else stalled + 1
+        best = max(best, float(k2.max()))
+        poses.append(cand)
+        keys.append(k2)
+        rs.append(r2)
         pool = np.vstack([elite, cand])
         pool_key = np.concatenate([elite_key, k2])
         top = np.argsort(pool_key)[::-1][:cfg.elite]
         elite, elite_key = pool[top], pool_key[top]
-    if best_key < -VIOLATION_OFFSET:
-        return Transition(False, None, None, _explain(miss), evaluated)
-    return Transition(True, best_pose, np.exp(best_r4), "", evaluated)
+    if not poses:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros((0, 4)), evaluated, miss
+    return np.vstack(poses), np.concatenate(keys), np.vstack(rs), evaluated, miss
+
+
+def release_poses(scn: Scenario, old: tuple[str, ...], boom: int, rng: np.random.Generator,
+                  guess: np.ndarray | None = None,
+                  config: TransitionConfig | None = None) -> ReleaseSet:
+    """The poses found at which boom `boom` can let go of its anchor in stance `old`."""
+    cfg = config or TransitionConfig()
+    robot = scn.robot
+    held = scn.stance(old).positions
+    centre = _meeting_point(scn, held, np.arange(4))
+    cand = _sample_around(rng, centre, guess, cfg.release_candidates, cfg)
+    kin = _kinematic_violation(robot, cand, held, np.arange(4))
+    if kin.min() > cfg.max_reach_violation:
+        return ReleaseSet(np.zeros((0, 3)), np.zeros((0, 4)), "no sampled pose reaches the four "
+                          "anchors within boom length and shoulder range", len(cand))
+    poses = cand[_best_by_reach(rng, kin, cfg.release_samples)]
+    key, r, reason = _score(scn, old, boom, None, poses, cfg.ignore_grasps, RELEASE)
+    evaluated = 2 * len(poses)
+    miss = _furthest(reason, r)
+    ok = key > -VIOLATION_OFFSET
+    found_poses, found_r = [poses[ok]], [r[ok]]
+    if not ok.any() and key.max() >= -VIOLATION_OFFSET - cfg.hopeless_violation:
+        top = np.argsort(key)[::-1][:cfg.elite]
+        more, k2, r2, n, miss2 = _cross_entropy(
+            scn, old, boom, None, poses[top], key[top], rng, cfg, RELEASE, cfg.release_rounds,
+            lambda best, n: best < -VIOLATION_OFFSET)
+        evaluated += n
+        miss = max(miss, miss2)
+        ok2 = k2 > -VIOLATION_OFFSET
+        found_poses.append(more[ok2])
+        found_r.append(r2[ok2])
+    poses, r = np.vstack(found_poses), np.vstack(found_r)
+    reason_text = "" if len(poses) else _explain(miss)
+    return ReleaseSet(poses, r, reason_text, evaluated // 4)
+
+
+def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
+                    rng: np.random.Generator, guess: np.ndarray | None = None,
+                    config: TransitionConfig | None = None,
+                    release: ReleaseSet | None = None) -> Transition:
+    """Search a pose that holds boom `boom`'s move to `new_anchor` (see module doc).
+
+    `release` is boom `boom`'s `release_poses` in `old`, shared between moves; without it
+    they are searched here first, with the same generator."""
+    cfg = config or TransitionConfig()
+    robot = scn.robot
+    target = scn.anchor_positions[scn.anchor_index[new_anchor]]
+    # Reach first (geometry only, microseconds a pose): can any pose reach all five anchors?
+    five = np.vstack([scn.stance(old).positions, target[None]])
+    booms = np.array([0, 1, 2, 3, boom])
+    cand = _sample_around(rng, _meeting_point(scn, five, booms), guess, cfg.release_candidates // 2,
+                          cfg)
+    if _kinematic_violation(robot, cand, five, booms).min() > cfg.max_reach_violation:
+        return Transition(False, None, None, "no pose found: no sampled pose comes near reaching "
+                          "all five anchors within boom length and shoulder range", 0)
+    if release is None:
+        release = release_poses(scn, old, boom, rng, guess, cfg)
+    evaluated = 0
+    if not len(release.poses):
+        return Transition(False, None, None, f"no pose found: boom {boom} cannot let go in this "
+                          f"stance ({release.reason.removeprefix('no pose found: ')})",
+                          release.evaluated)
+    kin = geometry.reach(robot, release.poses, target[None], np.array([boom])).violation[:, 0]
+    if kin.min() > cfg.max_reach_violation:
+        return Transition(False, None, None, f"no pose found: no pose at which boom {boom} can "
+                          "let go comes near to reach the new anchor within boom length and "
+                          "shoulder range", 0)
+    reaching = np.flatnonzero(kin == 0.0)
+    if len(reaching) > cfg.samples:
+        reaching = rng.choice(reaching, cfg.samples, replace=False)
+    poses = release.poses[reaching]
+    key, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps, ARRIVE,
+                             known=release.robustness[reaching])
+    evaluated += 2 * len(poses)
+    miss = _furthest(reason, r4) if len(poses) else (-1, 0)
+    if len(poses) and key.max() < -VIOLATION_OFFSET - cfg.hopeless_violation:
+        return Transition(False, None, None, _explain(miss), (evaluated + 3) // 4)
+    if len(poses) and key.max() > -VIOLATION_OFFSET:
+        elite_idx = np.argsort(key)[::-1][:cfg.elite]
+        elite, elite_key = poses[elite_idx], key[elite_idx]
+        rounds = 0 if cfg.ignore_grasps else cfg.refine_rounds
+    else:
+        # No release pose reaches b feasibly: search all four configurations from the release
+        # poses that come nearest to reaching it.
+        near = np.argsort(kin, kind="stable")[:cfg.elite]
+        elite = release.poses[near]
+        elite_key = -VIOLATION_OFFSET - 1.0 - kin[near]
+        rounds = cfg.search_rounds
+    best = int(np.argmax(key)) if len(poses) else -1
+    best_key = key[best] if best >= 0 else -np.inf
+    best_pose = poses[best].copy() if best >= 0 else None
+    best_r4 = r4[best] if best >= 0 else None
+    searching = best_key <= -VIOLATION_OFFSET
+    more, k2, r2, n, miss2 = _cross_entropy(
+        scn, old, boom, new_anchor, elite, elite_key, rng, cfg, ALL, rounds,
+        lambda b, n: b < -VIOLATION_OFFSET or (not searching and n < cfg.refine_rounds))
+    evaluated += n
+    miss = max(miss, miss2)
+    if len(k2) and k2.max() > best_key:
+        b = int(np.argmax(k2))
+        best_key, best_pose, best_r4 = k2[b], more[b].copy(), r2[b]
+    if best_key <= -VIOLATION_OFFSET:
+        return Transition(False, None, None, _explain(miss), (evaluated + 3) // 4)
+    return Transition(True, best_pose, np.exp(best_r4), "", (evaluated + 3) // 4)
 
 
 def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:
     """(progress, failure code) of the sample that got furthest: the most configurations
     feasible, then the latest failing test (codes as `_score`'s)."""
-    passed = np.isfinite(r4).sum(axis=1)
+    passed = (r4 > -np.inf).sum(axis=1)
     progress = passed * 100 + reason % 10
     k = int(np.argmax(progress))
     return int(progress[k]), int(reason[k])
@@ -191,6 +323,8 @@ def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:
 
 def _explain(miss: tuple[int, int]) -> str:
     """Why the sample that got furthest failed, in words."""
+    if miss[0] < 0:
+        return "no pose found"
     config, reason = divmod(miss[1], 10)
     return (f"no pose found: nearest miss fails with {REASON_TEXT[Reason(reason)]} in the "
             f"{CONFIG_NAMES[config]}")

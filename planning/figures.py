@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -52,3 +53,95 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
                  f"p_path = {p_path:.4f}, p_min = {plan['p_min']:.4f}", fontsize=11)
     fig.tight_layout()
     return fig
+
+
+BOOM_COLOURS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a")
+
+
+def phase_figure(plan: dict[str, Any], k: int):
+    """The paper's Fig. 6 for phase k: tensions per boom over time (seed dotted, optimised
+    solid) and the configuration's probability of success over time (seed and optimised)."""
+    phase = plan["phases"][k]
+    motion = phase.get("motion")
+    if motion is None:
+        raise ValueError(f"phase {k} holds no trajectory (plan it without --no-motion)")
+    t = np.array([s["t"] for s in phase["steps"]])
+    t = t - t[0]
+    tension = np.array([[np.nan if v is None else v for v in s["tension"]]
+                        for s in phase["steps"]])
+    seed_tension = np.array([[np.nan if v is None else v for v in f]
+                             for f in motion["seed_tension"]])
+    p = np.array([s["p_success"] for s in phase["steps"]])
+    p_seed = np.array(motion["seed_p_success"])
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True)
+    for i in range(4):
+        if np.all(np.isnan(tension[:, i])):
+            continue
+        c = BOOM_COLOURS[i]
+        top.plot(t, seed_tension[:, i], ":", color=c, lw=1.6)
+        top.plot(t, tension[:, i], "-", color=c, lw=1.8, label=f"boom {i}")
+    top.plot([], [], "k:", label="seed")
+    top.plot([], [], "k-", label="optimised")
+    top.set_ylabel("tension [N]")
+    top.legend(fontsize=8, ncol=3)
+    bottom.plot(t, p_seed, ":", color="black", lw=1.6, label="seed")
+    bottom.plot(t, p, "-", color="#2171b5", lw=1.8, label="optimised")
+    bottom.axhline(plan["robot"]["p_min"], color="#cb181d", lw=1, ls="--", label="p_min")
+    bottom.set_ylabel("probability of success")
+    bottom.set_xlabel("time in phase [s]")
+    bottom.legend(fontsize=8)
+    what = "body movement" if phase["kind"] == "body" else (
+        f"boom {phase['free_boom']} {phase['from_anchor']} -> {phase['to_anchor']}")
+    title = (f"phase {k} ({what}): seed {motion['seed_method']}; SCP "
+             f"{motion['scp_status']}")
+    top.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
+                 max_frames: int = 400) -> None:
+    """An animation of the whole climb (GIF through Pillow, or MP4 through ffmpeg, by the
+    file's suffix), written atomically."""
+    from matplotlib.animation import FuncAnimation
+
+    from rb_drake.files import atomic_write
+
+    frames = [(phase, step) for phase in plan["phases"] for step in phase["steps"]]
+    if not frames:
+        raise ValueError("the plan has no configurations to animate")
+    frames = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1,
+                                                       min(max_frames, len(frames))).astype(int))]
+    fig, ax = plt.subplots(figsize=(6, 6))
+
+    def draw_frame(n: int):
+        ax.clear()
+        phase, step = frames[n]
+        stance = scn.stance(tuple(phase["stance"]))
+        draw.draw_cave(ax, scn, highlight=stance.ids, glyphs=False)
+        probs = np.array([np.nan if v is None else v for v in step["p_grasp"]])
+        tip = np.array(step["free_tip"]) if "free_tip" in step else None
+        draw.draw_robot(ax, scn.robot, np.array(step["pose"]), stance, probs, free_tip=tip,
+                        label_booms=False)
+        draw.frame_axes(ax, scn)
+        ax.set_title(f"t = {step['t']:.1f} s, P = {draw.format_prob(step['p_success'])}",
+                     fontsize=9)
+        return []
+
+    anim = FuncAnimation(fig, draw_frame, frames=len(frames), blit=False)
+    suffix = str(path).rsplit(".", 1)[-1].lower()
+    writer = "pillow" if suffix == "gif" else "ffmpeg"
+
+    def write(f) -> None:
+        import os
+        import tempfile
+
+        # matplotlib writers need a file name: render next to the target, then copy.
+        with tempfile.TemporaryDirectory() as tmp:
+            name = os.path.join(tmp, f"anim.{suffix}")
+            anim.save(name, writer=writer, fps=fps)
+            with open(name, "rb") as src:
+                f.write(src.read())
+
+    atomic_write(path, write)
+    plt.close(fig)

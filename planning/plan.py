@@ -22,6 +22,7 @@ from planning.probability import Configuration, path_probability
 from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import Scenario
+from rb_drake.statics import statics_problem
 
 FORMAT = "reachbot-plan/1"
 BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
@@ -94,6 +95,80 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
     if fp.success:
         prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
         plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    return plan
+
+
+def _step_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
+                        tensions: np.ndarray, free_tip: np.ndarray | None,
+                        t: float) -> dict[str, Any]:
+    """A configuration with given tensions; probabilities as `rbp check` recomputes them."""
+    stance = scn.stance(stance_ids)
+    prob = statics_problem(scn.robot, scn.gravity_vector, pose, stance, free_tip)
+    att = stance.attached
+    f = np.where(att, tensions, 0.0)
+    lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles[0]))
+    step: dict[str, Any] = {
+        "t": round(float(t), 6),
+        "pose": [float(v) for v in pose],
+        "tension": [float(f[i]) if att[i] else None for i in range(4)],
+        "p_grasp": [float(np.exp(lp[i])) if att[i] else None for i in range(4)],
+        "p_success": float(np.exp(lp[att].sum())),
+    }
+    if free_tip is not None:
+        step["free_tip"] = [float(v) for v in free_tip]
+        step["shoulder_torque"] = float(prob.shoulder_torque[0])
+    return step
+
+
+def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: str,
+                      timing: dict[str, float], dt: float) -> dict[str, Any]:
+    """The plan-file dictionary with full trajectories (`pipeline.PhaseMotion`s), one step
+    every `dt` seconds. Each phase also records its seed (`motion`): method, per-step
+    probability and effort, and what SCP made of it."""
+    plan = build_plan(scn, fp, planner, timing)
+    plan["time_step"] = dt
+    phases = []
+    t = 0.0
+    for m in motions:
+        if m.result is not None:
+            poses, tensions = m.result.poses, m.result.tensions
+            seed_tensions = m.result.seed_tensions
+        else:
+            poses = m.seed.poses
+            check = check_poses(scn, scn.stance(m.stance), poses,
+                                None if m.seed.tips is None else m.seed.tips[0], full=True)
+            tensions = seed_tensions = check.allocation.tensions
+            if m.seed.tips is not None:  # the tip moves: one allocation per step
+                tensions = seed_tensions = np.vstack([
+                    check_poses(scn, scn.stance(m.stance), poses[k], m.seed.tips[k],
+                                full=True).allocation.tensions for k in range(len(poses))])
+        steps = []
+        for k in range(len(poses)):
+            tip = None if m.seed.tips is None else m.seed.tips[k]
+            steps.append(_step_with_tensions(scn, m.stance, poses[k], tensions[k], tip, t))
+            t += dt
+        t -= dt  # the next phase starts where this one ends
+        phase: dict[str, Any] = {"kind": m.kind, "stance": list(m.stance),
+                                 "free_boom": m.free_boom}
+        if m.kind == "reach":
+            phase["from_anchor"], phase["to_anchor"] = m.from_anchor, m.to_anchor
+        phase["steps"] = steps
+        phase["motion"] = {
+            "seed_method": m.seed.method,
+            "seed_p_success": [float(np.exp(v)) for v in m.seed.log_probs],
+            "seed_tension": [[None if np.isnan(v) else float(v) for v in f]
+                             for f in seed_tensions],
+            "seed_effort": [float(np.nansum(f)) for f in seed_tensions],
+            "effort": [float(np.nansum(f)) for f in tensions],
+            "optimised": m.result is not None,
+            "improved": bool(m.result is not None and m.result.improved),
+            "scp_status": m.result.status if m.result is not None else "not run",
+            "scp_iterations": int(m.result.iterations) if m.result is not None else 0,
+        }
+        phases.append(phase)
+    plan["phases"] = phases
+    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
+    plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
     return plan
 
 

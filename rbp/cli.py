@@ -97,17 +97,55 @@ def _progress(label: str):
     return show, done
 
 
-def run_planner(scn, planner: str, seed: int, expansions: int):
-    """Footstep plan (rbp or naive) -> plan dictionary."""
-    from planning.baseline import plan_naive
-    from planning.footsteps import FootstepConfig, plan_footsteps
-    from planning.plan import build_plan
+def run_planner(scn, planner: str, seed: int, expansions: int, dt: float = 0.5,
+                motion: bool = True, optimise: bool = True):
+    """The whole pipeline (footsteps, then seeds and SCP per phase) -> plan dictionary."""
+    from planning.footsteps import FootstepConfig
+    from planning.pipeline import PipelineConfig, plan_climb
 
-    cfg = FootstepConfig(seed=seed, max_expansions=expansions)
+    if not dt > 0:
+        raise UserError(f"--dt: must be positive, got {dt}")
+    cfg = PipelineConfig(footstep=FootstepConfig(seed=seed, max_expansions=expansions), dt=dt,
+                         optimise=optimise)
     show, done = _progress(f"{planner} on {scn.name}")
-    fp = plan_footsteps(scn, cfg, progress=show) if planner == "rbp" else plan_naive(scn, cfg)
+    interactive = sys.stderr.isatty()
+
+    def phase(message: str) -> None:
+        if interactive:
+            print(f"\r\033[K{planner} on {scn.name}: {message}", end="", file=sys.stderr,
+                  flush=True)
+
+    if not motion:
+        from planning.baseline import plan_naive
+        from planning.footsteps import plan_footsteps
+        from planning.plan import build_plan
+
+        fp = (plan_footsteps(scn, cfg.footstep, progress=show) if planner == "rbp"
+              else plan_naive(scn, cfg.footstep))
+        done()
+        return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
+    plan = plan_climb(scn, planner, cfg, progress=phase, footstep_progress=show)
     done()
-    return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
+    return plan
+
+
+def _write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str | None) -> None:
+    from planning.figures import animate_plan, phase_figure, snapshots_figure
+    from rb_drake.files import atomic_save_figure
+
+    picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
+    print(f"wrote {picture}")
+    with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
+    if phase is not None:
+        if phase not in with_motion:
+            raise UserError(f"--phase-figure: phase {phase} has no trajectory; phases with one: "
+                            f"{with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
+        fig = out.with_name(f"{out.stem}-phase{phase}.png")
+        atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
+        print(f"wrote {fig}")
+    if animate:
+        animate_plan(scn, plan, animate)
+        print(f"wrote {animate}")
 
 
 def _summary(plan: dict) -> str:
@@ -118,19 +156,32 @@ def _summary(plan: dict) -> str:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from planning.figures import snapshots_figure
     from planning.plan import write_plan
-    from rb_drake.files import atomic_save_figure
 
     scn = _load(args.scenario)
-    plan = run_planner(scn, args.planner, args.seed, args.max_expansions)
+    plan = run_planner(scn, args.planner, args.seed, args.max_expansions, args.dt,
+                       motion=not args.footsteps_only, optimise=not args.no_scp)
     out = Path(args.output)
     write_plan(plan, out)
-    picture = out.with_suffix(".png")
-    atomic_save_figure(snapshots_figure(scn, plan), picture, dpi=110)
-    print(f"wrote {out} and {picture}")
+    print(f"wrote {out}")
+    _write_pictures(scn, plan, out, args.phase_figure, args.animate)
+    _print_motion(plan)
     print(_summary(plan))
     return 0
+
+
+def _print_motion(plan: dict) -> None:
+    from planning.pipeline import motion_summary
+
+    rows = motion_summary(plan)
+    if not rows:
+        return
+    better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in rows)
+    better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in rows)
+    t = plan["timing"]
+    print(f"motion: {len(rows)} phases; SCP raised the minimum P on {better_min} and the mean P "
+          f"on {better_mean}; seeds {t['seed_body'] + t['seed_reach']:.2f} s, SCP "
+          f"{t['scp_body'] + t['scp_reach']:.2f} s")
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -192,13 +243,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
           f"wrote {picture} and {data}")
     if args.plan:
-        from planning.figures import snapshots_figure
         from planning.plan import write_plan
 
         plan = run_planner(scn, "rbp", 0, 400)
         write_plan(plan, out / "plan.json")
-        atomic_save_figure(snapshots_figure(scn, plan), out / "plan.png", dpi=110)
-        print(f"wrote {out / 'plan.json'} and {out / 'plan.png'}")
+        print(f"wrote {out / 'plan.json'}")
+        from planning.pipeline import motion_summary
+
+        # Fig. 6 for the phase where SCP gained most
+        rows = motion_summary(plan)
+        best = max(rows, key=lambda r: r["mean"] - r["seed_mean"])["phase"] if rows else None
+        _write_pictures(scn, plan, out / "plan.json", best, None)
+        _print_motion(plan)
         print(_summary(plan))
     return 0
 
@@ -222,6 +278,17 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--seed", type=int, default=0, help="seed of the planner's sampling")
     plan.add_argument("--max-expansions", type=int, default=400,
                       help="give up after expanding this many stances (default 400)")
+    plan.add_argument("--dt", type=float, default=0.5,
+                      help="seconds between trajectory steps (default 0.5; steps are 5 cm apart)")
+    plan.add_argument("--no-scp", action="store_true",
+                      help="keep the seed trajectories (no sequential convex programming)")
+    plan.add_argument("--footsteps-only", action="store_true",
+                      help="stop after the footstep plan (phases hold only transition poses)")
+    plan.add_argument("--phase-figure", type=int, metavar="K",
+                      help="also draw phase K's tensions and probability, seed against SCP "
+                           "(the paper's Fig. 6), beside the plan")
+    plan.add_argument("--animate", metavar="FILE",
+                      help="also write an animation of the climb (.gif, or .mp4 with ffmpeg)")
     plan.set_defaults(func=cmd_plan)
 
     check = sub.add_parser("check", help="re-verify a plan file from scratch")

@@ -106,8 +106,10 @@ def test_demo(tmp_path):
     demo = load_scenario(bundled_caves()["demo-shaft"])
     assert start["stance"] == list(demo.start_stance), f"stance {start['stance']}"
     assert start["pose"] == list(demo.start_pose), f"pose {start['pose']}"
-    assert sorted(p.name for p in out.iterdir()) == ["cave.png", "plan.json", "plan.png",
-                                                     "start.json"]
+    names = sorted(p.name for p in out.iterdir())
+    fig6 = [n for n in names if n.startswith("plan-phase")]
+    assert names == sorted(["cave.png", "plan.json", "plan.png", "start.json", *fig6]), names
+    assert len(fig6) == 1, f"expected one Fig. 6 picture, got {fig6}"
     # The demo plans the climb: the plan must follow the schema and verify from scratch.
     from planning.check import check_plan
     from planning.plan import validate
@@ -118,6 +120,10 @@ def test_demo(tmp_path):
     assert check_plan(plan) == [], "the demo plan does not verify"
     assert proc.stdout.strip().splitlines()[-1].startswith("success: true"), proc.stdout
     assert_picture(out / "plan.png")
+    assert_picture(out / fig6[0])
+    # Full trajectories, not just transition poses: every phase has a seed and SCP record.
+    assert all("motion" in phase for phase in plan["phases"]), "a phase without trajectory"
+    assert sum(len(phase["steps"]) for phase in plan["phases"]) > 3 * len(plan["phases"])
 
 
 def test_list(tmp_path):

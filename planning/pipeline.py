@@ -1,0 +1,165 @@
+"""The RBP pipeline: footstep plan, then for every body and reach phase a seed and its SCP.
+
+`plan_climb` is what `rbp plan` runs. The footstep planner (or the naive baseline) fixes the
+stance sequence and one transition pose per regrasp; each body phase then gets a feasible seed
+trajectory from that pose to the next (`seeds.body_seed`: straight line, local detours, OMPL)
+and each reach phase a seed with the free gripper on a collision-free arc (`seeds.reach_seed`);
+SCP (`scp.optimise_body` / `optimise_reach`) raises their robustness, and where it cannot the
+seed stands and the plan says so. The naive baseline stops after its footsteps: its
+configurations need not be probable enough for the seeds' P >= p_min, and the paper compares
+it on footsteps only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from planning.baseline import plan_naive
+from planning.footsteps import FootstepConfig, FootstepPlan, plan_footsteps
+from planning.plan import build_motion_plan, build_plan
+from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
+from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
+from rb_drake.scenario import Scenario
+
+PLANNERS = ("rbp", "naive")
+
+
+@dataclasses.dataclass(frozen=True)
+class PipelineConfig:
+    footstep: FootstepConfig = dataclasses.field(default_factory=FootstepConfig)
+    seed: SeedConfig = dataclasses.field(
+        default_factory=lambda: SeedConfig(step=0.05, turn_step=0.05))
+    scp: ScpConfig = dataclasses.field(default_factory=ScpConfig)
+    dt: float = 0.5        # s between trajectory steps: with 5 cm steps, 0.1 m/s
+    optimise: bool = True  # False: the seeds are the plan (no SCP)
+
+
+class PhaseMotion(NamedTuple):
+    """One phase's trajectory, with its seed for comparison."""
+
+    kind: str                        # "body" | "reach"
+    stance: tuple[str | None, ...]   # the anchors held (None for the free boom)
+    free_boom: int | None
+    from_anchor: str | None
+    to_anchor: str | None
+    seed: Seed
+    result: ScpResult | None         # None when SCP was not run
+
+    @property
+    def poses(self) -> np.ndarray:
+        return self.result.poses if self.result is not None else self.seed.poses
+
+    @property
+    def tensions(self) -> np.ndarray:
+        return self.result.tensions if self.result is not None else None
+
+
+Progress = Callable[[str], None]
+
+
+def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None = None,
+                  timing: dict[str, float] | None = None,
+                  progress: Progress | None = None) -> tuple[list[PhaseMotion], str]:
+    """Seed and optimise every phase of a successful footstep plan, in order.
+
+    Returns the motions and, if some phase has no feasible seed, why (the motions stop there).
+    `timing` accumulates seconds under seed_body, scp_body, seed_reach and scp_reach."""
+    cfg = config or PipelineConfig()
+    timing = timing if timing is not None else {}
+    seed_value = cfg.footstep.seed
+    motions: list[PhaseMotion] = []
+    ends = [s.pose for s in fp.steps] + [fp.goal_pose]
+    pose = np.asarray(fp.start_pose, dtype=float)
+    n_phases = len(fp.stances) + len(fp.steps)
+
+    def clock(stage: str, t0: float) -> None:
+        timing[stage] = timing.get(stage, 0.0) + time.perf_counter() - t0
+
+    for k, stance in enumerate(fp.stances):
+        if progress is not None:
+            progress(f"phase {len(motions) + 1}/{n_phases}: body movement")
+        t0 = time.perf_counter()
+        seed = body_seed(scn, stance, pose, ends[k], cfg.seed, seed=seed_value + k)
+        clock("seed_body", t0)
+        if not seed.success:
+            return motions, f"body phase {len(motions)} in stance {list(stance)}: {seed.reason}"
+        result = None
+        if cfg.optimise:
+            t0 = time.perf_counter()
+            result = optimise_body(scn, stance, seed.poses, cfg.dt, cfg.scp)
+            clock("scp_body", t0)
+        motions.append(PhaseMotion("body", tuple(stance), None, None, None, seed, result))
+        if k == len(fp.steps):
+            break
+        step = fp.steps[k]
+        if progress is not None:
+            progress(f"phase {len(motions) + 1}/{n_phases}: boom {step.boom} "
+                     f"{step.from_anchor} -> {step.to_anchor}")
+        three = tuple(None if i == step.boom else a for i, a in enumerate(stance))
+        t0 = time.perf_counter()
+        seed = reach_seed(scn, stance, step.boom, step.to_anchor, step.pose, cfg.seed,
+                          seed=seed_value + k)
+        clock("seed_reach", t0)
+        if not seed.success:
+            return motions, (f"reach phase {len(motions)} (boom {step.boom} {step.from_anchor} "
+                             f"-> {step.to_anchor}): {seed.reason}")
+        result = None
+        if cfg.optimise:
+            t0 = time.perf_counter()
+            result = optimise_reach(scn, three, step.boom, seed.poses, seed.tips, cfg.dt, cfg.scp)
+            clock("scp_reach", t0)
+        motions.append(PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor,
+                                   seed, result))
+        pose = np.asarray(step.pose, dtype=float)
+    return motions, ""
+
+
+def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
+               progress: Progress | None = None,
+               footstep_progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """The whole plan-file dictionary (`reachbot-plan/1`) for a scenario."""
+    if planner not in PLANNERS:
+        raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
+    cfg = config or PipelineConfig()
+    t_start = time.perf_counter()
+    timing: dict[str, float] = {}
+    if planner == "naive":
+        fp = plan_naive(scn)
+    else:
+        fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress)
+    timing["footstep"] = time.perf_counter() - t_start
+    if planner == "naive" or not fp.success:
+        timing["total"] = time.perf_counter() - t_start
+        return build_plan(scn, fp, planner, timing)
+    motions, failure = phase_motions(scn, fp, cfg, timing, progress)
+    if failure:
+        timing["total"] = time.perf_counter() - t_start
+        plan = build_plan(scn, fp, planner, timing)
+        plan["success"], plan["reason"] = False, f"motion planning failed: {failure}"
+        plan["p_path"] = plan["p_min"] = None
+        return plan
+    timing["total"] = time.perf_counter() - t_start
+    return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt)
+
+
+def motion_summary(plan: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per phase: the seed's and the optimum's minimum and mean probability and effort."""
+    rows = []
+    for k, phase in enumerate(plan["phases"]):
+        motion = phase.get("motion")
+        if motion is None:
+            continue
+        p = np.array([s["p_success"] for s in phase["steps"]])
+        p_seed = np.array(motion["seed_p_success"])
+        rows.append({"phase": k, "kind": phase["kind"], "steps": len(p),
+                     "seed_min": float(p_seed.min()), "min": float(p.min()),
+                     "seed_mean": float(p_seed.mean()), "mean": float(p.mean()),
+                     "seed_effort": float(np.mean(motion["seed_effort"])),
+                     "effort": float(np.mean(motion["effort"])),
+                     "improved": bool(motion["improved"]), "status": motion["scp_status"]})
+    return rows

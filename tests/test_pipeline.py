@@ -1,0 +1,141 @@
+"""The full pipeline on the bundled demo cave: footsteps, seeds, SCP, the plan file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planning.check import check_plan
+from planning.figures import animate_plan, phase_figure
+from planning.footsteps import plan_footsteps
+from planning.pipeline import PipelineConfig, motion_summary, phase_motions, plan_climb
+from planning.plan import build_motion_plan, validate
+from rb_drake.scenario import Scenario, bundled_caves, load_scenario
+
+TOL = 1e-9
+
+
+@pytest.fixture(scope="module")
+def demo() -> Scenario:
+    return load_scenario(bundled_caves()["demo-shaft"])
+
+
+@pytest.fixture(scope="module")
+def footsteps(demo):
+    fp = plan_footsteps(demo)
+    assert fp.success, fp.reason
+    return fp
+
+
+@pytest.fixture(scope="module")
+def motions(demo, footsteps):
+    motions, failure = phase_motions(demo, footsteps, PipelineConfig())
+    assert failure == "", failure
+    return motions
+
+
+@pytest.fixture(scope="module")
+def plan(demo, footsteps, motions):
+    timing = {"footstep": footsteps.seconds, "total": footsteps.seconds}
+    return build_motion_plan(demo, footsteps, motions, "rbp", timing, PipelineConfig().dt)
+
+
+def test_plan_verifies_from_scratch(plan):
+    validate(plan)
+    assert plan["success"], plan["reason"]
+    problems = check_plan(plan)
+    assert problems == [], "\n".join(problems[:10])
+
+
+def test_phases_alternate_and_connect(demo, plan, footsteps):
+    phases = plan["phases"]
+    assert len(phases) == 2 * len(footsteps.steps) + 1, f"{len(phases)} phases"
+    for k, phase in enumerate(phases):
+        assert phase["kind"] == ("body" if k % 2 == 0 else "reach"), f"phase {k}"
+        assert len(phase["steps"]) >= 2, f"phase {k} has {len(phase['steps'])} steps"
+    for k in range(len(phases) - 1):
+        end = np.array(phases[k]["steps"][-1]["pose"])
+        start = np.array(phases[k + 1]["steps"][0]["pose"])
+        assert np.allclose(end, start, atol=1e-9), f"phases {k}->{k + 1}: {end} vs {start}"
+    first = np.array(phases[0]["steps"][0]["pose"])
+    assert np.allclose(first, demo.start_pose, atol=1e-9), f"starts at {first}"
+    last = np.array(phases[-1]["steps"][-1]["pose"])
+    goal_gap = np.linalg.norm(last[:2] - np.array(demo.goal_position))
+    assert goal_gap <= demo.goal_tolerance + 1e-9, f"ends {goal_gap:.3f} m from the goal"
+
+
+def test_reach_tips_run_anchor_to_anchor(demo, plan):
+    for k, phase in enumerate(plan["phases"]):
+        if phase["kind"] != "reach":
+            continue
+        tips = np.array([s["free_tip"] for s in phase["steps"]])
+        a = demo.anchor_positions[demo.anchor_index[phase["from_anchor"]]]
+        b = demo.anchor_positions[demo.anchor_index[phase["to_anchor"]]]
+        assert np.allclose(tips[0], a, atol=1e-9), f"phase {k}: tip starts at {tips[0]}, not {a}"
+        assert np.allclose(tips[-1], b, atol=1e-9), f"phase {k}: tip ends at {tips[-1]}, not {b}"
+
+
+def test_time_steps_are_uniform_and_increasing(plan):
+    dt = plan["time_step"]
+    for k, phase in enumerate(plan["phases"]):
+        t = np.array([s["t"] for s in phase["steps"]])
+        assert np.allclose(np.diff(t), dt, atol=1e-5), f"phase {k}: steps {np.diff(t)}"
+    starts = [p["steps"][0]["t"] for p in plan["phases"]]
+    assert np.all(np.diff(starts) > 0), f"phase start times {starts}"
+
+
+def test_scp_never_worse_than_its_seed(plan):
+    rows = motion_summary(plan)
+    assert len(rows) == len(plan["phases"]), "a phase without a motion record"
+    for r in rows:
+        assert r["min"] >= r["seed_min"] - TOL, (
+            f"phase {r['phase']}: SCP minimum P {r['min']} below the seed's {r['seed_min']}")
+    # (The mean may dip slightly: SCP maximises sum log P less smoothness and dynamics
+    # penalties, and guarantees the merit and the minimum, not the mean.)
+
+
+def test_scp_improves_some_phase(plan):
+    rows = motion_summary(plan)
+    gains = [r["mean"] - r["seed_mean"] for r in rows]
+    assert max(gains) > 1e-4, f"SCP raised no phase's mean probability: gains {gains}"
+
+
+def test_motion_is_deterministic(demo, footsteps, motions):
+    again, failure = phase_motions(demo, footsteps, PipelineConfig())
+    assert failure == ""
+    for k, (a, b) in enumerate(zip(motions, again, strict=True)):
+        assert np.array_equal(a.poses, b.poses), f"phase {k} differs between runs"
+
+
+def test_seeds_only_plan_verifies(demo, footsteps):
+    cfg = PipelineConfig(optimise=False)
+    motions, failure = phase_motions(demo, footsteps, cfg)
+    assert failure == "", failure
+    plan = build_motion_plan(demo, footsteps, motions, "rbp", {}, cfg.dt)
+    assert check_plan(plan) == [], "the seeds-only plan does not verify"
+    assert all(not p["motion"]["optimised"] for p in plan["phases"])
+
+
+def test_naive_plan_stops_at_footsteps(demo):
+    plan = plan_climb(demo, "naive")
+    validate(plan)
+    assert all("motion" not in p for p in plan["phases"]), "naive phases hold trajectories"
+    assert plan["timing"]["footstep"] > 0
+
+
+def test_unknown_planner_is_refused(demo):
+    with pytest.raises(ValueError, match="planner"):
+        plan_climb(demo, "astar")
+
+
+def test_figures(demo, plan, tmp_path):
+    k = next(k for k, p in enumerate(plan["phases"]) if p["kind"] == "reach")
+    fig = phase_figure(plan, k)
+    lines = [line for ax in fig.axes for line in ax.get_lines()]
+    assert len(lines) >= 6, f"only {len(lines)} curves in Fig. 6"
+    gif = tmp_path / "climb.gif"
+    small = dict(plan, phases=plan["phases"][:2])
+    animate_plan(demo, small, str(gif), max_frames=4)
+    data = gif.read_bytes()
+    assert data[:6] in (b"GIF87a", b"GIF89a"), "not a GIF"
+    assert not list(tmp_path.glob(".*.tmp")), "a temporary file was left behind"

@@ -123,8 +123,8 @@ def _step_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], pose:
 def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: str,
                       timing: dict[str, float], dt: float) -> dict[str, Any]:
     """The plan-file dictionary with full trajectories (`pipeline.PhaseMotion`s), one step
-    every `dt` seconds. Each phase also records its seed (`motion`): method, per-step
-    probability and effort, and what SCP made of it."""
+    every `dt` seconds, and a dwell of dt at the end of each phase. Each phase also records
+    its seed (`motion`): method, per-step probability and effort, and what SCP made of it."""
     plan = build_plan(scn, fp, planner, timing)
     plan["time_step"] = dt
     phases = []
@@ -147,15 +147,22 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
             tip = None if m.seed.tips is None else m.seed.tips[k]
             steps.append(_step_with_tensions(scn, m.stance, poses[k], tensions[k], tip, t))
             t += dt
-        t -= dt  # the next phase starts where this one ends
+        # Each phase ends with a dwell of dt in its last configuration (the gripper engaging or
+        # letting go): the next phase starts when it ends, and an execution that switches
+        # stance at the boundary still spends time in every configuration the plan lists.
+        steps.append(dict(steps[-1], t=round(t, 6)))
         phase: dict[str, Any] = {"kind": m.kind, "stance": list(m.stance),
                                  "free_boom": m.free_boom}
         if m.kind == "reach":
             phase["from_anchor"], phase["to_anchor"] = m.from_anchor, m.to_anchor
         phase["steps"] = steps
+        # per step, like `steps` (the dwell repeats the last)
+        seed_lp = np.append(m.seed.log_probs, m.seed.log_probs[-1])
+        seed_tensions = np.vstack([seed_tensions, seed_tensions[-1:]])
+        tensions = np.vstack([tensions, tensions[-1:]])
         phase["motion"] = {
             "seed_method": m.seed.method,
-            "seed_p_success": [float(np.exp(v)) for v in m.seed.log_probs],
+            "seed_p_success": [float(np.exp(v)) for v in seed_lp],
             "seed_tension": [[None if np.isnan(v) else float(v) for v in f]
                              for f in seed_tensions],
             "seed_effort": [float(np.nansum(f)) for f in seed_tensions],

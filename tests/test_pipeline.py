@@ -80,8 +80,12 @@ def test_time_steps_are_uniform_and_increasing(plan):
     for k, phase in enumerate(plan["phases"]):
         t = np.array([s["t"] for s in phase["steps"]])
         assert np.allclose(np.diff(t), dt, atol=1e-5), f"phase {k}: steps {np.diff(t)}"
-    starts = [p["steps"][0]["t"] for p in plan["phases"]]
-    assert np.all(np.diff(starts) > 0), f"phase start times {starts}"
+        last, dwell = phase["steps"][-2:]
+        assert {**last, "t": 0} == {**dwell, "t": 0}, f"phase {k} does not end with a dwell"
+    for k in range(len(plan["phases"]) - 1):
+        end = plan["phases"][k]["steps"][-1]["t"]
+        start = plan["phases"][k + 1]["steps"][0]["t"]
+        assert abs(start - end) < 1e-9, f"phase {k + 1} starts at {start}, phase {k} ends {end}"
 
 
 def test_scp_never_worse_than_its_seed(plan):
@@ -92,6 +96,14 @@ def test_scp_never_worse_than_its_seed(plan):
             f"phase {r['phase']}: SCP minimum P {r['min']} below the seed's {r['seed_min']}")
     # (The mean may dip slightly: SCP maximises sum log P less smoothness and dynamics
     # penalties, and guarantees the merit and the minimum, not the mean.)
+
+
+def test_motion_records_align_with_steps(plan):
+    for k, phase in enumerate(plan["phases"]):
+        n = len(phase["steps"])
+        motion = phase["motion"]
+        for key in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
+            assert len(motion[key]) == n, f"phase {k}: {key} has {len(motion[key])} of {n}"
 
 
 def test_scp_improves_some_phase(plan):

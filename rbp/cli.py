@@ -315,7 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
     from systems.rig_cli import add_rig_commands
+    from systems.sim_cli import add_simulate_command
 
+    add_simulate_command(sub)
     add_rig_commands(sub)
     return parser
 

@@ -1,0 +1,218 @@
+"""The cave and a simulated climb in Drake's Meshcat, and a self-contained HTML replay.
+
+The scene lies in the x-y plane (the world frame of the model), seen from -z (so that x points
+right and y up on the screen; what is drawn in front has z < 0): rock polygons as
+extruded triangle meshes with their outlines, anchors as small spheres with a line along their
+outward normal, the goal as a ring, and the robot as its body box, four booms (thin boxes
+stretched from shoulder to gripper) and gripper spheres. A run (`SimulationRecord`) is replayed
+as a Meshcat animation: transforms and the booms' "scale" property per frame, an attached
+boom green, a free one orange, a failed one red from its failure on.
+
+Meshcat must listen on the loopback interface only: `start_meshcat` binds 127.0.0.1 on a free
+port (Drake's default listens on every interface). The replay is saved with
+`meshcat.StaticHtml()`, written atomically.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Box, Cylinder, Meshcat, MeshcatParams, Rgba, Sphere
+from pydrake.math import RigidTransform, RotationMatrix
+
+from rb_drake.files import atomic_write_text
+from rb_drake.params import NUM_BOOMS
+from rb_drake.scenario import Scenario
+from systems.diagram import SimulationRecord
+
+ROOT = "rbp"  # relative: under Meshcat's /drake, so meshcat.Delete() clears it
+ROCK_DEPTH = 0.2      # m, the rock's extrusion below and above the plane
+BOOM_WIDTH = 0.025    # m
+ANCHOR_RADIUS = 0.025
+GRIPPER_RADIUS = 0.035
+NORMAL_LENGTH = 0.15  # m, the line drawn along an anchor's outward normal
+FRONT = -(ROCK_DEPTH + 0.06)  # z of the robot and the anchors, between the camera and the rock
+ROCK = Rgba(0.62, 0.54, 0.46, 1.0)
+ROCK_EDGE = Rgba(0.25, 0.2, 0.15, 1.0)
+ANCHOR = Rgba(0.15, 0.35, 0.85, 1.0)
+GOAL = Rgba(0.75, 0.92, 0.75, 0.5)
+BODY = Rgba(0.2, 0.2, 0.25, 1.0)
+ATTACHED = [0.2, 0.65, 0.25]
+FREE = [0.95, 0.6, 0.1]
+FAILED = [0.9, 0.1, 0.1]
+
+
+def start_meshcat() -> Meshcat:
+    """A Meshcat server on 127.0.0.1 and a free port (never all interfaces)."""
+    return Meshcat(MeshcatParams(host="localhost", port=0))
+
+
+def triangulate(polygon: np.ndarray) -> np.ndarray:
+    """Ear-clipping triangulation of a simple counter-clockwise polygon: (n - 2, 3) indices."""
+    pts = np.asarray(polygon, dtype=float)
+    left = list(range(len(pts)))
+    triangles = []
+
+    def cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+    def inside(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
+        return cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0
+
+    guard = 0
+    while len(left) > 3 and guard < 10 * len(pts) ** 2:
+        guard += 1
+        for k in range(len(left)):
+            i, j, m = left[k - 1], left[k], left[(k + 1) % len(left)]
+            a, b, c = pts[i], pts[j], pts[m]
+            if cross(a, b, c) <= 1e-15:
+                continue  # reflex or degenerate corner: not an ear
+            if any(inside(pts[q], a, b, c) for q in left if q not in (i, j, m)):
+                continue
+            triangles.append((i, j, m))
+            left.pop(k)
+            break
+        else:
+            break  # no ear found (not simple): fan the rest
+    for k in range(1, len(left) - 1):
+        triangles.append((left[0], left[k], left[k + 1]))
+    return np.array(triangles, dtype=np.int32)
+
+
+def extrude(polygon: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (3, 2n) and faces (3, m) of a polygon extruded between z = -depth and +depth."""
+    pts = np.asarray(polygon, dtype=float)
+    n = len(pts)
+    top = triangulate(pts)
+    vertices = np.vstack([np.column_stack([pts, np.full(n, depth)]),
+                          np.column_stack([pts, np.full(n, -depth)])])
+    faces = [top, top[:, ::-1] + n]
+    ring = np.arange(n)
+    nxt = (ring + 1) % n
+    faces.append(np.column_stack([ring, ring + n, nxt + n]))
+    faces.append(np.column_stack([ring, nxt + n, nxt]))
+    return vertices.T.copy(), np.vstack(faces).T.astype(np.int32).copy()
+
+
+def draw_scenario(meshcat: Meshcat, scn: Scenario) -> None:
+    """Rock, anchors (with normals) and the goal, under /drake/rbp/cave."""
+    for k, wall in enumerate(scn.walls):
+        vertices, faces = extrude(wall, ROCK_DEPTH)
+        meshcat.SetTriangleMesh(f"{ROOT}/cave/rock{k}", vertices, faces, ROCK)
+        outline = np.column_stack([np.vstack([wall, wall[:1]]),
+                                   np.full(len(wall) + 1, -ROCK_DEPTH - 0.01)])
+        meshcat.SetLine(f"{ROOT}/cave/edge{k}", outline.T.copy(), 2.0, ROCK_EDGE)
+    for anchor in scn.anchors:
+        path = f"{ROOT}/cave/anchors/{anchor.id}"
+        p = np.array([*anchor.position, FRONT])
+        meshcat.SetObject(path, Sphere(ANCHOR_RADIUS), ANCHOR)
+        meshcat.SetTransform(path, RigidTransform(p))
+        tip = p + NORMAL_LENGTH * np.array([*anchor.normal, 0.0])
+        meshcat.SetLine(f"{path}-normal", np.column_stack([p, tip]), 2.0, ANCHOR)
+    goal = f"{ROOT}/cave/goal"
+    meshcat.SetObject(goal, Cylinder(scn.goal_tolerance, 0.005), GOAL)
+    meshcat.SetTransform(goal, RigidTransform([*scn.goal_position, ROCK_DEPTH]))  # a disc
+
+
+def _robot_objects(meshcat: Meshcat, scn: Scenario) -> None:
+    w, h = scn.robot.body_size
+    meshcat.SetObject(f"{ROOT}/robot/body", Box(w, h, 0.08), BODY)
+    for i in range(NUM_BOOMS):
+        # a unit-length box along x, stretched to the boom's length by its "scale" property
+        meshcat.SetObject(f"{ROOT}/robot/boom{i}", Box(1.0, BOOM_WIDTH, BOOM_WIDTH),
+                          Rgba(*ATTACHED, 1.0))
+        meshcat.SetObject(f"{ROOT}/robot/gripper{i}", Sphere(GRIPPER_RADIUS), Rgba(*ATTACHED, 1.0))
+
+
+def robot_frame(scn: Scenario, pose: np.ndarray, tips: np.ndarray
+                ) -> tuple[RigidTransform, list[tuple[RigidTransform, float]], np.ndarray]:
+    """Body transform, per boom (transform of its midpoint, length), shoulder positions."""
+    x, y, phi = (float(v) for v in pose)
+    c, s = math.cos(phi), math.sin(phi)
+    shoulders = np.array([[x + c * sx - s * sy, y + s * sx + c * sy]
+                          for sx, sy in scn.robot.shoulders])
+    z = FRONT
+    body = RigidTransform(RotationMatrix.MakeZRotation(phi), [x, y, z])
+    booms = []
+    for p, t in zip(shoulders, tips, strict=True):
+        d = t - p
+        length = float(np.hypot(*d))
+        mid = 0.5 * (p + t)
+        booms.append((RigidTransform(RotationMatrix.MakeZRotation(math.atan2(d[1], d[0])),
+                                     [mid[0], mid[1], z]), max(length, 1e-3)))
+    return body, booms, shoulders
+
+
+def gripper_positions(record: SimulationRecord, sample: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each gripper's position at a sample and whether its boom is attached."""
+    plan = record.plan
+    k = int(record.phase[sample])
+    phase = plan.phases[k]
+    t = float(record.times[sample])
+    tips = np.where(phase.stance.attached[:, None], phase.stance.positions, 0.0)
+    j = phase.stance.free_boom
+    if j is not None and phase.free_tip is not None:
+        tips[j] = phase.free_tip.value(t).ravel()
+    return tips, phase.stance.attached.copy()
+
+
+def animate(meshcat: Meshcat, record: SimulationRecord, frames_per_second: float = 20.0,
+            speedup: float = 4.0) -> int:
+    """Replay `record` as a Meshcat animation (played `speedup` times faster than simulated
+    time); returns the number of frames. Call `draw_scenario` first for the cave."""
+    scn = record.plan.scenario
+    _robot_objects(meshcat, scn)
+    meshcat.StartRecording(frames_per_second, False)
+    period = speedup / frames_per_second  # simulated seconds per frame
+    samples = np.unique(np.searchsorted(record.times,
+                                        np.arange(0.0, record.times[-1] + 1e-9, period)))
+    samples = samples[samples < len(record.times)]
+    failure = record.failure
+    for frame, s in enumerate(samples):
+        t_anim = frame / frames_per_second
+        tips, attached = gripper_positions(record, int(s))
+        body, booms, _ = robot_frame(scn, record.state[s, :3], tips)
+        meshcat.SetTransform(f"{ROOT}/robot/body", body, t_anim)
+        for i, (X, length) in enumerate(booms):
+            colour = ATTACHED if attached[i] else FREE
+            if failure is not None and i == failure.boom and record.times[s] >= failure.time:
+                colour = FAILED
+            meshcat.SetTransform(f"{ROOT}/robot/boom{i}", X, t_anim)
+            meshcat.SetProperty(f"{ROOT}/robot/boom{i}/<object>", "scale", [length, 1.0, 1.0],
+                                t_anim)
+            meshcat.SetProperty(f"{ROOT}/robot/boom{i}/<object>", "color", [*colour, 1.0],
+                                t_anim)
+            meshcat.SetTransform(f"{ROOT}/robot/gripper{i}",
+                                 RigidTransform([*tips[i], FRONT]), t_anim)
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+    return len(samples)
+
+
+def show_climb(meshcat: Meshcat, record: SimulationRecord, speedup: float = 4.0) -> int:
+    """The cave, the robot and the animated climb; the camera looks down on the cave."""
+    meshcat.Delete(ROOT)
+    meshcat.DeleteRecording()
+    scn = record.plan.scenario
+    draw_scenario(meshcat, scn)
+    # Looking along +z from below: camera x = world -x, camera y (its view axis) = world +z,
+    # camera z = world +y (Set2dRenderMode's convention), so x is right and y up.
+    R_WC = RotationMatrix(np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]))
+    meshcat.Set2dRenderMode(RigidTransform(R_WC, [0.0, 0.0, -10.0]), *_bounds(scn))
+    # Meshcat's lights shine from +z; the faces we see look to -z: light them evenly.
+    meshcat.SetProperty("/Lights/AmbientLight/<object>", "intensity", 2.5)
+    return animate(meshcat, record, speedup=speedup)
+
+
+def _bounds(scn: Scenario) -> tuple[float, float, float, float]:
+    pts = np.vstack([*scn.walls, scn.anchor_positions])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.3
+    return float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad)
+
+
+def save_html(meshcat: Meshcat, path: str | Path) -> Path:
+    """The scene and its animation as one self-contained HTML file, written atomically."""
+    return atomic_write_text(path, meshcat.StaticHtml())

@@ -1,0 +1,173 @@
+"""`rbp simulate PLAN`: execute a plan in the Drake diagram, then Monte Carlo trials of it.
+
+The deterministic run reports the tracking error and the success probability the simulated
+forces imply; `--trials N` draws N stochastic executions (grasp strengths and attach failures)
+and reports the success rate with its 95 % Wilson interval beside the plan's p_path, and where
+and why climbs failed; `--replan retry|footsteps` continues failed climbs on a new plan and
+counts those it saves; `--json FILE` writes the numbers; `--meshcat` shows the climb in Meshcat
+on localhost and `--html FILE` saves a self-contained replay. Heavy modules are imported inside
+the command so `rbp --help` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
+    """Register `simulate` on the `rbp` sub-command parsers."""
+    p = subparsers.add_parser(
+        "simulate", help="execute a plan in a Drake simulation with stochastic grasps",
+        description=__doc__.splitlines()[0])
+    p.add_argument("plan", help="plan file (.json, from rbp plan)")
+    p.add_argument("--trials", type=int, default=1000,
+                   help="Monte Carlo trials (default 1000; 0: the deterministic run only)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the trials' draws (default 0)")
+    p.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    p.add_argument("--meshcat", action="store_true",
+                   help="show the climb in Meshcat (on localhost; waits for Enter on a terminal)")
+    p.add_argument("--html", metavar="FILE", help="save a self-contained HTML replay")
+    p.add_argument("--replan", choices=("retry", "footsteps"),
+                   help="continue failed climbs on a new plan: re-grasp the same anchor "
+                        "(retry) or plan again from where the robot is (footsteps, slow)")
+    p.set_defaults(func=cmd_simulate)
+    return p
+
+
+def _load_plan(path: Path) -> dict[str, Any]:
+    from rbp.cli import UserError
+
+    try:
+        plan = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: (file): no such file") from None
+    except IsADirectoryError:
+        raise UserError(f"{path}: (file): is a directory, not a plan file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
+    import jsonschema
+
+    from planning.plan import validate
+
+    try:
+        validate(plan)
+    except jsonschema.ValidationError as e:
+        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise UserError(f"{path}: {field}: {e.message}") from None
+    if not plan["success"]:
+        raise UserError(f"{path}: success: the plan found no route ({plan['reason']}); "
+                        "nothing to simulate")
+    return plan
+
+
+def _progress(label: str):
+    """A one-line progress display on stderr (only on a terminal)."""
+    interactive = sys.stderr.isatty()
+
+    def show(text: str) -> None:
+        if interactive:
+            print(f"\r{label}: {text}\033[K", end="", file=sys.stderr, flush=True)
+
+    def done() -> None:
+        if interactive:
+            print(file=sys.stderr)
+
+    return show, done
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Run `rbp simulate` (see the module docstring); 0 on success."""
+    from rbp.cli import UserError
+
+    if args.trials < 0:
+        raise UserError(f"--trials: must be 0 or more, got {args.trials}")
+    if args.replan and args.trials == 0:
+        raise UserError("--replan: replanning continues failed trials; give --trials N > 0")
+    path = Path(args.plan)
+    plan = _load_plan(path)
+
+    from rb_drake.files import atomic_write_text
+    from systems.diagram import ClimbSimulator, PlanError, PlanTrajectory, plan_scenario
+    from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
+
+    scn = plan_scenario(plan, str(path))
+    try:
+        traj = PlanTrajectory(plan, scn)
+    except PlanError as e:
+        raise UserError(f"{path}: {e}") from None
+    simulator = ClimbSimulator(scn)
+    show, done = _progress("simulating")
+    start = time.perf_counter()
+    record = simulator.run(traj, progress=lambda k, n, t: show(f"phase {k}/{n}, t = {t:.1f} s"))
+    done()
+    wall = time.perf_counter() - start
+    import numpy as np
+
+    err, heading = record.position_error, record.heading_error
+    tracking = {"max_position_error": float(err.max()),
+                "rms_position_error": float(np.sqrt(np.mean(err**2))),
+                "max_heading_error": float(heading.max())}
+    p_path, p_sim = plan["p_path"], record.implied_p_path()
+    print(f"{path}: simulated {traj.end_time:.1f} s, {len(traj.phases)} phases, in {wall:.1f} s; "
+          f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
+          f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
+    worst = record.holding_minimum()
+    h = int(np.argmin(worst))
+    hold = traj.holdings[h]
+    print(f"  implied by the simulated forces: p_sim {p_sim:.4f} (plan p_path {p_path:.4f}); "
+          f"weakest holding boom {hold.boom} on {hold.anchor} (phases {hold.first}-"
+          f"{hold.last}), min P {worst[h]:.4f}")
+    results: dict[str, Any] = {"plan": str(path), "trials": args.trials, "successes": None,
+                               "rate": None, "ci95": None, "p_path": p_path, "p_sim": p_sim,
+                               "seed": args.seed, "tracking": tracking}
+    if args.trials > 0:
+        replanner, strategy = None, ""
+        if args.replan == "retry":
+            replanner, strategy = retry_replanner, "retry"
+        elif args.replan == "footsteps":
+            replanner, strategy = FootstepReplanner(seed=args.seed), "footsteps"
+        show, done = _progress("replanning failed climbs")
+        mc = monte_carlo(record, args.trials, args.seed, replanner, strategy, simulator,
+                         progress=lambda i, n: show(f"trial {i}/{n}"))
+        done()
+        lo, hi = mc.ci95
+        inside = "inside" if lo <= p_path <= hi else "OUTSIDE"
+        print(f"Monte Carlo: {mc.successes}/{mc.trials} climbs succeed: rate {mc.rate:.4f}, "
+              f"95% CI [{lo:.4f}, {hi:.4f}]; plan p_path {p_path:.4f} {inside}, "
+              f"p_sim {p_sim:.4f}")
+        for site in mc.failure_sites()[:5]:
+            print(f"  {site['count']:5d} failed at phase {site['phase']} ({site['kind']}), boom "
+                  f"{site['boom']} on {site['anchor']}: {site['cause']} (earliest "
+                  f"t = {site['earliest_time']:.2f} s)")
+        if mc.failures:
+            print(f"  first failed trial ({mc.failures[0].trial}): {mc.failures[0].describe()}")
+        if mc.replanning is not None:
+            r = mc.replanning
+            failed = mc.trials - mc.successes
+            print(f"replanning ({r.strategy}): {r.saved} of {failed} failed climbs saved "
+                  f"({r.attempted} still held on 3 booms, {r.replans} replans); rate "
+                  f"{r.rate:.4f}, 95% CI [{r.ci95[0]:.4f}, {r.ci95[1]:.4f}]; others: "
+                  f"{r.outcomes}")
+        results |= mc.to_json()
+        results["plan"], results["tracking"] = str(path), tracking
+    if args.json:
+        atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
+        print(f"wrote {args.json}")
+    if args.meshcat or args.html:
+        from systems.meshcat_view import save_html, show_climb, start_meshcat
+
+        meshcat = start_meshcat()
+        show_climb(meshcat, record)
+        if args.html:
+            save_html(meshcat, args.html)
+            print(f"wrote {args.html}")
+        if args.meshcat:
+            print(f"Meshcat: {meshcat.web_url()}")
+            if sys.stdin.isatty():
+                input("press Enter to quit ")
+    return 0

@@ -1,0 +1,567 @@
+"""The plan as a Drake diagram (systems.diagram), stochastic execution and Monte Carlo
+(systems.montecarlo) and `rbp simulate` (systems.sim_cli).
+
+The plans are written here, not planned (the footstep planner's output changes with its
+tuning, and a whole cave takes ~10 s to plan and ~15 s to simulate): on a short generated shaft,
+one regrasp found by sampling poses that hold all four configurations of the move, between two
+body phases, built like planning.plan builds them. `good`'s straight-line body phases hold
+everywhere, so executing it must succeed as often as its p_path says; `straight`'s last body
+phase crosses poses where the grasps hold far less than at its ends, which only a simulation
+shows (p_path sees the phases' end configurations). Every diagram is built once per module:
+Python systems are never freed in pydrake 1.51.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from planning.plan import (
+    BODY_SPEED,
+    FORMAT,
+    REACH_DURATION,
+    TURN_SPEED,
+    plan_configurations,
+    validate,
+)
+from planning.probability import path_probability
+from rb_drake.feasibility import check_poses
+from rb_drake.generate import CaveConfig, generate_cave
+from rb_drake.scenario import Scenario
+from rb_drake.statics import statics_problem
+from systems.diagram import (
+    BodyStatics,
+    ClimbSimulator,
+    PlanTrajectory,
+    SimulationRecord,
+    plan_scenario,
+    rest_to_rest,
+)
+from systems.montecarlo import (
+    ReplanRequest,
+    configuration,
+    draw_strengths,
+    first_failures,
+    monte_carlo,
+    retry_replanner,
+    trial_draws,
+    wilson_interval,
+)
+from systems.sim_cli import add_simulate_command, cmd_simulate
+
+SHORT = CaveConfig(length=(3.0, 3.2))
+LINE = 41  # configurations checked along a body phase
+
+
+def _duration(a: np.ndarray, b: np.ndarray) -> float:
+    return max(1.0, float(np.linalg.norm(b[:2] - a[:2])) / BODY_SPEED,
+               abs(float(b[2] - a[2])) / TURN_SPEED)
+
+
+def _lines(scn: Scenario, stance: tuple, a: np.ndarray, ends: np.ndarray):
+    """Per end pose: the fraction of the line from a where statics hold, and the line's
+    smallest P less the smaller of its two ends' P."""
+    s = np.linspace(0.0, 1.0, LINE)[None, :, None]
+    poses = (a + s * (ends[:, None, :] - a)).reshape(-1, 3)
+    check = check_poses(scn, scn.stance(stance), poses, full=True)
+    ok = check.allocation.statics_ok.reshape(len(ends), LINE)
+    p = np.where(ok, check.probability.reshape(len(ends), LINE), 0.0)
+    return ok.mean(axis=1), p.min(axis=1) - np.minimum(p[:, 0], p[:, -1])
+
+
+def hand_plan(line_holds: bool, seed: int = 1, samples: int = 200) -> dict[str, Any]:
+    """A plan file of one regrasp on shaft `seed`: body phase, reach phase, body phase. The
+    last body phase's line holds everywhere (no worse than its ends) or crosses poses where
+    the grasps hold with P below their ends' by 0.5 or more, or no tensions hold the body (P
+    counted 0), as `line_holds` asks."""
+    scn = generate_cave("shaft", seed, SHORT)
+    rng = np.random.default_rng(seed)
+    start, S = np.array(scn.start_pose), tuple(scn.start_stance)
+    for j in range(4):
+        old = scn.anchors[scn.anchor_index[S[j]]]
+        near = np.argsort(np.linalg.norm(scn.anchor_positions - np.array(old.position), axis=1))
+        for k in near[1:6]:
+            to = scn.anchors[k]
+            if to.id in S:
+                continue
+            new = tuple(to.id if i == j else a for i, a in enumerate(S))
+            three = tuple(None if i == j else a for i, a in enumerate(S))
+            tips = np.array(old.position), np.array(to.position)
+            poses = start + rng.normal(0.0, [0.2, 0.2, 0.15], (samples, 3))
+            ok = check_poses(scn, scn.stance(S), poses).feasible
+            for stance, tip in ((three, tips[0]), (three, tips[1]), (new, None)):
+                ok &= check_poses(scn, scn.stance(stance), poses, tip).feasible
+            for q in poses[ok][:5]:
+                holds, gap = _lines(scn, S, start, q[None])
+                if holds[0] < 1.0 or gap[0] < -1e-3:
+                    continue
+                ends = q + rng.normal(0.0, [0.4, 0.4, 0.2], (samples, 3)) + [0.0, 0.3, 0.0]
+                ends = ends[check_poses(scn, scn.stance(new), ends).feasible]
+                holds, gap = _lines(scn, new, q, ends)
+                fit = ((holds == 1.0) & (gap > -1e-3)) if line_holds else gap < -0.5
+                if fit.any():
+                    e = ends[np.flatnonzero(fit)[0]]
+                    return _plan(scn, [(S, None, start, q), (three, tips, q, q), (new, None, q, e)],
+                                 j, old.id, to.id)
+    raise AssertionError(f"no {'good' if line_holds else 'bad'} regrasp found on shaft {seed}")
+
+
+def _plan(scn: Scenario, phases: list, boom: int, a: str, b: str) -> dict[str, Any]:
+    out, t = [], 0.0
+    for stance, tips, p, q in phases:
+        dt = REACH_DURATION if tips is not None else _duration(p, q)
+        steps = [configuration(scn, stance, p, None if tips is None else tips[0], t),
+                 configuration(scn, stance, q, None if tips is None else tips[1], t + dt)]
+        assert all(ok for _, ok in steps), f"an infeasible configuration in {stance}"
+        phase = {"kind": "body" if tips is None else "reach", "stance": list(stance),
+                 "free_boom": None if tips is None else boom, "steps": [s for s, _ in steps]}
+        if tips is not None:
+            phase |= {"from_anchor": a, "to_anchor": b}
+        out.append(phase)
+        t += dt
+    plan = {"format": FORMAT, "planner": "rbp", "success": True, "reason": "", "p_min": None,
+            "p_path": None, "regrasps": 0,
+            "timing": dict.fromkeys(("footstep", "seed_body", "scp_body", "seed_reach",
+                                     "scp_reach", "total"), 0.0),
+            "scenario": scn.to_dict(resolved=True), "robot": scn.robot.to_dict(),
+            "phases": out}
+    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
+    plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    validate(plan)
+    return plan
+
+
+@pytest.fixture(scope="module")
+def good_plan() -> dict[str, Any]:
+    return hand_plan(line_holds=True)
+
+
+@pytest.fixture(scope="module")
+def sim(good_plan: dict[str, Any]) -> ClimbSimulator:
+    return ClimbSimulator(plan_scenario(good_plan))
+
+
+@pytest.fixture(scope="module")
+def good(good_plan: dict[str, Any], sim: ClimbSimulator) -> SimulationRecord:
+    return sim.run(PlanTrajectory(good_plan, sim.scenario))
+
+
+@pytest.fixture(scope="module")
+def straight(sim: ClimbSimulator) -> SimulationRecord:
+    """The same cave, so the same diagram serves."""
+    plan = hand_plan(line_holds=False)
+    return sim.run(PlanTrajectory(plan, plan_scenario(plan)))
+
+
+# ---------------------------------------------------------------------------------------------
+# The systems' model
+
+
+def test_body_statics_equals_rb_drake(good_plan: dict[str, Any]) -> None:
+    """The per-configuration statics of the systems equal statics_problem (4- and 3-stances)."""
+    scn = plan_scenario(good_plan)
+    fast = BodyStatics(scn.robot, scn.gravity_vector)
+    rng = np.random.default_rng(5)
+    for phase in good_plan["phases"]:
+        stance = scn.stance(phase["stance"])
+        for step in phase["steps"]:
+            tip = np.array(step["free_tip"]) if "free_tip" in step else None
+            for _ in range(5):
+                pose = np.array(step["pose"]) + rng.normal(0, [0.05, 0.05, 0.1])
+                ref = statics_problem(scn.robot, scn.gravity_vector, pose, stance, tip)
+                np.testing.assert_allclose(fast.wrench_matrix(pose, stance), ref.A[0],
+                                           atol=1e-12, err_msg=f"A at {pose}")
+                np.testing.assert_allclose(fast.load(pose, stance, tip), ref.b[0], atol=1e-12,
+                                           err_msg=f"b at {pose}, free tip {tip}")
+
+
+def test_booms_make_the_wanted_wrench(good_plan: dict[str, Any],
+                                      sim: ClimbSimulator) -> None:
+    """On the plan (pose and velocity) at each of its steps, the body accelerates exactly as
+    the plan wants, with the plan's tensions: the booms pull the way the statics say (signs,
+    moments, the planar joint's generalized forces, the free limb's load)."""
+    traj = PlanTrajectory(good_plan, sim.scenario)
+    ctx = sim.diagram.CreateDefaultContext()
+    sim.source.set_plan(sim.source.GetMyMutableContextFromRoot(ctx), traj)
+    plant_ctx = sim.plant.GetMyMutableContextFromRoot(ctx)
+    for k, phase in enumerate(good_plan["phases"]):
+        for n, step in enumerate(phase["steps"]):
+            t = step["t"] if n == 0 else step["t"] - 1e-9  # inside phase k
+            ctx.SetTime(t)
+            velocity = traj.velocity.value(t).ravel()
+            sim.plant.SetPositionsAndVelocities(plant_ctx, np.r_[step["pose"], velocity])
+            tension = sim.controller.GetOutputPort("tension").Eval(
+                sim.controller.GetMyContextFromRoot(ctx))
+            plan_f = np.array([f if f is not None else 0.0 for f in step["tension"]])
+            np.testing.assert_allclose(tension, plan_f, atol=1e-2,
+                                       err_msg=f"phases[{k}] step {n}: controller on the plan")
+            vdot = sim.plant.EvalTimeDerivatives(plant_ctx).CopyToVector()[3:]
+            np.testing.assert_allclose(vdot, traj.acceleration.value(t).ravel(), atol=1e-6,
+                                       err_msg=f"phases[{k}] step {n}: acceleration")
+
+
+def test_rest_to_rest_timing() -> None:
+    t, s, ds = rest_to_rest(2.0, 7.0, 0.05)
+    assert t[0] == 2.0 and t[-1] == 7.0 and np.all(np.diff(t) <= 0.05 + 1e-12)
+    assert s[0] == 0.0 and s[-1] == pytest.approx(1.0, abs=1e-15)
+    assert ds[0] == 0.0 and ds[-1] == pytest.approx(0.0, abs=1e-15)
+    assert np.all(np.diff(s) > 0), "progress must increase"
+    mid = np.gradient(s, t)[1:-1]
+    np.testing.assert_allclose(mid, ds[1:-1], atol=5e-3, err_msg="ds is not the rate of s")
+
+
+# ---------------------------------------------------------------------------------------------
+# The deterministic run
+
+
+def test_tracking_error_bounded(good: SimulationRecord, straight: SimulationRecord) -> None:
+    traj = good.plan
+    assert good.times[0] == 0.0 and good.times[-1] >= traj.end_time - 0.021
+    assert good.failure is None
+    assert good.position_error.max() < 0.005, f"max error {good.position_error.max():.4f} m"
+    assert good.heading_error.max() < math.radians(0.5), good.heading_error.max()
+    # Even through the stretch where no tensions hold the body, the error stays bounded.
+    assert straight.position_error.max() < 0.02, straight.position_error.max()
+    assert straight.heading_error.max() < math.radians(3.0), straight.heading_error.max()
+
+
+def test_record_follows_the_plan(good: SimulationRecord) -> None:
+    traj = good.plan
+    lo, hi = traj.scenario.robot.boom_tension
+    for s in range(0, len(good.times), 7):
+        k = good.phase[s]
+        phase = traj.phases[k]
+        assert phase.start <= good.times[s] + 1e-9 and good.times[s] <= phase.end + 1e-9
+        att = phase.stance.attached
+        f = good.tension[s]
+        assert np.all(f[att] >= lo - 1e-6) and np.all(f[att] <= hi + 1e-6), f"t={good.times[s]}"
+        assert np.all(f[~att] == 0.0)
+        assert np.all(np.isnan(good.probability[s, ~att])) and np.all(
+            np.isfinite(good.probability[s, att]))
+        np.testing.assert_allclose(good.force[s, att], f[att], atol=0)
+    assert set(np.unique(good.phase)) == set(range(len(traj.phases)))
+
+
+def test_monitor_probabilities_equal_the_model(good: SimulationRecord) -> None:
+    """P_i recomputed from the logged state and tensions with the paper's formulas, written
+    here independently (half-ellipse mean, sigma linear in |psi|, Phi by scipy.stats)."""
+    scn = good.plan.scenario
+    shoulders = np.asarray(scn.robot.shoulders)
+    checked = 0
+    for s in range(0, len(good.times), 5):
+        stance = good.plan.phases[good.phase[s]].stance
+        x, y, phi = good.state[s, :3]
+        R = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+        for i in np.flatnonzero(stance.attached):
+            anchor = scn.anchors[scn.anchor_index[stance.ids[i]]]
+            pull = np.array([x, y]) + R @ shoulders[i] - np.array(anchor.position)
+            n = np.array(anchor.normal)
+            psi = math.atan2(n[0] * pull[1] - n[1] * pull[0], n @ pull)
+            fn, ft = anchor.f_normal, anchor.f_lateral
+            mu = fn * ft / math.sqrt((ft * math.cos(psi)) ** 2 + (fn * math.sin(psi)) ** 2)
+            sigma = anchor.sigma_normal + abs(psi) / (math.pi / 2) * (
+                anchor.sigma_lateral - anchor.sigma_normal)
+            p = norm.cdf((mu - good.tension[s, i]) / sigma) if abs(psi) < math.pi / 2 else 0.0
+            assert good.pull_angle[s, i] == pytest.approx(psi, abs=1e-12)
+            assert good.probability[s, i] == pytest.approx(p, rel=1e-9, abs=1e-14), (
+                f"t={good.times[s]} boom {i}: monitor {good.probability[s, i]}, model {p}")
+            checked += 1
+    assert checked > 200
+
+
+def test_simulated_probability_matches_plan(good: SimulationRecord,
+                                            good_plan: dict[str, Any]) -> None:
+    """Tracked closely on lines that hold, the climb's implied probability is the plan's, and
+    so is each holding's smallest P_i (which the run sees on the whole line, not only at the
+    plan's end configurations)."""
+    p_sim, p_path = good.implied_p_path(), good_plan["p_path"]
+    assert abs(p_sim - p_path) < 0.01, f"p_sim {p_sim}, plan p_path {p_path}"
+    planned = {(b, a): p for b, a, p in path_probability(_configurations(good_plan),
+                                                          0.0).holdings}
+    simulated = good.holding_minimum()
+    assert len(planned) == len(simulated) == len(good.plan.holdings)
+    for hold, p in zip(good.plan.holdings, simulated, strict=True):
+        plan_p = planned[(hold.boom, hold.anchor)]
+        assert plan_p - 0.01 < p < plan_p + 1e-3, f"{hold}: simulated {p}, planned {plan_p}"
+
+
+def _configurations(plan: dict[str, Any]):
+    return plan_configurations(plan)
+
+
+def test_straight_line_plan_is_exposed(straight: SimulationRecord) -> None:
+    """A footstep plan whose body phase crosses poses no tensions hold: the simulation shows it
+    (the plan's p_path only sees the phases' end configurations)."""
+    p_path, p_sim = straight.plan.plan["p_path"], straight.implied_p_path()
+    assert p_path > 0.9 and p_sim < p_path - 0.5, f"p_path {p_path}, simulated {p_sim}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Stochastic execution
+
+
+def test_wilson_interval_solves_the_score_equation() -> None:
+    for successes, trials in ((0, 10), (3, 10), (50, 100), (904, 1000), (1000, 1000)):
+        lo, hi = wilson_interval(successes, trials)
+        p = successes / trials
+        assert 0.0 <= lo <= p <= hi <= 1.0
+        for end in (lo, hi):  # |p - end| = z sqrt(end (1 - end) / n)
+            gap = abs(p - end) - 1.959963984540054 * math.sqrt(end * (1 - end) / trials)
+            assert abs(gap) < 1e-12, f"{successes}/{trials}: end {end}"
+    assert np.diff(wilson_interval(500, 1000)) < np.diff(wilson_interval(50, 100))
+
+
+def test_in_diagram_failures_equal_vectorised(good: SimulationRecord,
+                                              sim: ClimbSimulator) -> None:
+    """GraspFailures in the diagram and the vectorised rule agree for the same draws: an
+    overload (u just above a holding's P early on) and an attach failure (a = 0)."""
+    traj = good.plan
+    H = len(traj.holdings)
+    overload_u, overload_a = np.zeros(H), np.ones(H)
+    h0 = next(h for h, hold in enumerate(traj.holdings) if not hold.attach)
+    rows = np.flatnonzero(good.phase == 0)
+    target = rows[2 * len(rows) // 3]
+    overload_u[h0] = float(np.min(good.probability[rows[:2 * len(rows) // 3 + 1],
+                                                   traj.holdings[h0].boom])) + 1e-12
+    attach_u, attach_a = np.zeros(H), np.ones(H)
+    h1 = next(h for h, hold in enumerate(traj.holdings) if hold.attach)
+    attach_a[h1] = 0.0
+    U, A = np.vstack([overload_u, attach_u]), np.vstack([overload_a, attach_a])
+    vec = first_failures(good, U, A)
+    assert vec.sample[0] <= target and vec.cause[0] == 1 and vec.holding[0] == h0
+    assert vec.cause[1] == 2 and vec.holding[1] == h1
+    assert vec.sample[1] == np.flatnonzero(good.phase == traj.holdings[h1].first)[0]
+    for n in range(2):
+        run = sim.run(traj, trial_draws(good, U[n], A[n]))
+        f = run.failure
+        assert f is not None, f"trial {n}: no failure in the diagram"
+        hold = traj.holdings[vec.holding[n]]
+        assert f.time == pytest.approx(good.times[vec.sample[n]], abs=1e-9), (n, f)
+        assert (f.boom, f.anchor, f.cause) == (hold.boom, hold.anchor,
+                                               ("overload", "attach")[vec.cause[n] - 1])
+        assert run.times[-1] < good.times[-1], "the run must stop at the failure"
+
+
+def test_monte_carlo_is_seeded_and_reproducible(good: SimulationRecord) -> None:
+    a, b = monte_carlo(good, 500, 11), monte_carlo(good, 500, 11)
+    assert a.successes == b.successes and a.failures == b.failures
+    c = monte_carlo(good, 500, 12)
+    assert [f.trial for f in c.failures] != [f.trial for f in a.failures]
+
+
+def test_rate_agrees_with_p_path(good: SimulationRecord, good_plan: dict[str, Any]) -> None:
+    res = monte_carlo(good, 4000, 3)
+    lo, hi = res.ci95
+    assert lo <= res.p_sim <= hi, f"p_sim {res.p_sim} outside [{lo}, {hi}]"
+    assert lo <= good_plan["p_path"] <= hi, f"p_path {good_plan['p_path']} outside [{lo}, {hi}]"
+    assert res.successes + len(res.failures) == res.trials
+
+
+def test_near_zero_plan_fails_nearly_always(good: SimulationRecord,
+                                            good_plan: dict[str, Any]) -> None:
+    """attach_failure 0.99: p_path ~0.01. It enters only the draws, not the dynamics, so the
+    same run serves (the record's plan is swapped for the changed one)."""
+    plan = copy.deepcopy(good_plan)
+    plan["robot"]["attach_failure"] = 0.99
+    plan["p_path"] = path_probability(_configurations(plan), 0.99).p_path
+    assert plan["p_path"] < 0.02
+    scn = plan_scenario(plan)
+    record = good._replace(plan=PlanTrajectory(plan, scn))
+    res = monte_carlo(record, 2000, 0)
+    assert res.rate < 0.03, f"rate {res.rate} for p_path {plan['p_path']}"
+    assert res.ci95[0] <= res.p_sim <= res.ci95[1]
+    causes = [f.cause for f in res.failures]
+    assert causes.count("attach") > 0.9 * len(causes)
+
+
+def test_failures_report_where_and_why(straight: SimulationRecord) -> None:
+    res = monte_carlo(straight, 300, 1)
+    assert res.ci95[1] < straight.plan.plan["p_path"] - 0.3, "the straight line should fail"
+    U, A = draw_strengths(np.random.default_rng(1), 300, len(straight.plan.holdings))
+    for f in res.failures:
+        s = int(np.flatnonzero(np.isclose(straight.times, f.time, atol=1e-9))[0])
+        h = int(np.flatnonzero([(x.boom, x.anchor) == (f.boom, f.anchor)
+                                and x.first <= f.phase <= x.last
+                                for x in straight.plan.holdings])[0])
+        hold = straight.plan.holdings[h]
+        assert straight.phase[s] == f.phase
+        assert straight.plan.phases[f.phase].kind == f.kind
+        assert straight.plan.phases[f.phase].stance.ids[f.boom] == f.anchor
+        rows = np.flatnonzero((straight.phase >= hold.first) & (straight.phase <= hold.last))
+        before = rows[rows < s]
+        if f.cause == "overload":
+            assert f.draw == U[f.trial, h] and straight.probability[s, f.boom] < f.draw
+            assert np.all(straight.probability[before, f.boom] >= f.draw), "not the first"
+            assert f.limit is not None and f.force > f.limit, f.describe()
+        else:
+            assert f.draw == A[f.trial, h] < straight.plan.scenario.robot.attach_failure
+            assert s == rows[0] and hold.attach
+    worst = res.failure_sites()[0]
+    assert worst["count"] > 0.6 * len(res.failures), "failures concentrate where P collapses"
+    assert (worst["phase"], worst["cause"]) == (2, "overload"), worst
+
+
+# ---------------------------------------------------------------------------------------------
+# Replanning
+
+
+def _retry_then_stop(request: ReplanRequest) -> dict[str, Any] | None:
+    """A cheap fake replanner: re-grasp the failed anchor and finish the failed phase only."""
+    plan = retry_replanner(request)
+    if plan is not None:
+        plan["phases"] = plan["phases"][:2]
+    return plan
+
+
+def test_replanning_is_pluggable_and_counts_saved_climbs(good: SimulationRecord,
+                                                         sim: ClimbSimulator) -> None:
+    trials = 400
+    base = monte_carlo(good, trials, 8)
+    calls: list[ReplanRequest] = []
+
+    def never(request: ReplanRequest) -> None:
+        calls.append(request)
+        return None
+
+    none = monte_carlo(good, trials, 8, never, "never", sim)
+    r = none.replanning
+    assert r is not None and r.saved == 0 and r.successes == base.successes
+    assert r.attempted == r.outcomes.get("no plan", 0) > 0
+    assert len(calls) == r.replans <= r.attempted, "one call per distinct failure state"
+    for req in calls:
+        assert sum(a is None for a in req.stance) == 1 and req.stance[req.boom] is None
+        assert req.plan["phases"][req.phase]["kind"] == "body"
+    fake = monte_carlo(good, trials, 8, _retry_then_stop, "retry-then-stop", sim)
+    r = fake.replanning
+    assert fake.successes == base.successes and fake.failures == base.failures
+    assert r.attempted > 0 and 0 < r.saved <= r.attempted
+    assert r.successes == base.successes + r.saved
+    assert r.saved + sum(r.outcomes.values()) == trials - base.successes
+
+
+def test_retry_replanner_builds_a_continuing_plan(good: SimulationRecord) -> None:
+    """From a failure in a body phase: re-grasp the same anchor where the body is, finish the
+    phase, go on with the plan (times shifted). From a reach phase: nothing (two booms left)."""
+    plan, scn = good.plan.plan, good.plan.scenario
+    # the end of the first body phase: the transition pose, which holds the 3-stance that
+    # frees the reaching boom with its gripper on its old anchor
+    s = int(np.flatnonzero(good.phase == 0)[-1])
+    ids = good.plan.phases[0].stance.ids
+    boom = plan["phases"][1]["free_boom"]
+    three = tuple(None if i == boom else a for i, a in enumerate(ids))
+    request = ReplanRequest(scn, plan, 0, float(good.times[s]), good.state[s, :3].copy(),
+                            three, boom, ids[boom], "overload")
+    new = retry_replanner(request)
+    assert new is not None, "the 3-stance holds here: retrying must give a plan"
+    validate(new)
+    first, second = new["phases"][:2]
+    assert first["kind"] == "reach" and first["free_boom"] == boom
+    assert first["from_anchor"] == first["to_anchor"] == ids[boom]
+    np.testing.assert_allclose(first["steps"][0]["pose"], request.pose, atol=1e-12)
+    assert first["steps"][0]["t"] == 0.0 and second["stance"] == list(ids)
+    np.testing.assert_allclose(second["steps"][-1]["pose"], plan["phases"][0]["steps"][-1]["pose"])
+    rest = new["phases"][2:]
+    assert [p["stance"] for p in rest] == [p["stance"] for p in plan["phases"][1:]]
+    shift = rest[0]["steps"][0]["t"] - plan["phases"][1]["steps"][0]["t"]
+    for a, b in zip(rest, plan["phases"][1:], strict=True):
+        assert [x["t"] - shift for x in a["steps"]] == pytest.approx([x["t"] for x in b["steps"]])
+    PlanTrajectory(new, scn)  # times continuous, anchors known
+    k = next(k for k, p in enumerate(good.plan.phases) if p.kind == "reach")
+    held = next(i for i, a in enumerate(good.plan.phases[k].stance.ids) if a is not None)
+    reach = request._replace(phase=k, boom=held, stance=tuple(
+        None if i == held else a for i, a in enumerate(good.plan.phases[k].stance.ids)))
+    assert retry_replanner(reach) is None
+
+
+# ---------------------------------------------------------------------------------------------
+# The command line
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="rbp")
+    add_simulate_command(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["simulate", *argv])
+
+
+def _short_plan(plan: dict[str, Any]) -> dict[str, Any]:
+    """The first body phase alone (a 5 s run): a valid plan for the command-line tests."""
+    short = copy.deepcopy(plan)
+    short["phases"] = short["phases"][:1]
+    prob = path_probability(_configurations(short), short["robot"]["attach_failure"])
+    short["p_path"], short["p_min"], short["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    validate(short)
+    return short
+
+
+def test_cli_writes_json(good_plan: dict[str, Any], tmp_path: Path,
+                         capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(_short_plan(good_plan)))
+    out = tmp_path / "sim" / "result.json"
+    assert cmd_simulate(_args(str(path), "--trials", "300", "--seed", "4",
+                              "--json", str(out))) == 0
+    data = json.loads(out.read_text())
+    for field in ("trials", "successes", "rate", "ci95", "p_path", "p_sim"):
+        assert field in data, f"{field} missing from {sorted(data)}"
+    assert data["trials"] == 300 and data["rate"] == data["successes"] / 300
+    assert data["ci95"][0] <= data["rate"] <= data["ci95"][1]
+    assert data["ci95"][0] <= data["p_path"] <= data["ci95"][1]
+    text = capsys.readouterr().out
+    assert "95% CI" in text and "p_path" in text and "tracking error" in text
+    assert [p.name for p in out.parent.iterdir()] == ["result.json"], "temporary files left"
+
+
+@pytest.mark.parametrize("content, field", [
+    (None, "(file)"),
+    ("{ not json", "(file)"),
+    ('{"format": "reachbot-plan/1"}', "(top level)"),
+    ("FAILED", "success"),
+])
+def test_cli_user_errors_name_file_and_field(tmp_path: Path, good_plan: dict[str, Any],
+                                             content: str | None, field: str) -> None:
+    from rbp.cli import UserError
+
+    path = tmp_path / "plan.json"
+    if content == "FAILED":
+        failed = copy.deepcopy(good_plan)
+        failed.update(success=False, reason="no route", p_path=None, p_min=None)
+        content = json.dumps(failed)
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(UserError) as err:
+        cmd_simulate(_args(str(path)))
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"{path}: {field}:"), message
+
+
+def test_cli_rejects_negative_trials(tmp_path: Path) -> None:
+    from rbp.cli import UserError
+
+    with pytest.raises(UserError, match="--trials"):
+        cmd_simulate(_args(str(tmp_path / "plan.json"), "--trials", "-1"))
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda p: p["phases"][0]["steps"][1].update(t=-1.0), "phases[0].steps"),
+    (lambda p: p["phases"][1]["stance"].__setitem__(2, "nowhere"), "phases[1].stance"),
+    (lambda p: p["phases"][2]["steps"][0].update(t=p["phases"][2]["steps"][0]["t"] + 0.5),
+     "phases[2].steps[0].t"),
+    (lambda p: p["phases"][0]["steps"][0]["tension"].__setitem__(1, None),
+     "phases[0].steps[0].tension[1]"),
+])
+def test_plan_errors_name_the_field(good_plan: dict[str, Any], change, field: str) -> None:
+    from systems.diagram import PlanError
+
+    plan = copy.deepcopy(good_plan)
+    change(plan)
+    with pytest.raises(PlanError) as err:
+        PlanTrajectory(plan, plan_scenario(plan))
+    assert err.value.field == field, str(err.value)

@@ -32,6 +32,7 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
+from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -346,8 +347,11 @@ def _arc_is_clear(scn: Scenario, tips: np.ndarray, normal_start: np.ndarray,
 
 
 def _clear_arcs(scn: Scenario, start: np.ndarray, end: np.ndarray, normal_start: np.ndarray,
-                normal_end: np.ndarray, cfg: SeedConfig) -> Iterator[np.ndarray]:
-    """Collision-free tip arcs, lowest first, at the configured heights (tip spacing <= step)."""
+                normal_end: np.ndarray, cfg: SeedConfig,
+                shoulder: np.ndarray | None = None) -> Iterator[np.ndarray]:
+    """Collision-free tip paths (tip spacing <= step): parabolic arcs, lowest first, at the
+    configured heights, then (given the shoulder) the boom retracting along its line, swinging
+    about the shoulder and extending to the new anchor, which clears corners no arc can."""
     chord = float(np.linalg.norm(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)))
     for frac in cfg.arc_heights:
         h = max(cfg.arc_min_height, frac * chord)
@@ -355,6 +359,36 @@ def _clear_arcs(scn: Scenario, start: np.ndarray, end: np.ndarray, normal_start:
         tips = tip_arc(start, end, normal_start, normal_end, h, n)
         if _arc_is_clear(scn, tips, normal_start, normal_end):
             yield tips
+    if shoulder is not None:
+        for radius in RETRACT_RADII:
+            tips = retract_path(start, end, shoulder, radius, cfg.step)
+            if _arc_is_clear(scn, tips, normal_start, normal_end):
+                yield tips
+                break
+
+
+RETRACT_RADII = (0.2, 0.1, 0.05)  # m from the shoulder, where a retracted gripper swings
+
+
+def retract_path(start: np.ndarray, end: np.ndarray, shoulder: np.ndarray, radius: float,
+                 step: float) -> np.ndarray:
+    """Tip positions (spacing <= step) from `start` in along the boom's line to `radius` from the
+    shoulder, round the shoulder (the shorter way) to the line towards `end`, and out to it."""
+    a, b, s = (np.asarray(v, dtype=float) for v in (start, end, shoulder))
+    ua, ub = (a - s) / np.linalg.norm(a - s), (b - s) / np.linalg.norm(b - s)
+    ra, rb = min(radius, np.linalg.norm(a - s)), min(radius, np.linalg.norm(b - s))
+    th_a, th_b = math.atan2(ua[1], ua[0]), math.atan2(ub[1], ub[0])
+    sweep = (th_b - th_a + math.pi) % (2 * math.pi) - math.pi
+
+    def line(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        n = max(1, math.ceil(np.linalg.norm(q - p) / step))
+        return p + np.linspace(0.0, 1.0, n + 1)[:, None] * (q - p)
+
+    n_arc = max(1, math.ceil(abs(sweep) * max(ra, rb) / step))
+    th = th_a + np.linspace(0.0, 1.0, n_arc + 1) * sweep
+    rr = ra + np.linspace(0.0, 1.0, n_arc + 1) * (rb - ra)
+    swing = s + rr[:, None] * np.column_stack([np.cos(th), np.sin(th)])
+    return np.vstack([line(a, s + ra * ua)[:-1], swing, line(s + rb * ub, b)[1:]])
 
 
 def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor: str,
@@ -376,7 +410,8 @@ def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor:
                                      "anchor", k), reach=True)
     rng = np.random.default_rng(seed)
     reasons = []
-    for tips in _clear_arcs(scn, a, b, na, nb, cfg):
+    shoulder = geometry.shoulder_positions(scn.robot, pose)[0, boom]
+    for tips in _clear_arcs(scn, a, b, na, nb, cfg, shoulder):
         hold = np.column_stack([np.broadcast_to(pose, (len(tips), 3)), tips])
         check = _check(scn, three, hold)
         if check.feasible.all():
@@ -389,8 +424,8 @@ def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor:
         reasons.append(f"no feasible sway among {cfg.local_rounds * cfg.local_samples} sampled "
                        "body offsets")
     if not reasons:
-        reasons.append(f"no collision-free tip arc from {stance_ids[boom]} to {to_anchor} at "
-                       f"heights {cfg.arc_heights} x chord")
+        reasons.append(f"no collision-free tip path from {stance_ids[boom]} to {to_anchor}: "
+                       f"arcs at heights {cfg.arc_heights} x chord, or retracting the boom")
     return _failed("; ".join(reasons), reach=True)
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from planning import seeds
 from planning.footsteps import candidate_moves, edge_rng
 from planning.seeds import (
     Seed,
@@ -25,6 +26,7 @@ from planning.seeds import (
     _ReachFilter,
     body_seed,
     reach_seed,
+    retract_path,
     subdivide,
     tip_arc,
 )
@@ -344,8 +346,9 @@ def test_reach_seed_infeasible_transition_pose_named(wide: Scenario, wide_reache
         seed.reason)
 
 
-def test_reach_seed_without_clear_arc(wide: Scenario, wide_reaches) -> None:
-    """A rock block over the whole arc region between the anchors: no arc clears it."""
+def test_reach_seed_without_clear_arc(wide: Scenario, wide_reaches, monkeypatch) -> None:
+    """A rock block over the arc's middle: the gripper retracts round it; with the retracted
+    swing blocked too, no tip path is clear and the reason says so."""
     (j, a), (pose, _) = next(iter(wide_reaches.items()))
     old = wide.anchor_positions[wide.anchor_index[wide.start_stance[j]]]
     new = wide.anchor_positions[wide.anchor_index[a]]
@@ -359,6 +362,34 @@ def test_reach_seed_without_clear_arc(wide: Scenario, wide_reaches) -> None:
     data = wide.to_dict()
     data["walls"].append(block.tolist())
     blocked = scenario_from_dict(data, source="<wide-shaft + block>", check_start=False)
+    # The arc is blocked, so the gripper retracts along its boom, swings, and extends.
     seed = reach_seed(blocked, wide.start_stance, j, a, pose, cfg)
-    assert not seed.success, f"an arc through the block was accepted: {seed.method}"
-    assert "no collision-free tip arc" in seed.reason, seed.reason
+    assert seed.success, seed.reason
+    assert not Rock([block]).segments_hit(seed.tips[:-1], seed.tips[1:]).any(), (
+        "the tip path crosses the block")
+    # Block the retracted swing as well (one radius tried, mid-swing): no tip path is clear.
+    monkeypatch.setattr(seeds, "RETRACT_RADII", (0.2,))
+    shoulder = geometry.shoulder_positions(wide.robot, pose)[0, j]
+    for radius in seeds.RETRACT_RADII:
+        swing = retract_path(old, new, shoulder, radius, cfg.step)
+        on = np.flatnonzero(np.isclose(np.linalg.norm(swing - shoulder, axis=1), radius))
+        mid = swing[on[len(on) // 2]]
+        data["walls"].append((mid + 0.004 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+                              ).tolist())
+    both = scenario_from_dict(data, source="<wide-shaft + blocks>", check_start=False)
+    seed = reach_seed(both, wide.start_stance, j, a, pose, cfg)
+    assert not seed.success, f"a tip path through the blocks was accepted: {seed.method}"
+    assert "no collision-free tip path" in seed.reason, seed.reason
+
+
+def test_retract_path_runs_anchor_to_anchor_round_the_shoulder() -> None:
+    a, b, shoulder = np.array([1.0, 0.0]), np.array([0.0, 1.2]), np.array([0.1, 0.1])
+    step, radius = 0.05, 0.1
+    tips = retract_path(a, b, shoulder, radius, step)
+    assert np.allclose(tips[0], a) and np.allclose(tips[-1], b), (tips[0], tips[-1])
+    gaps = np.linalg.norm(np.diff(tips, axis=0), axis=1)
+    assert gaps.max() <= step + 1e-9, f"tip steps up to {gaps.max():.4f} m > {step}"
+    distance = np.linalg.norm(tips - shoulder, axis=1)
+    assert distance.min() == pytest.approx(radius, abs=1e-9), distance.min()
+    # the tip never goes further from the shoulder than the farther anchor
+    assert distance.max() <= max(np.linalg.norm(a - shoulder), np.linalg.norm(b - shoulder)) + 1e-9

@@ -48,9 +48,12 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         ax.set_title(f"stance {k} of {len(body) - 1}: P = {draw.format_prob(step['p_success'])}",
                      fontsize=9)
         ax.tick_params(labelsize=7)
-    p_path = plan["p_path"]
-    fig.suptitle(f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, "
-                 f"p_path = {p_path:.4f}, p_min = {plan['p_min']:.4f}", fontsize=11)
+    if plan["p_path"] is None:
+        summary = "no plan: " + "\n".join(textwrap.wrap(plan["reason"], 110))
+    else:
+        summary = f"p_path = {plan['p_path']:.4f}, p_min = {plan['p_min']:.4f}"
+    fig.suptitle(f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
+                 fontsize=10)
     fig.tight_layout()
     return fig
 

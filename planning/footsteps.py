@@ -110,8 +110,8 @@ def goal_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
     must step before the goal can be held, however close the centroid is)."""
     pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
     goal = np.asarray(scn.goal_position)
-    lag = np.maximum(0.0, np.linalg.norm(pts - goal, axis=1)
-                     - (scn.robot.max_reach + scn.goal_tolerance)).sum()
+    radius = scn.robot.max_reach + scn.goal_tolerance
+    lag = np.maximum(0.0, np.linalg.norm(pts - goal, axis=1) - radius).sum()
     return max(0.0, centroid_distance(scn, stance) - scn.goal_tolerance) + float(lag)
 
 

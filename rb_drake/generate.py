@@ -36,7 +36,11 @@ class CaveConfig:
     # Booms leave the body along its diagonals, so hanging from one upper boom while the other
     # moves needs steep booms: shafts wider than about 2 m leave few feasible transitions.
     width: tuple[float, float] = (1.5, 1.9)            # m, shaft width
-    passage_height: tuple[float, float] = (1.5, 1.9)   # m, lower for the same reason
+    # In a passage an upper boom lets go only with the body turned ~45 deg so that the other
+    # upper shoulder is above its centre; the lower boom on that side must then pull at the
+    # edge of its shoulder range (45 deg below horizontal), which needs floor anchors as far
+    # out as the floor is below. Low passages keep those anchors within reach.
+    passage_height: tuple[float, float] = (1.1, 1.4)   # m
     roughness: float = 0.08                # m, std of wall vertex jitter
     gravity: tuple[float, float] = MARS_GRAVITY
     max_redraws: int = 20

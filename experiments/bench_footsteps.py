@@ -3,7 +3,8 @@
 Prints, per planner, the median and spread of the planning time, the success count, p_path and
 regrasps, and writes every trial and the summary to OUT/bench_footsteps.json.
 
-    python -m experiments.bench_footsteps --kind shaft --trials 5 --out out/bench
+    python -m experiments.bench_footsteps --kind shaft,crevasse,rockfall --trials 4 \
+        --length 4.5 5 --out out/bench
 """
 
 from __future__ import annotations
@@ -19,12 +20,13 @@ from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
 from rb_drake.files import atomic_write_text
-from rb_drake.generate import CaveConfig, generate_cave
+from rb_drake.generate import KINDS, CaveConfig, generate_cave
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
+    parser.add_argument("--kind", default="shaft",
+                        help="cave kinds, comma-separated: shaft, crevasse, rockfall")
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--first-seed", type=int, default=1)
     parser.add_argument("--max-expansions", type=int, default=400)
@@ -32,23 +34,28 @@ def main(argv: list[str] | None = None) -> int:
                         help="cave length range in m (default: the generator's, 7 to 9)")
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
+    kinds = args.kind.split(",")
+    unknown = sorted(set(kinds) - set(KINDS))
+    if unknown:
+        parser.error(f"--kind: unknown {unknown}; kinds are {', '.join(KINDS)}")
     records = []
-    for seed in range(args.first_seed, args.first_seed + args.trials):
+    for kind, seed in ((k, s) for k in kinds
+                       for s in range(args.first_seed, args.first_seed + args.trials)):
         config = CaveConfig(length=tuple(args.length)) if args.length else CaveConfig()
-        scn = generate_cave(args.kind, seed, config)
+        scn = generate_cave(kind, seed, config)
         cfg = FootstepConfig(max_expansions=args.max_expansions)
         for name, run in (("rbp", plan_footsteps), ("naive", plan_naive)):
             t0 = time.perf_counter()
             fp = run(scn, cfg)
             seconds = time.perf_counter() - t0
             plan = build_plan(scn, fp, name)
-            records.append({"seed": seed, "kind": args.kind, "planner": name,
+            records.append({"seed": seed, "kind": kind, "planner": name,
                             "success": plan["success"], "seconds": seconds,
                             "p_path": plan["p_path"], "p_min": plan["p_min"],
                             "regrasps": plan["regrasps"],
                             "transitions_tested": fp.transitions_tested,
                             "reason": plan["reason"]})
-            print(f"{args.kind} seed {seed} {name:5s}: success {plan['success']!s:5s} "
+            print(f"{kind} seed {seed} {name:5s}: success {plan['success']!s:5s} "
                   f"{seconds:7.2f} s, p_path {plan['p_path']}, regrasps {plan['regrasps']}",
                   flush=True)
     summary = {}
@@ -65,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: {len(ok)}/{len(rows)} succeeded; time median "
               f"{summary[name]['seconds_median']:.2f} s (min {min(times):.2f}, max "
               f"{max(times):.2f}); p_path median {summary[name]['p_path_median']}")
+        for kind in kinds:
+            solved = sum(r["success"] for r in ok if r["kind"] == kind)
+            summary[name][f"successes_{kind}"] = solved
+            print(f"  {kind}: {solved}/{args.trials}")
     result = {"machine": f"{platform.machine()}, {platform.python_implementation()} "
                          f"{platform.python_version()}", "summary": summary, "trials": records}
     out = Path(args.out) / "bench_footsteps.json"

@@ -25,6 +25,10 @@ def _load(spec: str, check_start: bool = True):
     caves = bundled_caves()
     if not Path(spec).exists() and spec in caves:
         return load_scenario(caves[spec], check_start=check_start)
+    if not Path(spec).exists() and spec == "rig":  # the lab rig's frame (systems.rig)
+        from systems.rig import RIG_SCENARIO
+
+        return load_scenario(RIG_SCENARIO, check_start=check_start)
     return load_scenario(spec, check_start=check_start)
 
 

@@ -248,11 +248,24 @@ class ForceAllocator:
         if not result.is_success():
             from pydrake.solvers import SolutionResult
 
-            if result.get_solution_result() in (SolutionResult.kInfeasibleConstraints,
-                                                 SolutionResult.kInfeasibleOrUnbounded):
+            status = result.get_solution_result()
+            if status in (SolutionResult.kInfeasibleConstraints,
+                          SolutionResult.kInfeasibleOrUnbounded):
                 self.last_infeasible = list(result.GetInfeasibleConstraintNames(self.prog))
+            if status == SolutionResult.kIterationLimit:
+                # OSQP can stall on its own tolerances with an iterate that already satisfies
+                # the constraints as tightly as the statics ask: keep that one.
+                f = result.GetSolution(self.f)
+                if self._satisfies_constraints(f):
+                    return f
             return None
         return result.GetSolution(self.f)
+
+    def _satisfies_constraints(self, f: np.ndarray) -> bool:
+        A, b = self.statics.evaluator().GetDenseA(), self.statics.evaluator().lower_bound()
+        lo, hi = self.bounds.evaluator().lower_bound(), self.bounds.evaluator().upper_bound()
+        return bool(np.all(np.isfinite(f)) and np.abs(A @ f - b).max() < STATICS_TOL
+                    and np.all(f >= lo - 1e-9) and np.all(f <= hi + 1e-9))
 
     def solve(self, gravity: np.ndarray, pose: np.ndarray, stance: Stance,
               free_tip: np.ndarray | None = None) -> Allocation:
@@ -263,8 +276,12 @@ class ForceAllocator:
         self.statics.evaluator().UpdateCoefficients(A, b)
         self.bounds.evaluator().set_bounds(np.where(att, lo, 0.0), np.where(att, hi, 0.0))
         self.last_infeasible = []
-        # Feasible start: the least-effort tensions.
+        # Feasible start: the least-effort tensions; where the solver cannot find them (OSQP
+        # stalls on ill-conditioned statics), the vectorised allocation's, if they hold.
         f = self._solve_qp(np.ones(4), np.zeros(4), np.full(4, lo))
+        if f is None:
+            start = allocate(self.robot, gravity, pose, stance, free_tip, problem=prob)
+            f = np.where(att, start.tensions[0], 0.0) if start.statics_ok[0] else None
         if f is None:
             return _finish(self.robot, stance, prob, np.full((1, 4), np.nan))
 

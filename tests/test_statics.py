@@ -522,3 +522,20 @@ def test_force_allocator_osqp_converges_at_pinned_pose(shaft, start_stance):
     np.testing.assert_allclose(got.tensions[0], ref.tensions[0], atol=1e-4, rtol=0,
                                err_msg="OSQP vs Clarabel tensions")
     assert fa.last_infeasible == [], f"a feasible solve reported {fa.last_infeasible}"
+
+
+def test_force_allocator_osqp_on_ill_conditioned_statics() -> None:
+    """OSQP stalls on the least-effort QP here (a singular value of A near 0.12); the allocator
+    must still find the robust tensions (found by rbp bench)."""
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    scn = load_scenario(bundled_caves()["demo-crevasse"])
+    stance = scn.stance(["a16", "a5", "a30", "a25"])
+    pose = np.array([2.9255045796625025, 0.9798010798028924, -0.11633288949927399])
+    want = statics.allocate(scn.robot, scn.gravity_vector, pose, stance)
+    assert want.statics_ok[0], "precondition: the pose holds"
+    for solver in ("osqp", "clarabel"):
+        got = statics.ForceAllocator(scn.robot, solver).solve(scn.gravity_vector, pose, stance)
+        assert got.statics_ok[0], f"{solver}: no tensions found"
+        np.testing.assert_allclose(got.tensions, want.tensions, atol=1e-4,
+                                   err_msg=f"{solver} disagrees with allocate")

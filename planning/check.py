@@ -17,6 +17,7 @@ from planning.plan import plan_configurations
 from planning.probability import Configuration, path_probability
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
+from rb_drake.feasibility import MIN_CONDITIONING, wrench_conditioning
 from rb_drake.grasp import HALF_PI
 from rb_drake.scenario import scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
@@ -118,6 +119,10 @@ def _check_configuration(scn, stance, pose, tip, step, at, problems):
                         f"[{lo_f}, {hi_f}] N")
     if tip is not None and abs(prob.shoulder_torque[0]) > robot.shoulder_torque_max + TOL:
         problems.append(f"{at}: shoulder torque {prob.shoulder_torque[0]:.3f} N m over the limit")
+    kappa = float(wrench_conditioning(robot, prob.A, att)[0])
+    if kappa < MIN_CONDITIONING:
+        problems.append(f"{at}: the booms nearly meet in one point (wrench conditioning "
+                        f"{kappa:.4f} < {MIN_CONDITIONING})")
     psi = prob.pull_angles[0]
     if np.any(np.abs(psi[att]) >= HALF_PI):
         problems.append(f"{at}: a grasp is pulled at 90 degrees or more from its normal")

@@ -50,7 +50,14 @@ import scipy.sparse as sp
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
-from rb_drake.feasibility import Reason, World, check_poses, rock_inside_body
+from rb_drake.feasibility import (
+    MIN_CONDITIONING,
+    Reason,
+    World,
+    check_poses,
+    rock_inside_body,
+    wrench_conditioning,
+)
 from rb_drake.grasp import (
     HALF_PI,
     log_ndtr_derivatives,
@@ -493,6 +500,8 @@ class PhaseProgram:
             return "shoulder angle out of range"
         if np.any(np.abs(prob.shoulder_torque) > robot.shoulder_torque_max):
             return "shoulder torque over the limit"
+        if np.any(wrench_conditioning(robot, prob.A, self.stance.attached) < MIN_CONDITIONING):
+            return "booms nearly meet in one point (wrench conditioning)"
         rock = self.world.rock
         if rock.polygons:
             corners = geometry.body_corners(robot, it.poses)

@@ -539,3 +539,35 @@ def test_force_allocator_osqp_on_ill_conditioned_statics() -> None:
         assert got.statics_ok[0], f"{solver}: no tensions found"
         np.testing.assert_allclose(got.tensions, want.tensions, atol=1e-4,
                                    err_msg=f"{solver} disagrees with allocate")
+
+
+def test_wrench_conditioning_vanishes_when_boom_lines_meet() -> None:
+    """Three booms whose lines pass through one point resist no moment about it: rank 2."""
+    from rb_drake.params import RobotParams
+
+    robot = RobotParams()
+    pose = np.zeros((1, 3))
+    meet = np.array([0.0, 0.6])  # every boom line passes through this point
+    shoulders = geometry.shoulder_positions(robot, pose)[0]
+    anchors = shoulders + 3.0 * (meet - shoulders)
+    u = (anchors - shoulders) / np.linalg.norm(anchors - shoulders, axis=1, keepdims=True)
+    A = geometry.wrench_matrix(robot, pose, u[None])
+    three = np.array([True, True, True, False])
+    kappa = feasibility.wrench_conditioning(robot, A, three)[0]
+    assert kappa < 1e-9, f"lines through one point: conditioning {kappa}"
+    # Moving one anchor off that line gives the stance a moment arm again.
+    anchors[0] += np.array([0.5, 0.0])
+    u = (anchors - shoulders) / np.linalg.norm(anchors - shoulders, axis=1, keepdims=True)
+    A = geometry.wrench_matrix(robot, pose, u[None])
+    kappa = feasibility.wrench_conditioning(robot, A, three)[0]
+    assert kappa > feasibility.MIN_CONDITIONING, f"off the point: conditioning {kappa}"
+
+
+def test_demo_start_stance_is_well_conditioned() -> None:
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    check = feasibility.check_poses(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
+    kappa = feasibility.wrench_conditioning(scn.robot, check.problem.A,
+                                            scn.stance(scn.start_stance).attached)[0]
+    assert kappa > 3 * feasibility.MIN_CONDITIONING, f"demo start conditioning {kappa}"

@@ -129,7 +129,7 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     t_start = time.perf_counter()
     timing: dict[str, float] = {}
     if planner == "naive":
-        fp = plan_naive(scn)
+        fp = plan_naive(scn, cfg.footstep)
     else:
         fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress)
     timing["footstep"] = time.perf_counter() - t_start

@@ -319,12 +319,14 @@ def build_parser() -> argparse.ArgumentParser:
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
     from experiments.bench import add_bench_command
+    from experiments.cli import add_experiment_command
     from systems.rig_cli import add_rig_commands
     from systems.sim_cli import add_simulate_command
 
     add_simulate_command(sub)
     add_rig_commands(sub)
     add_bench_command(sub)
+    add_experiment_command(sub)
     return parser
 
 

@@ -1,0 +1,268 @@
+"""RBP against the naive baseline on the same randomised caves (the paper's Fig. 4).
+
+Trial i plans cave i (seeded; shafts and passages alternating: shaft, crevasse, shaft,
+rockfall, ...) with both footstep planners and records each plan's success, reason, path
+success probability p_path and regrasps. The figure shows each planner's distribution of p_path
+over the trials, a failed plan counting p_path = 0, and results.json holds the counts
+"p_path > 0.90" and "> 0.95" (the paper: RBP over 0.90 in 86 of 100 and over 0.95 in more
+than half, the naive planner mostly failing).
+
+    python -m experiments.baseline_comparison --trials 100 --out out/baseline
+
+The trial function `climb_trial` (a cave from its parameters, the planners on it) is shared by
+the timing table, the SCP statistics and the parameter sweep.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from experiments.sweep import (
+    Trial,
+    add_sweep_arguments,
+    check_sweep_arguments,
+    machine_info,
+    ok_records,
+    quantiles,
+    sweep,
+    write_results,
+)
+
+MIXED = ("shaft", "crevasse", "shaft", "rockfall")  # shafts and passages, alternating
+THRESHOLDS = (0.90, 0.95)
+MARS_G = 3.71  # m/s^2, the generator's default gravity magnitude
+
+
+def make_cave(kind: str, seed: int, length: tuple[float, float], anchor_density: float = 3.0,
+              gravity: float = MARS_G, p_min: float = 0.95, gripper_scale: float = 1.0):
+    """A generated cave; `gripper_scale` multiplies every anchor's limit surface (its normal
+    and lateral limits: the generator draws them from the scaled range with the same random
+    numbers, so the cave's shape and anchor sites do not change)."""
+    from rb_drake.generate import CaveConfig, generate_cave
+    from rb_drake.params import RobotParams
+
+    base = CaveConfig()
+    config = CaveConfig(length=(float(length[0]), float(length[1])),
+                        anchor_density=anchor_density, gravity=(0.0, -float(gravity)),
+                        limit_normal=(gripper_scale * base.limit_normal[0],
+                                      gripper_scale * base.limit_normal[1]))
+    return generate_cave(kind, seed, config, RobotParams(p_min=p_min))
+
+
+CAVE_PARAMS = ("kind", "seed", "length", "anchor_density", "gravity", "p_min", "gripper_scale")
+
+
+def trial_cave(params: dict[str, Any]):
+    """The cave of a climb trial's parameters."""
+    return make_cave(**{k: v for k, v in params.items() if k in CAVE_PARAMS})
+
+
+def plan_cave(scn, planner: str, max_expansions: int, motion: bool) -> dict[str, Any]:
+    """The plan dictionary: the whole pipeline with `motion`, else the footstep stage only
+    (the naive baseline always stops after its footsteps)."""
+    from planning.footsteps import FootstepConfig, plan_footsteps
+    from planning.pipeline import PipelineConfig, plan_climb
+    from planning.plan import build_plan
+
+    config = PipelineConfig(footstep=FootstepConfig(max_expansions=max_expansions))
+    if motion or planner == "naive":
+        return plan_climb(scn, planner, config)
+    start = time.perf_counter()
+    fp = plan_footsteps(scn, config.footstep)
+    return build_plan(scn, fp, planner, {"footstep": fp.seconds,
+                                         "total": time.perf_counter() - start})
+
+
+def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
+    """What the experiments keep of a plan (its timing goes to the trial's `timing`)."""
+    from planning.pipeline import motion_summary
+
+    kinds = [p["kind"] for p in plan["phases"]]
+    record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
+              "p_min": plan["p_min"], "regrasps": plan["regrasps"],
+              "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")}}
+    rows = motion_summary(plan)
+    if rows:
+        record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
+                                               "seed_mean", "mean", "improved", "status")}
+                            for r in rows]
+    return record
+
+
+def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
+                planners: list[str], motion: bool = False, anchor_density: float = 3.0,
+                gravity: float = MARS_G, p_min: float = 0.95,
+                gripper_scale: float = 1.0) -> dict[str, Any]:
+    """One cave, each planner on it: {planner: plan_record, "cave": ..., "timing": ...}.
+
+    A cave the generator cannot give a feasible start stance (a weak gripper scale, say)
+    counts as a failure of every planner, with the generator's reason."""
+    start = time.perf_counter()
+    try:
+        scn = make_cave(kind, seed, tuple(length), anchor_density, gravity, p_min,
+                        gripper_scale)
+    except RuntimeError as e:
+        failed = {"success": False, "reason": f"no cave: {e}", "p_path": None, "p_min": None,
+                  "regrasps": 0, "phases": {"body": 0, "reach": 0}}
+        return {"cave": None, **{p: dict(failed) for p in planners},
+                "timing": {"cave": time.perf_counter() - start}}
+    out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
+    timing = {"cave": time.perf_counter() - start}
+    for planner in planners:
+        plan = plan_cave(scn, planner, max_expansions, motion)
+        out[planner] = plan_record(plan)
+        timing[planner] = plan["timing"]
+    out["timing"] = timing
+    return out
+
+
+def cave_kind(i: int, kind: str) -> str:
+    return MIXED[i % len(MIXED)] if kind == "mixed" else kind
+
+
+def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 150) -> None:
+    """The flags of the caves and of the planners' cap."""
+    parser.add_argument("--kind", default="mixed",
+                        choices=("mixed", "shaft", "crevasse", "rockfall"),
+                        help="cave kind (default mixed: shaft, crevasse, shaft, rockfall, ...)")
+    parser.add_argument("--first-seed", type=int, default=1,
+                        help="seed of the first cave; trial i uses seed first + i (default 1)")
+    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0),
+                        metavar=("MIN", "MAX"),
+                        help="shaft height or passage length range in m (default 4.5 5.0)")
+    parser.add_argument("--max-expansions", type=int, default=max_expansions,
+                        help="RBP gives up after expanding this many stances "
+                             f"(default {max_expansions})")
+
+
+def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    check_sweep_arguments(parser, args)
+    lo, hi = args.length
+    if not 2.0 <= lo <= hi:
+        parser.error(f"--length: need 2 <= MIN <= MAX, got {lo} {hi}")
+    if args.max_expansions < 1:
+        parser.error(f"--max-expansions: must be 1 or more, got {args.max_expansions}")
+
+
+def climb_trials(args: argparse.Namespace, planners: list[str], motion: bool,
+                 prefix: str = "", **cave: Any) -> list[Trial]:
+    """`args.trials` climb trials: cave i of the kind sequence with seed first + i."""
+    trials = []
+    for i in range(args.trials):
+        kind, seed = cave_kind(i, args.kind), args.first_seed + i
+        params = {"kind": kind, "seed": seed, "length": list(args.length),
+                  "max_expansions": args.max_expansions, "planners": planners,
+                  "motion": motion, **cave}
+        trials.append(Trial(f"{prefix}{i:03d}-{kind}-s{seed}",
+                            "experiments.baseline_comparison:climb_trial", params))
+    return trials
+
+
+def path_probabilities(records: list[dict[str, Any]], planner: str) -> list[float]:
+    """p_path per trial, 0 for a failed plan."""
+    return [r["result"][planner]["p_path"] if r["result"][planner]["success"] else 0.0
+            for r in records]
+
+
+def stage_times(records: list[dict[str, Any]], planner: str, stage: str) -> list[float]:
+    """Seconds the planner spent in `stage` (plan["timing"]), per trial that planned a cave."""
+    return [r["timing"][planner][stage] for r in records if planner in r["timing"]]
+
+
+def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, Any]:
+    p = path_probabilities(records, planner)
+    rows = [r["result"][planner] for r in records]
+    ok = [row for row in rows if row["success"]]
+    by_kind: dict[str, dict[str, int]] = {}
+    for r, row in zip(records, rows, strict=True):
+        counts = by_kind.setdefault(r["params"]["kind"], {"trials": 0, "successes": 0})
+        counts["trials"] += 1
+        counts["successes"] += bool(row["success"])
+    return {"trials": len(rows), "successes": len(ok),
+            **{f"p_path_over_{t:.2f}": sum(v > t for v in p) for t in THRESHOLDS},
+            "p_path": quantiles(p), "p_path_successes": quantiles([r["p_path"] for r in ok]),
+            "regrasps_successes": quantiles([r["regrasps"] for r in ok]), "by_kind": by_kind}
+
+
+def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
+    """Fig. 4: histograms of p_path (failures at 0) and the share of trials above each p."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    colours = {"rbp": "#2171b5", "naive": "#cb181d"}
+    fig, (hist, tail) = plt.subplots(1, 2, figsize=(10.0, 4.0))
+    bins = np.linspace(0.0, 1.0, 21)
+    for k, planner in enumerate(planners):
+        p = np.array(path_probabilities(records, planner))
+        width = (bins[1] - bins[0]) / len(planners)
+        counts, _ = np.histogram(p, bins)
+        plans = sum(r["result"][planner]["success"] for r in records)
+        hist.bar(bins[:-1] + k * width, counts, width, align="edge",
+                 color=colours.get(planner), label=f"{planner} ({plans} plans)")
+        grid = np.linspace(0.0, 1.0, 1001)
+        over = [f"{int(np.sum(p > t))} > {t:.2f}" for t in THRESHOLDS]
+        tail.plot(grid, (p[None, :] > grid[:, None]).mean(axis=1), color=colours.get(planner),
+                  label=f"{planner}: {', '.join(over)}")
+    for t in THRESHOLDS:
+        tail.axvline(t, color="grey", lw=0.8, ls="--")
+    hist.set_xlabel("path success probability p_path (failed plan: 0)")
+    hist.set_ylabel("trials")
+    hist.yaxis.set_major_locator(MaxNLocator(integer=True))
+    hist.legend(fontsize=8)
+    tail.set_xlabel("p")
+    tail.set_ylabel("share of trials with p_path > p")
+    tail.set_xlim(0.0, 1.0)
+    tail.set_ylim(0.0, 1.02)
+    tail.legend(fontsize=8)
+    fig.suptitle(f"footstep planners over {len(records)} randomised caves", fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
+    add_cave_arguments(parser)
+    parser.add_argument("--planners", default="rbp,naive",
+                        help="comma-separated planners (default rbp,naive)")
+    args = parser.parse_args(argv)
+    check_cave_arguments(parser, args)
+    planners = [p for p in args.planners.split(",") if p]
+    if not planners or not set(planners) <= {"rbp", "naive"}:
+        parser.error(f"--planners: choose from rbp,naive, got {args.planners!r}")
+
+    from rb_drake.files import atomic_save_figure
+
+    records = sweep(climb_trials(args, planners, motion=False), args)
+    done = ok_records(records)
+    summary = {p: planner_summary(done, p) for p in planners}
+    for p, s in summary.items():
+        print(f"{p}: {s['successes']}/{s['trials']} plans; p_path > 0.90 in "
+              f"{s['p_path_over_0.90']}, > 0.95 in {s['p_path_over_0.95']}")
+    figure = atomic_save_figure(baseline_figure(done, planners), f"{args.out}/baseline.png",
+                                dpi=120)
+    print(f"wrote {figure}")
+    results = {
+        "experiment": "baseline_comparison", "machine": machine_info(),
+        "params": {"trials": args.trials, "kind": args.kind, "first_seed": args.first_seed,
+                   "length": list(args.length), "max_expansions": args.max_expansions,
+                   "planners": planners},
+        "summary": summary,
+        "errors": [r["name"] for r in records if r["error"] is not None],
+        "timing": {p: {"footstep": quantiles(stage_times(done, p, "footstep"))}
+                   for p in planners},
+        "trials": [{"name": r["name"], "kind": r["params"]["kind"], "seed": r["params"]["seed"],
+                    **{p: {k: r["result"][p][k] for k in ("success", "p_path", "regrasps",
+                                                          "reason")} for p in planners}}
+                   for r in done],
+        "figure": str(figure),
+    }
+    write_results(args.out, results)
+    return 1 if results["errors"] else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,285 @@
+"""The trial runner of the experiments: many independent trials, a process pool or a Dask
+cluster, one JSON file per finished trial, and resume.
+
+A trial is a pure function of its parameters: `Trial(name, function, params)` names a function
+by its import path ("module:function") and the JSON-able keyword arguments to call it with; the
+function returns a JSON-able dictionary. Only a key `timing` in it may differ from run to run
+(wall-clock measurements): the runner moves it out of the record's `result`, so that a local
+and a Dask run give equal results trial by trial.
+
+`run_sweep` writes each record to OUT/trials/NAME.json (atomically) as soon as its trial
+finishes, in whatever order trials finish, and skips every trial whose record is already there
+with the same function and parameters: an interrupted sweep loses only the trials that were
+running. A trial that raises is recorded with its error and run again by the next sweep.
+Trials run on a local process pool (`workers`; 1 runs them in this process) or, given
+`cluster="tcp://HOST:PORT"`, on a Dask distributed scheduler, which sends the same function to
+its workers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import multiprocessing
+import os
+import platform
+import socket
+import sys
+import time
+import traceback
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from pathlib import Path
+from typing import IO, Any, NamedTuple
+
+from rb_drake.files import atomic_write_text
+
+RECORD_FORMAT = "rbp-trial/1"
+
+
+class Trial(NamedTuple):
+    """One unit of work: `function(**params)`, recorded as OUT/trials/`name`.json."""
+
+    name: str                # unique within a sweep; a file name (letters, digits, -_.=)
+    function: str            # "package.module:function", importable where the trial runs
+    params: dict[str, Any]   # JSON-able keyword arguments
+
+
+class SweepError(Exception):
+    """A sweep that cannot run as asked (bad trial names, a folder holding another sweep)."""
+
+
+def _resolve(path: str) -> Callable[..., dict[str, Any]]:
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def machine_info() -> dict[str, Any]:
+    """The machine a trial ran on: host, cpu model, cores, python and drake versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        drake = version("drake")
+    except PackageNotFoundError:
+        drake = "not installed"
+    return {"host": socket.gethostname(), "cpu": cpu, "cores": os.cpu_count(),
+            "python": platform.python_version(), "drake": drake}
+
+
+def run_trial(trial: Trial) -> dict[str, Any]:
+    """Run one trial and return its record (never raises: an exception becomes `error`)."""
+    start = time.perf_counter()
+    result, error, timing = None, None, {}
+    try:
+        result = dict(_resolve(trial.function)(**trial.params))
+        timing = result.pop("timing", {})
+    except Exception as e:  # a bug in one trial must not lose the others
+        error = f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=-3)}"
+    return {"format": RECORD_FORMAT, "name": trial.name, "function": trial.function,
+            "params": trial.params, "result": result, "error": error,
+            "timing": timing | {"trial": time.perf_counter() - start},
+            "worker": machine_info() | {"pid": os.getpid()}}
+
+
+def trial_path(out: str | Path, name: str) -> Path:
+    return Path(out) / "trials" / f"{name}.json"
+
+
+def _check_names(trials: Sequence[Trial]) -> None:
+    seen = set()
+    for t in trials:
+        if not t.name or not all(c.isalnum() or c in "-_.=" for c in t.name):
+            raise SweepError(f"trial name {t.name!r}: use letters, digits and -_.= only")
+        if t.name in seen:
+            raise SweepError(f"trial name {t.name!r}: used twice in one sweep")
+        seen.add(t.name)
+
+
+def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
+    """The trial's stored record if it finished without error, else None.
+
+    Raises SweepError when the folder holds a record of that name for other parameters: the
+    folder belongs to another sweep, and mixing the two would be silently wrong."""
+    path = trial_path(out, trial.name)
+    try:
+        record = json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return None  # not ours or damaged: run the trial again, the new record replaces it
+    # Compare through JSON, as stored: tuples become lists.
+    wanted = json.loads(json.dumps({"function": trial.function, "params": trial.params}))
+    if {"function": record.get("function"), "params": record.get("params")} != wanted:
+        raise SweepError(f"{path}: recorded for other parameters ({record.get('params')}), "
+                         f"not {trial.params}: use another --out folder or delete it")
+    return None if record.get("error") else record
+
+
+class ProgressDisplay:
+    """Progress of a sweep on `stream`: a bar redrawn in place on a terminal, otherwise one
+    line per finished trial (logs and CI)."""
+
+    def __init__(self, total: int, skipped: int, stream: IO[str] | None = None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.interactive = self.stream.isatty()
+        self.total, self.skipped = total, skipped
+        self.done, self.errors = 0, 0
+        self.start = time.perf_counter()
+        if skipped:
+            print(f"resuming: {skipped} of {total} trials already finished", file=self.stream,
+                  flush=True)
+
+    def update(self, record: dict[str, Any]) -> None:
+        self.done += 1
+        self.errors += record["error"] is not None
+        finished = self.skipped + self.done
+        elapsed = time.perf_counter() - self.start
+        left = (self.total - finished) * elapsed / self.done
+        if self.interactive:
+            width = 30
+            filled = math.floor(width * finished / self.total)
+            bar = "#" * filled + "-" * (width - filled)
+            errors = f", {self.errors} errors" if self.errors else ""
+            print(f"\r[{bar}] {finished}/{self.total} trials{errors}, {elapsed:.0f} s, "
+                  f"about {left:.0f} s left\033[K", end="", file=self.stream, flush=True)
+        else:
+            status = "ERROR " + record["error"].splitlines()[0] if record["error"] else "done"
+            print(f"[{finished}/{self.total}] {record['name']}: {status} "
+                  f"({record['timing']['trial']:.1f} s)", file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.interactive and self.done:
+            print(file=self.stream, flush=True)
+
+
+def _local(trials: list[Trial], workers: int) -> Iterator[dict[str, Any]]:
+    if workers == 1:  # in this process: no start-up cost, and a debugger sees the trial
+        for t in trials:
+            yield run_trial(t)
+        return
+    # spawn, not fork: the parent may hold pydrake and OMPL state that is unsafe to fork
+    pool = multiprocessing.get_context("spawn").Pool(workers)
+    try:
+        yield from pool.imap_unordered(run_trial, trials, chunksize=1)
+        pool.close()
+    finally:  # on an interruption, stop the running trials now: their records are lost anyway
+        pool.terminate()
+        pool.join()
+
+
+def _dask(trials: list[Trial], address: str) -> Iterator[dict[str, Any]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise SweepError("--cluster needs Dask: pip install 'dask[distributed]'") from None
+    with Client(address, timeout="30s") as client:
+        # pure=False: every submission runs, even of a trial the cluster has seen before
+        futures = [client.submit(run_trial, t, pure=False) for t in trials]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        finally:
+            client.cancel(futures)
+
+
+def run_sweep(trials: Iterable[Trial], out: str | Path, workers: int | None = None,
+              cluster: str | None = None, stream: IO[str] | None = None) -> list[dict[str, Any]]:
+    """Run every trial whose record is not already in OUT/trials/, write each record as its
+    trial finishes, and return all the records in the order of `trials`.
+
+    `workers`: local processes (default: one per core; 1 runs in this process). `cluster`: the
+    address of a Dask scheduler ("tcp://HOST:PORT") to send the trials to instead."""
+    trials = list(trials)
+    _check_names(trials)
+    if workers is not None and workers < 1:
+        raise SweepError(f"--workers: must be 1 or more, got {workers}")
+    records: dict[str, dict[str, Any]] = {}
+    for t in trials:
+        record = finished_record(out, t)
+        if record is not None:
+            records[t.name] = record
+    pending = [t for t in trials if t.name not in records]
+    if not pending:
+        print(f"all {len(trials)} trials already finished in {Path(out) / 'trials'}",
+              file=stream if stream is not None else sys.stderr, flush=True)
+    else:
+        progress = ProgressDisplay(len(trials), len(records), stream)
+        workers = workers or os.cpu_count() or 1
+        runs = _dask(pending, cluster) if cluster else _local(pending, min(workers, len(pending)))
+        try:
+            for record in runs:
+                atomic_write_text(trial_path(out, record["name"]),
+                                  json.dumps(record, indent=1, allow_nan=False) + "\n")
+                records[record["name"]] = record
+                progress.update(record)
+        finally:
+            progress.close()
+    return [records[t.name] for t in trials]
+
+
+def ok_records(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records of trials that ran without error."""
+    return [r for r in records if r["error"] is None]
+
+
+def add_sweep_arguments(parser: argparse.ArgumentParser, trials: int, out: str) -> None:
+    """The flags every sweep shares: --out, --trials, --workers, --cluster."""
+    parser.add_argument("--out", default=out, help=f"output folder (default {out})")
+    parser.add_argument("--trials", type=int, default=trials,
+                        help=f"number of trials (default {trials})")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="local worker processes (default: one per core; 1: in this "
+                             "process)")
+    parser.add_argument("--cluster", metavar="tcp://HOST:PORT",
+                        help="run the trials on this Dask distributed scheduler instead")
+
+
+def check_sweep_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    if args.trials < 1:
+        parser.error(f"--trials: must be 1 or more, got {args.trials}")
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers: must be 1 or more, got {args.workers}")
+
+
+def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, Any]]:
+    """`run_sweep` with the shared flags, for a script: a sweep that cannot run ends it with
+    one line on stderr (status 2), an interruption with a line on how to resume (130)."""
+    try:
+        return run_sweep(trials, args.out, args.workers, args.cluster)
+    except SweepError as e:
+        print(f"error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except KeyboardInterrupt:
+        print(f"interrupted: finished trials are kept in {Path(args.out) / 'trials'}; run the "
+              "same command again to resume", file=sys.stderr)
+        raise SystemExit(130) from None
+
+
+def write_results(out: str | Path, results: dict[str, Any], name: str = "results.json") -> Path:
+    """OUT/results.json (atomically), with the machine that summarised it."""
+    path = atomic_write_text(Path(out) / name,
+                             json.dumps(results, indent=1, allow_nan=False) + "\n")
+    print(f"wrote {path}")
+    return path
+
+
+def quantiles(values: Sequence[float]) -> dict[str, float | int | None]:
+    """Median, quartiles, mean, min and max of `values` (None when empty)."""
+    import numpy as np
+
+    if not len(values):
+        return {"n": 0, "median": None, "q1": None, "q3": None, "mean": None, "min": None,
+                "max": None}
+    v = np.asarray(values, dtype=float)
+    q1, med, q3 = np.percentile(v, [25, 50, 75])
+    return {"n": len(v), "median": float(med), "q1": float(q1), "q3": float(q3),
+            "mean": float(v.mean()), "min": float(v.min()), "max": float(v.max())}

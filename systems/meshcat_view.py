@@ -1,16 +1,19 @@
 """The cave and a simulated climb in Drake's Meshcat, and a self-contained HTML replay.
 
-The scene lies in the x-y plane (the world frame of the model), seen from -z (so that x points
-right and y up on the screen; what is drawn in front has z < 0): rock polygons as
-extruded triangle meshes with their outlines, anchors as small spheres with a line along their
-outward normal, the goal as a ring, and the robot as its body box, four booms (thin boxes
-stretched from shoulder to gripper) and gripper spheres. A run (`SimulationRecord`) is replayed
-as a Meshcat animation: transforms and the booms' "scale" property per frame, an attached
-boom green, a free one orange, a failed one red from its failure on.
+The scene lies in the x-y plane (the world frame of the model), seen from +z by an orthographic
+camera, so x points right and y up as in the matplotlib figures; what is drawn in front has the
+larger z: rock polygons as extruded triangle meshes with their outlines on top, anchors as small
+spheres with a line along their outward normal, the goal as a disc, and the robot as its body
+box, four booms (thin boxes stretched from shoulder to gripper) and gripper spheres. A run
+(`SimulationRecord`) is replayed as a Meshcat animation: transforms and the booms' "scale"
+property per frame, an attached boom green, a free one orange, a failed one red from its failure
+on; the robot also stands at the first frame's pose outside the animation, so it is drawn before
+the replay starts.
 
 Meshcat must listen on the loopback interface only: `start_meshcat` binds 127.0.0.1 on a free
 port (Drake's default listens on every interface). The replay is saved with
-`meshcat.StaticHtml()`, written atomically.
+`meshcat.StaticHtml()`, written atomically, with a few lines of script that fit the camera's
+box into the browser window (see `save_html`).
 """
 
 from __future__ import annotations
@@ -33,7 +36,10 @@ BOOM_WIDTH = 0.025    # m
 ANCHOR_RADIUS = 0.025
 GRIPPER_RADIUS = 0.035
 NORMAL_LENGTH = 0.15  # m, the line drawn along an anchor's outward normal
-FRONT = -(ROCK_DEPTH + 0.06)  # z of the robot and the anchors, between the camera and the rock
+FRONT = ROCK_DEPTH + 0.06  # z of the robot and the anchors, between the camera and the rock
+CAMERA_HEIGHT = 10.0  # m above the plane (orthographic: only the order in depth matters)
+MARGIN = 0.05  # of the cave's larger extent (at least MIN_MARGIN) around the framed scene
+MIN_MARGIN = 0.2  # m
 ROCK = Rgba(0.62, 0.54, 0.46, 1.0)
 ROCK_EDGE = Rgba(0.25, 0.2, 0.15, 1.0)
 ANCHOR = Rgba(0.15, 0.35, 0.85, 1.0)
@@ -42,6 +48,7 @@ BODY = Rgba(0.2, 0.2, 0.25, 1.0)
 ATTACHED = [0.2, 0.65, 0.25]
 FREE = [0.95, 0.6, 0.1]
 FAILED = [0.9, 0.1, 0.1]
+AMBIENT = 2.6  # the only light; measured: the rock then shows its own colour (tone mapping)
 
 
 def start_meshcat() -> Meshcat:
@@ -102,7 +109,7 @@ def draw_scenario(meshcat: Meshcat, scn: Scenario) -> None:
         vertices, faces = extrude(wall, ROCK_DEPTH)
         meshcat.SetTriangleMesh(f"{ROOT}/cave/rock{k}", vertices, faces, ROCK)
         outline = np.column_stack([np.vstack([wall, wall[:1]]),
-                                   np.full(len(wall) + 1, -ROCK_DEPTH - 0.01)])
+                                   np.full(len(wall) + 1, ROCK_DEPTH + 0.01)])
         meshcat.SetLine(f"{ROOT}/cave/edge{k}", outline.T.copy(), 2.0, ROCK_EDGE)
     for anchor in scn.anchors:
         path = f"{ROOT}/cave/anchors/{anchor.id}"
@@ -113,7 +120,8 @@ def draw_scenario(meshcat: Meshcat, scn: Scenario) -> None:
         meshcat.SetLine(f"{path}-normal", np.column_stack([p, tip]), 2.0, ANCHOR)
     goal = f"{ROOT}/cave/goal"
     meshcat.SetObject(goal, Cylinder(scn.goal_tolerance, 0.005), GOAL)
-    meshcat.SetTransform(goal, RigidTransform([*scn.goal_position, ROCK_DEPTH]))  # a disc
+    # a disc over the rock, under the robot
+    meshcat.SetTransform(goal, RigidTransform([*scn.goal_position, ROCK_DEPTH + 0.03]))
 
 
 def _robot_objects(meshcat: Meshcat, scn: Scenario) -> None:
@@ -158,61 +166,139 @@ def gripper_positions(record: SimulationRecord, sample: int) -> tuple[np.ndarray
     return tips, phase.stance.attached.copy()
 
 
+def srgb_to_linear(rgb: list[float] | np.ndarray) -> np.ndarray:
+    """sRGB components (as `Rgba` takes them) in the viewer's linear working colour space, which
+    the "color" property and animated material colours are given in."""
+    c = np.asarray(rgb, dtype=float)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _set_robot(meshcat: Meshcat, record: SimulationRecord, sample: int,
+               time: float | None) -> None:
+    """The robot at a sample of the run: in the animation at `time`, or now if it is None."""
+    scn = record.plan.scenario
+    at = () if time is None else (time,)
+    tips, attached = gripper_positions(record, sample)
+    body, booms, _ = robot_frame(scn, record.state[sample, :3], tips)
+    failure = record.failure
+    meshcat.SetTransform(f"{ROOT}/robot/body", body, *at)
+    for i, (X, length) in enumerate(booms):
+        colour = ATTACHED if attached[i] else FREE
+        if failure is not None and i == failure.boom and record.times[sample] >= failure.time:
+            colour = FAILED
+        meshcat.SetTransform(f"{ROOT}/robot/boom{i}", X, *at)
+        meshcat.SetProperty(f"{ROOT}/robot/boom{i}/<object>", "scale", [length, 1.0, 1.0], *at)
+        linear = [float(c) for c in srgb_to_linear(colour)]
+        for part in (f"boom{i}", f"gripper{i}"):
+            if time is None:
+                meshcat.SetProperty(f"{ROOT}/robot/{part}/<object>", "color", [*linear, 1.0])
+            else:  # the "color" property has no animation track; the material's colour has
+                meshcat.SetProperty(f"{ROOT}/robot/{part}/<object>", "material.color", linear,
+                                    time)
+        meshcat.SetTransform(f"{ROOT}/robot/gripper{i}", RigidTransform([*tips[i], FRONT]), *at)
+
+
 def animate(meshcat: Meshcat, record: SimulationRecord, frames_per_second: float = 20.0,
             speedup: float = 4.0) -> int:
     """Replay `record` as a Meshcat animation (played `speedup` times faster than simulated
     time); returns the number of frames. Call `draw_scenario` first for the cave."""
-    scn = record.plan.scenario
-    _robot_objects(meshcat, scn)
+    _robot_objects(meshcat, record.plan.scenario)
+    # The animation only moves the robot once it plays: stand it at its start meanwhile.
+    _set_robot(meshcat, record, 0, None)
     meshcat.StartRecording(frames_per_second, False)
     period = speedup / frames_per_second  # simulated seconds per frame
     samples = np.unique(np.searchsorted(record.times,
                                         np.arange(0.0, record.times[-1] + 1e-9, period)))
     samples = samples[samples < len(record.times)]
-    failure = record.failure
-    for frame, s in enumerate(samples):
-        t_anim = frame / frames_per_second
-        tips, attached = gripper_positions(record, int(s))
-        body, booms, _ = robot_frame(scn, record.state[s, :3], tips)
-        meshcat.SetTransform(f"{ROOT}/robot/body", body, t_anim)
-        for i, (X, length) in enumerate(booms):
-            colour = ATTACHED if attached[i] else FREE
-            if failure is not None and i == failure.boom and record.times[s] >= failure.time:
-                colour = FAILED
-            meshcat.SetTransform(f"{ROOT}/robot/boom{i}", X, t_anim)
-            meshcat.SetProperty(f"{ROOT}/robot/boom{i}/<object>", "scale", [length, 1.0, 1.0],
-                                t_anim)
-            meshcat.SetProperty(f"{ROOT}/robot/boom{i}/<object>", "color", [*colour, 1.0],
-                                t_anim)
-            meshcat.SetTransform(f"{ROOT}/robot/gripper{i}",
-                                 RigidTransform([*tips[i], FRONT]), t_anim)
+    for s in samples:  # at its own time: samples may be sparser than frames
+        _set_robot(meshcat, record, int(s), float(record.times[s]) / speedup)
     meshcat.StopRecording()
     meshcat.PublishRecording()
     return len(samples)
 
 
+def view_bounds(scn: Scenario) -> tuple[float, float, float, float]:
+    """xmin, xmax, ymin, ymax of the cave (rock, anchors and goal) with a small margin."""
+    goal = np.asarray(scn.goal_position, dtype=float)
+    pts = np.vstack([*scn.walls, scn.anchor_positions, goal - scn.goal_tolerance,
+                     goal + scn.goal_tolerance])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(MIN_MARGIN, MARGIN * float(np.max(hi - lo)))
+    return float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad)
+
+
+def view_from_front(meshcat: Meshcat, bounds: tuple[float, float, float, float]) -> None:
+    """An orthographic camera on +z looking down at the x-y plane (x right, y up) that frames
+    `bounds` = (xmin, xmax, ymin, ymax).
+
+    The viewer's orbit controls turn the camera towards their target, the world origin, on
+    every render, whatever orientation it was given (with y up): a camera below the plane (on
+    -z) shows the scene mirrored (x to the left) and one off the z axis tilts it. So the camera
+    sits on the +z axis, and the bounds, which are in its frame (x right, y up, centred on the
+    axis), move the view over the cave.
+    """
+    # Set2dRenderMode's camera frame C: it looks along +Cy with +Cz up, here Cx = x, Cy = -z,
+    # Cz = y.
+    R_WC = RotationMatrix(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]))
+    meshcat.Set2dRenderMode(RigidTransform(R_WC, [0.0, 0.0, CAMERA_HEIGHT]), *bounds)
+
+
 def show_climb(meshcat: Meshcat, record: SimulationRecord, speedup: float = 4.0) -> int:
-    """The cave, the robot and the animated climb; the camera looks down on the cave."""
+    """The cave, the robot and the animated climb, seen as in the 2-D figures (x right, y up)."""
     meshcat.Delete(ROOT)
     meshcat.DeleteRecording()
     scn = record.plan.scenario
     draw_scenario(meshcat, scn)
-    # Looking along +z from below: camera x = world -x, camera y (its view axis) = world +z,
-    # camera z = world +y (Set2dRenderMode's convention), so x is right and y up.
-    R_WC = RotationMatrix(np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]))
-    meshcat.Set2dRenderMode(RigidTransform(R_WC, [0.0, 0.0, -10.0]), *_bounds(scn))
-    # Meshcat's lights shine from +z; the faces we see look to -z: light them evenly.
-    meshcat.SetProperty("/Lights/AmbientLight/<object>", "intensity", 2.5)
+    view_from_front(meshcat, view_bounds(scn))
+    # Flat colours, as in the 2-D figures: only the ambient light (it does not depend on the
+    # faces' directions).
+    for light in ("SpotLight", "PointLightNegativeX", "PointLightPositiveX", "FillLight"):
+        meshcat.SetProperty(f"/Lights/{light}/<object>", "intensity", 0.0)
+    meshcat.SetProperty("/Lights/AmbientLight/<object>", "intensity", AMBIENT)
     return animate(meshcat, record, speedup=speedup)
 
 
-def _bounds(scn: Scenario) -> tuple[float, float, float, float]:
-    pts = np.vstack([*scn.walls, scn.anchor_positions])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = 0.3
-    return float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad)
+# Drake's viewer keeps an orthographic camera's left, bottom and top edges when the window is
+# sized and moves only its right edge with the window's aspect ratio, which crops a scene wider
+# than the window or pads it on the right. This fits the box the camera was given, centred,
+# into the window instead (and again on every resize).
+_FIT_ORTHOGRAPHIC_CAMERA = """
+    viewer.set_3d_pane_size = function (width, height) {  // rbp: fit the orthographic box
+      if (width === undefined) width = this.dom_element.offsetWidth;
+      if (height === undefined) height = this.dom_element.offsetHeight;
+      const camera = this.camera;
+      if (camera.isOrthographicCamera) {
+        const box = camera.userData.rbp_box || (camera.userData.rbp_box = {
+          left: camera.left, right: camera.right, bottom: camera.bottom, top: camera.top});
+        const cx = 0.5 * (box.left + box.right), cy = 0.5 * (box.bottom + box.top);
+        const aspect = width / Math.max(height, 1);
+        let hw = 0.5 * (box.right - box.left), hh = 0.5 * (box.top - box.bottom);
+        if (hw < hh * aspect) { hw = hh * aspect; } else { hh = hw / aspect; }
+        camera.left = cx - hw; camera.right = cx + hw;
+        camera.bottom = cy - hh; camera.top = cy + hh;
+      } else {
+        camera.aspect = width / height;
+      }
+      camera.updateProjectionMatrix();
+      this.renderer.setSize(width, height);
+      this.set_dirty();
+    };
+"""
+_VIEWER_CREATED = 'var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));'
+FIT_MARKER = "rbp: fit the orthographic box"
+
+
+def fit_camera_script(html: str) -> str:
+    """`html` (from `Meshcat.StaticHtml`) with the camera fitted to the window (see above);
+    unchanged if the page does not create its viewer as expected."""
+    at = html.find(_VIEWER_CREATED)
+    if at < 0:
+        return html
+    at += len(_VIEWER_CREATED)
+    return html[:at] + _FIT_ORTHOGRAPHIC_CAMERA + html[at:]
 
 
 def save_html(meshcat: Meshcat, path: str | Path) -> Path:
-    """The scene and its animation as one self-contained HTML file, written atomically."""
-    return atomic_write_text(path, meshcat.StaticHtml())
+    """The scene and its animation as one self-contained HTML file, written atomically; the
+    page fits the scene into the browser window (`fit_camera_script`)."""
+    return atomic_write_text(path, fit_camera_script(meshcat.StaticHtml()))

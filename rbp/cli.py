@@ -318,19 +318,32 @@ def build_parser() -> argparse.ArgumentParser:
     show.set_defaults(func=cmd_scenario_show)
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
-    from experiments.bench import add_bench_command
     from experiments.cli import add_experiment_command
     from systems.rig_cli import add_rig_commands
     from systems.sim_cli import add_simulate_command
 
     add_simulate_command(sub)
     add_rig_commands(sub)
-    add_bench_command(sub)
+    # rbp bench forwards its arguments, so that its heavy module loads only when it runs.
+    bench = sub.add_parser("bench", add_help=False,
+                           help="benchmark against cvxpy, SLSQP, IPOPT and the naive planner "
+                                "(rbp bench --help)")
+    bench.add_argument("args", nargs=argparse.REMAINDER)
+    bench.set_defaults(func=cmd_bench)
     add_experiment_command(sub)
     return parser
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from experiments.bench import main as bench_main
+
+    return bench_main(args.args, prog="rbp bench")
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
+        return cmd_bench(argparse.Namespace(args=argv[1:]))
     args = build_parser().parse_args(argv)
     from rb_drake.scenario import ScenarioError
 

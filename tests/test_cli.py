@@ -140,3 +140,15 @@ def test_help(tmp_path):
     assert "usage:" in proc.stdout, proc.stdout
     for command in ("demo", "scenario"):
         assert command in proc.stdout, f"{command!r} missing from --help"
+
+
+def test_help_loads_no_heavy_module() -> None:
+    """`rbp --help` builds the whole parser without numpy, Drake or the benchmarks."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from rbp.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('numpy', 'pydrake', 'experiments.bench', 'scipy') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", f"heavy modules loaded by the parser: {out.stdout}"

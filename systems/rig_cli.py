@@ -93,6 +93,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     stance = plan["phases"][args.phase]["stance"]
     print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "
           f"{run.statuses} statuses received; wrote {run.log}")
+    for line in run.safety.messages(config):  # what the safety guards did, if anything
+        print(f"  safety: {line}")
     if not len(run.live.time):
         print("  no status received: is the rig on this bus?")
         return 1

@@ -7,12 +7,18 @@ into each anchor's probability of grasp maintenance (the paper's Fig. 7) from th
 load-cell force and hinge angle. `run_rig` executes one phase and logs every message to an LCM
 log; `replay_log` feeds a log back through the same monitor; `report_figure` draws it.
 
+Because this drives hardware: commands are clamped to the robot's boom-length and tension
+limits, a non-finite command is refused (the last safe one is repeated), the command holds still
+when no status has come back for `status_timeout`, and a status that does not decode or is out
+of range is logged as received but ignored (`StatusFilter` keeps the last good one).
+
 Python LeafSystems are never freed in pydrake 1.51 (STACK.md section 5): `run_rig` builds its
 diagram once per run, and `replay_log` one monitor per log.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import shutil
@@ -26,7 +32,12 @@ from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, LeafSystem
-from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.lcm import (
+    LcmInterfaceSystem,
+    LcmPublisherSystem,
+    LcmSubscriberSystem,
+    SerializerInterface,
+)
 from pydrake.trajectories import PiecewisePolynomial
 
 from rb_drake import geometry, grasp
@@ -38,6 +49,7 @@ from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
 
 MEMQ = "memq://"
+CLAMP_REPORT_TOL = 1e-9  # m or N: smaller corrections by the limit clamp are not counted
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,6 +62,7 @@ class RigLcmConfig:
     status_channel: str = "RIG_STATUS"
     setup_channel: str = "RIG_SETUP"
     period: float = 0.1  # s between commands
+    status_timeout: float = 0.5  # s without a good status before the command holds still
 
 
 class RigInputError(ValueError):
@@ -109,6 +122,10 @@ def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
                                 "plan's scenario")
     poses = np.array([s["pose"] for s in steps], dtype=float).T
     tensions = np.array([s["tension"] for s in steps], dtype=float).T
+    # Later non-finite steps are refused at run time (the last safe command is repeated);
+    # the first one has nothing safe before it.
+    if not (np.all(np.isfinite(poses[:, 0])) and np.all(np.isfinite(tensions[:, 0]))):
+        raise RigInputError(f"{where}.steps[0]", "the first pose and tensions must be finite")
     if len(steps) == 1:  # hold still for a second
         times = np.append(times, times[0] + 1.0)
         poses, tensions = np.repeat(poses, 2, axis=1), np.repeat(tensions, 2, axis=1)
@@ -122,32 +139,178 @@ def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
 # The two systems
 
 
+class CommandMemory(NamedTuple):
+    """`RigCommandSource`'s state: the last command sent and what the guards did so far."""
+
+    boom_length: np.ndarray | None  # (4,) m, of the last command sent (None before the first)
+    tension: np.ndarray | None      # (4,) N
+    refused: int = 0                # commands that were not finite: the last one repeated
+    held: int = 0                   # commands held still because no status came back
+    clamped: int = 0                # commands clamped to the boom limits
+
+
 class RigCommandSource(LeafSystem):
-    """Output `command` (rig_command_t): the plan at plan time `time_offset` + context time.
+    """Input `last_status_time` (1, s of context time) -> output `command` (rig_command_t):
+    the plan at plan time `time_offset` + context time, made safe for the hardware.
 
     Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
-    are the plan's tensions, both interpolated linearly in time.
+    are the plan's tensions, both interpolated linearly in time and clamped to the robot's
+    `boom_length` and `boom_tension` limits. A command with a NaN or inf is refused and the
+    last one sent is repeated; so is the last one when no status came back for
+    `status_timeout` (the rig holds still). The state (`CommandMemory`) changes only in the
+    periodic update, which stores the command the publisher just sent.
     """
 
     def __init__(self, robot: RobotParams, anchors: np.ndarray, pose: PiecewisePolynomial,
-                 tension: PiecewisePolynomial, time_offset: float = 0.0):
+                 tension: PiecewisePolynomial, time_offset: float = 0.0, period: float = 0.1,
+                 status_timeout: float = float("inf")):
+        if not (np.all(np.isfinite(pose.value(time_offset)))
+                and np.all(np.isfinite(tension.value(time_offset)))):
+            raise ValueError("the first command must be finite: nothing safe comes before it")
         super().__init__()
         self._robot = robot
         self._anchors = np.asarray(anchors, dtype=float)
         self._pose = pose
         self._tension = tension
         self._time_offset = time_offset
+        self._status_timeout = status_timeout
+        self._memory = self.DeclareAbstractState(AbstractValue.Make(CommandMemory(None, None)))
+        self.last_status_time_port = self.DeclareVectorInputPort("last_status_time", 1)
         self.command_port = self.DeclareAbstractOutputPort(
-            "command", lambda: AbstractValue.Make(rig_command_t()), self._calc_command)
+            "command", lambda: AbstractValue.Make(rig_command_t()), self._calc_command,
+            prerequisites_of_calc={self.all_sources_ticket()})
+        # Stores what the publisher sent at the same period (publishing comes first).
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._remember)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._remember)
+
+    def memory(self, context) -> CommandMemory:
+        return context.get_abstract_state(self._memory).get_value()
+
+    def _decide(self, context) -> tuple[np.ndarray, np.ndarray, str]:
+        """(boom lengths, tensions, what happened: "ok", "clamped", "refused" or "held")."""
+        t = self._time_offset + context.get_time()
+        memory = self.memory(context)
+        if memory.boom_length is not None and self.last_status_time_port.HasValue(context):
+            silence = context.get_time() - self.last_status_time_port.Eval(context)[0]
+            if silence > self._status_timeout:
+                return memory.boom_length, memory.tension, "held"
+        pose = self._pose.value(t).ravel()
+        length = geometry.boom_geometry(self._robot, pose, self._anchors).length[0]
+        tension = self._tension.value(t).ravel()
+        if not (np.all(np.isfinite(length)) and np.all(np.isfinite(tension))):
+            return memory.boom_length, memory.tension, "refused"  # the first one is finite
+        safe_length = np.clip(length, *self._robot.boom_length)
+        safe_tension = np.clip(tension, *self._robot.boom_tension)
+        # A plan on a limit may miss it by round-off: that is not worth reporting.
+        clamped = max(np.abs(safe_length - length).max(),
+                      np.abs(safe_tension - tension).max()) > CLAMP_REPORT_TOL
+        return safe_length, safe_tension, "clamped" if clamped else "ok"
 
     def _calc_command(self, context, output) -> None:
-        t = self._time_offset + context.get_time()
-        pose = self._pose.value(t).ravel()
+        length, tension, _ = self._decide(context)
         msg = rig_command_t()
-        msg.utime = round(t * 1e6)
-        msg.boom_length = geometry.boom_geometry(self._robot, pose, self._anchors).length[0]
-        msg.tension_setpoint = np.maximum(0.0, self._tension.value(t).ravel())
+        msg.utime = round((self._time_offset + context.get_time()) * 1e6)
+        msg.boom_length = length
+        msg.tension_setpoint = tension
         output.set_value(msg)
+
+    def _remember(self, context, state) -> None:
+        length, tension, what = self._decide(context)
+        memory = self.memory(context)
+        state.get_mutable_abstract_state(self._memory).set_value(CommandMemory(
+            length.copy(), tension.copy(), memory.refused + (what == "refused"),
+            memory.held + (what == "held"), memory.clamped + (what == "clamped")))
+
+
+class RawSerializer(SerializerInterface):
+    """Hands a subscriber's message on as the bytes received, so a message that does not
+    decode reaches `StatusFilter` instead of raising inside the LCM pump."""
+
+    def __init__(self):
+        SerializerInterface.__init__(self)
+
+    def CreateDefaultValue(self):  # noqa: N802 (Drake's name)
+        return AbstractValue.Make(b"")
+
+    def Deserialize(self, buffer, abstract_value) -> None:  # noqa: N802
+        abstract_value.set_value(bytes(buffer))
+
+    def Serialize(self, abstract_value):  # noqa: N802
+        return abstract_value.get_value()
+
+
+def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
+    """The status in `data`, or None if it does not decode (another message type, garbage)
+    or is out of range: not finite, a negative winch length, or a force beyond ten times the
+    tension limit."""
+    try:
+        status = rig_status_t.decode(data)
+    except ValueError:
+        return None
+    values = np.array([*status.winch_length, *status.load_cell_force, *status.hinge_angle])
+    if not np.all(np.isfinite(values)):
+        return None
+    if np.any(np.asarray(status.winch_length) < 0.0):
+        return None
+    if np.any(np.abs(status.load_cell_force) > 10.0 * robot.boom_tension[1]):
+        return None
+    return status
+
+
+class StatusMemory(NamedTuple):
+    """`StatusFilter`'s state."""
+
+    raw: bytes                  # the subscriber's last message, as received
+    status: rig_status_t        # the last good status (a default one before any)
+    time: float                 # s of context time when it came (the start before any)
+    good: int = 0
+    bad: int = 0
+
+
+class StatusFilter(LeafSystem):
+    """Input `raw` (bytes of the last status message) -> outputs `status` (rig_status_t, the
+    last good one) and `last_status_time` (1, s of context time when it came).
+
+    A message that does not decode or is out of range (`decode_status`) is counted and
+    ignored. The outputs already see the subscriber's newest message (`current`); the state
+    stores that view in a per-step update.
+    """
+
+    def __init__(self, robot: RobotParams):
+        super().__init__()
+        self._robot = robot
+        self.raw_port = self.DeclareAbstractInputPort("raw", AbstractValue.Make(b""))
+        self._memory = self.DeclareAbstractState(
+            AbstractValue.Make(StatusMemory(b"", rig_status_t(), 0.0)))
+        self.status_port = self.DeclareAbstractOutputPort(
+            "status", lambda: AbstractValue.Make(rig_status_t()),
+            lambda context, out: out.set_value(self.current(context).status))
+        self.last_status_time_port = self.DeclareVectorOutputPort(
+            "last_status_time", 1,
+            lambda context, out: out.SetAtIndex(0, self.current(context).time))
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._start)
+        self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
+
+    def memory(self, context) -> StatusMemory:
+        return context.get_abstract_state(self._memory).get_value()
+
+    def _start(self, context, state) -> None:
+        state.get_mutable_abstract_state(self._memory).set_value(
+            StatusMemory(b"", rig_status_t(), context.get_time()))
+
+    def current(self, context) -> StatusMemory:
+        """The stored memory updated with the subscriber's message, if it is a new one."""
+        memory = self.memory(context)
+        raw = self.raw_port.Eval(context)
+        if not raw or raw == memory.raw:
+            return memory
+        status = decode_status(raw, self._robot)
+        if status is None:
+            return memory._replace(raw=raw, bad=memory.bad + 1)
+        return StatusMemory(raw, status, context.get_time(), memory.good + 1, memory.bad)
+
+    def _update(self, context, state) -> None:
+        state.get_mutable_abstract_state(self._memory).set_value(self.current(context))
 
 
 class GraspMonitor(LeafSystem):
@@ -185,25 +348,31 @@ class RigDiagram(NamedTuple):
     diagram: Diagram
     source: RigCommandSource
     subscriber: LcmSubscriberSystem
+    status_filter: StatusFilter
     monitor: GraspMonitor
 
 
 def build_rig_diagram(phase: BodyPhase, bus: DrakeLcm, config: RigLcmConfig) -> RigDiagram:
-    """Command source -> LCM publisher; LCM subscriber -> grasp monitor; the bus pump."""
+    """Command source -> LCM publisher; LCM subscriber (raw bytes) -> status filter -> grasp
+    monitor, and the filter's last status time back to the source; the bus pump."""
     builder = DiagramBuilder()
     builder.AddSystem(LcmInterfaceSystem(bus))
     scn = phase.scenario
     source = builder.AddNamedSystem("command_source", RigCommandSource(
-        scn.robot, phase.stance.positions, phase.pose, phase.tension, phase.start_time))
+        scn.robot, phase.stance.positions, phase.pose, phase.tension, phase.start_time,
+        config.period, config.status_timeout))
     publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
         channel=config.command_channel, lcm_type=rig_command_t, lcm=bus,
         publish_period=config.period))
-    subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
-        channel=config.status_channel, lcm_type=rig_status_t, lcm=bus))
+    subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem(
+        channel=config.status_channel, serializer=RawSerializer(), lcm=bus))
+    status_filter = builder.AddNamedSystem("status_filter", StatusFilter(scn.robot))
     monitor = builder.AddNamedSystem("grasp_monitor", GraspMonitor(phase.stance))
     builder.Connect(source.command_port, publisher.get_input_port())
-    builder.Connect(subscriber.get_output_port(), monitor.status_port)
-    return RigDiagram(builder.Build(), source, subscriber, monitor)
+    builder.Connect(subscriber.get_output_port(), status_filter.raw_port)
+    builder.Connect(status_filter.status_port, monitor.status_port)
+    builder.Connect(status_filter.last_status_time_port, source.last_status_time_port)
+    return RigDiagram(builder.Build(), source, subscriber, status_filter, monitor)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -219,26 +388,59 @@ class GraspRecord(NamedTuple):
     force: np.ndarray       # (N, 4) N, measured
 
 
+class SafetyReport(NamedTuple):
+    """What the guards of a run did (counts of commands and statuses)."""
+
+    clamped: int            # commands clamped to the boom-length or tension limits
+    refused: int            # non-finite commands replaced by the last safe one
+    held: int               # commands held still: no good status for status_timeout
+    bad_statuses: int       # statuses ignored: undecodable or out of range
+
+    def messages(self, config: RigLcmConfig) -> list[str]:
+        """One line per guard that acted, for the run's output."""
+        lines = []
+        if self.held:
+            lines.append(f"  status timeout: no good status for {config.status_timeout:g} s; "
+                         f"held the last safe setpoint for {self.held} commands")
+        if self.refused:
+            lines.append(f"  refused {self.refused} non-finite commands (repeated the last "
+                         "safe one)")
+        if self.clamped:
+            lines.append(f"  clamped {self.clamped} commands to the boom limits")
+        if self.bad_statuses:
+            lines.append(f"  ignored {self.bad_statuses} bad statuses (kept in the log)")
+        return lines
+
+
 class RigRun(NamedTuple):
     live: GraspRecord
     commands: int           # published
     statuses: int           # received
     lcm_url: str
     log: Path
+    safety: SafetyReport = SafetyReport(0, 0, 0, 0)
+
+    @property
+    def timed_out(self) -> bool:
+        return self.safety.held > 0
 
 
 class _LogWriter:
-    """Every message on the rig's channels, into an LCM event log stamped with its utime."""
+    """Every message on the rig's channels, into an LCM event log stamped with its utime (a
+    message that does not decode keeps its bytes and the previous event's stamp)."""
 
     def __init__(self, bus: DrakeLcm, config: RigLcmConfig, path: Path):
         self.events = lcm.EventLog(str(path), "w", overwrite=True)
         self.counts = {config.command_channel: 0, config.status_channel: 0}
+        self.utime = 0
         for channel, kind in ((config.command_channel, rig_command_t),
                               (config.status_channel, rig_status_t)):
             bus.Subscribe(channel, lambda data, c=channel, k=kind: self.write(c, data, k))
 
     def write(self, channel: str, data: bytes, kind) -> None:
-        self.events.write_event(kind.decode(data).utime, channel, data)
+        with contextlib.suppress(ValueError):  # garbage: logged as received all the same
+            self.utime = kind.decode(data).utime
+        self.events.write_event(self.utime, channel, data)
         self.counts[channel] += 1
 
 
@@ -269,32 +471,33 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
         setup.stance = list(phase.stance_ids)
         setup.plan_source = plan_source
         writer.events.write_event(setup.utime, config.setup_channel, setup.encode())
+        writer.utime = setup.utime
 
-        live = _simulate(parts, phase, config, realtime=sim_rig is None)
+        live, safety = _simulate(parts, phase, config, realtime=sim_rig is None)
         writer.events.close()
         with partial.open("rb") as src:
             atomic_write(log, lambda f: shutil.copyfileobj(src, f))
     return RigRun(live, writer.counts[config.command_channel],
-                  writer.counts[config.status_channel], bus.get_lcm_url(), Path(log))
+                  writer.counts[config.status_channel], bus.get_lcm_url(), Path(log), safety)
 
 
 def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
-              realtime: bool) -> GraspRecord:
-    """Advance through the phase, recording the monitor's output for each new status."""
+              realtime: bool) -> tuple[GraspRecord, SafetyReport]:
+    """Advance through the phase, recording the monitor's output for each new good status."""
     simulator = Simulator(parts.diagram)
     if realtime:
         simulator.set_target_realtime_rate(1.0)
     root = simulator.get_mutable_context()
-    sub_context = parts.subscriber.GetMyContextFromRoot(root)
+    filter_context = parts.status_filter.GetMyContextFromRoot(root)
     mon_context = parts.monitor.GetMyContextFromRoot(root)
     rows: list[tuple] = []
-    last = [rig_status_t().encode()]  # the subscriber's output before any message
+    good = [0]  # good statuses recorded so far
 
     def record(_context) -> EventStatus:
-        msg = parts.subscriber.get_output_port().Eval(sub_context)
-        data = msg.encode()
-        if data != last[0]:
-            last[0] = data
+        memory = parts.status_filter.current(filter_context)
+        if memory.good != good[0]:
+            good[0] = memory.good
+            msg = memory.status
             rows.append((msg.utime * 1e-6, parts.monitor.p_grasp_port.Eval(mon_context).copy(),
                          parts.monitor.pull_angle_port.Eval(mon_context).copy(),
                          np.asarray(msg.load_cell_force)))
@@ -306,7 +509,9 @@ def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
     # one lets its status come back and reach the monitor.
     last_command = np.floor((phase.end_time - phase.start_time) / config.period + 1e-9)
     simulator.AdvanceTo((last_command + 0.5) * config.period)
-    return _record(rows)
+    commands = parts.source.memory(parts.source.GetMyContextFromRoot(root))
+    bad = parts.status_filter.current(filter_context).bad
+    return _record(rows), SafetyReport(commands.clamped, commands.refused, commands.held, bad)
 
 
 def _record(rows: list[tuple]) -> GraspRecord:
@@ -330,16 +535,17 @@ class RigLog(NamedTuple):
 
 
 def replay_log(path: str | Path, config: RigLcmConfig = RigLcmConfig()) -> RigLog:
-    """Read a log written by `run_rig` and pass each status through a `GraspMonitor`."""
+    """Read a log written by `run_rig` and pass each good status through a `GraspMonitor`
+    (statuses that do not decode or are out of range are skipped, as the live run did)."""
     path = Path(path)
-    setup, commands, statuses = None, [], []
+    setup, commands, raw_statuses = None, [], []
     for event in lcm.EventLog(str(path), "r"):
         if event.channel == config.setup_channel and setup is None:
             setup = rig_setup_t.decode(event.data)
         elif event.channel == config.command_channel:
             commands.append(rig_command_t.decode(event.data))
         elif event.channel == config.status_channel:
-            statuses.append(rig_status_t.decode(event.data))
+            raw_statuses.append(event.data)
     if setup is None:
         raise RigInputError(config.setup_channel, "no setup message: not a log written by "
                             "rbp rig-run (or not an LCM log at all)")
@@ -352,6 +558,7 @@ def replay_log(path: str | Path, config: RigLcmConfig = RigLcmConfig()) -> RigLo
     unknown = [a for a in stance_ids if a not in scn.anchor_index]
     if unknown:
         raise RigInputError(f"{config.setup_channel}.stance", f"unknown anchor {unknown[0]!r}")
+    statuses = [s for s in (decode_status(d, scn.robot) for d in raw_statuses) if s is not None]
     monitor = GraspMonitor(scn.stance(stance_ids))
     context = monitor.CreateDefaultContext()
     rows = []

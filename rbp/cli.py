@@ -188,24 +188,34 @@ def _print_motion(plan: dict) -> None:
           f"{t['scp_body'] + t['scp_reach']:.2f} s")
 
 
-def cmd_check(args: argparse.Namespace) -> int:
-    from planning.check import check_plan
+def read_plan(path: Path) -> dict:
+    """A plan file, parsed and validated against the schema; a user's mistake is a UserError
+    naming the file, the field and the reason (shared by check, simulate and rig-run)."""
+    import jsonschema
+
     from planning.plan import validate
 
-    path = Path(args.plan)
     try:
         plan = json.loads(path.read_text())
     except FileNotFoundError:
         raise UserError(f"{path}: (file): no such file") from None
+    except IsADirectoryError:
+        raise UserError(f"{path}: (file): is a directory, not a plan file") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
-    import jsonschema
-
     try:
         validate(plan)
     except jsonschema.ValidationError as e:
         field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
         raise UserError(f"{path}: {field}: {e.message}") from None
+    return plan
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from planning.check import check_plan
+
+    path = Path(args.plan)
+    plan = read_plan(path)
     problems = check_plan(plan, str(path))
     for p in problems:
         print(f"{path}: {p}")

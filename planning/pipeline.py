@@ -74,7 +74,10 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
     seed_value = cfg.footstep.seed
     motions: list[PhaseMotion] = []
     ends = [s.pose for s in fp.steps] + [fp.goal_pose]
+    found = [s.found_pose if s.found_pose is not None else s.pose for s in fp.steps]
+    found_ends = [*found, fp.goal_pose]
     pose = np.asarray(fp.start_pose, dtype=float)
+    found_pose = pose
     n_phases = len(fp.stances) + len(fp.steps)
 
     def clock(stage: str, t0: float) -> None:
@@ -84,7 +87,8 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         if progress is not None:
             progress(f"phase {len(motions) + 1}/{n_phases}: body movement")
         t0 = time.perf_counter()
-        seed = body_seed(scn, stance, pose, ends[k], cfg.seed, seed=seed_value + k)
+        seed = body_seed(scn, stance, pose, ends[k], cfg.seed, seed=seed_value + k,
+                         linked_ends=(found_pose, found_ends[k]))
         clock("seed_body", t0)
         if not seed.success:
             return motions, f"body phase {len(motions)} in stance {list(stance)}: {seed.reason}"
@@ -116,6 +120,7 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         motions.append(PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor,
                                    seed, result))
         pose = np.asarray(step.pose, dtype=float)
+        found_pose = np.asarray(found[k], dtype=float)
     return motions, ""
 
 

@@ -151,9 +151,35 @@ def _local(scn: Scenario, stance: Stance, line: np.ndarray, cfg: SeedConfig,
 
 
 def body_seed(scn: Scenario, stance_ids: tuple[str, ...], start_pose: np.ndarray,
-              goal_pose: np.ndarray, config: SeedConfig | None = None, seed: int = 0) -> Seed:
-    """A feasible discretised body path from `start_pose` to `goal_pose` in a 4-stance."""
+              goal_pose: np.ndarray, config: SeedConfig | None = None, seed: int = 0,
+              linked_ends: tuple[np.ndarray, np.ndarray] | None = None) -> Seed:
+    """A feasible discretised body path from `start_pose` to `goal_pose` in a 4-stance.
+
+    `linked_ends` are poses joined to the start and to the goal by feasible straight segments
+    (the transition poses as the footstep search found them, before `polish_transition` moved
+    them): when nothing joins start and goal directly, a path through them is tried."""
     cfg = config or SeedConfig()
+    found = _body_seed(scn, stance_ids, start_pose, goal_pose, cfg, seed)
+    if found.success or linked_ends is None:
+        return found
+    start, goal = (np.asarray(p, dtype=float).reshape(3) for p in (start_pose, goal_pose))
+    a, b = (np.asarray(p, dtype=float).reshape(3) for p in linked_ends)
+    if np.allclose(a, start) and np.allclose(b, goal):
+        return found
+    inner = _body_seed(scn, stance_ids, a, b, cfg, seed)
+    if not inner.success:
+        return found
+    configs = np.vstack([subdivide(np.vstack([start, a]), cfg.step, cfg.turn_step)[:-1],
+                         inner.poses,
+                         subdivide(np.vstack([b, goal]), cfg.step, cfg.turn_step)[1:]])
+    check = _check(scn, scn.stance(stance_ids), configs)
+    if not check.feasible.all():
+        return found
+    return _success(f"{inner.method} via search poses", configs, check.allocation.robustness)
+
+
+def _body_seed(scn: Scenario, stance_ids: tuple[str, ...], start_pose: np.ndarray,
+               goal_pose: np.ndarray, cfg: SeedConfig, seed: int) -> Seed:
     stance = scn.stance(stance_ids)
     start = np.asarray(start_pose, dtype=float).reshape(3)
     goal = np.asarray(goal_pose, dtype=float).reshape(3)

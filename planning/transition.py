@@ -354,3 +354,46 @@ def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
                          booms: np.ndarray) -> np.ndarray:
     """How far boom booms[k] at each pose is from reaching anchors[k], summed over k (m + rad)."""
     return geometry.reach(robot, poses, anchors, booms).violation.sum(axis=1)
+
+
+def polish_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
+                      pose: np.ndarray, rng: np.random.Generator, rounds: int = 8,
+                      samples: int = 24, step: tuple[float, float, float] = (0.06, 0.06, 0.08),
+                      shrink: float = 0.7, link_step: float = 0.02) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """Raise the worst of the four robustnesses of a feasible transition pose by a local
+    search: each round samples around the best pose so far, moving there on improvement and
+    shrinking the spread otherwise. The search inside A* stops at the first feasible pose (a
+    round of refinement at most); the few transitions of the chosen path are worth this.
+
+    A move is taken only when the straight segment from `pose` to it (every `link_step` m or
+    rad) is feasible in both 4-stances, so the polished pose stays joined to the found one in
+    the stances the body moves in before and after: a body path between found poses extends to
+    the polished ones (`seeds.body_seed`'s `linked_ends`).
+    Returns the pose and its four probabilities; never worse than `pose`."""
+    origin = np.asarray(pose, dtype=float).copy()
+    best = origin.copy()
+    key, r, _ = _score(scn, old, boom, new_anchor, best[None], False)
+    best_key, best_r = float(key[0]), r[0]
+    if best_key <= -VIOLATION_OFFSET:
+        raise ValueError("polish_transition needs a feasible transition pose")
+    s_old, _, s_new = transition_stances(scn, old, boom, new_anchor)
+    spread = np.asarray(step, dtype=float)
+    for _ in range(rounds):
+        cand = best + rng.normal(0.0, 1.0, (samples, 3)) * spread
+        k2, r2, _ = _score(scn, old, boom, new_anchor, cand, False)
+        moved = False
+        for b in np.argsort(k2)[::-1][:3]:  # the best few, in case the best is cut off
+            if k2[b] <= best_key:
+                break
+            n = max(2, int(np.ceil(np.abs(cand[b] - origin).max() / link_step)) + 1)
+            link = origin + np.linspace(0.0, 1.0, n)[:, None] * (cand[b] - origin)
+            link2 = np.vstack([link, link])
+            mixed = Stance.mix(s_old, s_new, np.repeat([False, True], n))
+            if check_poses(scn, mixed, link2).feasible.all():
+                best, best_key, best_r = cand[b].copy(), float(k2[b]), r2[b]
+                moved = True
+                break
+        if not moved:
+            spread = spread * shrink
+    return best, np.exp(best_r)

@@ -22,6 +22,7 @@ from planning.transition import (
     Transition,
     TransitionConfig,
     find_transition,
+    polish_transition,
     reachable_anchors,
     transition_stances,
 )
@@ -130,6 +131,45 @@ def test_feasible_transition_pose_verified_independently(
         p_min = demo.robot.p_min
         assert np.all(p >= p_min), f"boom {j} -> {a}: probabilities {p} below p_min {p_min}"
     assert checked >= 1, "no feasible transition to verify"
+
+
+def test_polish_raises_worst_configuration_and_stays_feasible(
+        demo: Scenario, start_moves: dict[Move, Transition]) -> None:
+    """polish_transition never lowers the worst of the four probabilities, its pose passes all
+    four configurations independently, and it raises the worst one for some move."""
+    stance = demo.start_stance
+    raised = 0
+    for (j, a), tr in start_moves.items():
+        if not tr.feasible:
+            continue
+        pose, p = polish_transition(demo, stance, j, a, tr.pose, edge_rng(SEED, stance, j, "p"))
+        checks = four_checks(demo, stance, j, a, pose)
+        for name, c in zip(CONFIG_NAMES, checks, strict=True):
+            assert c.feasible[0], f"boom {j} -> {a}: polished pose {pose} infeasible in the {name}"
+        np.testing.assert_allclose(p, [c.probability[0] for c in checks], rtol=PROB_RTOL,
+                                   err_msg=f"boom {j} -> {a}: returned probabilities differ")
+        # Robustness is the sum of log P, so compare the worst configuration's robustness.
+        r_before = min(float(c.allocation.robustness[0])
+                       for c in four_checks(demo, stance, j, a, tr.pose))
+        r_after = min(float(c.allocation.robustness[0]) for c in checks)
+        assert r_after >= r_before - 1e-12, (
+            f"boom {j} -> {a}: polish lowered the worst robustness {r_before} -> {r_after}")
+        raised += r_after > r_before + 1e-6
+        # Joined to the found pose by a straight segment feasible in both 4-stances.
+        s_old, _, s_new = transition_stances(demo, stance, j, a)
+        link = tr.pose + np.linspace(0.0, 1.0, 41)[:, None] * (pose - tr.pose)
+        for name, st in (("old", s_old), ("new", s_new)):
+            ok = check_poses(demo, st, link).feasible
+            assert ok.all(), (f"boom {j} -> {a}: segment from the found to the polished pose "
+                              f"infeasible in the {name} 4-stance at {np.flatnonzero(~ok)}")
+    assert raised >= 1, "polish raised no transition's worst robustness"
+
+
+def test_polish_rejects_infeasible_pose(demo: Scenario, feasible_move: Move) -> None:
+    j, a = feasible_move
+    far = np.array([50.0, 50.0, 0.0])
+    with pytest.raises(ValueError, match="feasible"):
+        polish_transition(demo, demo.start_stance, j, a, far, np.random.default_rng(0))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -86,7 +86,8 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
     rows = motion_summary(plan)
     if rows:
         record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
-                                               "seed_mean", "mean", "improved", "status")}
+                                               "seed_mean", "mean", "seed_min_at_end", "room",
+                                               "improved", "status")}
                             for r in rows]
     return record
 

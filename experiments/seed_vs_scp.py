@@ -63,6 +63,13 @@ def improvement_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "seed_min": quantiles([r["seed_min"] for r in mine]),
             "min": quantiles([r["min"] for r in mine]),
             "scp_status": statuses,
+            # SCP keeps the ends fixed: what it can raise, and how often it does
+            "with_room": sum(r["room"] for r in mine),
+            "mean_raised_with_room": sum(r["room"] and g > TOLERANCE
+                                         for r, g in zip(mine, gain_mean, strict=True)),
+            "min_inside": sum(not r["seed_min_at_end"] for r in mine),
+            "min_raised_inside": sum(not r["seed_min_at_end"] and g > TOLERANCE
+                                     for r, g in zip(mine, gain_min, strict=True)),
         }
     return summary
 
@@ -139,7 +146,10 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         g = s["gain_mean"]
         print(f"{kind}: {s['phases']} phases; SCP raised the minimum P in {s['min_raised']} "
               f"and the mean P in {s['mean_raised']}" +
-              (f" (median gain {g['median']:.2e})" if g["n"] else ""))
+              (f" (median gain {g['median']:.2e})" if g["n"] else "") +
+              f"; the mean in {s['mean_raised_with_room']} of the {s['with_room']} with room, "
+              f"the minimum in {s['min_raised_inside']} of the {s['min_inside']} whose seed's "
+              "minimum is not at a fixed end")
     figure = atomic_save_figure(scp_figure(rows), f"{args.out}/scp.png", dpi=120)
     print(f"wrote {figure}")
     first = next((r for r in done if r["result"]["rbp"]["success"]), None)

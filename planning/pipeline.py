@@ -152,8 +152,15 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt)
 
 
+ROOM = 1e-4  # a phase whose seed's mean P is within this of 1 leaves SCP nothing to gain
+
+
 def motion_summary(plan: dict[str, Any]) -> list[dict[str, Any]]:
-    """Per phase: the seed's and the optimum's minimum and mean probability and effort."""
+    """Per phase: the seed's and the optimum's minimum and mean probability and effort.
+
+    SCP keeps a phase's first and last pose fixed (the transition poses), so it cannot raise a
+    minimum that sits there: `seed_min_at_end` says whether the seed's does, and `room` whether
+    the seed's mean P leaves anything to gain (below 1 - ROOM)."""
     rows = []
     for k, phase in enumerate(plan["phases"]):
         motion = phase.get("motion")
@@ -161,9 +168,14 @@ def motion_summary(plan: dict[str, Any]) -> list[dict[str, Any]]:
             continue
         p = np.array([s["p_success"] for s in phase["steps"]])
         p_seed = np.array(motion["seed_p_success"])
+        poses = np.array([s["pose"] for s in phase["steps"]])
+        at = poses[int(np.argmin(p_seed))]
+        at_end = bool(np.allclose(at, poses[0], atol=1e-9) or np.allclose(at, poses[-1],
+                                                                          atol=1e-9))
         rows.append({"phase": k, "kind": phase["kind"], "steps": len(p),
                      "seed_min": float(p_seed.min()), "min": float(p.min()),
                      "seed_mean": float(p_seed.mean()), "mean": float(p.mean()),
+                     "seed_min_at_end": at_end, "room": bool(p_seed.mean() < 1.0 - ROOM),
                      "seed_effort": float(np.mean(motion["seed_effort"])),
                      "effort": float(np.mean(motion["effort"])),
                      "improved": bool(motion["improved"]), "status": motion["scp_status"]})

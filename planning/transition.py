@@ -253,6 +253,8 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     cfg = config or TransitionConfig()
     robot = scn.robot
     target = scn.anchor_positions[scn.anchor_index[new_anchor]]
+    if release is not None and not len(release.poses):  # shared and known empty: no search
+        return _cannot_let_go(boom, release)
     # Reach first (geometry only, microseconds a pose): can any pose reach all five anchors?
     five = np.vstack([scn.stance(old).positions, target[None]])
     booms = np.array([0, 1, 2, 3, boom])
@@ -265,9 +267,7 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
         release = release_poses(scn, old, boom, rng, guess, cfg)
     evaluated = 0
     if not len(release.poses):
-        return Transition(False, None, None, f"no pose found: boom {boom} cannot let go in this "
-                          f"stance ({release.reason.removeprefix('no pose found: ')})",
-                          release.evaluated)
+        return _cannot_let_go(boom, release)
     kin = geometry.reach(robot, release.poses, target[None], np.array([boom])).violation[:, 0]
     if kin.min() > cfg.max_reach_violation:
         return Transition(False, None, None, f"no pose found: no pose at which boom {boom} can "
@@ -310,6 +310,12 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     if best_key <= -VIOLATION_OFFSET:
         return Transition(False, None, None, _explain(miss), (evaluated + 3) // 4)
     return Transition(True, best_pose, np.exp(best_r4), "", (evaluated + 3) // 4)
+
+
+def _cannot_let_go(boom: int, release: ReleaseSet) -> Transition:
+    return Transition(False, None, None, f"no pose found: boom {boom} cannot let go in this "
+                      f"stance ({release.reason.removeprefix('no pose found: ')})",
+                      release.evaluated)
 
 
 def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:

@@ -180,12 +180,15 @@ def _print_motion(plan: dict) -> None:
     rows = motion_summary(plan)
     if not rows:
         return
-    better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in rows)
-    better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in rows)
+    room = [r for r in rows if r["room"]]
+    inner = [r for r in rows if not r["seed_min_at_end"]]
+    better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in room)
+    better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in inner)
     t = plan["timing"]
-    print(f"motion: {len(rows)} phases; SCP raised the minimum P on {better_min} and the mean P "
-          f"on {better_mean}; seeds {t['seed_body'] + t['seed_reach']:.2f} s, SCP "
-          f"{t['scp_body'] + t['scp_reach']:.2f} s")
+    print(f"motion: {len(rows)} phases; SCP raised the mean P on {better_mean} of the "
+          f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
+          f"the {len(inner)} whose seed's minimum is not at a fixed end; seeds "
+          f"{t['seed_body'] + t['seed_reach']:.2f} s, SCP {t['scp_body'] + t['scp_reach']:.2f} s")
 
 
 def read_plan(path: Path) -> dict:

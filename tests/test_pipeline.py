@@ -151,3 +151,13 @@ def test_figures(demo, plan, tmp_path):
     data = gif.read_bytes()
     assert data[:6] in (b"GIF87a", b"GIF89a"), "not a GIF"
     assert not list(tmp_path.glob(".*.tmp")), "a temporary file was left behind"
+
+
+def test_scp_raises_the_mean_where_there_is_room(plan):
+    """SCP raises the mean P on most phases whose seed leaves room (mean below 1 - ROOM)."""
+    rows = [r for r in motion_summary(plan) if r["room"]]
+    assert rows, "no phase with room to improve: the test needs another cave"
+    raised = [r["phase"] for r in rows if r["mean"] > r["seed_mean"] + 1e-9]
+    assert len(raised) > len(rows) / 2, (
+        f"SCP raised the mean on {len(raised)} of {len(rows)} phases with room: "
+        f"{[(r['phase'], r['seed_mean'], r['mean']) for r in rows]}")

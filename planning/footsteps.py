@@ -31,7 +31,7 @@ import dataclasses
 import math
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -162,9 +162,23 @@ def candidate_moves(scn: Scenario, stance: tuple[str, ...], pose: np.ndarray,
     return moves
 
 
+@dataclasses.dataclass
+class FootstepMemo:
+    """Transitions and release sets already searched on a scenario (same config and seed), so
+    that a search repeated with some moves excluded costs only what is new."""
+
+    transitions: dict[tuple, Transition] = dataclasses.field(default_factory=dict)
+    releases: dict[tuple, ReleaseSet] = dataclasses.field(default_factory=dict)
+
+
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
-                   progress: Callable[[int, int], None] | None = None) -> FootstepPlan:
-    """RBP's footstep plan from the scenario's start stance to a stance that reaches the goal."""
+                   progress: Callable[[int, int], None] | None = None,
+                   exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
+                   memo: FootstepMemo | None = None) -> FootstepPlan:
+    """RBP's footstep plan from the scenario's start stance to a stance that reaches the goal.
+
+    `exclude` holds moves (stance, boom, new anchor) not to take (the pipeline excludes one
+    whose motion could not be planned); `memo` carries searched transitions between calls."""
     cfg = config or FootstepConfig()
     t0 = time.perf_counter()
     c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
@@ -173,8 +187,9 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     max_step = 2.0 * robot.max_reach / 4.0
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_pose = np.asarray(scn.start_pose, dtype=float)
-    cache: dict[tuple, Transition] = {}
-    releases: dict[tuple, ReleaseSet] = {}
+    memo = memo if memo is not None else FootstepMemo()
+    cache, releases = memo.transitions, memo.releases
+    excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     goal_rng = np.random.default_rng([cfg.seed, 1])
     tested = 0
 
@@ -187,6 +202,8 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         nonlocal tested
         j, anchor = key
         ck = (node, j, anchor)
+        if ck in excluded:
+            return None
         if ck not in cache:
             tested += 1
             if (node, j) not in releases:  # shared by every move of boom j from this stance

@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.baseline import plan_naive
-from planning.footsteps import FootstepConfig, FootstepPlan, plan_footsteps
+from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
 from planning.plan import build_motion_plan, build_plan
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
@@ -37,6 +37,7 @@ class PipelineConfig:
     scp: ScpConfig = dataclasses.field(default_factory=ScpConfig)
     dt: float = 0.5        # s between trajectory steps: with 5 cm steps, 0.1 m/s
     optimise: bool = True  # False: the seeds are the plan (no SCP)
+    motion_retries: int = 3  # footstep searches again, each without a move whose motion failed
 
 
 class PhaseMotion(NamedTuple):
@@ -84,6 +85,20 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         timing[stage] = timing.get(stage, 0.0) + time.perf_counter() - t0
 
     for k, stance in enumerate(fp.stances):
+        reach = None
+        if k < len(fp.steps):
+            # The reach first: if it fails at the polished transition pose but holds at the
+            # pose the search found, the body phase goes there instead.
+            step = fp.steps[k]
+            t0 = time.perf_counter()
+            reach = reach_seed(scn, stance, step.boom, step.to_anchor, ends[k], cfg.seed,
+                               seed=seed_value + k)
+            if not reach.success and not np.allclose(found[k], ends[k]):
+                unpolished = reach_seed(scn, stance, step.boom, step.to_anchor, found[k],
+                                        cfg.seed, seed=seed_value + k)
+                if unpolished.success:
+                    reach, ends[k] = unpolished, found[k]
+            clock("seed_reach", t0)
         if progress is not None:
             progress(f"phase {len(motions) + 1}/{n_phases}: body movement")
         t0 = time.perf_counter()
@@ -105,10 +120,7 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             progress(f"phase {len(motions) + 1}/{n_phases}: boom {step.boom} "
                      f"{step.from_anchor} -> {step.to_anchor}")
         three = tuple(None if i == step.boom else a for i, a in enumerate(stance))
-        t0 = time.perf_counter()
-        seed = reach_seed(scn, stance, step.boom, step.to_anchor, step.pose, cfg.seed,
-                          seed=seed_value + k)
-        clock("seed_reach", t0)
+        seed = reach
         if not seed.success:
             return motions, (f"reach phase {len(motions)} (boom {step.boom} {step.from_anchor} "
                              f"-> {step.to_anchor}): {seed.reason}")
@@ -119,7 +131,7 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             clock("scp_reach", t0)
         motions.append(PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor,
                                    seed, result))
-        pose = np.asarray(step.pose, dtype=float)
+        pose = np.asarray(ends[k], dtype=float)
         found_pose = np.asarray(found[k], dtype=float)
     return motions, ""
 
@@ -142,6 +154,27 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
     motions, failure = phase_motions(scn, fp, cfg, timing, progress)
+    memo, excluded = FootstepMemo(fp.transitions or {}), []
+    for _ in range(cfg.motion_retries):
+        if not failure:
+            break
+        # A transition holds at its pose, but the motion through it may not (a reach arc whose
+        # intermediate cantilevers no tensions balance): search again without that move.
+        move = failed_move(fp, len(motions))
+        excluded.append(move)
+        if progress is not None:
+            progress(f"{failure[:100]}...; searching footsteps again without boom {move[1]} "
+                     f"-> {move[2]} from {list(move[0])}")
+        t0 = time.perf_counter()
+        retry = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, exclude=excluded,
+                               memo=memo)
+        timing["footstep"] += time.perf_counter() - t0
+        if not retry.success:
+            break
+        fp = retry
+        for stage in ("seed_body", "scp_body", "seed_reach", "scp_reach"):
+            timing.pop(stage, None)  # the plan's stages are those of the footsteps it keeps
+        motions, failure = phase_motions(scn, fp, cfg, timing, progress)
     if failure:
         timing["total"] = time.perf_counter() - t_start
         plan = build_plan(scn, fp, planner, timing)
@@ -150,6 +183,15 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         return plan
     timing["total"] = time.perf_counter() - t_start
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt)
+
+
+def failed_move(fp: FootstepPlan, done: int) -> tuple[tuple[str, ...], int, str]:
+    """The move (stance, boom, anchor) to exclude when `phase_motions` stopped after `done`
+    phases: a failed reach is its own move's; a failed body phase leads to the next move (or,
+    the last one, from the previous)."""
+    k = min(done // 2, len(fp.steps) - 1)
+    step = fp.steps[k]
+    return tuple(fp.stances[k]), step.boom, step.to_anchor
 
 
 ROOM = 1e-4  # a phase whose seed's mean P is within this of 1 leaves SCP nothing to gain

@@ -7,8 +7,14 @@ import pytest
 
 from planning.check import check_plan
 from planning.figures import animate_plan, phase_figure
-from planning.footsteps import plan_footsteps
-from planning.pipeline import PipelineConfig, motion_summary, phase_motions, plan_climb
+from planning.footsteps import FootstepMemo, plan_footsteps
+from planning.pipeline import (
+    PipelineConfig,
+    failed_move,
+    motion_summary,
+    phase_motions,
+    plan_climb,
+)
 from planning.plan import build_motion_plan, validate
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 
@@ -161,3 +167,28 @@ def test_scp_raises_the_mean_where_there_is_room(plan):
     assert len(raised) > len(rows) / 2, (
         f"SCP raised the mean on {len(raised)} of {len(rows)} phases with room: "
         f"{[(r['phase'], r['seed_mean'], r['mean']) for r in rows]}")
+
+
+def test_failed_move_names_the_right_step(footsteps):
+    n = len(footsteps.steps)
+    for done, k in ((0, 0), (1, 0), (2, 1), (3, 1), (2 * n, n - 1)):
+        stance, boom, anchor = failed_move(footsteps, done)
+        step = footsteps.steps[k]
+        assert (stance, boom, anchor) == (tuple(footsteps.stances[k]), step.boom,
+                                          step.to_anchor), f"{done} phases done: step {k}"
+
+
+def test_excluded_move_is_not_taken_and_memo_is_reused(demo, footsteps):
+    """Searching again without the first move (what the pipeline does when a motion fails)
+    gives a plan without it, and reuses the transitions already searched."""
+    move = failed_move(footsteps, 1)
+    memo = FootstepMemo(dict(footsteps.transitions))
+    known = len(memo.transitions)
+    again = plan_footsteps(demo, exclude=[move], memo=memo)
+    taken = {(tuple(st), s.boom, s.to_anchor) for st, s in zip(again.stances, again.steps,
+                                                                  strict=False)}
+    assert move not in taken, f"excluded move {move} taken again"
+    assert again.success, again.reason
+    assert again.transitions_tested < len(memo.transitions), (
+        f"tested {again.transitions_tested} of {len(memo.transitions)} transitions: the memo "
+        f"({known} known) was not reused")

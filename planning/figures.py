@@ -30,7 +30,8 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         ax = axes.flat[0]
         draw.draw_cave(ax, scn, highlight=tuple(scn.start_stance))
         draw.frame_axes(ax, scn)
-        ax.set_title(f"{plan['planner']}: no plan ({plan['reason']})", fontsize=9)
+        title = f"{plan['planner']}: no plan ({plan['reason']})"
+        ax.set_title("\n".join(textwrap.wrap(title, 60)), fontsize=8)
         return fig
     for ax, k in zip(axes.flat, picks, strict=False):
         phase = body[k]

@@ -238,6 +238,8 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         nearest = min(centroid_distance(scn, n) for n in result.graph.nodes)
         reason = (f"{result.reason}; the nearest stance reached is {nearest:.2f} m from the "
                   f"goal (the start is {centroid_distance(scn, start):.2f} m)")
+        if result.expansions >= cfg.max_expansions:
+            reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
         return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache)
     steps = []

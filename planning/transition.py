@@ -17,12 +17,14 @@ poses, seeded, and has a fixed sample budget.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from typing import NamedTuple
 
 import numpy as np
 
 from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses, violation
+from rb_drake.feasibility_kernel import PackedStances, score_rows
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -90,6 +92,70 @@ class _NaiveWorld:
         self.gravity_vector = scn.gravity_vector
 
 
+class _AnchorTable(NamedTuple):
+    """A scenario's anchors as rows (as `Scenario.stance` reads them), plus a last row of NaN
+    for a free boom: the kernel's stances are gathered from it by index."""
+
+    row: dict[str, int]
+    positions: np.ndarray      # (N + 1, 2)
+    normals: np.ndarray        # (N + 1, 2)
+    f_normal: np.ndarray       # (N + 1,)
+    f_lateral: np.ndarray
+    sigma_normal: np.ndarray
+    sigma_lateral: np.ndarray
+
+
+_ANCHOR_TABLES: dict[int, tuple[weakref.ref, _AnchorTable]] = {}
+
+
+def _anchor_table(scn: Scenario) -> _AnchorTable:
+    hit = _ANCHOR_TABLES.get(id(scn))
+    if hit is not None and hit[0]() is scn:
+        return hit[1]
+    nan2 = (np.nan, np.nan)
+
+    def col(get, default) -> np.ndarray:
+        return np.array([get(a) for a in scn.anchors] + [default], dtype=float)
+
+    table = _AnchorTable({a.id: k for k, a in enumerate(scn.anchors)},
+                         col(lambda a: a.position, nan2), col(lambda a: a.normal, nan2),
+                         col(lambda a: a.f_normal, np.nan), col(lambda a: a.f_lateral, np.nan),
+                         col(lambda a: a.sigma_normal, np.nan),
+                         col(lambda a: a.sigma_lateral, np.nan))
+    if len(_ANCHOR_TABLES) >= 64:  # forget scenarios that are gone
+        for key in [k for k, (ref, _) in _ANCHOR_TABLES.items() if ref() is None]:
+            del _ANCHOR_TABLES[key]
+    _ANCHOR_TABLES[id(scn)] = (weakref.ref(scn), table)
+    return table
+
+
+def _configurations(scn: Scenario, old: tuple[str, ...], boom: int,
+                    new_anchor: str | None) -> tuple[PackedStances, np.ndarray, np.ndarray,
+                                                     np.ndarray]:
+    """A move's stances (old 4-stance, 3-stance, new 4-stance if any) and free-gripper tips
+    (none, at the old anchor, at the new one) as kernel rows, and each configuration's
+    (CONFIG_NAMES order) stance row and tip row."""
+    table = _anchor_table(scn)
+    free = len(table.row)
+    held = [table.row[a] for a in old]
+    rows = [held, held.copy()]
+    rows[1][boom] = free
+    tips = [free, held[boom]]
+    if new_anchor is not None:
+        rows.append(held.copy())
+        rows[2][boom] = table.row[new_anchor]
+        tips.append(rows[2][boom])
+    idx = np.array(rows)
+    stances = PackedStances(table.positions[idx], table.normals[idx], table.f_normal[idx],
+                            table.f_lateral[idx], table.sigma_normal[idx],
+                            table.sigma_lateral[idx], idx != free)
+    return stances, table.positions[tips], _STANCE_OF, _TIP_OF
+
+
+_STANCE_OF = np.array([0, 1, 1, 2])
+_TIP_OF = np.array([0, 1, 2, 0])
+
+
 def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | None,
            poses: np.ndarray, ignore_grasps: bool, configs: tuple[int, ...] = ALL,
            known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -99,7 +165,43 @@ def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | Non
     Only `configs` are evaluated; `known` (P, 4) supplies robustnesses already computed for the
     others (all feasible). The key is the worst robustness where every configuration is
     feasible, and minus the evaluated configurations' summed violation, below
-    -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored)."""
+    -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored).
+
+    Every configuration at every pose is one row of one compiled call
+    (`feasibility_kernel.score_rows`); `_score_reference` is the same through check_poses and
+    violation."""
+    if new_anchor is None and any(k in configs for k in ARRIVE):
+        raise ValueError("the arrival configurations need the new anchor")
+    stances, tips, stance_of, tip_of = _configurations(scn, old, boom, new_anchor)
+    world = scn if not ignore_grasps else _NaiveWorld(scn)
+    P = poses.shape[0]
+    ks = np.array([k for k in (0, 3, 1, 2) if k in configs], dtype=np.int64)  # as _score_reference
+    C = len(ks)
+    check = score_rows(world, stances, tips, poses, np.tile(np.arange(P), C),
+                       np.repeat(stance_of[ks], P), np.repeat(tip_of[ks], P), ignore_grasps)
+    ok = check.feasible.reshape(C, P)
+    r = np.full((P, 4), np.nan) if known is None else known.astype(float, copy=True)
+    r[:, ks] = np.where(ok, check.robustness.reshape(C, P), -np.inf).T
+    total_violation = np.zeros(P)
+    for v in check.violation.reshape(C, P):  # summed in _score_reference's order
+        total_violation += v
+    # The first failure: the lowest failing configuration's code.
+    codes = np.where(ok, np.iinfo(np.int64).max, check.reason.reshape(C, P) + 10 * ks[:, None])
+    feasible = ok.all(axis=0)
+    reason = np.where(feasible, 0, codes.min(axis=0, initial=np.iinfo(np.int64).max))
+    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
+        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
+    else:
+        key = np.where(feasible, np.nanmin(np.where(np.isnan(r), np.inf, r), axis=1),
+                       -VIOLATION_OFFSET - total_violation)
+    return key, r, reason
+
+
+def _score_reference(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | None,
+                     poses: np.ndarray, ignore_grasps: bool, configs: tuple[int, ...] = ALL,
+                     known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
+                                                               np.ndarray]:
+    """`_score` through the numpy path (check_poses + violation), for the tests to compare."""
     s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
     world = scn if not ignore_grasps else _NaiveWorld(scn)
     P = poses.shape[0]

@@ -1,0 +1,807 @@
+"""Compiled pose feasibility: `check_poses(..., full=True)` and `violation` in one numba loop.
+
+The transition search scores thousands of small batches of poses; in numpy each batch costs a
+few milliseconds of per-call overhead (dozens of small array operations), whatever its size.
+`score_poses` runs the same tests in the same order, with the same constants and algorithms,
+one pose at a time in compiled code, and returns what the search needs: feasibility, the first
+failing `Reason`, the allocation's robustness, log-probabilities and tensions, and the
+violation. `score_rows` does the same for rows that each pair a pose with one of several
+stances (a transition's four configurations in one call). `rb_drake.feasibility` stays the
+reference, and is used everywhere else.
+
+Where the numpy path calls LAPACK (determinants, 3x3 solves, the SVD of the conditioning) this
+module uses cofactor determinants, Gaussian elimination with partial pivoting and a one-sided
+Jacobi SVD; it has its own `log_ndtr` and `erfcx` (numba has no scipy.special), and its
+allocation stops the safeguarded Newton steps once they move by less than NEWTON_EXIT, where
+`statics.allocate`'s remaining steps move by rounding errors. Results differ in the last bits
+only: on 310,000 poses of tests/test_feasibility_kernel.py's cases no feasibility or reason
+differed, and every value agreed to 4e-11 relative (tensions 2e-11, robustness 2e-12), so a
+decision can flip only for a pose within about that of a threshold.
+
+Constants that decide (limits, MIN_CONDITIONING, REGULARISATION, ...) reach the kernels as data
+(`_robot_params`), so that numba's on-disk cache, which only notices changes to this file, can
+never hold stale ones; the Reason codes below are checked against `feasibility.Reason`.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from rb_drake.collision import ANCHOR_CLEARANCE, Rock
+from rb_drake.feasibility import MIN_CONDITIONING, World
+from rb_drake.grasp import HALF_PI
+from rb_drake.params import RobotParams
+from rb_drake.stance import Stance
+from rb_drake.statics import REGULARISATION, STATICS_TOL
+
+NEWTON_STEPS = 12  # statics.allocate's default
+NEWTON_EXIT = 1e-12  # stop once a Newton step is this small (relative to 1 + |t|)
+
+# The special functions' constants, written as grasp.py and scipy's xsf write them.
+_SQRT1_2 = 0.707106781186547524400844362104849039  # M_SQRT1_2, in scipy's log_ndtr
+_INV_SQRT2 = 1.0 / math.sqrt(2.0)                  # grasp.mills_ratio's
+_SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
+_INV_SQRT_PI = 0.56418958354775628694807945156     # Faddeeva's ispi
+_CEPHES_MAXLOG = 7.09782712893383996843e2
+_SPLIT = 134217729.0                               # 2^27 + 1, Dekker's splitter
+_TWO_PI = 2.0 * math.pi
+
+# Layout of the packed robot parameters (`_robot_params`).
+_SHOULDER = 0       # 8 values: x0, y0, ..., x3, y3 (body frame)
+_DIRECTION = 8      # 4 values: equilibrium directions (rad)
+_RANGE = 12
+_L_LO, _L_HI = 13, 14
+_F_LO, _F_HI = 15, 16
+_TORQUE_MAX = 17
+_GRIPPER_MASS = 18
+_DENSITY = 19
+_BODY_MASS = 20
+_WIDTH, _HEIGHT = 21, 22
+_LOG_P_MIN = 23
+_GRAVITY = 24       # 2 values
+_MOMENT_SCALE = 26  # 1 / largest shoulder distance, as in wrench_conditioning
+_MIN_CONDITIONING = 27
+_REGULARISATION = 28
+_STATICS_TOL = 29
+_CLEARANCE = 30
+_N_PARAMS = 31
+
+# Reason codes (feasibility.Reason), as plain ints for the compiled code.
+_BOOM_LENGTH, _SHOULDER_ANGLE, _BODY_COLLISION, _BOOM_COLLISION = 1, 2, 3, 4
+_PULL_ANGLE, _SHOULDER_TORQUE, _SINGULAR, _STATICS, _PROBABILITY = 5, 6, 7, 8, 9
+
+
+class KernelCheck(NamedTuple):
+    """`check_poses(..., full=True)` and `violation` at P poses, in one."""
+
+    feasible: np.ndarray    # (P,) bool
+    reason: np.ndarray      # (P,) Reason codes (first failing test)
+    robustness: np.ndarray  # (P,) allocated r; -inf where statics fail
+    log_probs: np.ndarray   # (P, 4) log P_i (0 for a free boom)
+    tensions: np.ndarray    # (P, 4) allocated; NaN for a free boom and where none exist
+    violation: np.ndarray   # (P,) feasibility.violation: 0 where feasible
+
+
+class PackedStances(NamedTuple):
+    """Stances as the kernel reads them, one per row: S rows (a free boom's entries NaN)."""
+
+    positions: np.ndarray      # (S, 4, 2)
+    normals: np.ndarray        # (S, 4, 2)
+    f_normal: np.ndarray       # (S, 4)
+    f_lateral: np.ndarray      # (S, 4)
+    sigma_normal: np.ndarray   # (S, 4)
+    sigma_lateral: np.ndarray  # (S, 4)
+    attached: np.ndarray       # (S, 4) bool
+
+
+def pack_stances(*stances: Stance) -> PackedStances:
+    """Plain (not per-row) stances, one row each, for `score_rows`."""
+    for stance in stances:
+        _anchor_count(stance)
+    return PackedStances(*(np.stack([getattr(s, name) for s in stances]).astype(
+        bool if name == "attached" else float) for name in PackedStances._fields))
+
+
+def score_poses(world: World, stance: Stance, poses: np.ndarray,
+                free_tip: np.ndarray | None = None, ignore_grasps: bool = False) -> KernelCheck:
+    """`check_poses(world, stance, poses, free_tip, full=True, ignore_grasps)` followed by
+    `violation(...)` on the same poses, compiled.
+
+    `stance` may be per-row (`Stance.mix`); a 3-stance needs `free_tip`, (2,) or (P, 2)."""
+    poses = np.ascontiguousarray(poses, dtype=float).reshape(-1, 3)
+    P = poses.shape[0]
+    if _anchor_count(stance) == 3:
+        if free_tip is None:
+            raise ValueError(f"a 3-stance (boom {stance.free_boom} free) needs the free "
+                             "gripper's position")
+        tips = _floats(free_tip, (-1, 2))
+        if tips.shape[0] not in (1, P):
+            raise ValueError(f"free_tip holds {tips.shape[0]} points for {P} poses")
+    else:
+        tips = _NO_TIP
+    S = P if stance.positions.ndim == 3 else 1
+    attached = np.tile(np.asarray(stance.attached, dtype=bool), (S, 1))
+    packed = PackedStances(_floats(stance.positions, (S, 4, 2)), _floats(stance.normals, (S, 4, 2)),
+                           _floats(stance.f_normal, (S, 4)), _floats(stance.f_lateral, (S, 4)),
+                           _floats(stance.sigma_normal, (S, 4)),
+                           _floats(stance.sigma_lateral, (S, 4)), attached)
+    rows = np.arange(P)
+    return score_rows(world, packed, tips, poses, rows, rows if S > 1 else np.zeros(P, np.int64),
+                      rows if tips.shape[0] > 1 else np.zeros(P, np.int64), ignore_grasps)
+
+
+def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np.ndarray,
+               pose_row: np.ndarray, stance_row: np.ndarray, tip_row: np.ndarray,
+               ignore_grasps: bool = False) -> KernelCheck:
+    """`score_poses` for R rows at once, each its own configuration: row r is pose
+    poses[pose_row[r]] in stance stances[stance_row[r]], with the free gripper of a 3-stance
+    at tips[tip_row[r]] (tips: (T, 2); ignored in a 4-stance). Lets one call score several
+    stances, as a transition's four configurations."""
+    R = len(pose_row)
+    reason = np.empty(R, dtype=np.int64)
+    robustness = np.empty(R)
+    log_probs = np.empty((R, 4))
+    tensions = np.empty((R, 4))
+    violation = np.empty(R)
+    if R:
+        edges, owner, vertices = _packed_rock(world.rock)
+        _score_kernel(_floats(poses, (-1, 3)), _robot_params(world.robot, world.gravity_vector),
+                      *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
+                      _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
+                      reason, robustness, log_probs, tensions, violation)
+    return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation)
+
+
+_NO_TIP = np.full((1, 2), np.nan)
+
+
+def _anchor_count(stance: Stance) -> int:
+    n = int(np.count_nonzero(stance.attached))
+    if n not in (3, 4):
+        raise ValueError(f"a stance holds 3 or 4 anchors, this one holds {n}")
+    return n
+
+
+# The kernel is compiled for C-contiguous, writable float64 / int64 / bool arrays: anything
+# else (a read-only view, say) would trigger a second compilation of it.
+def _floats(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=float).reshape(shape)
+    return a if a.flags.writeable else a.copy()
+
+
+def _indices(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=np.int64)
+    return a if a.flags.writeable else a.copy()
+
+
+def _robot_params(robot: RobotParams, gravity: np.ndarray) -> np.ndarray:
+    """The robot, gravity and the feasibility constants as one float array (layout above);
+    the last one is kept, as a planner asks for the same robot thousands of times."""
+    g_x, g_y = float(gravity[0]), float(gravity[1])
+    last = _LAST_PARAMS[0]
+    if last is not None and last[0] is robot and last[1] == g_x and last[2] == g_y:
+        return last[3]
+    params = _pack_robot(robot, g_x, g_y)
+    _LAST_PARAMS[0] = (robot, g_x, g_y, params)
+    return params
+
+
+_LAST_PARAMS: list[tuple[RobotParams, float, float, np.ndarray] | None] = [None]
+
+
+@lru_cache(maxsize=16)
+def _pack_robot(robot: RobotParams, g_x: float, g_y: float) -> np.ndarray:
+    p = np.empty(_N_PARAMS)
+    p[_SHOULDER:_SHOULDER + 8] = robot.shoulder_array.ravel()
+    p[_DIRECTION:_DIRECTION + 4] = robot.shoulder_directions
+    p[_RANGE] = robot.shoulder_range
+    p[_L_LO], p[_L_HI] = robot.boom_length
+    p[_F_LO], p[_F_HI] = robot.boom_tension
+    p[_TORQUE_MAX] = robot.shoulder_torque_max
+    p[_GRIPPER_MASS] = robot.gripper_mass
+    p[_DENSITY] = robot.boom_linear_density
+    p[_BODY_MASS] = robot.body_mass
+    p[_WIDTH], p[_HEIGHT] = robot.body_size
+    p[_LOG_P_MIN] = robot.log_p_min
+    p[_GRAVITY], p[_GRAVITY + 1] = g_x, g_y
+    p[_MOMENT_SCALE] = 1.0 / float(np.linalg.norm(robot.shoulder_array, axis=1).max())
+    p[_MIN_CONDITIONING] = MIN_CONDITIONING
+    p[_REGULARISATION] = REGULARISATION
+    p[_STATICS_TOL] = STATICS_TOL
+    p[_CLEARANCE] = ANCHOR_CLEARANCE
+    return p
+
+
+_ROCK_CACHE: weakref.WeakKeyDictionary[Rock, tuple[np.ndarray, np.ndarray, np.ndarray]] = (
+    weakref.WeakKeyDictionary())
+
+
+def _packed_rock(rock: Rock) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Edges (E, 4: x0, y0, x1, y1), the polygon of each edge (E,) and one vertex per polygon
+    (W, 2), packed once per Rock."""
+    packed = _ROCK_CACHE.get(rock)
+    if packed is None:
+        if rock.polygons:
+            edges = np.hstack([rock.edge_start, rock.edge_end])
+            owner = np.repeat(np.arange(len(rock.polygons)), [len(p) for p in rock.polygons])
+            vertices = np.array(rock.vertex, dtype=float)
+        else:
+            edges, owner, vertices = np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros((0, 2))
+        packed = (np.ascontiguousarray(edges, dtype=float), owner.astype(np.int64),
+                  np.ascontiguousarray(vertices))
+        _ROCK_CACHE[rock] = packed
+    return packed
+
+
+# ---------------------------------------------------------------------------------------------
+# Special functions (scipy.special's algorithms: xsf log_ndtr, Faddeeva erfcx)
+
+
+@njit(cache=True, error_model="numpy")
+def _erfcx_nonnegative(x: float) -> float:
+    if x < 26.0:
+        # erfc(x) exp(x^2), with the rounding error of x^2 restored (Dekker's exact product):
+        # exp would otherwise turn it into a relative error of up to 7e-14.
+        xx = x * x
+        t = _SPLIT * x
+        hi = t - (t - x)
+        lo = x - hi
+        err = ((hi * hi - xx) + 2.0 * hi * lo) + lo * lo
+        return math.erfc(x) * math.exp(xx) * (1.0 + err)
+    if x < 50.0:  # asymptotic series; its 9th term is below 1e-20 here
+        inv2 = 0.5 / (x * x)
+        term, total = 1.0, 1.0
+        for n in range(1, 10):
+            term *= -(2 * n - 1) * inv2
+            total += term
+        return _INV_SQRT_PI / x * total
+    if x < 5e7:  # Faddeeva's continued fraction, as scipy
+        return _INV_SQRT_PI * ((x * x) * (x * x + 4.5) + 2) / (x * ((x * x) * (x * x + 5) + 3.75))
+    return _INV_SQRT_PI / x
+
+
+@njit(cache=True, error_model="numpy")
+def erfcx(x: float) -> float:
+    """The scaled complementary error function exp(x^2) erfc(x) (scipy.special.erfcx)."""
+    if x < 0.0:
+        if x < -26.7:
+            return math.inf
+        if x < -6.1:
+            return 2.0 * math.exp(x * x)
+        return 2.0 * math.exp(x * x) - _erfcx_nonnegative(-x)
+    return _erfcx_nonnegative(x)
+
+
+@njit(cache=True, error_model="numpy")
+def log_ndtr(x: float) -> float:
+    """log Phi(x), as scipy.special.log_ndtr computes it."""
+    t = x * _SQRT1_2
+    if x < -1.0:
+        return math.log(erfcx(-t) / 2) - t * t
+    # scipy's erfc (cephes) is exp(-t^2) times a rational function from t = 1 on; computing it
+    # the same way keeps the far tail (log Phi ~ -1e-100) within rounding of scipy's.
+    if t < 1.0:
+        upper = math.erfc(t)
+    elif -t * t < -_CEPHES_MAXLOG:  # cephes returns 0 where exp(-t^2) would be subnormal
+        upper = 0.0
+    else:
+        upper = math.exp(-t * t) * _erfcx_nonnegative(t)
+    return math.log1p(-upper / 2)
+
+
+@njit(cache=True, error_model="numpy")
+def mills_ratio(z: float) -> float:
+    """phi(z) / Phi(z), as grasp.mills_ratio computes it."""
+    return _SQRT_2_OVER_PI / erfcx(-z * _INV_SQRT2)
+
+
+# ---------------------------------------------------------------------------------------------
+# Small dense linear algebra
+
+
+@njit(cache=True, error_model="numpy")
+def _det3(M: np.ndarray) -> float:
+    return (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+            - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+            + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+
+
+@njit(cache=True, error_model="numpy")
+def _solve3(M: np.ndarray, rhs: np.ndarray, out: np.ndarray) -> None:
+    """out = M^-1 rhs by Gaussian elimination with partial pivoting (M, rhs overwritten)."""
+    for k in range(3):
+        p = k
+        for i in range(k + 1, 3):
+            if abs(M[i, k]) > abs(M[p, k]):
+                p = i
+        if p != k:
+            for j in range(3):
+                M[k, j], M[p, j] = M[p, j], M[k, j]
+            rhs[k], rhs[p] = rhs[p], rhs[k]
+        for i in range(k + 1, 3):
+            m = M[i, k] / M[k, k]
+            for j in range(k + 1, 3):
+                M[i, j] -= m * M[k, j]
+            rhs[i] -= m * rhs[k]
+    for k in range(2, -1, -1):
+        s = rhs[k]
+        for j in range(k + 1, 3):
+            s -= M[k, j] * out[j]
+        out[k] = s / M[k, k]
+
+
+@njit(cache=True, error_model="numpy")
+def _smallest_singular_value(B: np.ndarray, k: int) -> float:
+    """The smallest singular value of the 3 x k matrix B[:, :k] (k >= 3; B overwritten), by
+    one-sided Jacobi on its rows: accurate to about eps times the largest one."""
+    for _ in range(40):
+        rotated = False
+        for p in range(2):
+            for q in range(p + 1, 3):
+                alpha = beta = gamma = 0.0
+                for j in range(k):
+                    alpha += B[p, j] * B[p, j]
+                    beta += B[q, j] * B[q, j]
+                    gamma += B[p, j] * B[q, j]
+                if abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
+                    continue
+                rotated = True
+                zeta = (beta - alpha) / (2.0 * gamma)
+                t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                c = 1.0 / math.sqrt(1.0 + t * t)
+                s = c * t
+                for j in range(k):
+                    bp, bq = B[p, j], B[q, j]
+                    B[p, j] = c * bp - s * bq
+                    B[q, j] = s * bp + c * bq
+        if not rotated:
+            break
+    smallest = math.inf
+    for p in range(3):
+        norm2 = 0.0
+        for j in range(k):
+            norm2 += B[p, j] * B[p, j]
+        smallest = min(smallest, math.sqrt(norm2))
+    return smallest
+
+
+# ---------------------------------------------------------------------------------------------
+# Collision (collision.Rock.segments_hit / contains, feasibility.rock_inside_body)
+
+
+@njit(cache=True, error_model="numpy")
+def _orient(ax, ay, bx, by, cx, cy):
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@njit(cache=True, error_model="numpy")
+def _segment_hits(ax, ay, bx, by, edges, near) -> bool:
+    """Whether segment a-b crosses or touches one of the edges `near` (collision's test)."""
+    lo_x, hi_x = min(ax, bx), max(ax, bx)
+    lo_y, hi_y = min(ay, by), max(ay, by)
+    for e in near:
+        cx, cy, dx, dy = edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3]
+        if (max(cx, dx) < lo_x or min(cx, dx) > hi_x or max(cy, dy) < lo_y
+                or min(cy, dy) > hi_y):
+            continue  # apart (collision.Rock culls the same way, per batch)
+        o1 = _orient(ax, ay, bx, by, cx, cy)
+        o2 = _orient(ax, ay, bx, by, dx, dy)
+        o3 = _orient(cx, cy, dx, dy, ax, ay)
+        o4 = _orient(cx, cy, dx, dy, bx, by)
+        if o1 * o2 <= 0 and o3 * o4 <= 0 and not (o1 == 0 and o2 == 0):
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _inside_rock(x, y, edges, owner, near, parity) -> bool:
+    """Whether point (x, y) lies inside some polygon (even-odd rule per polygon)."""
+    parity[:] = 0
+    for e in near:
+        x0, y0, x1, y1 = edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3]
+        if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+            parity[owner[e]] ^= 1
+    return parity.any()
+
+
+@njit(cache=True, error_model="numpy")
+def _near_edges(poses, edges, reach) -> tuple[np.ndarray, np.ndarray]:
+    """Edges that a body or boom at one of the poses can touch (within `reach` of a centre), and
+    those a ray towards +x from a body corner can cross. Like collision.Rock's culling per
+    batch, this only drops edges that cannot change a result."""
+    x_lo, x_hi = poses[:, 0].min() - reach, poses[:, 0].max() + reach
+    y_lo, y_hi = poses[:, 1].min() - reach, poses[:, 1].max() + reach
+    hit = np.empty(edges.shape[0], dtype=np.int64)
+    ray = np.empty(edges.shape[0], dtype=np.int64)
+    n_hit = n_ray = 0
+    for e in range(edges.shape[0]):
+        ex_lo, ex_hi = min(edges[e, 0], edges[e, 2]), max(edges[e, 0], edges[e, 2])
+        ey_lo, ey_hi = min(edges[e, 1], edges[e, 3]), max(edges[e, 1], edges[e, 3])
+        if ey_hi >= y_lo and ey_lo <= y_hi and ex_hi >= x_lo:
+            ray[n_ray] = e
+            n_ray += 1
+            if ex_lo <= x_hi:
+                hit[n_hit] = e
+                n_hit += 1
+    return hit[:n_hit], ray[:n_ray]
+
+
+# ---------------------------------------------------------------------------------------------
+# The kernel
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap(a: float) -> float:
+    w = (a + math.pi) % _TWO_PI - math.pi
+    return w - _TWO_PI if w >= math.pi else w
+
+
+@njit(cache=True, error_model="numpy")
+def _slope(t, fp, n, mu, sigma, dz, reg, curvature) -> tuple[float, float]:
+    """d/dt (and d2/dt2) of the allocation objective along the tension family fp + t n."""
+    d1 = 0.0
+    reg1 = 0.0
+    d2 = 0.0
+    reg2 = 0.0
+    for i in range(4):
+        f = fp[i] + t * n[i]
+        z = (mu[i] - f) / sigma[i]
+        lam = mills_ratio(z)
+        d1 += lam * dz[i]
+        reg1 += f * n[i]
+        if curvature:
+            d2 += -lam * (z + lam) * dz[i] * dz[i]
+            reg2 += n[i] * n[i]
+    return d1 - reg * reg1, d2 - reg * reg2
+
+
+@njit(cache=True, error_model="numpy")
+def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, work, rhs,
+               w) -> tuple[bool, bool]:
+    """statics.allocate for four attached booms: the most robust member of the family
+    fp + t n within the tension bounds, into f (NaN where there is none). Leaves fp and the
+    unnormalised null vector (minors) for the violation; returns (ok, A A^T regular)."""
+    for c in range(4):  # null vector by signed 3x3 minors
+        m = 0
+        for j in range(4):
+            if j != c:
+                for r in range(3):
+                    work[r, m] = A[r, j]
+                m += 1
+        minors[c] = _det3(work) * (1.0 if c % 2 == 0 else -1.0)
+    n_norm = math.sqrt(minors[0] * minors[0] + minors[1] * minors[1] + minors[2] * minors[2]
+                       + minors[3] * minors[3])
+    n, mu, sigma, dz = vec[0], vec[1], vec[2], vec[3]
+    for i in range(4):
+        n[i] = minors[i] / max(n_norm, 1e-300)
+    for r in range(3):  # particular (minimum-norm) solution A^T (A A^T)^-1 b
+        for c in range(3):
+            s = 0.0
+            for j in range(4):
+                s += A[r, j] * A[c, j]
+            work[r, c] = s
+        rhs[r] = b[r]
+    regular = abs(_det3(work)) > 1e-14
+    if not regular:
+        for r in range(3):
+            for c in range(3):
+                work[r, c] = 1.0 if r == c else 0.0
+    _solve3(work, rhs, w)
+    for i in range(4):
+        fp[i] = A[0, i] * w[0] + A[1, i] * w[1] + A[2, i] * w[2]
+    t_lo, t_hi = -math.inf, math.inf
+    for i in range(4):
+        if abs(n[i]) < 1e-12:
+            inside = fp[i] >= f_lo - 1e-9 and fp[i] <= f_hi + 1e-9
+            lo_i, hi_i = (-math.inf, math.inf) if inside else (math.inf, -math.inf)
+        else:
+            t1 = (f_lo - fp[i]) / n[i]
+            t2 = (f_hi - fp[i]) / n[i]
+            lo_i, hi_i = min(t1, t2), max(t1, t2)
+        t_lo, t_hi = max(t_lo, lo_i), min(t_hi, hi_i)
+    ok = regular and t_lo <= t_hi and n_norm > 1e-12
+    if not ok:
+        t_lo = t_hi = 0.0
+    for i in range(4):
+        if abs(psi[i]) < HALF_PI:
+            sigma[i] = sn[i] + (abs(psi[i]) / HALF_PI) * (st[i] - sn[i])
+            mu[i] = _mean_limit(psi[i], fn[i], ft[i])
+            dz[i] = -n[i] / sigma[i]
+        else:
+            sigma[i], mu[i], dz[i] = 1.0, 1e6, 0.0
+    # The concave objective's slope has one root in [t_lo, t_hi]: safeguarded Newton steps
+    # inside a shrinking bracket, as statics.allocate (same start, steps and order). allocate
+    # always takes NEWTON_STEPS steps; here they stop once a Newton step moves t by less than
+    # NEWTON_EXIT (relative), where allocate's remaining steps move it by rounding errors only.
+    if not ok:
+        t = math.nan
+    elif _slope(t_lo, fp, n, mu, sigma, dz, reg, False)[0] <= 0.0:
+        t = t_lo
+    elif _slope(t_hi, fp, n, mu, sigma, dz, reg, False)[0] >= 0.0:
+        t = t_hi
+    else:
+        lo, hi = t_lo, t_hi
+        t = 0.5 * (lo + hi)
+        for _ in range(NEWTON_STEPS):
+            d1, d2 = _slope(t, fp, n, mu, sigma, dz, reg, True)
+            if d1 > 0.0:
+                lo = t
+            else:
+                hi = t
+            step = t - d1 / d2
+            inside = math.isfinite(step) and lo <= step <= hi
+            if inside and abs(step - t) <= NEWTON_EXIT * (1.0 + abs(t)):
+                t = step
+                break
+            t = step if inside else 0.5 * (lo + hi)
+    for i in range(4):
+        f[i] = fp[i] + t * n[i]
+    return ok, regular
+
+
+@njit(cache=True, error_model="numpy")
+def _mean_limit(psi, fn, ft):
+    c, s = math.cos(psi), math.sin(psi)
+    return fn * ft / math.sqrt((ft * c) ** 2 + (fn * s) ** 2)
+
+
+@njit(cache=True, error_model="numpy")
+def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                  sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
+                  vertices, ignore_grasps, reason_out, r_out, lp_out, f_out, v_out) -> None:
+    """check_poses(full=True) and violation for each row (see score_rows), into the outputs."""
+    L_lo, L_hi, rng = prm[_L_LO], prm[_L_HI], prm[_RANGE]
+    f_lo, f_hi = prm[_F_LO], prm[_F_HI]
+    gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
+    reg = prm[_REGULARISATION]
+    log_p_min = prm[_LOG_P_MIN]
+    half_w, half_h = prm[_WIDTH] / 2, prm[_HEIGHT] / 2
+    corner_x = np.array([half_w, -half_w, -half_w, half_w])
+    corner_y = np.array([half_h, half_h, -half_h, -half_h])
+    has_rock = edges.shape[0] > 0
+    shoulder_reach = 0.0
+    for i in range(4):
+        sx, sy = prm[_SHOULDER + 2 * i], prm[_SHOULDER + 2 * i + 1]
+        shoulder_reach = max(shoulder_reach, math.sqrt(sx * sx + sy * sy))
+    # Every segment tested for collision lies within this distance of its pose's centre (a
+    # boom is tested only once its length is within bounds).
+    reach = max(shoulder_reach + L_hi, math.sqrt(half_w * half_w + half_h * half_h)) + 1.0
+    near_hit, near_ray = _near_edges(poses, edges, reach)
+    parity = np.zeros(vertices.shape[0], dtype=np.int64)
+    # Per-pose scratch.
+    L = np.empty(4)
+    theta = np.empty(4)
+    sh = np.empty((4, 2))     # shoulders in the world
+    off = np.empty((4, 2))    # R(phi) s_i
+    tg = np.empty((4, 2))     # targets
+    u = np.empty((4, 2))
+    psi = np.empty(4)
+    A = np.empty((3, 4))
+    b = np.empty(3)
+    f = np.empty(4)
+    fp = np.empty(4)
+    minors = np.empty(4)
+    vec = np.empty((4, 4))
+    lp = np.empty(4)
+    work = np.empty((3, 3))
+    rhs = np.empty(3)
+    w = np.empty(3)
+    B = np.empty((3, 4))
+    cx = np.empty(4)
+    cy = np.empty(4)
+    for row in range(pose_row.shape[0]):
+        k, sk, tk = pose_row[row], stance_row[row], tip_row[row]
+        att = attached[sk]
+        free = -1
+        for i in range(4):
+            if not att[i]:
+                free = i
+        if free >= 0 and not (math.isfinite(tips[tk, 0]) and math.isfinite(tips[tk, 1])):
+            raise ValueError("a 3-stance row needs a finite free-gripper position")
+        x, y, phi = poses[k, 0], poses[k, 1], poses[k, 2]
+        c, s = math.cos(phi), math.sin(phi)
+        fn, ft = f_normal[sk], f_lateral[sk]
+        sn, st = sigma_normal[sk], sigma_lateral[sk]
+        # -- geometry (geometry.boom_geometry, statics.statics_problem)
+        for i in range(4):
+            sx, sy = prm[_SHOULDER + 2 * i], prm[_SHOULDER + 2 * i + 1]
+            off[i, 0], off[i, 1] = c * sx - s * sy, s * sx + c * sy
+            sh[i, 0], sh[i, 1] = x + off[i, 0], y + off[i, 1]
+            if att[i]:
+                tg[i, 0], tg[i, 1] = positions[sk, i, 0], positions[sk, i, 1]
+            else:
+                tg[i, 0], tg[i, 1] = tips[tk, 0], tips[tk, 1]
+            dx, dy = tg[i, 0] - sh[i, 0], tg[i, 1] - sh[i, 1]
+            L[i] = math.sqrt(dx * dx + dy * dy)
+            u[i, 0], u[i, 1] = dx / L[i], dy / L[i]
+            theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[_DIRECTION + i])
+            if att[i]:
+                nx, ny = normals[sk, i, 0], normals[sk, i, 1]
+                vx, vy = -u[i, 0], -u[i, 1]
+                psi[i] = math.atan2(nx * vy - ny * vx, nx * vx + ny * vy)
+                A[0, i], A[1, i] = u[i, 0], u[i, 1]
+                A[2, i] = off[i, 0] * u[i, 1] - off[i, 1] * u[i, 0]
+            else:
+                psi[i] = math.nan
+                A[0, i] = A[1, i] = A[2, i] = 0.0
+        b[0] = -prm[_BODY_MASS] * gx
+        b[1] = -prm[_BODY_MASS] * gy
+        b[2] = 0.0
+        torque = 0.0
+        if free >= 0:  # the cantilevered free limb (geometry.limb_load)
+            m_boom = prm[_DENSITY] * L[free]
+            m_grip = prm[_GRIPPER_MASS]
+            tx, ty = tg[free, 0], tg[free, 1]
+            px, py = sh[free, 0], sh[free, 1]
+            mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
+            b[0] -= (m_boom + m_grip) * gx
+            b[1] -= (m_boom + m_grip) * gy
+            b[2] -= (m_boom * ((mx - x) * gy - (my - y) * gx)
+                     + m_grip * ((tx - x) * gy - (ty - y) * gx))
+            torque = (m_boom * ((mx - px) * gy - (my - py) * gx)
+                      + m_grip * ((tx - px) * gy - (ty - py) * gx))
+        # -- kinematic limits
+        code = 0
+        for i in range(4):
+            if L[i] < L_lo or L[i] > L_hi:
+                code = _BOOM_LENGTH
+                break
+        if code == 0:
+            for i in range(4):
+                if abs(theta[i]) > rng + 1e-12:
+                    code = _SHOULDER_ANGLE
+                    break
+        # -- collisions (only where they decide the reason)
+        if code == 0 and has_rock:
+            for q in range(4):
+                cx[q] = x + (c * corner_x[q] - s * corner_y[q])
+                cy[q] = y + (s * corner_x[q] + c * corner_y[q])
+            body = False
+            for q in range(4):
+                r = (q + 1) % 4
+                if (_segment_hits(cx[q], cy[q], cx[r], cy[r], edges, near_hit)
+                        or _inside_rock(cx[q], cy[q], edges, owner, near_ray, parity)):
+                    body = True
+                    break
+            if not body:  # a whole rock polygon inside the body square
+                for v in range(vertices.shape[0]):
+                    inside = True
+                    for q in range(4):
+                        r = (q + 1) % 4
+                        side = ((cx[r] - cx[q]) * (vertices[v, 1] - cy[q])
+                                - (cy[r] - cy[q]) * (vertices[v, 0] - cx[q]))
+                        if not side > 0:
+                            inside = False
+                            break
+                    if inside:
+                        body = True
+                        break
+            if body:
+                code = _BODY_COLLISION
+            else:
+                for i in range(4):
+                    ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
+                    uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
+                    ex = tg[i, 0] - prm[_CLEARANCE] * ux
+                    ey = tg[i, 1] - prm[_CLEARANCE] * uy
+                    if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
+                        code = _BOOM_COLLISION
+                        break
+        # -- force allocation (statics.allocate, statics._finish)
+        if free >= 0:
+            m = 0
+            for i in range(4):
+                if att[i]:
+                    for r in range(3):
+                        work[r, m] = A[r, i]
+                    m += 1
+            det = _det3(work)
+            ok = abs(det) > 1e-12
+            for r in range(3):
+                rhs[r] = b[r]
+            _solve3(work, rhs, w)
+            m = 0
+            for i in range(4):
+                if att[i]:
+                    f[i] = w[m] if ok else math.nan
+                    m += 1
+                else:
+                    f[i] = math.nan
+            ten = 0.0  # violation: the unique tensions' excess over the bounds
+            if abs(det) > 1e-9:
+                for i in range(4):
+                    if att[i]:
+                        ten += max(0.0, f_lo - f[i]) + max(0.0, f[i] - f_hi)
+            else:
+                ten = 100.0
+        else:
+            ok, regular = _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors,
+                                     vec, work, rhs, w)
+            ten = 100.0
+            if regular:  # violation: the least violating member of the family
+                ten = math.inf
+                for bound in (f_lo, f_hi):
+                    for q in range(4):
+                        tq = (bound - fp[q]) / minors[q]
+                        if not math.isfinite(tq):
+                            tq = 0.0
+                        total = 0.0
+                        for i in range(4):
+                            fi = fp[i] + tq * minors[i]
+                            total += max(0.0, f_lo - fi) + max(0.0, fi - f_hi)
+                        ten = min(ten, total)
+        residual = 0.0
+        for r in range(3):
+            acc = 0.0
+            for i in range(4):
+                acc += A[r, i] * (f[i] if math.isfinite(f[i]) else 0.0)
+            residual = max(residual, abs(acc - b[r]))
+        statics_ok = residual < prm[_STATICS_TOL]
+        r_sum = 0.0
+        for i in range(4):
+            if att[i]:
+                fi = f[i] if math.isfinite(f[i]) else 0.0
+                statics_ok = statics_ok and math.isfinite(f[i]) and (
+                    f_lo - 1e-9 <= f[i] <= f_hi + 1e-9)
+                if abs(psi[i]) < HALF_PI:
+                    sig = sn[i] + (abs(psi[i]) / HALF_PI) * (st[i] - sn[i])
+                    lp[i] = log_ndtr((_mean_limit(psi[i], fn[i], ft[i]) - fi) / sig)
+                else:
+                    lp[i] = -math.inf
+            else:
+                lp[i] = 0.0
+            r_sum += lp[i]
+            lp_out[row, i] = lp[i]
+            f_out[row, i] = f[i]
+        robustness = r_sum if statics_ok else -math.inf
+        r_out[row] = robustness
+        # -- the grasp and statics tests (feasibility.check_poses' order)
+        if code == 0 and not ignore_grasps:
+            for i in range(4):
+                if att[i] and not abs(psi[i]) < HALF_PI:
+                    code = _PULL_ANGLE
+                    break
+        if code == 0 and free >= 0 and abs(torque) > prm[_TORQUE_MAX]:
+            code = _SHOULDER_TORQUE
+        m = 0
+        for i in range(4):
+            if att[i]:
+                B[0, m] = A[0, i]
+                B[1, m] = A[1, i]
+                B[2, m] = A[2, i] * prm[_MOMENT_SCALE]
+                m += 1
+        kappa = _smallest_singular_value(B, m)
+        if code == 0 and kappa < prm[_MIN_CONDITIONING]:
+            code = _SINGULAR
+        if code == 0 and not statics_ok:
+            code = _STATICS
+        if code == 0 and not ignore_grasps and robustness < log_p_min:
+            code = _PROBABILITY
+        reason_out[row] = code
+        # -- feasibility.violation
+        v = 0.0
+        for i in range(4):
+            v += (max(0.0, L[i] - L_hi) + max(0.0, L_lo - L[i])
+                  + max(0.0, abs(theta[i]) - rng))
+        if code in (_BODY_COLLISION, _BOOM_COLLISION):
+            v += 1.0
+        v += ten / 10.0
+        if free >= 0:
+            v += max(0.0, abs(torque) - prm[_TORQUE_MAX]) / max(prm[_TORQUE_MAX], 1e-9)
+        v += max(0.0, prm[_MIN_CONDITIONING] - kappa) / prm[_MIN_CONDITIONING]
+        if not ignore_grasps:
+            pull = 0.0
+            for i in range(4):
+                if att[i]:
+                    pull += max(0.0, abs(psi[i]) - (HALF_PI - 1e-3))
+            v += pull
+            r = robustness if math.isfinite(robustness) else log_p_min - 1.0
+            if statics_ok:
+                v += max(0.0, log_p_min - r)
+        v_out[row] = 0.0 if code == 0 else max(v, 1e-6)

@@ -47,7 +47,7 @@ from planning.transition import (
     release_poses,
     transition_stances,
 )
-from rb_drake.feasibility import check_poses
+from rb_drake.feasibility_kernel import score_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -107,7 +107,7 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
     tips = np.vstack([s_old.positions[boom], s_new.positions[boom]])
     worst = np.zeros(4)
     for stance, tip in ((Stance.mix(s_old, s_new, second), None), (s_three, tips)):
-        lp = check_poses(scn, stance, poses, tip).allocation.log_probs
+        lp = score_poses(scn, stance, poses, tip).log_probs
         worst = np.maximum(worst, -np.nan_to_num(lp, nan=0.0).min(axis=0))
     return worst
 
@@ -141,11 +141,11 @@ def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generato
     ang = rng.uniform(0.0, 2 * math.pi, samples)
     poses = np.column_stack([goal[0] + radius * np.cos(ang), goal[1] + radius * np.sin(ang),
                              rng.normal(0.0, 0.3, samples)])
-    check = check_poses(scn, scn.stance(stance), poses, ignore_grasps=ignore_grasps)
+    check = score_poses(scn, scn.stance(stance), poses, ignore_grasps=ignore_grasps)
     if not check.feasible.any():
         return None
     # Among feasible poses the most robust; the naive planner's may all have r = -inf.
-    score = np.where(check.feasible, np.maximum(check.allocation.robustness, -1e300), -np.inf)
+    score = np.where(check.feasible, np.maximum(check.robustness, -1e300), -np.inf)
     return poses[int(np.argmax(score))]
 
 

@@ -22,9 +22,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses, violation
-from rb_drake.feasibility_kernel import PackedStances, score_rows
+from rb_drake.feasibility_kernel import (
+    PackedStances,
+    reach_violation,
+    score_poses,
+    score_rows,
+)
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -370,7 +374,7 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     evaluated = 0
     if not len(release.poses):
         return _cannot_let_go(boom, release)
-    kin = geometry.reach(robot, release.poses, target[None], np.array([boom])).violation[:, 0]
+    kin = reach_violation(robot, release.poses, target[None], np.array([boom]))[:, 0]
     if kin.min() > cfg.max_reach_violation:
         return Transition(False, None, None, f"no pose found: no pose at which boom {boom} can "
                           "let go comes near to reach the new anchor within boom length and "
@@ -452,7 +456,7 @@ def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: n
     if not ok.any():
         return np.zeros(0, dtype=int)
     pts = scn.anchor_positions
-    reachable = (geometry.reach(robot, poses[ok], pts, np.full(len(pts), boom)).violation
+    reachable = (reach_violation(robot, poses[ok], pts, np.full(len(pts), boom))
                  == 0.0).any(axis=0)
     reachable[[scn.anchor_index[a] for a in stance]] = False
     return np.flatnonzero(reachable)
@@ -461,7 +465,7 @@ def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: n
 def _kinematic_violation(robot, poses: np.ndarray, anchors: np.ndarray,
                          booms: np.ndarray) -> np.ndarray:
     """How far boom booms[k] at each pose is from reaching anchors[k], summed over k (m + rad)."""
-    return geometry.reach(robot, poses, anchors, booms).violation.sum(axis=1)
+    return reach_violation(robot, poses, anchors, booms).sum(axis=1)
 
 
 def polish_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
@@ -498,7 +502,7 @@ def polish_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor
             link = origin + np.linspace(0.0, 1.0, n)[:, None] * (cand[b] - origin)
             link2 = np.vstack([link, link])
             mixed = Stance.mix(s_old, s_new, np.repeat([False, True], n))
-            if check_poses(scn, mixed, link2).feasible.all():
+            if score_poses(scn, mixed, link2).feasible.all():
                 best, best_key, best_r = cand[b].copy(), float(k2[b]), r2[b]
                 moved = True
                 break

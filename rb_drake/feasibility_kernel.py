@@ -805,3 +805,38 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             if statics_ok:
                 v += max(0.0, log_p_min - r)
         v_out[row] = 0.0 if code == 0 else max(v, 1e-6)
+
+
+def reach_violation(robot: RobotParams, poses: np.ndarray, targets: np.ndarray,
+                    booms: np.ndarray) -> np.ndarray:
+    """`geometry.reach(robot, poses, targets, booms).violation`, compiled: per pose and k, how
+    far boom booms[k] is from reaching targets[k] (m + rad; 0 where it reaches), (P, K).
+    The transition search ranks thousands of random poses by it per stance."""
+    poses = np.ascontiguousarray(poses, dtype=float).reshape(-1, 3)
+    targets = np.ascontiguousarray(targets, dtype=float).reshape(-1, 2)
+    booms = np.ascontiguousarray(booms, dtype=np.int64).reshape(-1)
+    if len(booms) != len(targets):
+        raise ValueError(f"{len(booms)} booms for {len(targets)} targets")
+    return _reach_kernel(poses, targets, booms, _robot_params(robot, np.zeros(2)))
+
+
+@njit(cache=True)
+def _reach_kernel(poses, targets, booms, params):  # pragma: no cover - compiled
+    P, K = poses.shape[0], targets.shape[0]
+    out = np.empty((P, K))
+    lo, hi, rng = params[_L_LO], params[_L_HI], params[_RANGE]
+    for p in range(P):
+        x, y, phi = poses[p, 0], poses[p, 1], poses[p, 2]
+        c, s = math.cos(phi), math.sin(phi)
+        for k in range(K):
+            i = booms[k]
+            sx, sy = params[_SHOULDER + 2 * i], params[_SHOULDER + 2 * i + 1]
+            dx = targets[k, 0] - (x + (c * sx - s * sy))
+            dy = targets[k, 1] - (y + (s * sx + c * sy))
+            length = math.sqrt(dx * dx + dy * dy)
+            w = (math.atan2(dy, dx) - phi - params[_DIRECTION + i] + math.pi) % _TWO_PI - math.pi
+            if w >= math.pi:
+                w -= _TWO_PI
+            out[p, k] = (max(0.0, length - hi) + max(0.0, lo - length)
+                         + max(0.0, abs(w) - rng))
+    return out

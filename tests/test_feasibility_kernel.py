@@ -339,3 +339,23 @@ def test_constants_mirror_the_reference() -> None:
 def test_compiled_once(compared: dict[str, list[Compared]]) -> None:
     """Every entry point hands the kernel the same array types: one compilation serves all."""
     assert len(fk._score_kernel.signatures) == 1, fk._score_kernel.signatures
+
+
+@pytest.mark.parametrize("cave", ["demo-crevasse", "rockfall-3"])
+def test_reach_violation_matches_geometry(scenarios: dict[str, Scenario], cave: str) -> None:
+    """reach_violation equals geometry.reach(...).violation, and agrees exactly on which
+    anchors are within reach (the search's filters test == 0)."""
+    from rb_drake import geometry
+
+    scn = scenarios[cave]
+    rng = np.random.default_rng(3)
+    lo, hi = scn.anchor_positions.min(axis=0) - 1.0, scn.anchor_positions.max(axis=0) + 1.0
+    poses = np.column_stack([rng.uniform(lo[0], hi[0], 4000), rng.uniform(lo[1], hi[1], 4000),
+                             rng.uniform(-4.0, 4.0, 4000)])
+    booms = rng.integers(0, 4, len(scn.anchor_positions))
+    expected = geometry.reach(scn.robot, poses, scn.anchor_positions, booms).violation
+    got = fk.reach_violation(scn.robot, poses, scn.anchor_positions, booms)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12,
+                               err_msg=f"{cave}: reach violation differs from geometry.reach")
+    assert np.array_equal(got == 0.0, expected == 0.0), f"{cave}: reachability differs"
+    assert (expected == 0.0).mean() > 0.01, f"{cave}: too few reachable pairs to compare"

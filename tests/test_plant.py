@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pydrake.multibody.plant import DiscreteContactApproximation
+from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from rb_drake import geometry
@@ -159,3 +161,108 @@ def test_builder_adds_scene_graph(robot):
     builder.Build()
     standalone = build_plant(robot)
     assert standalone.scene_graph is None and standalone.plant.is_finalized()
+
+
+# ---------------------------------------------------------------------------------------------
+# Tips held at anchors (the simulation's plant)
+
+
+@pytest.fixture(scope="module")
+def held(robot):
+    return build_plant(robot, GRAVITY, time_step=1e-2, hold_tips=True)
+
+
+def test_hold_tips_adds_anchor_bodies_and_ball_constraints(robot, held):
+    plant = held.plant
+    assert plant.num_constraints() == 4 and len(held.holds) == 4 and len(held.anchors) == 4
+    assert plant.get_discrete_contact_approximation() == DiscreteContactApproximation.kSap
+    assert plant.num_positions() == 11 + 4 * 3, "each anchor body on a planar joint"
+    ctx = plant.CreateDefaultContext()
+    # the default context is consistent: every tip held where the default configuration has it
+    for i, tip in enumerate(held.tip_positions(ctx)):
+        np.testing.assert_allclose(held.anchors[i].get_translation(ctx), tip, atol=1e-12,
+                                   err_msg=f"default anchor {i}")
+    anchors = [[1.5, 1.5], None, [-1.5, -1.5], [1.5, -1.5]]
+    held.hold_tips(ctx, anchors)
+    for i, anchor in enumerate(anchors):
+        assert plant.GetConstraintActiveStatus(ctx, held.holds[i]) == (anchor is not None)
+        assert held.anchors[i].is_locked(ctx), f"anchor {i} must stay locked"
+        if anchor is not None:
+            np.testing.assert_allclose(held.anchors[i].get_translation(ctx), anchor, atol=0)
+    with pytest.raises(ValueError, match="hold_tips"):
+        build_plant(robot, GRAVITY).hold_tips(ctx, anchors)
+    with pytest.raises(ValueError, match="discrete"):
+        build_plant(robot, GRAVITY, hold_tips=True)
+
+
+def test_held_tips_stay_on_their_anchors_while_the_body_falls(robot, held):
+    """No tensions: the body falls on its passive joints, the held tips do not move (SAP
+    ball constraints, 10 ms steps: within 1 mm through the booms' stops), the free tip falls
+    with the body."""
+    plant = held.plant
+    simulator = Simulator(plant)
+    ctx = simulator.get_mutable_context()
+    pose = np.array([0.0, 0.0, 0.1])
+    tips = geometry.tip_positions(robot, pose, np.zeros(4), np.full(4, 1.0))
+    held.hold_tips(ctx, [tips[0], tips[1], tips[2], None])
+    q = plant.GetPositions(ctx)
+    q[held.q_order] = held.canonical_q(pose, np.zeros(4), np.full(4, 1.0))
+    plant.SetPositions(ctx, q)
+    plant.get_applied_generalized_force_input_port().FixValue(
+        ctx, np.zeros(plant.num_velocities()))
+    simulator.AdvanceTo(0.5)
+    now = held.tip_positions(ctx)
+    moved = np.linalg.norm(plant.GetPositions(ctx)[held.base.position_start():][:2] - pose[:2])
+    assert moved > 0.05, f"the body should fall, moved {moved}"
+    np.testing.assert_allclose(now[:3], tips[:3], atol=1e-3, err_msg="held tips moved")
+    assert np.linalg.norm(now[3] - tips[3]) > 0.05, "the free tip should fall"
+
+
+def test_boom_masses_weigh_like_the_free_limb_of_the_model(robot, held):
+    """Half of a boom's mass at its tip and half at its shoulder: its weight, its moment about
+    the shoulder and about the body centre are those of geometry.limb_load's uniform boom."""
+    plant = held.plant
+    ctx = plant.CreateDefaultContext()
+    rng = np.random.default_rng(6)
+    bare = robot.replace(gripper_mass=0.0)  # limb_load's boom part alone
+    for k, (pose, th, L) in enumerate(random_configs(robot, 6, seed=7)):
+        q = plant.GetPositions(ctx)
+        q[held.q_order] = held.canonical_q(pose, th, L)
+        plant.SetPositions(ctx, q)
+        boom = int(rng.integers(4))
+        masses = np.zeros(4)
+        masses[boom] = robot.boom_linear_density * L[boom]
+        held.set_boom_masses(ctx, np.zeros(4))
+        before = plant.CalcGravityGeneralizedForces(ctx)
+        held.set_boom_masses(ctx, masses)
+        delta = plant.CalcGravityGeneralizedForces(ctx) - before
+        tip = geometry.tip_positions(robot, pose, th, L)[boom]
+        want = geometry.limb_load(bare, pose, boom, tip, np.asarray(GRAVITY))
+        v0 = held.base.velocity_start()
+        np.testing.assert_allclose(delta[v0:v0 + 2], want.force[0], atol=1e-12,
+                                   err_msg=f"config {k}: weight")
+        assert delta[v0 + 2] == pytest.approx(want.moment[0], abs=1e-12), f"config {k}: moment"
+        shoulder = delta[held.shoulders[boom].velocity_start()]
+        assert shoulder == pytest.approx(want.shoulder_torque[0], abs=1e-12), f"config {k}"
+        assert held.tips[boom].get_mass(ctx) == pytest.approx(
+            robot.gripper_mass + 0.5 * masses[boom], abs=1e-15)
+
+
+def test_plant_options_limits_and_live_outputs(robot):
+    free = build_plant(robot, GRAVITY, time_step=1e-2, hold_tips=True, live_outputs=True,
+                       joint_limits=False)
+    for joint in (*free.shoulders, *free.booms):
+        assert joint.position_lower_limits()[0] == -np.inf, joint.name()
+        assert joint.position_upper_limits()[0] == np.inf, joint.name()
+    # live outputs: the reaction forces of a fresh context (5 N in each held boom); sampled
+    # ones (Drake's default) read zero until the first step
+    for rb, live in ((free, True), (build_plant(robot, GRAVITY, 1e-2, hold_tips=True), False)):
+        ctx = rb.plant.CreateDefaultContext()
+        rb.hold_tips(ctx, rb.tip_positions(ctx))
+        u = np.zeros(rb.plant.num_velocities())
+        u[[b.velocity_start() for b in rb.booms]] = -5.0
+        rb.plant.get_applied_generalized_force_input_port().FixValue(ctx, u)
+        reactions = rb.plant.get_reaction_forces_output_port().Eval(ctx)
+        axial = np.array([reactions[b.index()].translational()[0] for b in rb.booms])
+        want = -5.0 if live else 0.0
+        np.testing.assert_allclose(axial, want, atol=0.05, err_msg=f"live={live}")

@@ -43,8 +43,9 @@ def simulate_trial(runs: int, mc_seed: int, **params: Any) -> dict[str, Any]:
     stochastic executions: {"plan": ..., "simulated": ... or None, "timing": ...}."""
     import time
 
-    from systems.diagram import ClimbSimulator, PlanTrajectory
+    from systems.diagram import ClimbSimulator
     from systems.montecarlo import monte_carlo
+    from systems.trajectory import PlanTrajectory
 
     start = time.perf_counter()
     try:

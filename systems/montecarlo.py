@@ -49,13 +49,9 @@ from planning.probability import Configuration, path_probability
 from rb_drake import grasp
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
-from systems.diagram import (
-    Cause,
-    ClimbSimulator,
-    PlanTrajectory,
-    SimulationRecord,
-    StrengthDraws,
-)
+from systems.diagram import ClimbSimulator, SimulationRecord
+from systems.monitors import Cause
+from systems.trajectory import PlanTrajectory, StrengthDraws
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
 RETRY_DURATION = 2.0     # s, to re-grasp the same anchor

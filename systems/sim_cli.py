@@ -76,8 +76,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     plan = _load_plan(path)
 
     from rb_drake.files import atomic_write_text
-    from systems.diagram import ClimbSimulator, PlanError, PlanTrajectory, plan_scenario
+    from systems.diagram import ClimbSimulator
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
+    from systems.trajectory import PlanError, PlanTrajectory, plan_scenario
 
     scn = plan_scenario(plan, str(path))
     try:

@@ -33,7 +33,7 @@ from planning.plan import BODY_SPEED, FORMAT, plan_configurations, validate
 from planning.probability import path_probability
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
-from systems.diagram import ClimbSimulator, PlanTrajectory, SimulationRecord, plan_scenario
+from systems.diagram import ClimbSimulator, SimulationRecord
 from systems.meshcat_view import (
     ANCHOR,
     ANCHOR_RADIUS,
@@ -52,6 +52,7 @@ from systems.meshcat_view import (
     view_bounds,
 )
 from systems.montecarlo import configuration
+from systems.trajectory import PlanTrajectory, plan_scenario
 
 CHROMIUM = Path("/usr/bin/chromium")
 WINDOW = (800, 600)  # px, the screenshots' width and height

@@ -39,16 +39,8 @@ from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario
 from rb_drake.statics import statics_problem
-from systems.diagram import (
-    DWELL_MOTION,
-    PLANT_TIME_STEP,
-    BodyStatics,
-    ClimbSimulator,
-    PlanTrajectory,
-    SimulationRecord,
-    plan_scenario,
-    rest_to_rest,
-)
+from systems.control import BodyStatics
+from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
 from systems.montecarlo import (
     ReplanRequest,
     configuration,
@@ -60,6 +52,7 @@ from systems.montecarlo import (
     wilson_interval,
 )
 from systems.sim_cli import add_simulate_command, cmd_simulate
+from systems.trajectory import DWELL_MOTION, PlanTrajectory, plan_scenario, rest_to_rest
 
 SHORT = CaveConfig(length=(3.0, 3.2))
 LINE = 41  # configurations checked along a body phase
@@ -719,7 +712,7 @@ def test_cli_rejects_negative_trials(tmp_path: Path) -> None:
      "phases[0].steps[0].tension[1]"),
 ])
 def test_plan_errors_name_the_field(good_plan: dict[str, Any], change, field: str) -> None:
-    from systems.diagram import PlanError
+    from systems.trajectory import PlanError
 
     plan = copy.deepcopy(good_plan)
     change(plan)

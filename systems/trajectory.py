@@ -1,0 +1,379 @@
+"""The plan as trajectories: a plan file's phases as trajectories of body pose, feed-forward
+tensions and free tip (`PlanTrajectory`, which says how phases become trajectories), its
+holdings and one trial's drawn strengths laid out per phase (`StrengthDraws`), and
+`PlanSource`, the leaf system that outputs the plan at the current time. A plan file the
+simulation cannot run raises `PlanError`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, Context, LeafSystem
+from pydrake.trajectories import PiecewisePolynomial
+
+from rb_drake.params import NUM_BOOMS
+from rb_drake.scenario import Scenario, scenario_from_dict
+from rb_drake.stance import Stance
+from rb_drake.statics import allocate
+
+DWELL_MOTION = 0.8  # of a trajectory phase's final dwell spent finishing its last motion
+
+
+class PlanError(ValueError):
+    """A plan file the simulation cannot run: `field` (a path in the plan) and `reason`."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+def plan_scenario(plan: dict[str, Any], source: str = "<plan>") -> Scenario:
+    """The scenario a plan was made for, rebuilt from the plan file (its robot included)."""
+    data = dict(plan["scenario"])
+    data["robot"] = plan["robot"]
+    return scenario_from_dict(data, source, check_start=False)
+
+
+class Holding(NamedTuple):
+    """Boom `boom` on `anchor` during phases first..last; `attach` when it starts by a regrasp."""
+
+    boom: int
+    anchor: str
+    first: int
+    last: int
+    attach: bool
+
+
+class PhaseTrajectory(NamedTuple):
+    kind: str
+    start: float
+    end: float
+    stance: Stance
+    tension: PiecewisePolynomial       # (4,) feed-forward, 0 for the free boom
+    free_tip: PiecewisePolynomial | None  # (2,) in a reach phase
+    free_tip_rate: PiecewisePolynomial | None = None  # its derivative
+
+
+def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
+                       tips: np.ndarray | None) -> np.ndarray:
+    """The step times of a phase whose last step repeats the one before it (the plan's
+    dwell), with the motion into the last configuration ending DWELL_MOTION of the way into
+    the dwell: the braking spread over more time, and the robot still rests a while in the
+    last configuration, in that stance, as the plan has it."""
+    same = np.allclose(poses[-1], poses[-2], rtol=0, atol=1e-12) and (
+        tips is None or np.allclose(tips[-1], tips[-2], rtol=0, atol=1e-12))
+    if not same:
+        return times
+    times = times.copy()
+    times[-2] += DWELL_MOTION * (times[-1] - times[-2])
+    return times
+
+
+def _rate(trajectory: PiecewisePolynomial | None) -> PiecewisePolynomial | None:
+    return None if trajectory is None else trajectory.derivative(1)
+
+
+def _hold(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
+    """Linear interpolation of values (K, n) at times (K,); one step holds its value."""
+    if len(times) == 1:
+        times = np.array([times[0], times[0] + 1.0])
+        values = np.vstack([values, values])
+    return PiecewisePolynomial.FirstOrderHold(times, values.T)
+
+
+def _smooth(times: np.ndarray, values: np.ndarray, rest: bool) -> PiecewisePolynomial:
+    """Shape-preserving cubic ("pchip") through values (K, n): continuous velocity, no
+    overshoot; at rest at both ends when `rest`. Fewer than 3 points: linear."""
+    if len(times) < 3:
+        return _hold(times, values)
+    return PiecewisePolynomial.CubicShapePreserving(times, values.T, rest)
+
+
+def rest_to_rest(t0: float, t1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A grid on [t0, t1] (spacing <= step) with the minimum-jerk progress s (0 -> 1) and its
+    rate ds/dt: 10 tau^3 - 15 tau^4 + 6 tau^5, which starts and ends at rest."""
+    n = max(1, math.ceil((t1 - t0) / step))
+    t = np.linspace(t0, t1, n + 1)
+    tau = (t - t0) / (t1 - t0)
+    s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+    ds = 30.0 * tau**2 * (1.0 - tau) ** 2 / (t1 - t0)
+    return t, s, ds
+
+
+class PlanTrajectory:
+    """A plan file's phases as trajectories of pose, feed-forward tensions and free tip.
+
+    Phase k runs over [start_k, start_{k+1}). The body pose passes through every step of the
+    plan, but with a continuous velocity, unlike a first-order hold: one cubic Hermite spline
+    through all steps, its velocities shape-preserving estimates ("pchip",
+    `PiecewisePolynomial.CubicShapePreserving`, at rest at the start and the end) where the
+    plan gives none. A velocity step (at every step of a linear interpolation, and at phase
+    boundaries of plans whose phases do not end at rest) is answered by the PD with a jolt of
+    the tensions that collapses grasp probabilities for nothing; the spline's acceleration
+    feeds the controller forward. A phase of several steps (a full trajectory)
+    gets the plan's own tensions and free tip between its steps, tensions interpolated
+    linearly. Such a phase ends with a dwell (its last step repeats the one before), and the
+    motion into the last configuration is spread over the last interval and most of the dwell
+    (`_finish_over_dwell`): stopping within the last interval, as the plan's knots have it,
+    brakes the body and the free tip at ~0.4 m/s^2, whose inertial loads (in a 3-stance a
+    newton or more on one boom) cost the crevasse plans up to 0.1 in a holding's P. A phase
+    of exactly two steps, as the footstep stage writes today (its two end configurations), is
+    travelled along the straight line between them with a minimum-jerk
+    timing (`rest_to_rest`, sampled every `resample` s), and its feed-forward tensions are
+    the plan's own model on that line, the most robust allocation (`statics.allocate`, which
+    made the plan's tensions and reproduces them at the two ends): linear interpolation of
+    the two end allocations is out of equilibrium in between (by ~1 N and 0.1 N m on the
+    bundled plans, where the moment direction is weak). Where no tensions hold a
+    configuration of that line, the feed-forward is interpolated linearly and the simulation
+    shows what follows. Such a phase's body moves along the line at the minimum-jerk rates,
+    so it starts and ends at rest. `resample=None` interpolates everything linearly between
+    the steps (first-order hold).
+    """
+
+    def __init__(self, plan: dict[str, Any], scn: Scenario, resample: float | None = 0.05):
+        self.plan = plan
+        self.scenario = scn
+        self.phases: list[PhaseTrajectory] = []
+        knots_t: list[np.ndarray] = []
+        knots_q: list[np.ndarray] = []
+        knots_v: list[np.ndarray] = []  # NaN: to be estimated (shape-preserving)
+        previous_end = None
+        for k, phase in enumerate(plan["phases"]):
+            traj, t, q, v = self._phase(k, phase, scn, previous_end, resample)
+            self.phases.append(traj)
+            if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
+                last = knots_v[-1]
+                last[-1] = np.where(np.isnan(last[-1]), v[0], last[-1])
+                t, q, v = t[1:], q[1:], v[1:]
+            knots_t.append(t)
+            knots_q.append(q)
+            knots_v.append(v)
+            previous_end = traj.end
+        if not self.phases:
+            raise PlanError("phases", "the plan has no phases")
+        times, poses, rates = np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v)
+        if resample is None or len(times) < 3:
+            self.pose = _hold(times, poses)
+        else:
+            estimate = _smooth(times, poses, True).derivative(1)
+            for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
+                rates[n] = estimate.value(times[n]).ravel()
+            self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+        self.velocity = self.pose.derivative(1)
+        self.acceleration = self.velocity.derivative(1)
+        self.starts = np.array([p.start for p in self.phases])
+        self.holdings = _holdings([p.stance.ids for p in self.phases])
+        # holding_of[k, i]: the holding of boom i during phase k (-1: free)
+        self.holding_of = np.full((len(self.phases), NUM_BOOMS), -1, dtype=int)
+        for h, hold in enumerate(self.holdings):
+            self.holding_of[hold.first:hold.last + 1, hold.boom] = h
+
+    @staticmethod
+    def _phase(k: int, phase: dict[str, Any], scn: Scenario, previous_end: float | None,
+               resample: float | None
+               ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray]:
+        """The phase, and the times, poses and velocities (NaN: not given) of its body."""
+        where = f"phases[{k}]"
+        ids = tuple(phase["stance"])
+        unknown = [a for a in ids if a is not None and a not in scn.anchor_index]
+        if unknown:
+            raise PlanError(f"{where}.stance", f"unknown anchor {unknown[0]!r}")
+        stance = scn.stance(ids)
+        steps = phase["steps"]
+        times = np.array([s["t"] for s in steps], dtype=float)
+        if np.any(np.diff(times) <= 0):
+            raise PlanError(f"{where}.steps", f"step times must increase, got {list(times)}")
+        if previous_end is not None and abs(times[0] - previous_end) > 1e-6:
+            raise PlanError(f"{where}.steps[0].t",
+                            f"starts at {times[0]} but the phase before ends at {previous_end}")
+        tensions = np.zeros((len(steps), NUM_BOOMS))
+        for n, s in enumerate(steps):
+            for i in range(NUM_BOOMS):
+                if stance.attached[i]:
+                    if s["tension"][i] is None:
+                        raise PlanError(f"{where}.steps[{n}].tension[{i}]",
+                                        "an attached boom needs a tension")
+                    tensions[n, i] = s["tension"][i]
+        poses = np.array([s["pose"] for s in steps], dtype=float)
+        tips = None
+        if stance.free_boom is not None:
+            if any("free_tip" not in s for s in steps):
+                raise PlanError(f"{where}.steps", "a phase with a free boom needs free_tip")
+            tips = np.array([s["free_tip"] for s in steps], dtype=float)
+        start, end = float(times[0]), float(times[-1])
+        if len(steps) > 3 and resample is not None:
+            times = _finish_over_dwell(times, poses, tips)
+        if len(steps) != 2 or resample is None:
+            free_tip = None
+            if tips is not None:
+                free_tip = _hold(times, tips) if resample is None else _smooth(times, tips, True)
+            traj = PhaseTrajectory(phase["kind"], start, end, stance, _hold(times, tensions),
+                                   free_tip, _rate(free_tip))
+            return traj, times, poses, np.full_like(poses, np.nan)
+        t, prog, rate = rest_to_rest(times[0], times[1], resample)
+        line = poses[0] + prog[:, None] * (poses[1] - poses[0])
+        free_tip = None
+        if tips is not None:
+            delta = tips[1] - tips[0]
+            free_tip = PiecewisePolynomial.CubicHermite(
+                t, (tips[0] + prog[:, None] * delta).T, (rate[:, None] * delta).T)
+        ff = tensions[0] + prog[:, None] * (tensions[1] - tensions[0])
+        inner = slice(1, len(t) - 1)
+        grid_tips = None if tips is None else tips[0] + prog[inner, None] * (tips[1] - tips[0])
+        alloc = allocate(scn.robot, scn.gravity_vector, line[inner], stance, grid_tips)
+        ok = np.flatnonzero(alloc.statics_ok)
+        ff[1 + ok] = np.where(stance.attached, np.nan_to_num(alloc.tensions[ok]), 0.0)
+        traj = PhaseTrajectory(phase["kind"], start, end, stance, _hold(t, ff),
+                               free_tip, _rate(free_tip))
+        return traj, t, line, rate[:, None] * (poses[1] - poses[0])
+
+    @property
+    def end_time(self) -> float:
+        return self.phases[-1].end
+
+    def free_boom_mass(self, t: float) -> float:
+        """The free boom's mass at time t (0 when none): boom_linear_density times its planned
+        length, shoulder (on the planned pose) to the planned tip."""
+        phase = self.phase_at(t)
+        j = free_boom(phase.stance)
+        if j is None:
+            return 0.0
+        robot = self.scenario.robot
+        x, y, phi = (float(v) for v in self.pose.value(t).ravel())
+        sx, sy = robot.shoulders[j]
+        tx, ty = (float(v) for v in phase.free_tip.value(t).ravel())
+        c, s = math.cos(phi), math.sin(phi)
+        return robot.boom_linear_density * math.hypot(tx - x - c * sx + s * sy,
+                                                      ty - y - s * sx - c * sy)
+
+    def phase_index(self, t: float) -> int:
+        return max(0, int(np.searchsorted(self.starts, t, side="right")) - 1)
+
+    def phase_at(self, t: float) -> PhaseTrajectory:
+        return self.phases[self.phase_index(t)]
+
+    @property
+    def regrasps(self) -> int:
+        return sum(h.attach for h in self.holdings)
+
+
+def _holdings(stances: Sequence[tuple[str | None, ...]]) -> list[Holding]:
+    """Maximal runs of phases in which a boom stays on one anchor (as planning.probability)."""
+    out: list[Holding] = []
+    for i in range(NUM_BOOMS):
+        k = 0
+        while k < len(stances):
+            anchor = stances[k][i]
+            end = k
+            while end + 1 < len(stances) and stances[end + 1][i] == anchor:
+                end += 1
+            if anchor is not None:
+                out.append(Holding(i, anchor, k, end, attach=k > 0))
+            k = end + 1
+    return sorted(out, key=lambda h: (h.first, h.boom))
+
+
+def free_boom(stance: Stance) -> int | None:
+    """`stance.free_boom` from the ids, for the per-step systems (the property costs 10 us)."""
+    return stance.ids.index(None) if None in stance.ids else None
+
+
+class StrengthDraws(NamedTuple):
+    """One trial's draws laid out per phase: quantile[k, i] is the strength quantile u of the
+    holding of boom i in phase k (NaN when free); attach[k] the attach draw of the boom that
+    regrasps at the start of phase k (NaN when none), which fails when below attach_failure."""
+
+    quantile: np.ndarray     # (phases, 4)
+    attach: np.ndarray       # (phases,)
+    attach_boom: np.ndarray  # (phases,) int, -1 when none
+    attach_failure: float
+
+    @staticmethod
+    def none(plan: PlanTrajectory) -> StrengthDraws:
+        """Draws under which nothing ever fails (u = 0, no attach draws)."""
+        n = len(plan.phases)
+        return StrengthDraws(np.zeros((n, NUM_BOOMS)), np.full(n, np.nan),
+                             np.full(n, -1), 0.0)
+
+    @staticmethod
+    def for_trial(plan: PlanTrajectory, quantiles: np.ndarray, attach_draws: np.ndarray,
+                  attach_failure: float) -> StrengthDraws:
+        """From one draw per holding (`plan.holdings` order) of u and of the attach variable."""
+        n = len(plan.phases)
+        q = np.full((n, NUM_BOOMS), np.nan)
+        attach, boom = np.full(n, np.nan), np.full(n, -1)
+        for h, hold in enumerate(plan.holdings):
+            q[hold.first:hold.last + 1, hold.boom] = quantiles[h]
+            if hold.attach:
+                attach[hold.first], boom[hold.first] = attach_draws[h], hold.boom
+        return StrengthDraws(q, attach, boom, float(attach_failure))
+
+
+# ---------------------------------------------------------------------------------------------
+# The plan as a leaf system
+
+
+_PLAN_PLACEHOLDER = AbstractValue.Make(None)
+# PlanSource's free_limb output: the planned free tip (x, y), its velocity and the free boom's
+# mass in the plant (zeros when every boom is attached)
+FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass")
+FREE_LIMB_SIZE = len(FREE_LIMB_FIELDS)
+
+
+class PlanSource(LeafSystem):
+    """The plan at the current time: desired state (pose, velocity) and acceleration,
+    feed-forward tensions, free limb (FREE_LIMB_FIELDS), phase index and stance. The plan is an
+    abstract parameter (`set_plan`)."""
+
+    def __init__(self):
+        super().__init__()
+        self._plan_index = self.DeclareAbstractParameter(_PLAN_PLACEHOLDER)
+        self.DeclareVectorOutputPort("desired_state", 6, self._calc_desired)
+        self.DeclareVectorOutputPort("desired_acceleration", 3, self._calc_acceleration)
+        self.DeclareVectorOutputPort("feedforward_tension", NUM_BOOMS, self._calc_tension)
+        self.DeclareVectorOutputPort("free_limb", FREE_LIMB_SIZE, self._calc_free_limb)
+        self.DeclareVectorOutputPort("phase", 1, self._calc_phase)
+        self.DeclareAbstractOutputPort("stance", lambda: AbstractValue.Make(None),
+                                       self._calc_stance)
+
+    def set_plan(self, context: Context, plan: PlanTrajectory) -> None:
+        context.get_mutable_abstract_parameter(self._plan_index).set_value(plan)
+
+    def plan(self, context: Context) -> PlanTrajectory:
+        return context.get_abstract_parameter(self._plan_index).get_value()
+
+    def _phase(self, context: Context) -> PhaseTrajectory:
+        return self.plan(context).phase_at(context.get_time())
+
+    def _calc_desired(self, context: Context, output: BasicVector) -> None:
+        plan, t = self.plan(context), context.get_time()
+        output.SetFromVector(np.concatenate([plan.pose.value(t).ravel(),
+                                             plan.velocity.value(t).ravel()]))
+
+    def _calc_acceleration(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self.plan(context).acceleration.value(context.get_time()).ravel())
+
+    def _calc_tension(self, context: Context, output: BasicVector) -> None:
+        output.SetFromVector(self._phase(context).tension.value(context.get_time()).ravel())
+
+    def _calc_free_limb(self, context: Context, output: BasicVector) -> None:
+        plan, t = self.plan(context), context.get_time()
+        phase = plan.phase_at(t)
+        if phase.free_tip is None:
+            output.SetFromVector(np.zeros(FREE_LIMB_SIZE))
+            return
+        output.SetFromVector(np.concatenate([phase.free_tip.value(t).ravel(),
+                                             phase.free_tip_rate.value(t).ravel(),
+                                             [plan.free_boom_mass(t)]]))
+
+    def _calc_phase(self, context: Context, output: BasicVector) -> None:
+        output.SetAtIndex(0, self.plan(context).phase_index(context.get_time()))
+
+    def _calc_stance(self, context: Context, output: AbstractValue) -> None:
+        output.set_value(self._phase(context).stance)

@@ -5,7 +5,9 @@ rockfall, ...) with both footstep planners and records each plan's success, reas
 success probability p_path and regrasps. The figure shows each planner's distribution of p_path
 over the trials, a failed plan counting p_path = 0, and results.json holds the counts
 "p_path > 0.90" and "> 0.95" (the paper: RBP over 0.90 in 86 of 100 and over 0.95 in more
-than half, the naive planner mostly failing).
+than half, the naive planner mostly failing). Both are also counted for p_grasps, p_path without
+the per-regrasp attach term: the paper's robustness metric has none, and with it a plan of more
+than 10 regrasps cannot pass 0.90.
 
     python -m experiments.baseline_comparison --trials 100 --out out/baseline
 
@@ -81,7 +83,8 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
 
     kinds = [p["kind"] for p in plan["phases"]]
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
-              "p_min": plan["p_min"], "regrasps": plan["regrasps"],
+              "p_grasps": plan.get("p_grasps"), "p_min": plan["p_min"],
+              "regrasps": plan["regrasps"],
               "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")}}
     rows = motion_summary(plan)
     if rows:
@@ -105,7 +108,8 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
         scn = make_cave(kind, seed, tuple(length), anchor_density, gravity, p_min,
                         gripper_scale)
     except RuntimeError as e:
-        failed = {"success": False, "reason": f"no cave: {e}", "p_path": None, "p_min": None,
+        failed = {"success": False, "reason": f"no cave: {e}", "p_path": None,
+                  "p_grasps": None, "p_min": None,
                   "regrasps": 0, "phases": {"body": 0, "reach": 0}}
         return {"cave": None, **{p: dict(failed) for p in planners},
                 "timing": {"cave": time.perf_counter() - start}}
@@ -123,7 +127,7 @@ def cave_kind(i: int, kind: str) -> str:
     return MIXED[i % len(MIXED)] if kind == "mixed" else kind
 
 
-def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 150) -> None:
+def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 1000) -> None:
     """The flags of the caves and of the planners' cap."""
     parser.add_argument("--kind", default="mixed",
                         choices=("mixed", "shaft", "crevasse", "rockfall"),
@@ -161,9 +165,10 @@ def climb_trials(args: argparse.Namespace, planners: list[str], motion: bool,
     return trials
 
 
-def path_probabilities(records: list[dict[str, Any]], planner: str) -> list[float]:
-    """p_path per trial, 0 for a failed plan."""
-    return [r["result"][planner]["p_path"] if r["result"][planner]["success"] else 0.0
+def path_probabilities(records: list[dict[str, Any]], planner: str,
+                       key: str = "p_path") -> list[float]:
+    """p_path (or `key`, "p_grasps") per trial, 0 for a failed plan."""
+    return [r["result"][planner][key] if r["result"][planner]["success"] else 0.0
             for r in records]
 
 
@@ -174,6 +179,7 @@ def stage_times(records: list[dict[str, Any]], planner: str, stage: str) -> list
 
 def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, Any]:
     p = path_probabilities(records, planner)
+    p_grasps = path_probabilities(records, planner, "p_grasps")
     rows = [r["result"][planner] for r in records]
     ok = [row for row in rows if row["success"]]
     by_kind: dict[str, dict[str, int]] = {}
@@ -183,12 +189,14 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
         counts["successes"] += bool(row["success"])
     return {"trials": len(rows), "successes": len(ok),
             **{f"p_path_over_{t:.2f}": sum(v > t for v in p) for t in THRESHOLDS},
+            **{f"p_grasps_over_{t:.2f}": sum(v > t for v in p_grasps) for t in THRESHOLDS},
             "p_path": quantiles(p), "p_path_successes": quantiles([r["p_path"] for r in ok]),
             "regrasps_successes": quantiles([r["regrasps"] for r in ok]), "by_kind": by_kind}
 
 
 def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
-    """Fig. 4: histograms of p_path (failures at 0) and the share of trials above each p."""
+    """Fig. 4: histograms of p_path (failures at 0) and the share of trials above each p, for
+    p_path (solid) and p_grasps (dashed)."""
     import matplotlib.pyplot as plt
     import numpy as np
     from matplotlib.ticker import MaxNLocator
@@ -204,9 +212,11 @@ def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
         hist.bar(bins[:-1] + k * width, counts, width, align="edge",
                  color=colours.get(planner), label=f"{planner} ({plans} plans)")
         grid = np.linspace(0.0, 1.0, 1001)
-        over = [f"{int(np.sum(p > t))} > {t:.2f}" for t in THRESHOLDS]
-        tail.plot(grid, (p[None, :] > grid[:, None]).mean(axis=1), color=colours.get(planner),
-                  label=f"{planner}: {', '.join(over)}")
+        for key, style in (("p_path", "-"), ("p_grasps", "--")):
+            q = np.array(path_probabilities(records, planner, key))
+            over = [f"{int(np.sum(q > t))} > {t:.2f}" for t in THRESHOLDS]
+            tail.plot(grid, (q[None, :] > grid[:, None]).mean(axis=1), style,
+                      color=colours.get(planner), label=f"{planner} {key}: {', '.join(over)}")
     for t in THRESHOLDS:
         tail.axvline(t, color="grey", lw=0.8, ls="--")
     hist.set_xlabel("path success probability p_path (failed plan: 0)")
@@ -214,7 +224,7 @@ def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
     hist.yaxis.set_major_locator(MaxNLocator(integer=True))
     hist.legend(fontsize=8)
     tail.set_xlabel("p")
-    tail.set_ylabel("share of trials with p_path > p")
+    tail.set_ylabel("share of trials above p")
     tail.set_xlim(0.0, 1.0)
     tail.set_ylim(0.0, 1.02)
     tail.legend(fontsize=8)
@@ -242,7 +252,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     summary = {p: planner_summary(done, p) for p in planners}
     for p, s in summary.items():
         print(f"{p}: {s['successes']}/{s['trials']} plans; p_path > 0.90 in "
-              f"{s['p_path_over_0.90']}, > 0.95 in {s['p_path_over_0.95']}")
+              f"{s['p_path_over_0.90']}, > 0.95 in {s['p_path_over_0.95']}; p_grasps > 0.90 "
+              f"in {s['p_grasps_over_0.90']}, > 0.95 in {s['p_grasps_over_0.95']}")
     figure = atomic_save_figure(baseline_figure(done, planners), f"{args.out}/baseline.png",
                                 dpi=120)
     print(f"wrote {figure}")
@@ -256,8 +267,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "timing": {p: {"footstep": quantiles(stage_times(done, p, "footstep"))}
                    for p in planners},
         "trials": [{"name": r["name"], "kind": r["params"]["kind"], "seed": r["params"]["seed"],
-                    **{p: {k: r["result"][p][k] for k in ("success", "p_path", "regrasps",
-                                                          "reason")} for p in planners}}
+                    **{p: {k: r["result"][p].get(k) for k in ("success", "p_path", "p_grasps",
+                                                              "regrasps", "reason")}
+                       for p in planners}}
                    for r in done],
         "figure": str(figure),
     }

@@ -74,6 +74,7 @@ def check_plan(plan: dict[str, Any], source: str = "<plan>") -> list[str]:
         theirs = path_probability(plan_configurations(plan), robot.attach_failure)
         for name, a, b in (("p_path", mine.p_path, plan["p_path"]),
                            ("p_min", mine.p_min, plan["p_min"]),
+                           ("p_grasps", mine.p_grasps, plan.get("p_grasps", mine.p_grasps)),
                            ("regrasps", mine.regrasps, plan["regrasps"]),
                            ("p_path from the file's own p_grasp", theirs.p_path, plan["p_path"])):
             if b is None or not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12):

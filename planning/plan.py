@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from planning.footsteps import FootstepPlan
-from planning.probability import Configuration, path_probability
+from planning.probability import Configuration, PathProbability, path_probability
 from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import Scenario
@@ -62,6 +62,7 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
         "reason": fp.reason,
         "p_min": None,
         "p_path": None,
+        "p_grasps": None,
         "regrasps": len(fp.steps),
         "timing": timing,
         "scenario": scn.to_dict(resolved=True),
@@ -93,8 +94,7 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
                           _configuration(scn, three, step.pose, new, t + REACH_DURATION)]})
             t += REACH_DURATION
     if fp.success:
-        prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
-        plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+        score_plan(plan, scn.robot.attach_failure)
     return plan
 
 
@@ -170,9 +170,16 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         }
         phases.append(phase)
     plan["phases"] = phases
-    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
-    plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    score_plan(plan, scn.robot.attach_failure)
     return plan
+
+
+def score_plan(plan: dict[str, Any], attach_failure: float) -> PathProbability:
+    """Set the plan's p_path, p_grasps, p_min and regrasps from its configurations."""
+    prob = path_probability(plan_configurations(plan), attach_failure)
+    plan.update(p_path=prob.p_path, p_grasps=prob.p_grasps, p_min=prob.p_min,
+                regrasps=prob.regrasps)
+    return prob
 
 
 def plan_configurations(plan: dict[str, Any]):

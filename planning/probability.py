@@ -6,6 +6,11 @@ the minimum of P_i over the configurations it goes through. Holdings are indepen
 regrasp must also take hold on contact (probability 1 - attach_failure):
 
     p_path = prod_holdings min_t P_i(t) * (1 - attach_failure)^regrasps.
+
+`p_grasps`, the first factor alone, is how likely the grasps are to hold once taken: the
+paper's robustness metric has no attach term, so its path probabilities compare with this one
+(with attach_failure = 0.01, a plan of more than 10 regrasps has p_path < 0.90 however robust
+its grasps).
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from typing import NamedTuple
 
 class PathProbability(NamedTuple):
     p_path: float
+    p_grasps: float    # p_path without the attach term: prod_holdings min_t P_i(t)
     p_min: float       # the smallest configuration probability along the plan
     regrasps: int
     holdings: list[tuple[int, str, float]]  # (boom, anchor, min P) in the order they end
@@ -52,7 +58,8 @@ def path_probability(configurations: Iterable[Configuration],
     for i in range(4):
         if current[i] is not None:
             holdings.append((i, current[i], worst[i]))
-    p_path = (1.0 - attach_failure) ** regrasps
+    p_grasps = 1.0
     for _, _, p in holdings:
-        p_path *= p
-    return PathProbability(p_path, p_min, regrasps, holdings)
+        p_grasps *= p
+    p_path = p_grasps * (1.0 - attach_failure) ** regrasps
+    return PathProbability(p_path, p_grasps, p_min, regrasps, holdings)

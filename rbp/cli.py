@@ -155,7 +155,8 @@ def _write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str 
 def _summary(plan: dict) -> str:
     if not plan["success"]:
         return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s")
-    return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}, "
+    grasps = f" (grasps alone {plan['p_grasps']:.4f})" if plan.get("p_grasps") is not None else ""
+    return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}{grasps}, "
             f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s")
 
 

@@ -45,7 +45,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
-from planning.probability import Configuration, path_probability
+from planning.plan import score_plan
 from rb_drake import grasp
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -241,10 +241,7 @@ def shifted_phases(phases: list[dict[str, Any]], dt: float) -> list[dict[str, An
 def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]]) -> dict[str, Any]:
     plan = {k: v for k, v in request.plan.items() if k != "phases"}
     plan["phases"] = phases
-    configs = [Configuration(ph["stance"], st["p_grasp"], st["p_success"])
-               for ph in phases for st in ph["steps"]]
-    prob = path_probability(configs, request.scenario.robot.attach_failure)
-    plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    score_plan(plan, request.scenario.robot.attach_failure)
     return plan
 
 

@@ -16,8 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 
 import rb_drake
-from planning.plan import BODY_SPEED, FORMAT, STAGES, TURN_SPEED, plan_configurations, validate
-from planning.probability import path_probability
+from planning.plan import BODY_SPEED, FORMAT, STAGES, TURN_SPEED, score_plan, validate
 from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
 from rb_drake.params import RobotParams
@@ -69,8 +68,7 @@ def rig_plan(scn: Scenario, goal_pose: np.ndarray | None = None,
                     "steps": steps}],
     }
     if plan["success"]:
-        prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
-        plan["p_min"], plan["p_path"] = prob.p_min, prob.p_path
+        score_plan(plan, scn.robot.attach_failure)
     validate(plan)
     return plan
 

@@ -258,6 +258,14 @@ def test_check_catches_a_wrong_p_path(fresh: dict[str, Any]) -> None:
         f"p_path 0.99 not caught: {problems}")
 
 
+def test_check_catches_a_wrong_p_grasps(fresh: dict[str, Any]) -> None:
+    assert fresh["p_grasps"] > fresh["p_path"], "the plan's regrasps must lower p_path"
+    fresh["p_grasps"] = fresh["p_path"]
+    problems = check_plan(fresh)
+    assert any(p.startswith("p_grasps") for p in problems), (
+        f"p_grasps set to p_path not caught: {problems}")
+
+
 def test_check_catches_a_pose_moved_3_m(fresh: dict[str, Any]) -> None:
     fresh["phases"][0]["steps"][1]["pose"][0] += 3.0
     problems = check_plan(fresh)

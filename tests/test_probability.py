@@ -148,3 +148,17 @@ def test_no_attach_failure_means_no_regrasp_cost() -> None:
     result = path_probability(configs, attach_failure=0.0)
     assert result.regrasps == 1
     assert result.p_path == pytest.approx(0.9 ** 5, rel=REL)
+
+
+def test_p_grasps_is_p_path_without_the_attach_term() -> None:
+    """Two regrasps with attach failure 0.1: p_grasps keeps only the holdings' minima."""
+    af = 0.1
+    configs = [config(("a", "b", "c", "d"), (0.9, 1.0, 1.0, 1.0)),
+               config(("e", "b", "c", "d"), (0.8, 1.0, 1.0, 1.0)),
+               config(("e", "f", "c", "d"), (0.8, 0.7, 1.0, 1.0))]
+    result = path_probability(configs, attach_failure=af)
+    assert result.regrasps == 2
+    assert result.p_grasps == pytest.approx(0.9 * 0.8 * 0.7, rel=REL), (
+        f"p_grasps {result.p_grasps}: the product of the four holdings' minima")
+    assert result.p_path == pytest.approx(result.p_grasps * (1 - af) ** 2, rel=REL), (
+        f"p_path {result.p_path} must be p_grasps {result.p_grasps} times 0.9^2")

@@ -37,9 +37,19 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.generate import CaveConfig, generate_cave
     from rb_drake.scenario import scenario_to_yaml
 
-    cfg = CaveConfig(anchor_density=args.anchor_density)
-    scn = generate_cave(args.kind, args.seed, cfg)
-    atomic_write_text(args.output, scenario_to_yaml(scn))
+    lo, hi = args.length
+    if not 2.0 <= lo <= hi:
+        raise UserError(f"--length: need 2 <= MIN <= MAX, got {lo:g} {hi:g}")
+    if not args.anchor_density > 0:
+        raise UserError(f"--anchor-density: must be positive, got {args.anchor_density:g}")
+    cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
+    try:
+        scn = generate_cave(args.kind, args.seed, cfg)
+    except RuntimeError as e:  # no feasible start stance in any draw
+        raise UserError(str(e)) from None
+    command = (f"rbp scenario generate --kind {args.kind} --seed {args.seed} "
+               f"--length {lo:g} {hi:g} --anchor-density {args.anchor_density:g}")
+    atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(f"wrote {args.output}: {scn.name}, {len(scn.anchors)} anchors, "
           f"start stance {list(scn.start_stance)}")
     return 0
@@ -320,6 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--seed", type=int, default=0)
     gen.add_argument("--anchor-density", type=float, default=3.0,
                      help="anchors per metre of rock surface (default 3.0)")
+    gen.add_argument("--length", type=float, nargs=2, default=(7.0, 9.0), metavar=("MIN", "MAX"),
+                     help="shaft height or passage length, drawn in this range in m (default "
+                          "7 9; the experiments use 4.5 5)")
     gen.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
     gen.set_defaults(func=cmd_scenario_generate)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")

@@ -61,6 +61,31 @@ def test_generate_writes_a_scenario(generated):
     assert leftovers(folder) == [], f"temporary files left: {leftovers(folder)}"
 
 
+def test_generate_length_sets_the_shaft_height(tmp_path: Path) -> None:
+    proc = run_rbp("scenario", "generate", "--kind", "shaft", "--seed", "4", "--length", "4.5",
+                   "5", "-o", "S.yaml", cwd=tmp_path)
+    assert_ok(proc)
+    text = (tmp_path / "S.yaml").read_text()
+    assert text.startswith("# rbp scenario generate --kind shaft --seed 4 --length 4.5 5"), (
+        f"the file should say how it was made: {text[:120]!r}")
+    scn = load_scenario(tmp_path / "S.yaml")
+    top = max(p[1] for wall in scn.walls for p in wall)
+    # The generator's walls reach 0.5 m past the shaft's height H, drawn in [4.5, 5].
+    assert 5.0 - 1e-6 <= top <= 5.5 + 1e-6, f"walls reach y = {top}, not H + 0.5 for H in [4.5, 5]"
+
+
+@pytest.mark.parametrize("flags, field", [
+    (("--length", "5", "4"), "--length"),
+    (("--length", "1", "2"), "--length"),
+    (("--anchor-density", "0"), "--anchor-density"),
+])
+def test_generate_refuses_bad_flags(tmp_path: Path, flags, field: str) -> None:
+    proc = run_rbp("scenario", "generate", *flags, "-o", "B.yaml", cwd=tmp_path)
+    assert proc.returncode == 2, f"exit {proc.returncode}: {proc.stderr}"
+    assert proc.stderr.startswith(f"error: {field}:"), proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "B.yaml").exists()
+
+
 def test_check_generated(generated):
     folder, gen = generated
     assert_ok(gen)

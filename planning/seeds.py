@@ -33,6 +33,7 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from rb_drake import geometry
+from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -364,12 +365,29 @@ def _arc_length(start, end, normal_start, normal_end, height) -> float:
 
 def _arc_is_clear(scn: Scenario, tips: np.ndarray, normal_start: np.ndarray,
                   normal_end: np.ndarray) -> bool:
-    """Whether the polyline through `tips` stays off the rock between its ends (which grip it;
-    they are tested ARC_OFFSET off the rock along their normals)."""
-    pts = np.asarray(tips, dtype=float).copy()
+    """Whether the polyline through `tips` stays off the rock between its ends, which grip it:
+    as for a boom (`rb_drake.collision`), the gripper's last ANCHOR_CLEARANCE of path at either
+    end may touch the rock it grasps, and the cut ends are tested ARC_OFFSET off it along the
+    anchors' normals."""
+    pts = _trim_path(_trim_path(np.asarray(tips, dtype=float), ANCHOR_CLEARANCE)[::-1],
+                     ANCHOR_CLEARANCE)[::-1]
+    if len(pts) < 2:
+        return True
     pts[0] += ARC_OFFSET * np.asarray(normal_start, dtype=float)
     pts[-1] += ARC_OFFSET * np.asarray(normal_end, dtype=float)
     return not bool(scn.rock.segments_hit(pts[:-1], pts[1:]).any())
+
+
+def _trim_path(pts: np.ndarray, length: float) -> np.ndarray:
+    """The polyline `pts` without its first `length` of arc length (a copy)."""
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    k = int(np.searchsorted(cum, length, side="right"))  # first point beyond `length`
+    if k >= len(pts):
+        return pts[-1:].copy()
+    t = (length - cum[k - 1]) / max(seg[k - 1], 1e-12)
+    start = pts[k - 1] + t * (pts[k] - pts[k - 1])
+    return np.vstack([start, pts[k:]])
 
 
 def _clear_arcs(scn: Scenario, start: np.ndarray, end: np.ndarray, normal_start: np.ndarray,

@@ -393,3 +393,24 @@ def test_retract_path_runs_anchor_to_anchor_round_the_shoulder() -> None:
     assert distance.min() == pytest.approx(radius, abs=1e-9), distance.min()
     # the tip never goes further from the shoulder than the farther anchor
     assert distance.max() <= max(np.linalg.norm(a - shoulder), np.linalg.norm(b - shoulder)) + 1e-9
+
+
+def test_a_gripper_path_may_touch_its_own_rock_only_in_its_last_2_cm() -> None:
+    """The tip path's rule is the boom's (rb_drake.collision): within ANCHOR_CLEARANCE of the
+    anchor it grips, the gripper may touch the rock; any further out, it may not."""
+    from types import SimpleNamespace
+
+    from planning.seeds import _arc_is_clear
+    from rb_drake.collision import ANCHOR_CLEARANCE
+
+    # A floor block with its top at y = 0; the anchor at the origin, normal up. The path comes
+    # down to the anchor along a line that dips below the floor `depth_at` metres before it.
+    world = SimpleNamespace(rock=Rock([np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 0.0],
+                                                 [-1.0, 0.0]])]))
+    up, anchor = np.array([0.0, 1.0]), np.array([0.0, 0.0])
+    for before, clear in ((0.5 * ANCHOR_CLEARANCE, True), (2.5 * ANCHOR_CLEARANCE, False)):
+        dip = np.array([before, -0.002])  # 2 mm into the rock, `before` from the anchor
+        tips = np.array([[0.5, 0.5], [before + 0.05, 0.01], dip, anchor])
+        assert _arc_is_clear(world, tips, up, up) is clear, (
+            f"a path dipping into rock {before * 100:.0f} cm before its anchor: clear should "
+            f"be {clear}")

@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="cave kinds, comma-separated: shaft, crevasse, rockfall")
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--first-seed", type=int, default=1)
-    parser.add_argument("--max-expansions", type=int, default=400)
+    parser.add_argument("--max-expansions", type=int, default=1000)
     parser.add_argument("--length", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
                         help="cave length range in m (default: the generator's, 7 to 9)")
     parser.add_argument("--out", default="out/bench")

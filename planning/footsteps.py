@@ -58,7 +58,7 @@ Stance4 = tuple[str, str, str, str]
 class FootstepConfig:
     heuristic_weight: float = 300.0
     candidates_per_boom: int = 8
-    max_expansions: int = 400
+    max_expansions: int = 1000  # about 10 s when it fails; rbp plan and the experiments share it
     goal_samples: int = 96
     polish_rounds: int = 8   # local search rounds per transition pose of the found path
     seed: int = 0

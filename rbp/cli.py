@@ -304,8 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("-o", "--output", required=True, help="plan file to write (.json)")
     plan.add_argument("--planner", choices=("rbp", "naive"), default="rbp")
     plan.add_argument("--seed", type=int, default=0, help="seed of the planner's sampling")
-    plan.add_argument("--max-expansions", type=int, default=400,
-                      help="give up after expanding this many stances (default 400)")
+    plan.add_argument("--max-expansions", type=int, default=1000,  # FootstepConfig's
+                      help="give up after expanding this many stances (default 1000)")
     plan.add_argument("--dt", type=float, default=0.5,
                       help="seconds between trajectory steps (default 0.5; steps are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",

@@ -148,7 +148,7 @@ def assert_same_scenario(a: Scenario, b: Scenario, tol: float = 1e-12) -> None:
 
 
 def test_bundled_caves_present():
-    assert {"demo-shaft", "crevasse-1", "rockfall-1"} <= set(CAVES), f"bundled: {sorted(CAVES)}"
+    assert {"demo-shaft", "crevasse-2", "rockfall-3"} <= set(CAVES), f"bundled: {sorted(CAVES)}"
     for name, path in CAVES.items():
         assert path.is_file(), f"{name}: {path} is not a file"
 

@@ -273,8 +273,10 @@ def retry_replanner(request: ReplanRequest) -> dict[str, Any] | None:
 
 @dataclasses.dataclass
 class FootstepReplanner:
-    """Move the free boom to another reachable anchor from where the body is, then run the
-    footstep planner (`planning.footsteps.plan_footsteps`) from that 4-stance to the goal.
+    """Move the free boom to another reachable anchor from where the body is, then plan the
+    rest of the climb from that 4-stance with the whole pipeline (`planning.pipeline.
+    plan_climb`: footsteps, then a seed and SCP per phase), so the continuation is a plan like
+    any other, trajectories and tensions included.
 
     Candidates are the reachable anchors nearest the goal whose 3-stance (gripper there) and
     4-stance both hold at the current pose; the first `candidates` are tried in turn."""
@@ -282,10 +284,12 @@ class FootstepReplanner:
     candidates: int = 3
     max_expansions: int = 400
     seed: int = 0
+    optimise: bool = True  # False: the continuation keeps its seed trajectories (no SCP)
 
     def __call__(self, request: ReplanRequest) -> dict[str, Any] | None:
-        from planning.footsteps import FootstepConfig, plan_footsteps
-        from planning.plan import REACH_DURATION, build_plan
+        from planning.footsteps import FootstepConfig
+        from planning.pipeline import PipelineConfig, plan_climb
+        from planning.plan import REACH_DURATION
         from planning.transition import reachable_anchors
 
         scn, j = request.scenario, request.boom
@@ -311,13 +315,15 @@ class FootstepReplanner:
             tried += 1
             start = dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
                                         start_stance=four)
-            fp = plan_footsteps(start, FootstepConfig(seed=self.seed,
-                                                      max_expansions=self.max_expansions))
-            if not fp.success:
+            config = PipelineConfig(footstep=FootstepConfig(seed=self.seed,
+                                                            max_expansions=self.max_expansions),
+                                    optimise=self.optimise)
+            plan = plan_climb(start, "rbp", config)
+            if not plan["success"]:
                 continue
             reach = {"kind": "reach", "stance": list(request.stance), "free_boom": j,
                      "from_anchor": request.anchor, "to_anchor": new.id, "steps": [a, b]}
-            rest = shifted_phases(build_plan(start, fp, "rbp")["phases"], REACH_DURATION)
+            rest = shifted_phases(plan["phases"], REACH_DURATION)
             return _finish_plan(request, [reach, *rest])
         return None
 

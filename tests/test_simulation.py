@@ -42,6 +42,7 @@ from rb_drake.statics import statics_problem
 from systems.control import BodyStatics
 from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
 from systems.montecarlo import (
+    FootstepReplanner,
     ReplanRequest,
     configuration,
     draw_strengths,
@@ -633,6 +634,40 @@ def test_retry_replanner_builds_a_continuing_plan(good: SimulationRecord) -> Non
     reach = request._replace(phase=k, boom=held, stance=tuple(
         None if i == held else a for i, a in enumerate(good.plan.phases[k].stance.ids)))
     assert retry_replanner(reach) is None
+
+
+def test_footstep_replanner_continues_with_a_full_verified_plan(good: SimulationRecord) -> None:
+    """The real replanner (no stand-in): boom j's grasp fails at the end of the first body
+    phase; the continuation moves j to another anchor from where the body is, then the whole
+    pipeline plans on to the goal. Every configuration must pass `rbp check`'s verifier, with
+    tensions on every step, and the climb must end within the goal tolerance."""
+    from planning.check import check_plan
+
+    plan, scn = good.plan.plan, good.plan.scenario
+    s = int(np.flatnonzero(good.phase == 0)[-1])
+    ids = good.plan.phases[0].stance.ids
+    boom = plan["phases"][1]["free_boom"]
+    three = tuple(None if i == boom else a for i, a in enumerate(ids))
+    request = ReplanRequest(scn, plan, 0, float(good.times[s]), good.state[s, :3].copy(),
+                            three, boom, ids[boom], "overload")
+    new = FootstepReplanner()(request)
+    assert new is not None, "the 3-stance holds here and the shaft is short: expected a plan"
+    validate(new)
+    first = new["phases"][0]
+    assert first["kind"] == "reach" and first["free_boom"] == boom
+    assert first["from_anchor"] == ids[boom] and first["to_anchor"] != ids[boom], first
+    np.testing.assert_allclose(first["steps"][0]["pose"], request.pose, atol=1e-12)
+    problems = check_plan(new)
+    assert problems == [], f"the continuation fails the verifier: {problems[:5]}"
+    body = [p for p in new["phases"][1:] if p["kind"] == "body"]
+    assert body and all(len(p["steps"]) > 2 for p in body), (
+        "body phases should carry trajectories, not only their end poses")
+    end = np.asarray(new["phases"][-1]["steps"][-1]["pose"])[:2]
+    gap = float(np.linalg.norm(end - np.asarray(scn.goal_position)))
+    assert gap <= scn.goal_tolerance + 1e-9, f"the climb ends {gap:.2f} m from the goal"
+    times = [st["t"] for p in new["phases"] for st in p["steps"]]
+    assert times[0] == 0.0 and np.all(np.diff(times) >= 0.0), "times must start at 0 and grow"
+    PlanTrajectory(new, scn)  # the simulation can run it
 
 
 # ---------------------------------------------------------------------------------------------

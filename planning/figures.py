@@ -64,7 +64,8 @@ BOOM_COLOURS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a")
 
 def phase_figure(plan: dict[str, Any], k: int):
     """The paper's Fig. 6 for phase k: tensions per boom over time (seed dotted, optimised
-    solid) and the configuration's probability of success over time (seed and optimised)."""
+    solid) and the configuration's probability of failure 1 - P over time (seed and optimised,
+    log scale: lower is better)."""
     phase = plan["phases"][k]
     motion = phase.get("motion")
     if motion is None:
@@ -88,10 +89,16 @@ def phase_figure(plan: dict[str, Any], k: int):
     top.plot([], [], "k-", label="optimised")
     top.set_ylabel("tension [N]")
     top.legend(fontsize=8, ncol=3)
-    bottom.plot(t, p_seed, ":", color="black", lw=1.6, label="seed")
-    bottom.plot(t, p, "-", color="#2171b5", lw=1.8, label="optimised")
-    bottom.axhline(plan["robot"]["p_min"], color="#cb181d", lw=1, ls="--", label="p_min")
-    bottom.set_ylabel("probability of success")
+    # Failure probability on a log axis: configurations hold with P between 0.99 and
+    # 0.999999, where a linear axis of P shows seed and optimum as one line.
+    floor = 1e-12
+    bottom.semilogy(t, np.maximum(1.0 - p_seed, floor), ":", color="black", lw=1.6,
+                    label="seed")
+    bottom.semilogy(t, np.maximum(1.0 - p, floor), "-", color="#2171b5", lw=1.8,
+                    label="optimised")
+    bottom.axhline(1.0 - plan["robot"]["p_min"], color="#cb181d", lw=1, ls="--",
+                   label="1 - p_min")
+    bottom.set_ylabel("probability of failure 1 - P")
     bottom.set_xlabel("time in phase [s]")
     bottom.legend(fontsize=8)
     what = "body movement" if phase["kind"] == "body" else (

@@ -78,14 +78,17 @@ def plan_cave(scn, planner: str, max_expansions: int, motion: bool) -> dict[str,
 
 
 def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
-    """What the experiments keep of a plan (its timing goes to the trial's `timing`)."""
+    """What the experiments keep of a plan (its timing goes to the trial's `timing`), and
+    whether `rbp check`'s verifier finds it sound (`verified`; a failed plan is not)."""
+    from planning.check import check_plan
     from planning.pipeline import motion_summary
 
     kinds = [p["kind"] for p in plan["phases"]]
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
               "p_grasps": plan.get("p_grasps"), "p_min": plan["p_min"],
               "regrasps": plan["regrasps"],
-              "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")}}
+              "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
+              "verified": bool(plan["success"]) and not check_plan(plan)}
     rows = motion_summary(plan)
     if rows:
         record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
@@ -188,6 +191,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
         counts["trials"] += 1
         counts["successes"] += bool(row["success"])
     return {"trials": len(rows), "successes": len(ok),
+            "verified": sum(bool(row.get("verified")) for row in ok),
             **{f"p_path_over_{t:.2f}": sum(v > t for v in p) for t in THRESHOLDS},
             **{f"p_grasps_over_{t:.2f}": sum(v > t for v in p_grasps) for t in THRESHOLDS},
             "p_path": quantiles(p), "p_path_successes": quantiles([r["p_path"] for r in ok]),
@@ -253,7 +257,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     for p, s in summary.items():
         print(f"{p}: {s['successes']}/{s['trials']} plans; p_path > 0.90 in "
               f"{s['p_path_over_0.90']}, > 0.95 in {s['p_path_over_0.95']}; p_grasps > 0.90 "
-              f"in {s['p_grasps_over_0.90']}, > 0.95 in {s['p_grasps_over_0.95']}")
+              f"in {s['p_grasps_over_0.90']}, > 0.95 in {s['p_grasps_over_0.95']}; "
+              f"{s['verified']} pass rbp check's verifier")
     figure = atomic_save_figure(baseline_figure(done, planners), f"{args.out}/baseline.png",
                                 dpi=120)
     print(f"wrote {figure}")

@@ -61,6 +61,7 @@ def timing_rows(records: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             ok = [r for r in records if r["result"]["rbp"]["success"]]
             rows[key] = {"label": label, "rbp": ours,
                          "rbp_successes": quantiles(stage_times(ok, "rbp", "footstep")),
+                         "rbp_whole": quantiles(stage_times(ok, "rbp", "total")),
                          "naive": quantiles(stage_times(records, "naive", "footstep")),
                          "paper_rbp": paper_rbp, "paper_naive": paper_naive}
         else:
@@ -88,6 +89,8 @@ def markdown_table(rows: dict[str, dict[str, Any]], machine: list[dict[str, Any]
     if "footstep" in rows:
         lines.append(f"| footstep plan, successful RBP plans only | "
                      f"{_cell(rows['footstep']['rbp_successes'])} | | | |")
+        lines.append(f"| whole plan (footsteps, seeds, SCP), successful RBP plans | "
+                     f"{_cell(rows['footstep']['rbp_whole'])} | minutes | | |")
     lines.append("")
     lines.append("Median [first quartile, third quartile] over the trials. Per segment: a "
                  "plan's stage total / its number of phases of that kind, per successful plan. "
@@ -142,6 +145,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     machine = trial_machines(done)
     table = markdown_table(rows, machine)
     print(table, end="")
+    planned = [r["result"]["rbp"] for r in done if r["result"]["rbp"]["success"]]
+    verified = sum(bool(p.get("verified")) for p in planned)
+    print(f"{verified} of the {len(planned)} RBP plans pass rbp check's verifier")
     md = atomic_write_text(f"{args.out}/timing_table.md", table)
     figure = atomic_save_figure(timing_figure(done), f"{args.out}/timing.png", dpi=120)
     print(f"wrote {md}\nwrote {figure}")
@@ -152,6 +158,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "per_segment": "stage total / number of phases of that kind, per successful plan",
         "summary": {"rbp_successes": sum(r["result"]["rbp"]["success"] for r in done),
                     "naive_successes": sum(r["result"]["naive"]["success"] for r in done),
+                    "rbp_verified": verified,
                     "trials": len(done)},
         "timing": rows,
         "errors": [r["name"] for r in records if r["error"] is not None],

@@ -238,7 +238,7 @@ def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
     add_cave_arguments(parser)
     parser.add_argument("--planners", default="rbp,naive",

@@ -24,7 +24,7 @@ from rb_drake.generate import KINDS, CaveConfig, generate_cave
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", default="shaft",
                         help="cave kinds, comma-separated: shaft, crevasse, rockfall")
     parser.add_argument("--trials", type=int, default=5)

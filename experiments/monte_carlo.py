@@ -135,7 +135,7 @@ def calibration_figure(rows: list[dict[str, Any]], bins: list[dict[str, Any]]):
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=50, out="out/monte_carlo")
     add_cave_arguments(parser)
     parser.add_argument("--runs", type=int, default=1000,

@@ -44,7 +44,7 @@ def rbp_body_plan(scn) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out/rig_experiment", help="output folder")
     parser.add_argument("--planner", choices=("rbp", "straight"), default="rbp",
                         help="the body movement: RBP seed + SCP (default) or the straight line")

@@ -17,7 +17,7 @@ from experiments.sweep import machine_info, write_results
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out/snapshots", help="output folder")
     parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
     parser.add_argument("--seed", type=int, default=1, help="cave seed (default 1)")

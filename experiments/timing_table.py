@@ -131,7 +131,7 @@ def trial_machines(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/timing_table")
     add_cave_arguments(parser)
     args = parser.parse_args(argv)

@@ -23,7 +23,7 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     """Register `simulate` on the `rbp` sub-command parsers."""
     p = subparsers.add_parser(
         "simulate", help="execute a plan in a Drake simulation with stochastic grasps",
-        description=__doc__.splitlines()[0])
+        description=__doc__.split("\n\n")[0])
     p.add_argument("plan", help="plan file (.json, from rbp plan)")
     p.add_argument("--trials", type=int, default=1000,
                    help="Monte Carlo trials (default 1000; 0: the deterministic run only)")

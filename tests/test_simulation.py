@@ -602,18 +602,24 @@ def test_replanning_is_pluggable_and_counts_saved_climbs(good: SimulationRecord,
     assert r.saved + sum(r.outcomes.values()) == trials - base.successes
 
 
-def test_retry_replanner_builds_a_continuing_plan(good: SimulationRecord) -> None:
-    """From a failure in a body phase: re-grasp the same anchor where the body is, finish the
-    phase, go on with the plan (times shifted). From a reach phase: nothing (two booms left)."""
-    plan, scn = good.plan.plan, good.plan.scenario
-    # the end of the first body phase: the transition pose, which holds the 3-stance that
-    # frees the reaching boom with its gripper on its old anchor
+def _failure_at_first_release(good: SimulationRecord) -> ReplanRequest:
+    """The reaching boom's grasp fails at the end of the first body phase: the transition pose,
+    which holds the 3-stance that frees that boom with its gripper on its old anchor."""
+    plan = good.plan.plan
     s = int(np.flatnonzero(good.phase == 0)[-1])
     ids = good.plan.phases[0].stance.ids
     boom = plan["phases"][1]["free_boom"]
     three = tuple(None if i == boom else a for i, a in enumerate(ids))
-    request = ReplanRequest(scn, plan, 0, float(good.times[s]), good.state[s, :3].copy(),
-                            three, boom, ids[boom], "overload")
+    return ReplanRequest(good.plan.scenario, plan, 0, float(good.times[s]),
+                         good.state[s, :3].copy(), three, boom, ids[boom], "overload")
+
+
+def test_retry_replanner_builds_a_continuing_plan(good: SimulationRecord) -> None:
+    """From a failure in a body phase: re-grasp the same anchor where the body is, finish the
+    phase, go on with the plan (times shifted). From a reach phase: nothing (two booms left)."""
+    plan, scn = good.plan.plan, good.plan.scenario
+    request = _failure_at_first_release(good)
+    ids, boom = good.plan.phases[0].stance.ids, request.boom
     new = retry_replanner(request)
     assert new is not None, "the 3-stance holds here: retrying must give a plan"
     validate(new)
@@ -643,13 +649,9 @@ def test_footstep_replanner_continues_with_a_full_verified_plan(good: Simulation
     tensions on every step, and the climb must end within the goal tolerance."""
     from planning.check import check_plan
 
-    plan, scn = good.plan.plan, good.plan.scenario
-    s = int(np.flatnonzero(good.phase == 0)[-1])
-    ids = good.plan.phases[0].stance.ids
-    boom = plan["phases"][1]["free_boom"]
-    three = tuple(None if i == boom else a for i, a in enumerate(ids))
-    request = ReplanRequest(scn, plan, 0, float(good.times[s]), good.state[s, :3].copy(),
-                            three, boom, ids[boom], "overload")
+    scn = good.plan.scenario
+    request = _failure_at_first_release(good)
+    ids, boom = good.plan.phases[0].stance.ids, request.boom
     new = FootstepReplanner()(request)
     assert new is not None, "the 3-stance holds here and the shaft is short: expected a plan"
     validate(new)

@@ -147,9 +147,10 @@ def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 10
 
 def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     check_sweep_arguments(parser, args)
-    lo, hi = args.length
-    if not 2.0 <= lo <= hi:
-        parser.error(f"--length: need 2 <= MIN <= MAX, got {lo} {hi}")
+    from rb_drake.generate import length_problem
+
+    if (problem := length_problem(*args.length)) is not None:
+        parser.error(f"--length: {problem}")
     if args.max_expansions < 1:
         parser.error(f"--max-expansions: must be 1 or more, got {args.max_expansions}")
 

@@ -20,6 +20,7 @@ from experiments.baseline_comparison import (
     add_cave_arguments,
     check_cave_arguments,
     climb_trials,
+    planner_summary,
     stage_times,
 )
 from experiments.sweep import (
@@ -145,9 +146,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     machine = trial_machines(done)
     table = markdown_table(rows, machine)
     print(table, end="")
-    planned = [r["result"]["rbp"] for r in done if r["result"]["rbp"]["success"]]
-    verified = sum(bool(p.get("verified")) for p in planned)
-    print(f"{verified} of the {len(planned)} RBP plans pass rbp check's verifier")
+    rbp = planner_summary(done, "rbp")
+    verified = rbp["verified"]
+    print(f"{verified} of the {rbp['successes']} RBP plans pass rbp check's verifier")
     md = atomic_write_text(f"{args.out}/timing_table.md", table)
     figure = atomic_save_figure(timing_figure(done), f"{args.out}/timing.png", dpi=120)
     print(f"wrote {md}\nwrote {figure}")

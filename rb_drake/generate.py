@@ -20,6 +20,14 @@ from rb_drake.params import RobotParams
 from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
 
 KINDS = ("shaft", "crevasse", "rockfall")
+MIN_LENGTH = 2.0  # m: start and goal sit 1 m from either end of a cave, so shorter has no climb
+
+
+def length_problem(lo: float, hi: float) -> str | None:
+    """Why (lo, hi) is no range of cave lengths to draw from, or None if it is one."""
+    if not MIN_LENGTH <= lo <= hi:
+        return f"need {MIN_LENGTH:g} <= MIN <= MAX, got {lo:g} {hi:g}"
+    return None
 
 
 @dataclasses.dataclass(frozen=True)

@@ -34,12 +34,12 @@ def _load(spec: str, check_start: bool = True):
 
 def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_write_text
-    from rb_drake.generate import CaveConfig, generate_cave
+    from rb_drake.generate import CaveConfig, generate_cave, length_problem
     from rb_drake.scenario import scenario_to_yaml
 
     lo, hi = args.length
-    if not 2.0 <= lo <= hi:
-        raise UserError(f"--length: need 2 <= MIN <= MAX, got {lo:g} {hi:g}")
+    if (problem := length_problem(lo, hi)) is not None:
+        raise UserError(f"--length: {problem}")
     if not args.anchor_density > 0:
         raise UserError(f"--anchor-density: must be positive, got {args.anchor_density:g}")
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))

@@ -945,7 +945,8 @@ def print_comparison(old: dict[str, Any], new: dict[str, Any], label: str) -> No
     print(f"\ncompared with {label} ({old.get('created', '?')}): new/old per metric")
     width = max((len(k) for k, *_ in rows), default=10)
     for key, a, b, ratio in rows:
-        print(f"  {key:{width}s} {a:11.4g} -> {b:11.4g}  {_fmt(ratio, '7.3f')}")
+        # Four significant digits: a fixed number of decimals loses a ratio far below 1.
+        print(f"  {key:{width}s} {a:11.4g} -> {b:11.4g}  {_fmt(ratio, '10.4g')}")
     if not rows:
         print("  no metric in common")
 

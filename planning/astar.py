@@ -35,6 +35,8 @@ class SearchResult(NamedTuple):
     evaluations: int
     graph: nx.DiGraph              # every evaluated feasible edge
     reason: str
+    expanded: tuple = ()           # nodes in expansion order (the start first)
+    node_data: Any = None          # dict: the data each reached node was last reached with
 
 
 def lazy_astar(
@@ -65,6 +67,7 @@ def lazy_astar(
     # entry g is the parent's g plus the edge's lower bound.
     open_list: list = [(weight * heuristic(start), next(tie), 0.0, start, None, None, True, None)]
     expansions = evaluations = 0
+    order: list[Hashable] = []
     while open_list:
         _, _, g, node, par, key, evaluated, data = heapq.heappop(open_list)
         if node in closed and g >= closed[node] - 1e-15:
@@ -88,6 +91,7 @@ def lazy_astar(
             node_data[node] = data
         closed[node] = g
         expansions += 1
+        order.append(node)
         if on_expand is not None:
             on_expand(expansions, node)
         goal = is_goal(node, node_data[node])
@@ -98,10 +102,11 @@ def lazy_astar(
                 edges.append(d)
                 path.append(p)
             return SearchResult(True, path[::-1], edges[::-1], goal, g, expansions, evaluations,
-                                graph, "")
+                                graph, "", order, node_data)
         if expansions >= max_expansions:
             return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
-                                f"gave up after {expansions} expansions without reaching the goal")
+                                f"gave up after {expansions} expansions without reaching the goal",
+                                order, node_data)
         for child, edge_key, lower in successors(node, node_data[node]):
             g_child = g + lower
             if child in closed and g_child >= closed[child] - 1e-15:
@@ -109,4 +114,5 @@ def lazy_astar(
             heapq.heappush(open_list, (g_child + weight * heuristic(child), next(tie), g_child,
                                        child, node, edge_key, False, None))
     return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
-                        "every reachable stance was explored without reaching the goal")
+                        "every reachable stance was explored without reaching the goal", order,
+                        node_data)

@@ -88,6 +88,22 @@ class FootstepPlan(NamedTuple):
     seconds: float
     search: SearchResult | None = None
     transitions: dict | None = None   # every transition tested: (stance, boom, anchor) -> result
+    # Why the search stopped: "" (a route was found), "budget" (max_expansions reached),
+    # "exhausted" (every stance the search could reach was expanded; not a proof that no route
+    # exists unless the search is complete) or "noroute" (a complete search proved that no
+    # route exists at its resolution).
+    stop: str = ""
+    explored: list[Explored] | None = None  # expanded stances, in expansion order
+    frontier: list[Explored] | None = None  # stances reached but never expanded
+
+
+class Explored(NamedTuple):
+    """A stance the search reached, for pictures of where it went."""
+
+    stance: tuple[str, ...]
+    pose: np.ndarray       # the body pose it was reached at (the start pose for the start)
+    order: int             # expansion order (0 = the start); -1 for the frontier
+    goal_distance: float   # footsteps.goal_distance of the stance (m)
 
 
 def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.random.Generator:
@@ -240,8 +256,11 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                   f"goal (the start is {centroid_distance(scn, start):.2f} m)")
         if result.expansions >= cfg.max_expansions:
             reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
+        stop = "budget" if result.expansions >= cfg.max_expansions else "exhausted"
+        explored, frontier = explored_stances(scn, result, start_pose)
         return FootstepPlan(False, reason, [start], [], start_pose, None,
-                            result.expansions, tested, seconds, result, cache)
+                            result.expansions, tested, seconds, result, cache, stop, explored,
+                            frontier)
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
@@ -254,8 +273,28 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                 scn, a, j, b[j], pose, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
         steps.append(Step(j, a[j], b[j], pose, probabilities, found))
     seconds = time.perf_counter() - t0
+    explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
-                        result.expansions, tested, seconds, result, cache)
+                        result.expansions, tested, seconds, result, cache, "", explored,
+                        frontier)
+
+
+def explored_stances(scn: Scenario, result: SearchResult,
+                     start_pose: np.ndarray) -> tuple[list[Explored], list[Explored]]:
+    """The expanded stances in order, and the frontier (reached by a feasible transition but
+    never expanded), each with the pose it was reached at."""
+    expanded = {node: k for k, node in enumerate(result.expanded)}
+    explored, frontier = [], []
+    for node, k in expanded.items():
+        pose = start_pose if k == 0 else (result.node_data or {}).get(node, start_pose)
+        explored.append(Explored(node, np.asarray(pose, dtype=float), k,
+                                 goal_distance(scn, node)))
+    for _parent, node, data in result.graph.edges(data="data"):
+        if node not in expanded and data is not None:
+            frontier.append(Explored(node, np.asarray(data, dtype=float), -1,
+                                     goal_distance(scn, node)))
+            expanded[node] = -1
+    return explored, frontier
 
 
 class _Goal(NamedTuple):

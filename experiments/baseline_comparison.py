@@ -61,20 +61,48 @@ def trial_cave(params: dict[str, Any]):
     return make_cave(**{k: v for k, v in params.items() if k in CAVE_PARAMS})
 
 
-def plan_cave(scn, planner: str, max_expansions: int, motion: bool) -> dict[str, Any]:
+# The footstep planners an experiment can compare: rbp (the default, complete search with its
+# expansion budget), rbp-sampled (the sampling search of commit 36a65ef, for before/after
+# ratios in one run), oracle (the complete search without an expansion budget, stopped only
+# by --oracle-time: it labels each cave route / noroute / undecided) and the naive baseline.
+PLANNERS = ("rbp", "rbp-sampled", "oracle", "naive")
+ORACLE_SECONDS = 120.0
+
+
+def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = ORACLE_SECONDS):
+    from planning.footsteps import FootstepConfig
+
+    if planner == "rbp-sampled":
+        return FootstepConfig(search="sampled", max_expansions=max_expansions)
+    if planner == "oracle":
+        return FootstepConfig(max_expansions=None, time_limit=oracle_seconds)
+    return FootstepConfig(max_expansions=max_expansions)
+
+
+def plan_cave(scn, planner: str, max_expansions: int, motion: bool, memo=None,
+              oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
     """The plan dictionary: the whole pipeline with `motion`, else the footstep stage only
-    (the naive baseline always stops after its footsteps)."""
-    from planning.footsteps import FootstepConfig, plan_footsteps
+    (the naive baseline always stops after its footsteps). `memo` (a FootstepMemo) shares what
+    one complete search decided with the next on the same cave (the oracle after rbp)."""
+    from planning.footsteps import plan_footsteps
     from planning.pipeline import PipelineConfig, plan_climb
     from planning.plan import build_plan
 
-    config = PipelineConfig(footstep=FootstepConfig(max_expansions=max_expansions))
+    config = PipelineConfig(footstep=footstep_config(planner, max_expansions, oracle_seconds))
+    name = "naive" if planner == "naive" else "rbp"
     if motion or planner == "naive":
-        return plan_climb(scn, planner, config)
+        return plan_climb(scn, name, config)
     start = time.perf_counter()
-    fp = plan_footsteps(scn, config.footstep)
-    return build_plan(scn, fp, planner, {"footstep": fp.seconds,
-                                         "total": time.perf_counter() - start})
+    fp = plan_footsteps(scn, config.footstep, memo=memo)
+    return build_plan(scn, fp, name, {"footstep": fp.seconds,
+                                      "total": time.perf_counter() - start})
+
+
+def oracle_label(record: dict[str, Any]) -> str:
+    """route / noroute / undecided, from the oracle's plan record."""
+    if record["success"]:
+        return "route"
+    return "noroute" if record.get("stop") in ("noroute", "nostart") else "undecided"
 
 
 def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
@@ -85,6 +113,7 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
 
     kinds = [p["kind"] for p in plan["phases"]]
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
+              "stop": plan.get("search", {}).get("stop"),
               "p_grasps": plan.get("p_grasps"), "p_min": plan["p_min"],
               "regrasps": plan["regrasps"],
               "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
@@ -101,7 +130,8 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
 def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
                 planners: list[str], motion: bool = False, anchor_density: float = 3.0,
                 gravity: float = MARS_G, p_min: float = 0.95,
-                gripper_scale: float = 1.0) -> dict[str, Any]:
+                gripper_scale: float = 1.0,
+                oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
     """One cave, each planner on it: {planner: plan_record, "cave": ..., "timing": ...}.
 
     A cave the generator cannot give a feasible start stance (a weak gripper scale, say)
@@ -118,10 +148,17 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
                 "timing": {"cave": time.perf_counter() - start}}
     out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
     timing = {"cave": time.perf_counter() - start}
+    from planning.footsteps import FootstepMemo
+
+    memo = FootstepMemo()  # the oracle replays rbp's search from what it decided
     for planner in planners:
-        plan = plan_cave(scn, planner, max_expansions, motion)
+        plan = plan_cave(scn, planner, max_expansions, motion,
+                         memo if planner in ("rbp", "oracle") else None, oracle_seconds)
         out[planner] = plan_record(plan)
         timing[planner] = plan["timing"]
+        if planner == "oracle" and "rbp" in timing:  # it reused rbp's work: count it
+            timing[planner] = {**plan["timing"], "footstep": plan["timing"]["footstep"]
+                               + timing["rbp"]["footstep"]}
     out["timing"] = timing
     return out
 
@@ -199,6 +236,50 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
             "regrasps_successes": quantiles([r["regrasps"] for r in ok]), "by_kind": by_kind}
 
 
+def oracle_summary(records: list[dict[str, Any]], planners: list[str]) -> dict[str, Any]:
+    """The oracle's label counts, and per planner how many caves with a route it planned."""
+    from planning.lattice import LatticeConfig
+
+    lattice = LatticeConfig()
+    labels = [oracle_label(r["result"]["oracle"]) for r in records]
+    counts = {k: labels.count(k) for k in ("route", "noroute", "undecided")}
+    route = [r for r, lab in zip(records, labels, strict=True) if lab == "route"]
+    planned = {p: {"route": len(route),
+                   "planned": sum(bool(r["result"][p]["success"]) for r in route),
+                   "planned_where_no_route": sum(
+                       bool(r["result"][p]["success"]) for r, lab in
+                       zip(records, labels, strict=True) if lab == "noroute")}
+               for p in planners if p != "oracle"}
+    oracle_ok = [r["result"]["oracle"] for r in route]
+    return {"labels": counts,
+            "resolution": f"{lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg",
+            "planned_of_route": planned,
+            "oracle_regrasps": quantiles([o["regrasps"] for o in oracle_ok]),
+            "by_kind": {k: {lab: sum(1 for r, x in zip(records, labels, strict=True)
+                                     if r["params"]["kind"] == k and x == lab)
+                            for lab in counts}
+                        for k in sorted({r["params"]["kind"] for r in records})}}
+
+
+def footstep_times(records: list[dict[str, Any]], planners: list[str]) -> dict[str, Any]:
+    """Per planner, footstep seconds (quantiles) where it found a route, where it proved that
+    there is none, and where it failed otherwise (budget, exhausted, undecided)."""
+    out = {}
+    for p in planners:
+        rows = [(r["result"][p], r["timing"][p]["footstep"]) for r in records
+                if p in r["timing"]]
+        out[p] = {"found": quantiles([t for rec, t in rows if rec["success"]]),
+                  "noroute": quantiles([t for rec, t in rows if not rec["success"]
+                                        and rec.get("stop") in ("noroute", "nostart")]),
+                  "failed": quantiles([t for rec, t in rows if not rec["success"]
+                                       and rec.get("stop") not in ("noroute", "nostart")])}
+    return out
+
+
+def _seconds(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f} s"
+
+
 def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
     """Fig. 4: histograms of p_path (failures at 0) and the share of trials above each p, for
     p_path (solid) and p_grasps (dashed)."""
@@ -206,7 +287,7 @@ def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
     import numpy as np
     from matplotlib.ticker import MaxNLocator
 
-    colours = {"rbp": "#2171b5", "naive": "#cb181d"}
+    colours = {"rbp": "#2171b5", "rbp-sampled": "#6baed6", "naive": "#cb181d"}
     fig, (hist, tail) = plt.subplots(1, 2, figsize=(10.0, 4.0))
     bins = np.linspace(0.0, 1.0, 21)
     for k, planner in enumerate(planners):
@@ -242,17 +323,25 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
     add_cave_arguments(parser)
-    parser.add_argument("--planners", default="rbp,naive",
-                        help="comma-separated planners (default rbp,naive)")
+    parser.add_argument("--planners", default=",".join(PLANNERS),
+                        help="comma-separated planners among " + ",".join(PLANNERS) +
+                        " (default all; rbp-sampled is the search before the complete one, "
+                        "oracle labels each cave)")
+    parser.add_argument("--oracle-time", type=float, default=ORACLE_SECONDS,
+                        help="seconds the oracle may search a cave before it says undecided "
+                             f"(default {ORACLE_SECONDS:g})")
     args = parser.parse_args(argv)
     check_cave_arguments(parser, args)
     planners = [p for p in args.planners.split(",") if p]
-    if not planners or not set(planners) <= {"rbp", "naive"}:
-        parser.error(f"--planners: choose from rbp,naive, got {args.planners!r}")
+    if not planners or not set(planners) <= set(PLANNERS):
+        parser.error(f"--planners: choose from {','.join(PLANNERS)}, got {args.planners!r}")
+    if not args.oracle_time > 0:
+        parser.error(f"--oracle-time: must be positive, got {args.oracle_time}")
 
     from rb_drake.files import atomic_save_figure
 
-    records = sweep(climb_trials(args, planners, motion=False), args)
+    records = sweep(climb_trials(args, planners, motion=False,
+                                 oracle_seconds=args.oracle_time), args)
     done = ok_records(records)
     summary = {p: planner_summary(done, p) for p in planners}
     for p, s in summary.items():
@@ -260,21 +349,37 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
               f"{s['p_path_over_0.90']}, > 0.95 in {s['p_path_over_0.95']}; p_grasps > 0.90 "
               f"in {s['p_grasps_over_0.90']}, > 0.95 in {s['p_grasps_over_0.95']}; "
               f"{s['verified']} pass rbp check's verifier")
-    figure = atomic_save_figure(baseline_figure(done, planners), f"{args.out}/baseline.png",
-                                dpi=120)
+    oracle = oracle_summary(done, planners) if "oracle" in planners else None
+    if oracle is not None:
+        print(f"oracle: {oracle['labels']['route']} caves have a route, "
+              f"{oracle['labels']['noroute']} have none at {oracle['resolution']}, "
+              f"{oracle['labels']['undecided']} undecided after {args.oracle_time:g} s")
+        for p, line in oracle["planned_of_route"].items():
+            print(f"{p} plans {line['planned']} of the {line['route']} caves that have a route")
+    times = footstep_times(done, planners)
+    for p, t in times.items():
+        print(f"{p} footstep time, median: {_seconds(t['found']['median'])} where it found a "
+              f"route, {_seconds(t['noroute']['median'])} where it proved there is none, "
+              f"{_seconds(t['failed']['median'])} where it failed otherwise")
+    figure = atomic_save_figure(baseline_figure(done, [p for p in planners if p != "oracle"]),
+                                f"{args.out}/baseline.png", dpi=120)
     print(f"wrote {figure}")
     results = {
         "experiment": "baseline_comparison", "machine": machine_info(),
         "params": {"trials": args.trials, "kind": args.kind, "first_seed": args.first_seed,
                    "length": list(args.length), "max_expansions": args.max_expansions,
-                   "planners": planners},
+                   "oracle_seconds": args.oracle_time, "planners": planners},
         "summary": summary,
         "errors": [r["name"] for r in records if r["error"] is not None],
-        "timing": {p: {"footstep": quantiles(stage_times(done, p, "footstep"))}
+        "oracle": oracle,
+        "timing": {p: {"footstep": quantiles(stage_times(done, p, "footstep")), **times[p]}
                    for p in planners},
         "trials": [{"name": r["name"], "kind": r["params"]["kind"], "seed": r["params"]["seed"],
-                    **{p: {k: r["result"][p].get(k) for k in ("success", "p_path", "p_grasps",
-                                                              "regrasps", "reason")}
+                    **({"label": oracle_label(r["result"]["oracle"])}
+                       if "oracle" in planners else {}),
+                    **{p: {**{k: r["result"][p].get(k) for k in (
+                        "success", "stop", "p_path", "p_grasps", "regrasps", "reason")},
+                        "footstep_seconds": r["timing"].get(p, {}).get("footstep")}
                        for p in planners}}
                    for r in done],
         "figure": str(figure),

@@ -61,7 +61,7 @@ def plan_naive(scn: Scenario, config: FootstepConfig | None = None,
             return FootstepPlan(False, f"stuck after {len(steps)} steps: no feasible move from "
                                 f"stance {list(stance)}", stances, steps,
                                 np.asarray(scn.start_pose), None, len(stances), tested,
-                                time.perf_counter() - t0)
+                                time.perf_counter() - t0, stop="exhausted")
     return FootstepPlan(False, f"no goal after {max_steps} steps", stances, steps,
                         np.asarray(scn.start_pose), None, len(stances), tested,
-                        time.perf_counter() - t0)
+                        time.perf_counter() - t0, stop="budget")

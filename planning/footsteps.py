@@ -37,6 +37,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
+from planning.complete import LatticeMemo, complete_search, search_result
+from planning.lattice import LatticeConfig
 from planning.transition import (
     ReleaseSet,
     Transition,
@@ -54,11 +56,20 @@ from rb_drake.stance import Stance
 Stance4 = tuple[str, str, str, str]
 
 
+SEARCHES = ("complete", "sampled")
+
+
 @dataclasses.dataclass(frozen=True)
 class FootstepConfig:
+    # "complete": resolution-complete on the pose lattice (planning.complete), certifies when
+    # no route exists; "sampled": the sampling search of rbp 0.3 (commit 36a65ef), kept for
+    # comparison.
+    search: str = "complete"
+    lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     heuristic_weight: float = 300.0
-    candidates_per_boom: int = 8
-    max_expansions: int = 1000  # about 10 s when it fails; rbp plan and the experiments share it
+    candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
+    max_expansions: int | None = 1000  # None: no budget (the oracle)
+    time_limit: float | None = None    # s; None: no limit
     goal_samples: int = 96
     polish_rounds: int = 8   # local search rounds per transition pose of the found path
     seed: int = 0
@@ -95,6 +106,7 @@ class FootstepPlan(NamedTuple):
     stop: str = ""
     explored: list[Explored] | None = None  # expanded stances, in expansion order
     frontier: list[Explored] | None = None  # stances reached but never expanded
+    memo: FootstepMemo | None = None  # what the search decided, for a search again
 
 
 class Explored(NamedTuple):
@@ -185,6 +197,7 @@ class FootstepMemo:
 
     transitions: dict[tuple, Transition] = dataclasses.field(default_factory=dict)
     releases: dict[tuple, ReleaseSet] = dataclasses.field(default_factory=dict)
+    lattice: LatticeMemo = dataclasses.field(default_factory=LatticeMemo)
 
 
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
@@ -196,6 +209,11 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     `exclude` holds moves (stance, boom, new anchor) not to take (the pipeline excludes one
     whose motion could not be planned); `memo` carries searched transitions between calls."""
     cfg = config or FootstepConfig()
+    if cfg.search not in SEARCHES:
+        raise ValueError(f"search must be one of {SEARCHES}, got {cfg.search!r}")
+    memo = memo if memo is not None else FootstepMemo()
+    if cfg.search == "complete":
+        return _plan_complete(scn, cfg, progress, exclude, memo)
     t0 = time.perf_counter()
     c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
     c_attach = max(c_attach, 1e-9)
@@ -203,7 +221,6 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     max_step = 2.0 * robot.max_reach / 4.0
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_pose = np.asarray(scn.start_pose, dtype=float)
-    memo = memo if memo is not None else FootstepMemo()
     cache, releases = memo.transitions, memo.releases
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     goal_rng = np.random.default_rng([cfg.seed, 1])
@@ -247,20 +264,22 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
 
     result = lazy_astar(start, successors, evaluate, heuristic,
                         is_goal=lambda n, d: _as_goal(is_goal(n, d)),
-                        weight=cfg.heuristic_weight, max_expansions=cfg.max_expansions,
+                        weight=cfg.heuristic_weight,
+                        max_expansions=cfg.max_expansions or 10**9,
                         start_data=start_pose, on_expand=on_expand)
     seconds = time.perf_counter() - t0
     if not result.success:
         nearest = min(centroid_distance(scn, n) for n in result.graph.nodes)
         reason = (f"{result.reason}; the nearest stance reached is {nearest:.2f} m from the "
                   f"goal (the start is {centroid_distance(scn, start):.2f} m)")
-        if result.expansions >= cfg.max_expansions:
+        budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
+        if budget:
             reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
-        stop = "budget" if result.expansions >= cfg.max_expansions else "exhausted"
+        stop = "budget" if budget else "exhausted"
         explored, frontier = explored_stances(scn, result, start_pose)
         return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache, stop, explored,
-                            frontier)
+                            frontier, memo)
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
@@ -276,7 +295,48 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
                         result.expansions, tested, seconds, result, cache, "", explored,
-                        frontier)
+                        frontier, memo)
+
+
+def _plan_complete(scn: Scenario, cfg: FootstepConfig,
+                   progress: Callable[[int, int], None] | None,
+                   exclude: Collection[tuple[tuple[str, ...], int, str]],
+                   memo: FootstepMemo) -> FootstepPlan:
+    """plan_footsteps through the complete search (planning.complete)."""
+    t0 = time.perf_counter()
+    start_pose = np.asarray(scn.start_pose, dtype=float)
+    result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
+                             cfg.time_limit, exclude, memo.lattice, progress,
+                             cfg.transition.ignore_grasps)
+    search = search_result(result)
+    explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))
+                for k, (v, p) in enumerate(result.expanded)]
+    frontier = [Explored(v[0], np.asarray(p, dtype=float), -1, goal_distance(scn, v[0]))
+                for v, p in result.frontier]
+    start = tuple(scn.start_stance)
+    if not result.success:
+        reason = result.reason
+        if explored:
+            nearest = min(centroid_distance(scn, e.stance) for e in explored)
+            reason += (f"; the nearest stance reached is {nearest:.2f} m from the goal (the "
+                       f"start is {centroid_distance(scn, start):.2f} m)")
+        return FootstepPlan(False, reason, [start], [], start_pose, None, result.expansions,
+                            result.transitions_tested, time.perf_counter() - t0, search, None,
+                            result.stop, explored, frontier, memo)
+    stances = [v[0] for v in result.path]
+    steps = []
+    for a, b, pose, probabilities in zip(stances[:-1], stances[1:], result.poses,
+                                         result.probabilities, strict=True):
+        j = next(i for i in range(4) if a[i] != b[i])
+        found = np.asarray(pose, dtype=float)
+        pose = found
+        if cfg.polish_rounds > 0:
+            pose, probabilities = polish_transition(
+                scn, a, j, b[j], found, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
+        steps.append(Step(j, a[j], b[j], pose, probabilities, found))
+    return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
+                        result.expansions, result.transitions_tested,
+                        time.perf_counter() - t0, search, None, "", explored, frontier, memo)
 
 
 def explored_stances(scn: Scenario, result: SearchResult,

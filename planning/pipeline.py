@@ -154,7 +154,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
     motions, failure = phase_motions(scn, fp, cfg, timing, progress)
-    memo, excluded = FootstepMemo(fp.transitions or {}), []
+    memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
+    excluded: list = []
     for _ in range(cfg.motion_retries):
         if not failure:
             break

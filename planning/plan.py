@@ -51,6 +51,14 @@ def _configuration(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.n
     return step
 
 
+def search_record(fp: FootstepPlan) -> dict[str, Any]:
+    """How the footstep search ended: `stop` is "" (a route), "budget", "exhausted" (an
+    incomplete search ran out of stances: no proof), "noroute" (the complete search proved that
+    no route exists at its resolution) or "nostart" (the start pose joins no lattice pose)."""
+    return {"stop": fp.stop, "expansions": int(fp.expansions),
+            "transitions_tested": int(fp.transitions_tested)}
+
+
 def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
                timing: dict[str, float] | None = None) -> dict[str, Any]:
     """The plan-file dictionary for a footstep plan (phases at the footstep stage)."""
@@ -65,6 +73,7 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
         "p_grasps": None,
         "regrasps": len(fp.steps),
         "timing": timing,
+        "search": search_record(fp),
         "scenario": scn.to_dict(resolved=True),
         "robot": scn.robot.to_dict(),
         "phases": [],

@@ -138,11 +138,13 @@ def score_poses(world: World, stance: Stance, poses: np.ndarray,
 
 def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np.ndarray,
                pose_row: np.ndarray, stance_row: np.ndarray, tip_row: np.ndarray,
-               ignore_grasps: bool = False) -> KernelCheck:
+               ignore_grasps: bool = False, decide_only: bool = False) -> KernelCheck:
     """`score_poses` for R rows at once, each its own configuration: row r is pose
     poses[pose_row[r]] in stance stances[stance_row[r]], with the free gripper of a 3-stance
     at tips[tip_row[r]] (tips: (T, 2); ignored in a 4-stance). Lets one call score several
-    stances, as a transition's four configurations."""
+    stances, as a transition's four configurations. With `decide_only` (the lattice search,
+    which asks only which rows are feasible) each row stops at a failing test: the violation
+    is NaN and an infeasible row's reason is one failing test, not always the first."""
     R = len(pose_row)
     reason = np.empty(R, dtype=np.int64)
     robustness = np.empty(R)
@@ -154,7 +156,7 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
         _score_kernel(_floats(poses, (-1, 3)), _robot_params(world.robot, world.gravity_vector),
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
-                      reason, robustness, log_probs, tensions, violation)
+                      bool(decide_only), reason, robustness, log_probs, tensions, violation)
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation)
 
 
@@ -554,8 +556,14 @@ def _mean_limit(psi, fn, ft):
 @njit(cache=True, error_model="numpy")
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
-                  vertices, ignore_grasps, reason_out, r_out, lp_out, f_out, v_out) -> None:
-    """check_poses(full=True) and violation for each row (see score_rows), into the outputs."""
+                  vertices, ignore_grasps, decide_only, reason_out, r_out, lp_out, f_out,
+                  v_out) -> None:
+    """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
+
+    With `decide_only` a row stops at its first failing test (kinematics, collisions, then the
+    allocation's tests, the conditioning last) and its violation is NaN: feasibility, and the
+    robustness, log-probabilities and tensions of feasible rows, are as without it; the
+    reason of an infeasible row is one failing test, not always the first."""
     L_lo, L_hi, rng = prm[_L_LO], prm[_L_HI], prm[_RANGE]
     f_lo, f_hi = prm[_F_LO], prm[_F_HI]
     gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
@@ -693,6 +701,14 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                     if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
                         code = _BOOM_COLLISION
                         break
+        if decide_only and code != 0:
+            reason_out[row] = code
+            r_out[row] = -math.inf
+            for i in range(4):
+                lp_out[row, i] = math.nan
+                f_out[row, i] = math.nan
+            v_out[row] = math.nan
+            continue
         # -- force allocation (statics.allocate, statics._finish)
         if free >= 0:
             m = 0
@@ -769,6 +785,15 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                     break
         if code == 0 and free >= 0 and abs(torque) > prm[_TORQUE_MAX]:
             code = _SHOULDER_TORQUE
+        if decide_only:  # the cheap tests first, the conditioning only where they all pass
+            if code == 0 and not statics_ok:
+                code = _STATICS
+            if code == 0 and not ignore_grasps and robustness < log_p_min:
+                code = _PROBABILITY
+            if code != 0:
+                reason_out[row] = code
+                v_out[row] = math.nan
+                continue
         m = 0
         for i in range(4):
             if att[i]:
@@ -784,6 +809,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         if code == 0 and not ignore_grasps and robustness < log_p_min:
             code = _PROBABILITY
         reason_out[row] = code
+        if decide_only:
+            v_out[row] = math.nan
+            continue
         # -- feasibility.violation
         v = 0.0
         for i in range(4):

@@ -182,13 +182,19 @@ def test_excluded_move_is_not_taken_and_memo_is_reused(demo, footsteps):
     """Searching again without the first move (what the pipeline does when a motion fails)
     gives a plan without it, and reuses the transitions already searched."""
     move = failed_move(footsteps, 1)
-    memo = FootstepMemo(dict(footsteps.transitions))
-    known = len(memo.transitions)
+    memo = footsteps.memo
+    assert isinstance(memo, FootstepMemo), type(memo)
+
+    def decided() -> int:
+        return len(memo.transitions) + len(memo.lattice.transitions)
+
+    known = decided()
+    assert known >= footsteps.transitions_tested > 0, (known, footsteps.transitions_tested)
     again = plan_footsteps(demo, exclude=[move], memo=memo)
     taken = {(tuple(st), s.boom, s.to_anchor) for st, s in zip(again.stances, again.steps,
                                                                   strict=False)}
     assert move not in taken, f"excluded move {move} taken again"
     assert again.success, again.reason
-    assert again.transitions_tested < len(memo.transitions), (
-        f"tested {again.transitions_tested} of {len(memo.transitions)} transitions: the memo "
+    assert again.transitions_tested < decided(), (
+        f"tested {again.transitions_tested} of {decided()} transitions: the memo "
         f"({known} known) was not reused")

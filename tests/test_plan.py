@@ -28,15 +28,16 @@ from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario, scenario_from_dict, scenario_to_yaml
 
-# generate_cave("shaft", SEED, short) with the goal moved 0.6 m above the start: RBP succeeds
-# with 2 regrasps in about 2 s (seeds 0, 1 and 5-11 need no regrasp, 3 has no route).
+# generate_cave("shaft", SEED, short) with the goal moved 0.9 m above the start: the complete
+# search succeeds with 2 regrasps in under a second (0.6 m up, the body reaches the goal
+# without one).
 SEED = 4
 SHORT = CaveConfig(length=(3.0, 3.2))
 EXPANSIONS = 40
 TOL = 1e-9
 
 
-def small_shaft(seed: int = SEED, rise: float = 0.6) -> Scenario:
+def small_shaft(seed: int = SEED, rise: float = 0.9) -> Scenario:
     scn = generate_cave("shaft", seed, SHORT)
     x, y, _ = scn.start_pose
     return dataclasses.replace(scn, goal_position=(x, y + rise), goal_tolerance=0.4)
@@ -50,7 +51,7 @@ def scn() -> Scenario:
 @pytest.fixture(scope="module")
 def fp(scn: Scenario) -> FootstepPlan:
     fp = plan_footsteps(scn, FootstepConfig(max_expansions=EXPANSIONS))
-    assert fp.success, (f"RBP found no plan on shaft seed {SEED} with the goal 0.6 m up "
+    assert fp.success, (f"RBP found no plan on shaft seed {SEED} with the goal 0.9 m up "
                         f"(max_expansions {EXPANSIONS}): {fp.reason}")
     assert len(fp.steps) >= 1, "the fixture scenario must need at least one regrasp"
     return fp

@@ -1,0 +1,424 @@
+"""The complete footstep search: A* over (4-stance, connected component) on the pose lattice.
+
+Resolution-complete. Every transition and every body motion is decided on the pose lattice of
+`planning.lattice` (default 2 cm x 2.5 deg, every orientation):
+- a vertex is a 4-stance S together with one connected component C of its feasible lattice
+  poses (the body can move between any two poses of C, one lattice step at a time, as the
+  pipeline's body phase must);
+- an edge moves boom j from its anchor to b through a lattice pose q of C at which all four
+  configurations hold: S and the 3-stance with the gripper at its old anchor (q in the
+  release set of j, computed once per stance), the 3-stance with the gripper at b and the new
+  4-stance S'. It enters the component of S' that holds q. Every such pose is tested, so
+  whenever a lattice pose holds a transition, the edge is found;
+- the moves of a vertex are every anchor that boom j reaches (boom length and shoulder range,
+  exactly) from some release pose of C: none is dropped;
+- the start is joined to the components of its stance whose lattice poses next to the start
+  pose are linked to it by a feasible straight segment; a vertex is a goal when C holds a
+  lattice pose within the goal tolerance.
+So when the search expands every vertex it can reach without meeting a goal, no route exists
+at that resolution (`stop == "noroute"`); when it stops on its budget it says so (`"budget"`).
+What is not decided here: poses between lattice points, and the free gripper's path from one
+anchor to the next (the pipeline plans it, and searches again without a move whose motion
+fails), as in the paper's two limiting configurations.
+
+Cost and heuristic are `planning.footsteps`' (an upper bound on -log p_path; distance to the
+goal, weighted). An edge's pose is its most robust lattice pose (the worst of its four
+configurations' r), polished afterwards on the found path as the sampled search does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import itertools
+import math
+import time
+from collections.abc import Callable, Collection
+from typing import NamedTuple
+
+import networkx as nx
+import numpy as np
+
+from planning.astar import SearchResult
+from planning.lattice import (
+    LatticeConfig,
+    StanceLattice,
+    pack,
+    packed_configs,
+    poses_of,
+    stance_lattice,
+)
+from rb_drake.feasibility_kernel import reach_violation, score_poses, score_rows
+from rb_drake.scenario import Scenario
+
+Stance4 = tuple[str, str, str, str]
+Vertex = tuple[Stance4, int]  # (stance, component)
+
+
+@dataclasses.dataclass
+class LatticeMemo:
+    """Stance lattices and transitions already decided on one scenario (same lattice)."""
+
+    lattices: dict[tuple, StanceLattice] = dataclasses.field(default_factory=dict)
+    transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
+
+
+class LatticeTransition(NamedTuple):
+    """Every lattice pose of component `component` of `stance` that holds boom `boom`'s move
+    to `anchor`, with the worst of the four configurations' r and each one's r."""
+
+    keys: np.ndarray      # (E,) lattice keys (sorted)
+    worst: np.ndarray     # (E,)
+    r4: np.ndarray        # (E, 4) CONFIG_NAMES order
+    tested: int           # lattice poses tested
+
+
+class CompleteResult(NamedTuple):
+    success: bool
+    stop: str                      # "", "budget", "noroute", "nostart"
+    reason: str
+    path: list[Vertex]
+    poses: list[np.ndarray]        # transition pose per edge
+    probabilities: list[np.ndarray]  # the four configurations' P per edge
+    goal_pose: np.ndarray | None
+    expansions: int
+    transitions_tested: int
+    expanded: list[tuple[Vertex, np.ndarray]]   # (vertex, pose reached at), in order
+    frontier: list[tuple[Vertex, np.ndarray]]
+    graph: nx.DiGraph
+
+
+def _lattice(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
+             ignore_grasps: bool) -> StanceLattice:
+    hit = memo.lattices.get(stance)
+    if hit is None:
+        hit = memo.lattices[stance] = stance_lattice(scn, stance, cfg, ignore_grasps)
+    return hit
+
+
+def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, component: int,
+                       boom: int, anchor: str, cfg: LatticeConfig,
+                       ignore_grasps: bool = False) -> LatticeTransition:
+    """Decide boom `boom`'s move to `anchor` from component `component` of `stance` on every
+    lattice pose (see the module doc)."""
+    from planning.transition import _anchor_table
+
+    table = _anchor_table(scn)
+    free = len(table.row)
+    rows = np.flatnonzero((lat.component == component) & lat.release[:, boom])
+    target = table.positions[table.row[anchor]]
+    if len(rows):
+        reach = reach_violation(scn.robot, lat.poses[rows], target[None],
+                                np.array([boom]))[:, 0] == 0.0
+        rows = rows[reach]
+    tested = len(rows)
+    empty = LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
+    if not tested:
+        return empty
+    held = [table.row[a] for a in stance]
+    three = [free if i == boom else held[i] for i in range(4)]
+    new = [table.row[anchor] if i == boom else held[i] for i in range(4)]
+    stances, tips = packed_configs(scn, table, [three, new], [table.row[anchor], free])
+    poses = lat.poses[rows]
+    n = len(rows)
+    # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
+    first = score_rows(scn, stances, tips, poses, np.arange(n), np.zeros(n, np.int64),
+                       np.zeros(n, np.int64), ignore_grasps, decide_only=True)
+    ok = np.flatnonzero(first.feasible)
+    if not len(ok):
+        return empty
+    second = score_rows(scn, stances, tips, poses[ok], np.arange(len(ok)),
+                        np.ones(len(ok), np.int64), np.ones(len(ok), np.int64), ignore_grasps,
+                        decide_only=True)
+    keep = ok[second.feasible]
+    if not len(keep):
+        return empty
+    src = rows[keep]
+    r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom],
+                          first.robustness[keep], second.robustness[second.feasible]])
+    return LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested)
+
+
+def candidate_anchors(scn: Scenario, lat: StanceLattice, stance: tuple, component: int,
+                      boom: int) -> np.ndarray:
+    """Indices of every anchor boom `boom` reaches from some release pose of the component
+    (exact on the lattice), the stance's own anchors excluded."""
+    rows = np.flatnonzero((lat.component == component) & lat.release[:, boom])
+    if not len(rows):
+        return np.zeros(0, dtype=np.int64)
+    pts = scn.anchor_positions
+    poses = lat.poses[rows]
+    centre = poses[:, :2].mean(axis=0)
+    spread = float(np.linalg.norm(poses[:, :2] - centre, axis=1).max())
+    near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) <= scn.robot.max_reach + spread
+                          + 1e-6)
+    held = {scn.anchor_index[a] for a in stance}
+    near = np.array([k for k in near if k not in held], dtype=np.int64)
+    if not len(near):
+        return near
+    reach = np.zeros(len(near), dtype=bool)
+    for chunk in range(0, len(rows), 4096):  # bounded memory on big components
+        v = reach_violation(scn.robot, poses[chunk:chunk + 4096], pts[near],
+                            np.full(len(near), boom))
+        reach |= (v == 0.0).any(axis=0)
+    return near[reach]
+
+
+def start_components(scn: Scenario, lat: StanceLattice, cfg: LatticeConfig,
+                     link_step: float = 0.005) -> dict[int, np.ndarray]:
+    """The components the start pose is joined to, each with the lattice pose it joins: a
+    feasible lattice pose of a neighbouring cell (within one step in x, y and phi) whose
+    straight segment from the start pose is feasible every `link_step` m or rad."""
+    start = np.asarray(scn.start_pose, dtype=float)
+    out: dict[int, np.ndarray] = {}
+    if not len(lat.keys):
+        return out
+    base = np.floor(start / np.array([cfg.position_step, cfg.position_step,
+                                      cfg.angle_step])).astype(np.int64)
+    corners = np.array(list(itertools.product((0, 1), repeat=3))) + base
+    rows = lat.find(pack(corners, cfg.angle_count))
+    rows = rows[rows >= 0]
+    stance = scn.stance(scn.start_stance)
+    for row in sorted(rows, key=lambda k: -lat.robustness[k]):
+        comp = int(lat.component[row])
+        if comp in out:
+            continue
+        end = lat.poses[row]
+        n = max(2, int(np.ceil(np.abs(end - start).max() / link_step)) + 1)
+        link = start + np.linspace(0.0, 1.0, n)[:, None] * (end - start)
+        if score_poses(scn, stance, link).feasible.all():
+            out[comp] = end
+    return out
+
+
+def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
+    """Whether some lattice pose within the goal tolerance could hold a stance at all: its body
+    clear of rock and every boom reaching some anchor (a necessary condition for a goal vertex,
+    so False proves that no route exists at the lattice's resolution)."""
+    from rb_drake import geometry
+    from rb_drake.feasibility import rock_inside_body
+
+    goal = np.asarray(scn.goal_position, dtype=float)
+    tol, dx = scn.goal_tolerance, cfg.position_step
+    i = np.arange(math.ceil((goal[0] - tol) / dx), math.floor((goal[0] + tol) / dx) + 1)
+    k = np.arange(math.ceil((goal[1] - tol) / dx), math.floor((goal[1] + tol) / dx) + 1)
+    ii, kk = np.meshgrid(i, k, indexing="ij")
+    cells = np.column_stack([ii.ravel(), kk.ravel()])
+    cells = cells[np.linalg.norm(cells * dx - goal, axis=1) <= tol]
+    if not len(cells):
+        return False
+    near = np.flatnonzero(np.linalg.norm(scn.anchor_positions - goal, axis=1)
+                          <= tol + scn.robot.max_reach + 1e-6)
+    if not len(near):
+        return False
+    n = cfg.angle_count
+    for m in range(-n // 2, n // 2):  # an orientation at a time: bounded memory
+        poses = np.column_stack([cells * dx, np.full(len(cells), m * cfg.angle_step)])
+        ok = np.ones(len(poses), dtype=bool)
+        for j in range(4):
+            v = reach_violation(scn.robot, poses, scn.anchor_positions[near],
+                                np.full(len(near), j))
+            ok &= (v == 0.0).any(axis=1)
+        if not ok.any():
+            continue
+        poses = poses[ok]
+        if scn.rock.polygons:
+            corners = geometry.body_corners(scn.robot, poses)
+            hit = scn.rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
+            hit |= rock_inside_body(scn.rock, corners)
+            if (~hit).any():
+                return True
+        else:
+            return True
+    return False
+
+
+def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
+                    heuristic_weight: float = 300.0, max_expansions: int | None = None,
+                    time_limit: float | None = None,
+                    exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
+                    memo: LatticeMemo | None = None,
+                    progress: Callable[[int, int], None] | None = None,
+                    ignore_grasps: bool = False) -> CompleteResult:
+    """A* over (stance, component) vertices on the pose lattice (module doc).
+
+    `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit."""
+    from planning.footsteps import boom_costs, goal_distance
+
+    cfg = lattice or LatticeConfig()
+    memo = memo if memo is not None else LatticeMemo()
+    t0 = time.perf_counter()
+    robot = scn.robot
+    c_attach = max(-math.log(1.0 - robot.attach_failure) if robot.attach_failure < 1 else 1e3,
+                   1e-9)
+    max_step = 2.0 * robot.max_reach / 4.0
+    goal = np.asarray(scn.goal_position, dtype=float)
+    excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
+    start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
+    start_lat = _lattice(scn, memo, start, cfg, ignore_grasps)
+    joined = start_components(scn, start_lat, cfg)
+    graph = nx.DiGraph()
+    tested = 0
+
+    def heuristic(stance: tuple) -> float:
+        return heuristic_weight * c_attach * goal_distance(scn, stance) / max_step
+
+    if not goal_is_holdable(scn, cfg):
+        return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
+                              "tolerance can hold a stance (the body meets rock, or some boom "
+                              "reaches no anchor)", [], [], [], None, 0, 0, [], [], graph)
+    if not joined:
+        return CompleteResult(False, "nostart", "the start pose is joined to no feasible lattice "
+                              f"pose of its stance at {cfg.position_step * 100:g} cm / "
+                              f"{cfg.angle_step_deg:g} deg", [], [], [], None, 0, 0, [], [],
+                              graph)
+    tie = itertools.count()
+    # Entries: (f, tie, g, kind, payload). kind 0: a stance reached by an evaluated move,
+    # payload ((stance, component or None while unknown), move, pose, P4, transition,
+    # parent's g); kind 1: a move to evaluate, payload (parent vertex, boom, anchor).
+    open_list: list = []
+    start_pose = np.asarray(scn.start_pose, dtype=float)
+    for comp in joined:
+        heapq.heappush(open_list, (heuristic(start), next(tie), 0.0, 0,
+                                   ((start, comp), None, start_pose, None, None, 0.0)))
+    closed: dict[Vertex, float] = {}
+    parent: dict[Vertex, tuple] = {}
+    reached_at: dict[Vertex, np.ndarray] = {}
+    expanded: list[tuple[Vertex, np.ndarray]] = []
+    expansions = 0
+    stop, reason = "noroute", ""
+
+    def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
+                   child: Stance4, comp: int | None) -> tuple:
+        """An open-list entry for the child reached through the most robust pose of `pick`."""
+        (stance, _), j, anchor = move
+        best = pick[int(np.argmax(tr.worst[pick]))]
+        pose = poses_of(_unpack(tr.keys[best], cfg.angle_count), cfg)[0]
+        g_child = g_parent + c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
+        return (g_child + heuristic(child), next(tie), g_child, 0,
+                ((child, comp), move, pose, np.exp(tr.r4[best]), tr, g_parent))
+
+    while open_list:
+        _, _, g, kind, payload = heapq.heappop(open_list)
+        if kind == 1:
+            (stance, comp), j, anchor = payload
+            key = (stance, comp, j, anchor)
+            tr = memo.transitions.get(key)
+            if tr is None:
+                lat = memo.lattices[stance]
+                tr = memo.transitions[key] = lattice_transition(
+                    scn, lat, stance, comp, j, anchor, cfg, ignore_grasps)
+                tested += 1
+            if not len(tr.keys):
+                continue
+            child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
+            graph.add_edge((stance, comp), child, boom=j, anchor=anchor)
+            # The child's lattice (and so which of its components the move enters) waits until
+            # the child is popped: most children are never expanded.
+            heapq.heappush(open_list, edge_entry(g - c_attach, payload, tr,
+                                                 np.arange(len(tr.keys)), child, None))
+            continue
+        (child, comp), move, pose, p4, tr, g_parent = payload
+        if comp is None:  # entered through a move: split among the child's components
+            child_lat = _lattice(scn, memo, child, cfg, ignore_grasps)
+            rows = child_lat.find(tr.keys)
+            if (rows < 0).any():  # the kernel is deterministic: never expected
+                raise RuntimeError("a transition pose is missing from the new stance's lattice")
+            comps = child_lat.component[rows]
+            hit = np.unique(comps)
+            if len(hit) > 1 or (child, int(hit[0])) in closed:
+                for c2 in hit:
+                    if (child, int(c2)) not in closed:
+                        heapq.heappush(open_list, edge_entry(
+                            g_parent, move, tr, np.flatnonzero(comps == c2), child, int(c2)))
+                continue
+            comp = int(hit[0])
+        vertex = (child, comp)
+        par = move
+        if vertex in closed:
+            continue
+        closed[vertex] = g
+        parent[vertex] = (par, pose, p4)
+        reached_at[vertex] = pose
+        expanded.append((vertex, pose))
+        expansions += 1
+        if progress is not None:
+            progress(expansions, tested)
+        stance, comp = vertex
+        lat = memo.lattices[stance]
+        in_comp = lat.component == comp
+        near_goal = np.flatnonzero(in_comp & (np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
+                                              <= scn.goal_tolerance))
+        if len(near_goal):
+            goal_pose = lat.poses[near_goal[int(np.argmax(lat.robustness[near_goal]))]]
+            path, poses, probs = [vertex], [], []
+            while parent[path[-1]][0] is not None:
+                (pv, _j, _a), pz, pp = parent[path[-1]]
+                poses.append(pz)
+                probs.append(pp)
+                path.append(pv)
+            return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1],
+                                  goal_pose, expansions, tested, expanded,
+                                  _frontier(open_list, closed), graph)
+        if max_expansions is not None and expansions >= max_expansions:
+            stop = "budget"
+            reason = (f"gave up after {expansions} expansions without reaching the goal "
+                      f"(max_expansions {max_expansions})")
+            break
+        if time_limit is not None and time.perf_counter() - t0 > time_limit:
+            stop = "budget"
+            reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
+                      "reaching the goal")
+            break
+        for j in range(4):
+            for k in candidate_anchors(scn, lat, stance, comp, j):
+                anchor = scn.anchors[k].id
+                if (stance, j, anchor) in excluded:
+                    continue
+                child = tuple(anchor if i == j else a for i, a in enumerate(stance))
+                heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
+                                           g + c_attach, 1, (vertex, j, anchor)))
+    if stop == "noroute":
+        reason = (f"no route at resolution {cfg.position_step * 100:g} cm / "
+                  f"{cfg.angle_step_deg:g} deg: all {expansions} (stance, component) vertices "
+                  "reachable from the start were expanded without reaching the goal")
+        if excluded:
+            stop = "exhausted"
+            reason += f" ({len(excluded)} moves excluded)"
+    return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
+                          _frontier(open_list, closed), graph)
+
+
+def _unpack(key: np.ndarray, angle_count: int) -> np.ndarray:
+    """Lattice indices of packed keys (`lattice.pack`'s inverse)."""
+    from planning.lattice import _SPAN
+
+    key = np.asarray(key, dtype=np.int64).reshape(-1)
+    m = key % angle_count - angle_count // 2
+    rest = key // angle_count
+    return np.column_stack([rest // _SPAN - _SPAN // 2, rest % _SPAN - _SPAN // 2, m])
+
+
+def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
+    out, seen = [], set()
+    for entry in open_list:
+        if entry[3] == 0:
+            vertex, _, pose = entry[4][:3]
+            if vertex not in closed and vertex not in seen:
+                seen.add(vertex)
+                out.append((vertex, pose))
+    return out
+
+
+def search_result(result: CompleteResult) -> SearchResult:
+    """The result in `planning.astar`'s form, stances as nodes."""
+    graph = nx.DiGraph()
+    for (a, _), b in result.graph.edges():
+        graph.add_edge(a, b, cost=0.0, data=None)
+    return SearchResult(result.success, [v[0] for v in result.path], list(result.poses),
+                        None, float("nan"), result.expansions, result.transitions_tested, graph,
+                        result.reason, tuple(v[0] for v, _ in result.expanded),
+                        {v[0]: p for v, p in result.expanded})
+
+
+__all__ = ["LatticeConfig", "LatticeMemo", "complete_search", "poses_of"]

@@ -1,0 +1,238 @@
+"""The pose lattice: every body pose on a grid, and the feasible ones of a stance.
+
+The complete footstep search (`planning.complete`) decides transitions on a lattice of body
+poses, x = i dx, y = k dx, phi = m dphi (default dx = 2 cm, dphi = 2.5 deg), fixed in the world
+so that every stance sees the same poses. For a 4-stance it enumerates exactly the lattice poses
+at which all four booms reach their anchors (boom length and shoulder range; for one
+orientation this region is the intersection of four 90-degree circular sectors, a convex set,
+so each lattice column holds an interval of it), scores them all with the compiled
+feasibility kernel, and keeps the feasible ones with:
+- their robustness in the stance,
+- which booms may let go there (the 3-stance with that gripper still at its anchor is
+  feasible too: the two release configurations of a transition),
+- the connected component each belongs to (26-neighbours on the lattice): the body can move
+  between two poses of one component through feasible poses, one lattice step at a time.
+Nothing here samples: a lattice pose is in the set exactly when the kernel finds it feasible.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+from scipy import ndimage
+
+from rb_drake.feasibility_kernel import PackedStances, reach_violation, score_rows
+from rb_drake.params import RobotParams
+from rb_drake.scenario import Scenario
+
+
+@dataclasses.dataclass(frozen=True)
+class LatticeConfig:
+    """The resolution at which the complete search is complete."""
+
+    position_step: float = 0.02      # m
+    angle_step_deg: float = 2.5      # deg; 360 / angle_step_deg must be an even integer
+
+    @property
+    def angle_step(self) -> float:
+        return math.radians(self.angle_step_deg)
+
+    @property
+    def angle_count(self) -> int:
+        """Orientation indices -n/2 .. n/2 - 1 cover the whole circle."""
+        n = round(360.0 / self.angle_step_deg)
+        if n % 2 or abs(n * self.angle_step_deg - 360.0) > 1e-9:
+            raise ValueError(f"angle_step_deg must divide 180 deg, got {self.angle_step_deg}")
+        return n
+
+
+# Lattice indices are packed into one int64 key, so that sets of poses intersect by sorting.
+_SPAN = 1 << 21  # |i|, |k| < 2^20 cells: 20 km at 2 cm
+
+
+def pack(idx: np.ndarray, angle_count: int) -> np.ndarray:
+    """One sortable int64 per lattice index (i, k, m)."""
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
+    return ((idx[:, 0] + _SPAN // 2) * _SPAN + (idx[:, 1] + _SPAN // 2)) * angle_count + (
+        idx[:, 2] + angle_count // 2)
+
+
+def poses_of(idx: np.ndarray, cfg: LatticeConfig) -> np.ndarray:
+    idx = np.asarray(idx).reshape(-1, 3)
+    return np.column_stack([idx[:, 0] * cfg.position_step, idx[:, 1] * cfg.position_step,
+                            idx[:, 2] * cfg.angle_step])
+
+
+def reachable_lattice(robot: RobotParams, anchors: np.ndarray, booms: np.ndarray,
+                      cfg: LatticeConfig) -> np.ndarray:
+    """Every lattice index (i, k, m) at which boom booms[n] reaches anchors[n] for every n (boom
+    length within bounds, shoulder angle within range), (P, 3) int64.
+
+    Per orientation, boom n's shoulder must lie within L_max of its anchor inside the 90-degree
+    cone about the boom's direction: the body centre lies in a circular sector, and each lattice
+    column holds an interval of the sectors' intersection (with a margin for rounding); every
+    index of those intervals is then tested exactly, as `reach_violation` tests it."""
+    if robot.shoulder_range >= math.pi / 2:
+        raise ValueError("the lattice enumeration needs a shoulder range below 90 deg")
+    anchors = np.ascontiguousarray(anchors, dtype=float).reshape(-1, 2)
+    booms = np.ascontiguousarray(booms, dtype=np.int64).reshape(-1)
+    idx = _reachable_kernel(anchors, np.ascontiguousarray(robot.shoulder_array[booms]),
+                            np.ascontiguousarray(robot.shoulder_directions[booms]),
+                            float(robot.boom_length[0]), float(robot.boom_length[1]),
+                            float(robot.shoulder_range), float(cfg.position_step),
+                            float(cfg.angle_step), int(cfg.angle_count))
+    if not len(idx):
+        return idx
+    # The exact test, exactly as the feasibility kernel's (its own rounding).
+    v = reach_violation(robot, poses_of(idx, cfg), anchors, booms).sum(axis=1)
+    return idx[v == 0.0]
+
+
+@njit(cache=True)
+def _reachable_kernel(anchors, shoulders, directions, lo, hi, half, dx, dphi,
+                      n_phi):  # pragma: no cover - compiled
+    B = anchors.shape[0]
+    cap = 1024
+    out = np.empty((cap, 3), dtype=np.int64)
+    n = 0
+    ax = np.empty(B)
+    ay = np.empty(B)
+    margin = 1e-7  # m: rounding of the bounds; the exact test follows
+    for m in range(-n_phi // 2, n_phi // 2):
+        phi = m * dphi
+        c, s = math.cos(phi), math.sin(phi)
+        x_lo, x_hi, y_lo0, y_hi0 = -math.inf, math.inf, -math.inf, math.inf
+        for b in range(B):
+            ax[b] = anchors[b, 0] - (c * shoulders[b, 0] - s * shoulders[b, 1])
+            ay[b] = anchors[b, 1] - (s * shoulders[b, 0] + c * shoulders[b, 1])
+            x_lo = max(x_lo, ax[b] - hi)
+            x_hi = min(x_hi, ax[b] + hi)
+            y_lo0 = max(y_lo0, ay[b] - hi)
+            y_hi0 = min(y_hi0, ay[b] + hi)
+        if x_lo > x_hi or y_lo0 > y_hi0:
+            continue
+        for i in range(math.ceil(x_lo / dx - 1e-6), math.floor(x_hi / dx + 1e-6) + 1):
+            x = i * dx
+            y_lo, y_hi = y_lo0, y_hi0
+            for b in range(B):
+                px = x - ax[b]
+                disc = hi * hi - px * px
+                if disc < -1e-12:
+                    y_lo, y_hi = math.inf, -math.inf
+                    break
+                root = math.sqrt(max(disc, 0.0))
+                y_lo = max(y_lo, ay[b] - root)
+                y_hi = min(y_hi, ay[b] + root)
+                # The centre lies in the cone of directions phi + d + pi +- half from the apex:
+                # sign * (r_x (y - a_y) - r_y p_x) >= 0 for its two boundary rays.
+                axis = phi + directions[b] + math.pi
+                for side in range(2):
+                    ang = axis - half if side == 0 else axis + half
+                    sign = 1.0 if side == 0 else -1.0
+                    a = sign * math.cos(ang)
+                    off = -sign * math.sin(ang) * px
+                    if abs(a) < 1e-12:
+                        if off < -1e-9:
+                            y_lo, y_hi = math.inf, -math.inf
+                        continue
+                    bound = ay[b] - off / a
+                    if a > 0:
+                        y_lo = max(y_lo, bound)
+                    else:
+                        y_hi = min(y_hi, bound)
+            if not y_lo <= y_hi + 2 * margin:
+                continue
+            for k in range(math.ceil((y_lo - margin) / dx - 1e-9),
+                           math.floor((y_hi + margin) / dx + 1e-9) + 1):
+                if n == cap:
+                    grown = np.empty((2 * cap, 3), dtype=np.int64)
+                    grown[:cap] = out
+                    out = grown
+                    cap *= 2
+                out[n, 0] = i
+                out[n, 1] = k
+                out[n, 2] = m
+                n += 1
+    return out[:n].copy()
+
+
+class StanceLattice(NamedTuple):
+    """The feasible lattice poses of one 4-stance, sorted by key."""
+
+    keys: np.ndarray        # (F,) int64, sorted
+    idx: np.ndarray         # (F, 3) lattice indices
+    poses: np.ndarray       # (F, 3)
+    robustness: np.ndarray  # (F,) r in the 4-stance
+    release: np.ndarray     # (F, 4) bool: boom j may let go (3-stance, gripper at its anchor)
+    release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
+    component: np.ndarray   # (F,) connected component label, 0 .. n_components - 1
+    n_components: int
+    reachable: int          # lattice poses at which the booms reach (the region scored)
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        """Rows of `keys` in this set (-1 where absent)."""
+        pos = np.searchsorted(self.keys, keys)
+        pos = np.minimum(pos, max(len(self.keys) - 1, 0))
+        hit = len(self.keys) > 0
+        return np.where(hit & (self.keys[pos] == keys) if hit else False, pos, -1)
+
+
+def packed_configs(scn: Scenario, table, rows: list[list[int]], tips: list[int]) -> tuple[
+        PackedStances, np.ndarray]:
+    """Kernel stances from anchor-table rows (a row index of `free` leaves that boom free)."""
+    idx = np.array(rows)
+    free = len(table.row)
+    stances = PackedStances(table.positions[idx], table.normals[idx], table.f_normal[idx],
+                            table.f_lateral[idx], table.sigma_normal[idx],
+                            table.sigma_lateral[idx], idx != free)
+    return stances, table.positions[np.array(tips)]
+
+
+def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
+                   ignore_grasps: bool = False) -> StanceLattice:
+    """The feasible lattice poses of `stance`, their release booms and components."""
+    from planning.transition import _anchor_table
+
+    table = _anchor_table(scn)
+    free = len(table.row)
+    held = [table.row[a] for a in stance]
+    anchors = table.positions[held]
+    idx = reachable_lattice(scn.robot, anchors, np.arange(4), cfg)
+    reachable = len(idx)
+    poses = poses_of(idx, cfg)
+    rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
+    stances, tips = packed_configs(scn, table, rows, [free, *held])
+    P = len(idx)
+    check = score_rows(scn, stances, tips, poses, np.arange(P), np.zeros(P, np.int64),
+                       np.zeros(P, np.int64), ignore_grasps, decide_only=True)
+    ok = check.feasible
+    idx, poses, r = idx[ok], poses[ok], check.robustness[ok]
+    F = len(idx)
+    # The four release 3-stances, only where the 4-stance holds.
+    rel = score_rows(scn, stances, tips, poses, np.tile(np.arange(F), 4),
+                     np.repeat(np.arange(1, 5), F), np.repeat(np.arange(1, 5), F),
+                     ignore_grasps, decide_only=True)
+    release = rel.feasible.reshape(4, F).T
+    release_r = np.where(release, rel.robustness.reshape(4, F).T, -np.inf)
+    component, n = _components(idx)
+    keys = pack(idx, cfg.angle_count)
+    order = np.argsort(keys)
+    return StanceLattice(keys[order], idx[order], poses[order], r[order], release[order],
+                         release_r[order], component[order], n, reachable)
+
+
+def _components(idx: np.ndarray) -> tuple[np.ndarray, int]:
+    """Connected components of lattice points under 26-connectivity."""
+    if not len(idx):
+        return np.zeros(0, dtype=np.int64), 0
+    lo = idx.min(axis=0)
+    shape = tuple(idx.max(axis=0) - lo + 1)
+    grid = np.zeros(shape, dtype=bool)
+    local = idx - lo
+    grid[local[:, 0], local[:, 1], local[:, 2]] = True
+    labels, n = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
+    return labels[local[:, 0], local[:, 1], local[:, 2]].astype(np.int64) - 1, int(n)

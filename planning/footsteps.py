@@ -56,15 +56,18 @@ from rb_drake.stance import Stance
 Stance4 = tuple[str, str, str, str]
 
 
-SEARCHES = ("complete", "sampled")
+SEARCHES = ("hybrid", "complete", "sampled")
 
 
 @dataclasses.dataclass(frozen=True)
 class FootstepConfig:
-    # "complete": resolution-complete on the pose lattice (planning.complete), certifies when
-    # no route exists; "sampled": the sampling search of rbp 0.3 (commit 36a65ef), kept for
-    # comparison.
-    search: str = "complete"
+    # "complete": resolution-complete on the pose lattice (planning.complete): finds a route
+    # whenever one exists at its resolution and proves it when none does; "sampled": the
+    # sampling search of commit 36a65ef (fast where it succeeds, no proof either way);
+    # "hybrid" (the default): the sampled search for at most `sampled_expansions`, then the
+    # complete one, so the caves sampling solves stay fast and the rest are settled.
+    search: str = "hybrid"
+    sampled_expansions: int = 150
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     heuristic_weight: float = 300.0
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
@@ -214,6 +217,23 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     memo = memo if memo is not None else FootstepMemo()
     if cfg.search == "complete":
         return _plan_complete(scn, cfg, progress, exclude, memo)
+    if cfg.search == "hybrid":
+        budget = cfg.sampled_expansions
+        if cfg.max_expansions is not None:
+            budget = min(budget, cfg.max_expansions)
+        t0 = time.perf_counter()
+        first = plan_footsteps(scn, dataclasses.replace(cfg, search="sampled",
+                                                        max_expansions=budget),
+                               progress, exclude, memo)
+        if first.success:
+            return first
+        rest = None if cfg.max_expansions is None else max(1, cfg.max_expansions - budget)
+        second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest), progress,
+                                exclude, memo)
+        return second._replace(seconds=time.perf_counter() - t0,
+                               expansions=first.expansions + second.expansions,
+                               transitions_tested=first.transitions_tested
+                               + second.transitions_tested)
     t0 = time.perf_counter()
     c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
     c_attach = max(c_attach, 1e-9)

@@ -554,6 +554,40 @@ def _mean_limit(psi, fn, ft):
 
 
 @njit(cache=True, error_model="numpy")
+def _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance, edges, owner,
+                    near_hit, near_ray, parity, vertices) -> int:
+    """_BODY_COLLISION, _BOOM_COLLISION or 0 for the pose (x, y, phi = atan2(s, c)) whose booms
+    run from the shoulders sh to the targets tg along u (collision.Rock's tests)."""
+    for q in range(4):
+        cx[q] = x + (c * corner_x[q] - s * corner_y[q])
+        cy[q] = y + (s * corner_x[q] + c * corner_y[q])
+    for q in range(4):
+        r = (q + 1) % 4
+        if (_segment_hits(cx[q], cy[q], cx[r], cy[r], edges, near_hit)
+                or _inside_rock(cx[q], cy[q], edges, owner, near_ray, parity)):
+            return _BODY_COLLISION
+    for v in range(vertices.shape[0]):  # a whole rock polygon inside the body square
+        inside = True
+        for q in range(4):
+            r = (q + 1) % 4
+            side = ((cx[r] - cx[q]) * (vertices[v, 1] - cy[q])
+                    - (cy[r] - cy[q]) * (vertices[v, 0] - cx[q]))
+            if not side > 0:
+                inside = False
+                break
+        if inside:
+            return _BODY_COLLISION
+    for i in range(4):
+        ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
+        uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
+        ex = tg[i, 0] - clearance * ux
+        ey = tg[i, 1] - clearance * uy
+        if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
+            return _BOOM_COLLISION
+    return 0
+
+
+@njit(cache=True, error_model="numpy")
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
                   vertices, ignore_grasps, decide_only, reason_out, r_out, lp_out, f_out,
@@ -665,42 +699,12 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 if abs(theta[i]) > rng + 1e-12:
                     code = _SHOULDER_ANGLE
                     break
-        # -- collisions (only where they decide the reason)
-        if code == 0 and has_rock:
-            for q in range(4):
-                cx[q] = x + (c * corner_x[q] - s * corner_y[q])
-                cy[q] = y + (s * corner_x[q] + c * corner_y[q])
-            body = False
-            for q in range(4):
-                r = (q + 1) % 4
-                if (_segment_hits(cx[q], cy[q], cx[r], cy[r], edges, near_hit)
-                        or _inside_rock(cx[q], cy[q], edges, owner, near_ray, parity)):
-                    body = True
-                    break
-            if not body:  # a whole rock polygon inside the body square
-                for v in range(vertices.shape[0]):
-                    inside = True
-                    for q in range(4):
-                        r = (q + 1) % 4
-                        side = ((cx[r] - cx[q]) * (vertices[v, 1] - cy[q])
-                                - (cy[r] - cy[q]) * (vertices[v, 0] - cx[q]))
-                        if not side > 0:
-                            inside = False
-                            break
-                    if inside:
-                        body = True
-                        break
-            if body:
-                code = _BODY_COLLISION
-            else:
-                for i in range(4):
-                    ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
-                    uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
-                    ex = tg[i, 0] - prm[_CLEARANCE] * ux
-                    ey = tg[i, 1] - prm[_CLEARANCE] * uy
-                    if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
-                        code = _BOOM_COLLISION
-                        break
+        # -- collisions (only where they decide the reason; with decide_only after the
+        # allocation's tests, which reject more poses for less)
+        if code == 0 and has_rock and not decide_only:
+            code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
+                                   prm[_CLEARANCE], edges, owner, near_hit, near_ray, parity,
+                                   vertices)
         if decide_only and code != 0:
             reason_out[row] = code
             r_out[row] = -math.inf
@@ -790,6 +794,10 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 code = _STATICS
             if code == 0 and not ignore_grasps and robustness < log_p_min:
                 code = _PROBABILITY
+            if code == 0 and has_rock:
+                code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
+                                       prm[_CLEARANCE], edges, owner, near_hit, near_ray,
+                                       parity, vertices)
             if code != 0:
                 reason_out[row] = code
                 v_out[row] = math.nan

@@ -1,0 +1,275 @@
+"""The complete footstep search (planning.lattice, planning.complete).
+
+Completeness is checked against brute force: every lattice pose of a box that covers the
+stance's reach, tested with the compiled kernel in its full (reference) mode, must give the same
+sets as the search's sector enumeration, release sets and transition test. The tests use a
+coarse lattice (5 cm x 5 deg) so that brute force over the whole box stays cheap; the code is
+the same at any resolution. A planted narrow window (p_min raised until only a few lattice poses
+hold a move) must be found exactly, and a cave cut in two by a slab of rock must be answered
+"no route" by exhausting the vertices below it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from planning.complete import (
+    candidate_anchors,
+    complete_search,
+    goal_is_holdable,
+    lattice_transition,
+    start_components,
+)
+from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
+from planning.lattice import (
+    LatticeConfig,
+    pack,
+    poses_of,
+    reachable_lattice,
+    stance_lattice,
+)
+from planning.plan import build_plan
+from planning.transition import transition_stances
+from rb_drake.feasibility import check_poses
+from rb_drake.feasibility_kernel import pack_stances, reach_violation, score_poses, score_rows
+from rb_drake.scenario import Scenario, bundled_caves, load_scenario, scenario_from_dict
+
+COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
+
+
+@pytest.fixture(scope="module")
+def demo() -> Scenario:
+    return load_scenario(bundled_caves()["demo-shaft"])
+
+
+def box_lattice(anchors: np.ndarray, cfg: LatticeConfig, reach: float) -> np.ndarray:
+    """Every lattice index within `reach` (box) of every anchor, every orientation."""
+    lo = np.floor((anchors.max(axis=0) - reach) / cfg.position_step).astype(int)
+    hi = np.ceil((anchors.min(axis=0) + reach) / cfg.position_step).astype(int)
+    n = cfg.angle_count
+    grid = itertools.product(range(lo[0], hi[0] + 1), range(lo[1], hi[1] + 1),
+                             range(-n // 2, n // 2))
+    return np.array(list(grid), dtype=np.int64).reshape(-1, 3)
+
+
+def brute_reachable(scn: Scenario, anchors: np.ndarray, booms: np.ndarray,
+                    cfg: LatticeConfig) -> set[tuple[int, int, int]]:
+    idx = box_lattice(anchors, cfg, scn.robot.max_reach + cfg.position_step)
+    v = reach_violation(scn.robot, poses_of(idx, cfg), anchors, booms).sum(axis=1)
+    return set(map(tuple, idx[v == 0.0]))
+
+
+@pytest.mark.parametrize("cave", ["demo-shaft", "crevasse-2", "rockfall-3"])
+def test_sector_enumeration_equals_brute_force(cave: str) -> None:
+    """The lattice poses at which a stance's booms reach are exactly those of brute force over a
+    box, for the start stance and for random anchor sets (where the sectors barely meet)."""
+    scn = load_scenario(bundled_caves()[cave])
+    rng = np.random.default_rng(3)
+    held = scn.stance(scn.start_stance).positions
+    cases = [held] + [held + rng.normal(0.0, 0.6, held.shape) for _ in range(3)]
+    for anchors in cases:
+        got = set(map(tuple, reachable_lattice(scn.robot, anchors, np.arange(4), COARSE)))
+        want = brute_reachable(scn, anchors, np.arange(4), COARSE)
+        assert got == want, (f"{cave}: {len(got - want)} poses enumerated beyond reach, "
+                             f"{len(want - got)} reachable poses missed")
+
+
+def test_decide_only_keeps_feasibility_and_values(demo: Scenario) -> None:
+    """The kernel's decide_only mode (the lattice's) agrees with its full mode on feasibility,
+    and on robustness and tensions where feasible."""
+    stance = demo.stance(demo.start_stance)
+    idx = reachable_lattice(demo.robot, stance.positions, np.arange(4), COARSE)
+    poses = poses_of(idx, COARSE)
+    full = score_poses(demo, stance, poses)
+    packed = pack_stances(stance)
+    z = np.zeros(len(poses), np.int64)
+    fast = score_rows(demo, packed, np.full((1, 2), np.nan), poses, np.arange(len(poses)), z, z,
+                      decide_only=True)
+    assert full.feasible.any() and (~full.feasible).any(), "need both kinds of pose"
+    assert np.array_equal(full.feasible, fast.feasible), "decide_only changed feasibility"
+    f = full.feasible
+    assert np.array_equal(full.robustness[f], fast.robustness[f])
+    assert np.array_equal(full.tensions[f], fast.tensions[f])
+
+
+def test_stance_lattice_is_the_feasible_set_with_release_booms(demo: Scenario) -> None:
+    """stance_lattice holds exactly the reachable poses check_poses (the numpy reference) finds
+    feasible, each boom's release flag is the 3-stance's check, and the components are the
+    26-connected ones."""
+    stance = tuple(demo.start_stance)
+    lat = stance_lattice(demo, stance, COARSE)
+    idx = reachable_lattice(demo.robot, demo.stance(stance).positions, np.arange(4), COARSE)
+    ref = check_poses(demo, demo.stance(stance), poses_of(idx, COARSE))
+    want = set(pack(idx[ref.feasible], COARSE.angle_count).tolist())
+    assert set(lat.keys.tolist()) == want, "feasible lattice set differs from check_poses"
+    s4 = demo.stance(stance)
+    for j in range(4):
+        three = s4.without(j)
+        rel = check_poses(demo, three, lat.poses, s4.positions[j]).feasible
+        assert np.array_equal(lat.release[:, j], rel), f"release set of boom {j} differs"
+    # Components: neighbours (26-connectivity) share a label, and labels split nowhere else.
+    where = {tuple(i): c for i, c in zip(lat.idx.tolist(), lat.component.tolist(), strict=True)}
+    for i, c in where.items():
+        for d in itertools.product((-1, 0, 1), repeat=3):
+            other = where.get((i[0] + d[0], i[1] + d[1], i[2] + d[2]))
+            assert other is None or other == c, f"neighbours {i} + {d} in two components"
+    assert lat.n_components == len(set(where.values()))
+
+
+def all_transition_poses(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
+                         cfg: LatticeConfig) -> set[int]:
+    """Brute force: every lattice pose of a box over the five anchors' reach at which all four
+    configurations of the move are feasible (kernel, full mode)."""
+    s_old, s_three, s_new = transition_stances(scn, stance, boom, anchor)
+    five = np.vstack([s_old.positions, s_new.positions[boom][None]])
+    booms = np.array([0, 1, 2, 3, boom])
+    idx = box_lattice(five, cfg, scn.robot.max_reach + cfg.position_step)
+    poses = poses_of(idx, cfg)
+    ok = reach_violation(scn.robot, poses, five, booms).sum(axis=1) == 0.0
+    idx, poses = idx[ok], poses[ok]
+    for stance_k, tip in ((s_old, None), (s_three, s_old.positions[boom]),
+                          (s_three, s_new.positions[boom]), (s_new, None)):
+        if not len(poses):
+            break
+        keep = score_poses(scn, stance_k, poses, tip).feasible
+        idx, poses = idx[keep], poses[keep]
+    return set(pack(idx, cfg.angle_count).tolist())
+
+
+def lattice_poses_of_move(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
+                          cfg: LatticeConfig) -> dict[int, float]:
+    """The search's answer over every component: key -> worst robustness of the four."""
+    lat = stance_lattice(scn, stance, cfg)
+    out: dict[int, float] = {}
+    for comp in range(lat.n_components):
+        tr = lattice_transition(scn, lat, stance, comp, boom, anchor, cfg)
+        out.update(zip(tr.keys.tolist(), tr.worst.tolist(), strict=True))
+    return out
+
+
+@pytest.fixture(scope="module")
+def move(demo: Scenario) -> tuple[tuple[str, ...], int, str, dict[int, float]]:
+    """A move from the demo's start stance that holds at many lattice poses."""
+    stance = tuple(demo.start_stance)
+    lat = stance_lattice(demo, stance, COARSE)
+    best = None
+    for j in range(4):
+        for comp in range(lat.n_components):
+            for k in candidate_anchors(demo, lat, stance, comp, j):
+                found = lattice_poses_of_move(demo, stance, j, demo.anchors[k].id, COARSE)
+                if best is None or len(found) > len(best[3]):
+                    best = (stance, j, demo.anchors[k].id, found)
+    assert best is not None and len(best[3]) >= 20, "the demo's start needs a roomy move"
+    return best
+
+
+def test_transition_test_finds_every_lattice_pose(demo: Scenario, move) -> None:
+    stance, boom, anchor, found = move
+    want = all_transition_poses(demo, stance, boom, anchor, COARSE)
+    assert set(found) == want, (f"boom {boom} -> {anchor}: {len(want - set(found))} lattice "
+                                f"poses missed, {len(set(found) - want)} wrongly accepted")
+
+
+@pytest.mark.parametrize("window", [1, 3])
+def test_planted_narrow_window_is_found(demo: Scenario, move, window: int) -> None:
+    """Raise p_min until only the `window` most robust lattice poses hold the move (every other
+    test is independent of p_min, so exactly those remain): the test must find exactly them,
+    and brute force must agree that nothing else holds."""
+    stance, boom, anchor, found = move
+    worst = np.sort(np.array(list(found.values())))[::-1]
+    assert worst[window - 1] > worst[window] + 1e-9, "ties at the window's edge"
+    threshold = 0.5 * (worst[window - 1] + worst[window])
+    narrow = dataclasses.replace(demo, robot=demo.robot.replace(p_min=math.exp(threshold)))
+    planted = {k for k, r in found.items() if r >= threshold}
+    assert len(planted) == window
+    got = lattice_poses_of_move(narrow, stance, boom, anchor, COARSE)
+    assert set(got) == planted, f"found {sorted(got)}, planted {sorted(planted)}"
+    assert all_transition_poses(narrow, stance, boom, anchor, COARSE) == planted
+
+
+def test_every_reachable_anchor_is_a_candidate(demo: Scenario) -> None:
+    """candidate_anchors drops no anchor that the boom reaches from a release pose."""
+    stance = tuple(demo.start_stance)
+    lat = stance_lattice(demo, stance, COARSE)
+    held = {demo.anchor_index[a] for a in stance}
+    for j in range(4):
+        for comp in range(lat.n_components):
+            rows = (lat.component == comp) & lat.release[:, j]
+            got = set(candidate_anchors(demo, lat, stance, comp, j).tolist())
+            if not rows.any():
+                assert not got
+                continue
+            v = reach_violation(demo.robot, lat.poses[rows], demo.anchor_positions,
+                                np.full(len(demo.anchors), j))
+            want = set(np.flatnonzero((v == 0.0).any(axis=0)).tolist()) - held
+            assert got == want, f"boom {j}: missing {want - got}, extra {got - want}"
+
+
+def test_start_is_joined_to_the_lattice(demo: Scenario) -> None:
+    lat = stance_lattice(demo, tuple(demo.start_stance), LatticeConfig())
+    joined = start_components(demo, lat, LatticeConfig())
+    assert joined, "the demo's start pose joins no lattice pose"
+    for pose in joined.values():
+        assert np.abs(pose[:2] - np.asarray(demo.start_pose)[:2]).max() <= 0.02 + 1e-9
+
+
+def slab_cave(demo: Scenario, gap: float = 0.4, thickness: float = 0.3,
+              near: float = 0.4) -> Scenario:
+    """The demo shaft cut by a slab of rock `gap` m above the start stance's highest anchor:
+    anchors on or in it are removed, and the goal stays above it."""
+    data = demo.to_dict()
+    y0 = float(demo.stance(demo.start_stance).positions[:, 1].max()) + gap
+    xs = [p[0] for wall in data["walls"] for p in wall]
+    slab = [[min(xs) - 1.0, y0], [max(xs) + 1.0, y0], [max(xs) + 1.0, y0 + thickness],
+            [min(xs) - 1.0, y0 + thickness]]
+    data["walls"] = [*data["walls"], slab]
+    # Below the slab only anchors near the start stance's, so that the vertices are few.
+    held = demo.stance(demo.start_stance).positions
+    data["anchors"] = [a for a in data["anchors"]
+                       if a["position"][1] > y0 + thickness + 0.05
+                       or (a["position"][1] < y0 - 0.05
+                           and np.linalg.norm(held - a["position"], axis=1).min() < near)]
+    return scenario_from_dict(data, "slab-cave")
+
+
+def test_a_cave_cut_in_two_has_no_route(demo: Scenario) -> None:
+    """Below a slab the reachable vertices are few: the search expands them all and says that
+    no route exists at its resolution, in the plan file too; the goal alone is holdable."""
+    cave = slab_cave(demo)
+    assert goal_is_holdable(cave, LatticeConfig()), "the goal must be holdable for this test"
+    memo = FootstepMemo()
+    result = complete_search(cave, memo=memo.lattice)
+    assert not result.success and result.stop == "noroute", (result.stop, result.reason)
+    assert "no route at resolution 2 cm / 2.5 deg" in result.reason, result.reason
+    assert result.expansions == len(result.expanded) and not result.frontier
+    # Nothing reached lies above the slab.
+    top = float(demo.stance(demo.start_stance).positions[:, 1].max()) + 0.4
+    assert all(p[1] < top for _, p in result.expanded), "a pose above the slab was reached"
+    fp = plan_footsteps(cave, FootstepConfig(search="complete"), memo=memo)  # replays it
+    assert fp.stop == "noroute" and build_plan(cave, fp, "rbp")["search"]["stop"] == "noroute"
+
+
+def test_goal_in_rock_is_no_route_at_once(demo: Scenario) -> None:
+    """A goal that no stance can hold (far above the cave) is answered without a search."""
+    far = dataclasses.replace(demo, goal_position=(demo.goal_position[0], 60.0))
+    result = complete_search(far)
+    assert result.stop == "noroute" and result.expansions == 0, (result.stop, result.reason)
+
+
+def test_budget_is_not_a_proof(demo: Scenario) -> None:
+    result = complete_search(demo, max_expansions=2)
+    if not result.success:
+        assert result.stop == "budget", result.stop
+
+
+def test_same_plan_twice(demo: Scenario) -> None:
+    a = plan_footsteps(demo, FootstepConfig(search="complete"))
+    b = plan_footsteps(demo, FootstepConfig(search="complete"))
+    assert a.success and a.stances == b.stances
+    for s, t in zip(a.steps, b.steps, strict=True):
+        assert np.array_equal(s.pose, t.pose)

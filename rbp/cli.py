@@ -1,7 +1,7 @@
 """The `rbp` command line. Heavy modules are imported inside each command, so --help is instant.
 
 A user's mistake (a bad scenario, a missing file) ends with one line on stderr naming the file,
-the field and the reason, and exit status 2; never a traceback.
+the field and the reason, and exit status 2; never a traceback. Exit statuses: EXIT_STATUSES.
 """
 
 from __future__ import annotations
@@ -11,7 +11,18 @@ import json
 import sys
 from pathlib import Path
 
-EXIT_USAGE = 2
+EXIT_OK = 0           # done: a plan was found and written, a plan verified, ...
+EXIT_FAILED = 1       # ran, but no route / planning failed / the plan does not verify
+EXIT_USAGE = 2        # bad input (one line naming the file, field and reason), or unwritable output
+EXIT_INTERRUPTED = 3  # Ctrl-C: one line, no traceback, no half-written file
+
+EXIT_STATUSES = """exit status:
+  0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
+  1  ran but failed: no route or planning failed (rbp plan still writes the plan file, with
+     success: false and the reason), a plan that does not verify, a failed execution
+  2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
+     output that cannot be written
+  3  interrupted (Ctrl-C): one line on stderr; no output file is left half-written"""
 
 
 class UserError(Exception):
@@ -182,7 +193,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     _write_pictures(scn, plan, out, args.phase_figure, args.animate)
     _print_motion(plan)
     print(_summary(plan))
-    return 0
+    return EXIT_OK if plan["success"] else EXIT_FAILED
 
 
 def _print_motion(plan: dict) -> None:
@@ -284,11 +295,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
         _write_pictures(scn, plan, out / "plan.json", best, None)
         _print_motion(plan)
         print(_summary(plan))
-    return 0
+        if not plan["success"]:
+            return EXIT_FAILED
+    return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.split("\n\n")[0],
+                                     epilog=EXIT_STATUSES,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run the main job on the bundled demo cave")
@@ -299,7 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="only check and draw the cave (skip the footstep plan)")
     demo.set_defaults(func=cmd_demo)
 
-    plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture")
+    plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture",
+                          epilog=EXIT_STATUSES,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     plan.add_argument("scenario", help="scenario file or bundled cave name")
     plan.add_argument("-o", "--output", required=True, help="plan file to write (.json)")
     plan.add_argument("--planner", choices=("rbp", "naive"), default="rbp")
@@ -368,6 +385,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns its exit status (EXIT_STATUSES)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Outputs are written to a temporary file and renamed, so nothing is left half-written.
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
@@ -376,18 +403,12 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         return int(args.func(args) or 0)
-    except ScenarioError as e:
+    except (ScenarioError, UserError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as e:
+    except OSError as e:  # an output that cannot be written, an input that cannot be read
         print(f"error: {e.filename or ''}: {e.strerror}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -53,6 +53,7 @@ def test_no_route_exits_1_and_still_writes_the_plan(tmp_path: Path, stuck_shaft:
     ({"goal": {"position": [0.0, 7.0], "tolerance": -1}}, "goal.tolerance"),
     ({"start": {"pose": [0.0, 1.0, 0.0], "stance": ["a0", "a1", "a2", "a9"]}},
      "start.stance[3]"),
+    ({"goal": {"position": [1.6, 4.0], "tolerance": 0.5}}, "goal.position"),  # in rock
 ])
 def test_bad_scenario_exits_2_with_one_line(tmp_path: Path, change: dict, field: str) -> None:
     path = tmp_path / "bad.yaml"

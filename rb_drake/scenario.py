@@ -283,7 +283,9 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
         norm = math.hypot(nx, ny)
         if norm < 1e-9:
             raise rd.fail(f"{field}.normal", "the zero vector has no direction")
-        normal = (nx / norm, ny / norm)
+        # A unit vector (as Scenario.to_dict writes them) is kept bit for bit, so that a plan's
+        # embedded scenario reads back exactly (rbp plan --from-plan repeats the plan).
+        normal = (nx, ny) if abs(norm - 1.0) <= 1e-15 else (nx / norm, ny / norm)
     limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
     sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
     fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),

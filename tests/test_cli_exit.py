@@ -16,7 +16,7 @@ import yaml
 from cli_helpers import ROOT, run_rbp
 from conftest import SHAFT
 
-from rbp import cli
+from rbp import cli, plan_cli
 
 
 def leftovers(folder: Path) -> list[str]:
@@ -47,6 +47,11 @@ def test_no_route_exits_1_and_still_writes_the_plan(tmp_path: Path, stuck_shaft:
     assert plan["success"] is False and plan["reason"], f"success {plan['success']}"
     assert proc.stdout.strip().splitlines()[-1].startswith("success: false"), proc.stdout
     assert leftovers(tmp_path) == [], leftovers(tmp_path)
+    # the failed search is pictured beside the plan
+    for name in ("p.png", "p-search.png"):
+        picture = tmp_path / name
+        assert picture.is_file() and picture.stat().st_size > 1000, f"{name} missing or tiny"
+        assert f"wrote {name}" in proc.stdout, proc.stdout
 
 
 @pytest.mark.parametrize("change, field", [
@@ -79,7 +84,7 @@ def test_interrupt_while_planning_exits_3(tmp_path: Path, stuck_shaft: Path, mon
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "run_planner", interrupted)
+    monkeypatch.setattr(plan_cli, "run_planner", interrupted)
     out = tmp_path / "p.json"
     assert cli.main(["plan", str(stuck_shaft), "-o", str(out)]) == cli.EXIT_INTERRUPTED
     err = capsys.readouterr().err

@@ -1,0 +1,49 @@
+"""Progress lines on stderr (tqdm), shown only on a terminal and never with --quiet.
+
+`SearchProgress` is the live line of `rbp plan`: stances expanded (of the search's budget),
+transitions tested and the elapsed time during the footstep search (plan_footsteps' `progress`
+callback), then the phase being seeded and optimised. tqdm is imported only when a line is shown.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+
+def interactive(quiet: bool = False) -> bool:
+    """Whether progress lines are wanted: stderr is a terminal and --quiet was not given."""
+    return not quiet and sys.stderr.isatty()
+
+
+class SearchProgress:
+    """A context manager whose `search(expansions, tested)` and `phase(text)` update one line."""
+
+    def __init__(self, label: str, budget: int, quiet: bool = False):
+        self.label = label
+        self.budget = budget
+        self.bar: Any = None
+        if interactive(quiet):
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=budget, desc=f"{label}: search", unit=" stances",
+                            file=sys.stderr, leave=False, dynamic_ncols=True,
+                            bar_format="{desc}: {n_fmt}/{total_fmt} stances expanded "
+                                       "{postfix} [{elapsed}]")
+
+    def search(self, expansions: int, tested: int) -> None:
+        if self.bar is not None:
+            self.bar.n = expansions  # a repeated search (the pipeline's retries) starts again
+            self.bar.set_postfix_str(f"{tested} transitions tested", refresh=False)
+            self.bar.refresh()
+
+    def phase(self, text: str) -> None:
+        if self.bar is not None:
+            self.bar.set_description_str(f"{self.label}: {text[:80]}", refresh=True)
+
+    def __enter__(self) -> SearchProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.close()

@@ -8,6 +8,7 @@ callback), then the phase being seeded and optimised. tqdm is imported only when
 from __future__ import annotations
 
 import sys
+import time
 from typing import Any
 
 
@@ -28,14 +29,18 @@ class SearchProgress:
 
             self.bar = tqdm(total=budget, desc=f"{label}: search", unit=" stances",
                             file=sys.stderr, leave=False, dynamic_ncols=True,
-                            bar_format="{desc}: {n_fmt}/{total_fmt} stances expanded "
+                            bar_format="{desc}: {n_fmt}/{total_fmt} stances expanded"
                                        "{postfix} [{elapsed}]")
+        self.shown = 0.0
 
     def search(self, expansions: int, tested: int) -> None:
         if self.bar is not None:
             self.bar.n = expansions  # a repeated search (the pipeline's retries) starts again
             self.bar.set_postfix_str(f"{tested} transitions tested", refresh=False)
-            self.bar.refresh()
+            now = time.monotonic()
+            if now - self.shown >= 0.1:  # at most ten redraws a second
+                self.shown = now
+                self.bar.refresh()
 
     def phase(self, text: str) -> None:
         if self.bar is not None:

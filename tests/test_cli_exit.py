@@ -133,3 +133,18 @@ def test_help_documents_the_exit_statuses(tmp_path: Path) -> None:
         for line in ("exit status:", "0 done", "1 ran but failed", "2 bad input",
                      "3 interrupted"):
             assert line in text, f"{line!r} missing from rbp {' '.join(args)}:\n{proc.stdout}"
+
+
+def test_plan_without_pictures_loads_no_matplotlib(tmp_path: Path, stuck_shaft: Path) -> None:
+    """matplotlib is imported only when a picture is drawn (it costs about 0.3 s)."""
+    out = tmp_path / "p.json"
+    code = ("import sys; from rbp.cli import main; "
+            f"status = main(['plan', {str(stuck_shaft)!r}, '-o', {str(out)!r}, '--no-pictures', "
+            "'--max-expansions', '5']); "
+            "print(status, 'matplotlib' in sys.modules)")
+    env = {**os.environ, "MPLBACKEND": "Agg",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, check=False)
+    assert proc.stdout.strip().splitlines()[-1] == "1 False", proc.stdout + proc.stderr
+    assert out.is_file() and not (tmp_path / "p.png").exists()

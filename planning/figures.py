@@ -49,6 +49,7 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         ax.set_title(f"stance {k} of {len(body) - 1}: P = {draw.format_prob(step['p_success'])}",
                      fontsize=9)
         ax.tick_params(labelsize=7)
+        ax.locator_params(nbins=5)  # fewer ticks: their labels are most of the drawing time
     if plan["p_path"] is None:
         summary = "no plan: " + "\n".join(textwrap.wrap(plan["reason"], 110))
     else:

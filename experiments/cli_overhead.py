@@ -3,9 +3,11 @@
 Runs `rbp plan CAVE` as a user would (a subprocess: interpreter start-up, imports, planning,
 writing, pictures), with and without pictures, then `rbp check` of the plan it wrote, and
 reports each run's wall time as a ratio to the plan's own planning time (`timing.total` in the
-plan file) of the same run. A benchmark, not a test: the numbers depend on the machine.
+plan file) of the same run. With `--before DIR` the same runs of another source tree (an older
+checkout, e.g. `git worktree add DIR COMMIT`) are interleaved with these, so that a shared
+machine's load falls on both alike. A benchmark, not a test: the numbers depend on the machine.
 
-    python -m experiments.cli_overhead --cave demo-shaft --repeats 2 --out out/cli_overhead
+    python -m experiments.cli_overhead --cave demo-shaft --repeats 3 --out out/cli_overhead
 """
 
 from __future__ import annotations
@@ -20,8 +22,11 @@ from pathlib import Path
 from statistics import median
 
 
-def timed(cmd: list[str], cwd: Path) -> tuple[float, subprocess.CompletedProcess[str]]:
+def timed(cmd: list[str], cwd: Path, tree: str | None) -> tuple[float,
+                                                               subprocess.CompletedProcess[str]]:
     env = {**os.environ, "MPLBACKEND": "Agg", "LCM_DEFAULT_URL": "memq://"}
+    if tree:
+        env["PYTHONPATH"] = os.pathsep.join([tree, env.get("PYTHONPATH", "")])
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, check=False)
     return time.perf_counter() - t0, proc
@@ -30,33 +35,35 @@ def timed(cmd: list[str], cwd: Path) -> tuple[float, subprocess.CompletedProcess
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--cave", default="demo-shaft", help="scenario (default demo-shaft)")
-    parser.add_argument("--repeats", type=int, default=2, help="runs of each (default 2)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each (default 3)")
     parser.add_argument("--out", default="out/cli_overhead", help="output folder")
-    parser.add_argument("--no-pictures-flag", default="--no-pictures",
-                        help="the flag that skips pictures ('' to skip that run)")
+    parser.add_argument("--before", metavar="DIR",
+                        help="also run the source tree DIR (no --no-pictures there), "
+                             "interleaved, labelled 'before'")
     args = parser.parse_args(argv)
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     rbp = [sys.executable, "-m", "rbp"]
-    variants = {"plan": [], "plan --no-pictures": [args.no_pictures_flag]}
-    if not args.no_pictures_flag:
-        del variants["plan --no-pictures"]
+    variants = [("plan", None, []), ("plan --no-pictures", None, ["--no-pictures"])]
+    if args.before:
+        variants.insert(0, ("before: plan", str(Path(args.before).resolve()), []))
     rows = []
     for k in range(args.repeats):
-        for name, extra in variants.items():
-            plan_file = out / f"plan-{k}-{len(extra)}.json"
-            wall, proc = timed([*rbp, "plan", args.cave, "-o", str(plan_file), *extra], out)
+        for n, (name, tree, extra) in enumerate(variants):
+            plan_file = out / f"plan-{k}-{n}.json"
+            wall, proc = timed([*rbp, "plan", args.cave, "-o", str(plan_file), *extra], out, tree)
             if proc.returncode != 0:
                 print(proc.stdout, proc.stderr, file=sys.stderr)
                 return 1
             planning = json.loads(plan_file.read_text())["timing"]["total"]
             rows.append({"run": name, "repeat": k, "wall": wall, "planning": planning,
                          "ratio": wall / planning})
-            check_wall, proc = timed([*rbp, "check", str(plan_file)], out)
+            check_wall, proc = timed([*rbp, "check", str(plan_file)], out, tree)
             if proc.returncode != 0:
                 print(proc.stdout, proc.stderr, file=sys.stderr)
                 return 1
-            rows.append({"run": "check", "repeat": k, "wall": check_wall, "planning": planning,
+            check = "before: check" if tree else "check"
+            rows.append({"run": check, "repeat": k, "wall": check_wall, "planning": planning,
                          "ratio": check_wall / planning})
     for r in rows:
         print(f"{r['run']:22s} #{r['repeat']}: wall {r['wall']:6.2f} s, planning "

@@ -33,10 +33,15 @@ class SearchProgress:
                                        "{postfix} [{elapsed}]")
         self.shown = 0.0
 
-    def search(self, expansions: int, tested: int) -> None:
+    def search(self, expansions: int, tested: int, nearest: float | None = None) -> None:
+        """plan_footsteps' progress callback; `nearest` (m from the goal), when a search
+        reports it, is shown too."""
         if self.bar is not None:
             self.bar.n = expansions  # a repeated search (the pipeline's retries) starts again
-            self.bar.set_postfix_str(f"{tested} transitions tested", refresh=False)
+            text = f"{tested} transitions tested"
+            if nearest is not None:
+                text += f", nearest {nearest:.2f} m from the goal"
+            self.bar.set_postfix_str(text, refresh=False)
             now = time.monotonic()
             if now - self.shown >= 0.1:  # at most ten redraws a second
                 self.shown = now

@@ -23,11 +23,12 @@ def test_search_progress_on_a_terminal(monkeypatch) -> None:
     monkeypatch.setattr(sys, "stderr", term)
     with SearchProgress("rbp on cave", budget=100) as bar:
         bar.search(3, 10)
-        bar.search(7, 25)
+        bar.search(7, 25, 1.234)
         bar.phase("phase 1/5: body movement")
     text = term.getvalue()
     assert "7/100 stances expanded" in text and "25 transitions tested" in text, repr(text)
     assert "phase 1/5: body movement" in text, repr(text)
+    assert "nearest 1.23 m from the goal" in text, repr(text)
 
 
 def test_search_progress_quiet_or_not_a_terminal(monkeypatch) -> None:

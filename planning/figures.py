@@ -8,6 +8,7 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from rb_drake import draw
 from rb_drake.scenario import Scenario
@@ -183,9 +184,12 @@ def search_figure(scn: Scenario, fp):
         poses = np.array([e.pose[:2] for e in explored])
         order = np.array([e.order for e in explored], dtype=float)
         dots = ax.scatter(poses[:, 0], poses[:, 1], c=order, cmap="viridis", s=14, zorder=6,
+                          vmin=0.0, vmax=max(1.0, float(order.max())),
                           label=f"expanded stances ({len(explored)}), body centre")
         bar = fig.colorbar(dots, ax=ax, fraction=0.04, pad=0.02)
-        bar.set_label("expansion order")
+        bar.locator = MaxNLocator(integer=True)
+        bar.update_ticks()
+        bar.set_label("expansion order (0: the start)")
     if frontier:
         poses = np.array([e.pose[:2] for e in frontier])
         ax.scatter(poses[:, 0], poses[:, 1], facecolors="none", edgecolors="#636363", s=18,

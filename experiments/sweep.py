@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import math
 import multiprocessing
 import os
 import platform
@@ -125,8 +124,8 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
 
 
 class ProgressDisplay:
-    """Progress of a sweep on `stream`: a bar redrawn in place on a terminal, otherwise one
-    line per finished trial (logs and CI)."""
+    """Progress of a sweep on `stream`: a tqdm bar redrawn in place on a terminal, otherwise
+    one line per finished trial (logs and CI)."""
 
     def __init__(self, total: int, skipped: int, stream: IO[str] | None = None):
         self.stream = stream if stream is not None else sys.stderr
@@ -134,31 +133,32 @@ class ProgressDisplay:
         self.total, self.skipped = total, skipped
         self.done, self.errors = 0, 0
         self.start = time.perf_counter()
+        self.bar: Any = None
         if skipped:
             print(f"resuming: {skipped} of {total} trials already finished", file=self.stream,
                   flush=True)
+        if self.interactive:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, initial=skipped, unit=" trials", file=self.stream,
+                            dynamic_ncols=True)
 
     def update(self, record: dict[str, Any]) -> None:
         self.done += 1
         self.errors += record["error"] is not None
         finished = self.skipped + self.done
-        elapsed = time.perf_counter() - self.start
-        left = (self.total - finished) * elapsed / self.done
-        if self.interactive:
-            width = 30
-            filled = math.floor(width * finished / self.total)
-            bar = "#" * filled + "-" * (width - filled)
-            errors = f", {self.errors} errors" if self.errors else ""
-            print(f"\r[{bar}] {finished}/{self.total} trials{errors}, {elapsed:.0f} s, "
-                  f"about {left:.0f} s left\033[K", end="", file=self.stream, flush=True)
+        if self.bar is not None:
+            if self.errors:
+                self.bar.set_postfix_str(f"{self.errors} errors", refresh=False)
+            self.bar.update(1)
         else:
             status = "ERROR " + record["error"].splitlines()[0] if record["error"] else "done"
             print(f"[{finished}/{self.total}] {record['name']}: {status} "
                   f"({record['timing']['trial']:.1f} s)", file=self.stream, flush=True)
 
     def close(self) -> None:
-        if self.interactive and self.done:
-            print(file=self.stream, flush=True)
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _local(trials: list[Trial], workers: int) -> Iterator[dict[str, Any]]:
@@ -252,7 +252,8 @@ def check_sweep_arguments(parser: argparse.ArgumentParser, args: argparse.Namesp
 
 def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, Any]]:
     """`run_sweep` with the shared flags, for a script: a sweep that cannot run ends it with
-    one line on stderr (status 2), an interruption with a line on how to resume (130)."""
+    one line on stderr (status 2), an interruption with a line on how to resume (status 3, as
+    every rbp command: rbp.cli.EXIT_INTERRUPTED)."""
     try:
         return run_sweep(trials, args.out, args.workers, args.cluster)
     except SweepError as e:
@@ -261,7 +262,7 @@ def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, A
     except KeyboardInterrupt:
         print(f"interrupted: finished trials are kept in {Path(args.out) / 'trials'}; run the "
               "same command again to resume", file=sys.stderr)
-        raise SystemExit(130) from None
+        raise SystemExit(3) from None
 
 
 def write_results(out: str | Path, results: dict[str, Any], name: str = "results.json") -> Path:

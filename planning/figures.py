@@ -8,6 +8,7 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from rb_drake import draw
 from rb_drake.scenario import Scenario
@@ -49,13 +50,19 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         ax.set_title(f"stance {k} of {len(body) - 1}: P = {draw.format_prob(step['p_success'])}",
                      fontsize=9)
         ax.tick_params(labelsize=7)
+        ax.locator_params(nbins=5)  # fewer ticks: their labels are most of the drawing time
     if plan["p_path"] is None:
         summary = "no plan: " + "\n".join(textwrap.wrap(plan["reason"], 110))
     else:
         summary = f"p_path = {plan['p_path']:.4f}, p_min = {plan['p_min']:.4f}"
     fig.suptitle(f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
                  fontsize=10)
-    fig.tight_layout()
+    # Fixed margins (in inches) instead of tight_layout, which measures every tick label of
+    # every panel: that was a third of the figure's time.
+    width, height = fig.get_size_inches()
+    top = 0.75 + 0.16 * summary.count("\n")  # the suptitle above the panels' titles
+    fig.subplots_adjust(left=0.35 / width, right=1.0 - 0.1 / width, bottom=0.3 / height,
+                        top=1.0 - top / height, wspace=0.45 / 4.0, hspace=0.5 / 4.4)
     return fig
 
 
@@ -156,3 +163,54 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
 
     atomic_write(path, write)
     plt.close(fig)
+
+
+STOP_REASONS = {
+    "budget": "stopped on its budget (max_expansions reached)",
+    "exhausted": "exhausted: every stance it could reach was expanded",
+    "noroute": "no route at the search's resolution",
+}
+
+
+def search_figure(scn: Scenario, fp):
+    """Where a failed footstep search went: the body pose of each expanded stance coloured by
+    expansion order, the frontier (reached, never expanded), the stance nearest the goal (the
+    robot drawn in it) and the goal; the legend says why the search stopped."""
+    explored = list(fp.explored or [])
+    frontier = list(fp.frontier or [])
+    fig, ax = plt.subplots(figsize=(7.5, 8.0))
+    draw.draw_cave(ax, scn, glyphs=False)
+    if explored:
+        poses = np.array([e.pose[:2] for e in explored])
+        order = np.array([e.order for e in explored], dtype=float)
+        dots = ax.scatter(poses[:, 0], poses[:, 1], c=order, cmap="viridis", s=14, zorder=6,
+                          vmin=0.0, vmax=max(1.0, float(order.max())),
+                          label=f"expanded stances ({len(explored)}), body centre")
+        bar = fig.colorbar(dots, ax=ax, fraction=0.04, pad=0.02)
+        bar.locator = MaxNLocator(integer=True)
+        bar.update_ticks()
+        bar.set_label("expansion order (0: the start)")
+    if frontier:
+        poses = np.array([e.pose[:2] for e in frontier])
+        ax.scatter(poses[:, 0], poses[:, 1], facecolors="none", edgecolors="#636363", s=18,
+                   lw=0.8, zorder=5, label=f"frontier ({len(frontier)}), never expanded")
+    reached = explored + frontier
+    if reached:
+        near = min(reached, key=lambda e: e.goal_distance)
+        stance = scn.stance(tuple(near.stance))
+        draw.draw_robot(ax, scn.robot, near.pose, stance, alpha=0.8, label_booms=False)
+        ax.plot(*near.pose[:2], "X", color="#cb181d", ms=11, zorder=9, ls="none",
+                label=f"nearest the goal (goal distance {near.goal_distance:.2f} m: centroid "
+                      "beyond the disc + anchors beyond reach)")
+    else:
+        ax.plot(*scn.start_pose[:2], "X", color="#cb181d", ms=11, zorder=9, ls="none",
+                label="start (the search recorded no stances)")
+    why = STOP_REASONS.get(getattr(fp, "stop", "") or "", "stopped")
+    ax.plot([], [], ls="none", label=f"search {why}")
+    draw.frame_axes(ax, scn)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=7, framealpha=0.9)
+    title = (f"{scn.name}: footstep search failed after {fp.expansions} expansions, "
+             f"{fp.transitions_tested} transitions tested")
+    ax.set_title("\n".join(textwrap.wrap(title, 55)), fontsize=9)
+    fig.tight_layout()
+    return fig

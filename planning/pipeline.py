@@ -138,8 +138,12 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
 
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
                progress: Progress | None = None,
-               footstep_progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """The whole plan-file dictionary (`reachbot-plan/1`) for a scenario."""
+               footstep_progress: Callable[[int, int], None] | None = None,
+               footsteps_done: Callable[[FootstepPlan], None] | None = None) -> dict[str, Any]:
+    """The whole plan-file dictionary (`reachbot-plan/1`) for a scenario.
+
+    `footsteps_done` is called with each footstep plan (the search's, then any retry's): a
+    caller can picture where a failed search went."""
     if planner not in PLANNERS:
         raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
     cfg = config or PipelineConfig()
@@ -150,6 +154,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     else:
         fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress)
     timing["footstep"] = time.perf_counter() - t_start
+    if footsteps_done is not None:
+        footsteps_done(fp)
     if planner == "naive" or not fp.success:
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
@@ -170,6 +176,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         retry = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, exclude=excluded,
                                memo=memo)
         timing["footstep"] += time.perf_counter() - t0
+        if footsteps_done is not None:
+            footsteps_done(retry)
         if not retry.success:
             break
         fp = retry

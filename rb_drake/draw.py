@@ -15,6 +15,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import Normalize
 from matplotlib.patches import Circle, Polygon
 
@@ -45,25 +46,34 @@ def prob_colour(p: float):
 
 def draw_cave(ax, scn: Scenario, highlight: tuple[str | None, ...] = (),
               glyphs: bool = True) -> None:
-    """Walls, anchors with normals and limit-surface glyphs, and the goal region."""
-    for wall in scn.walls:
-        ax.add_patch(Polygon(wall, closed=True, facecolor=ROCK, edgecolor="#5a4330", lw=0.8,
-                             zorder=1))
-    psi = np.linspace(-math.pi / 2 + 1e-3, math.pi / 2 - 1e-3, 41)
+    """Walls, anchors with normals and limit-surface glyphs, and the goal region.
+
+    One collection per kind of thing (walls, glyphs, normals, anchor dots), not one artist per
+    anchor: a snapshot figure draws the cave a dozen times."""
+    ax.add_collection(PolyCollection(list(scn.walls), closed=True, facecolors=ROCK,
+                                     edgecolors="#5a4330", linewidths=0.8, zorder=1))
     held = set(a for a in highlight if a is not None)
-    for a in scn.anchors:
-        p, n = np.array(a.position), np.array(a.normal)
-        base = math.atan2(n[1], n[0])
+    if scn.anchors:
+        p, n = scn.anchor_positions, scn.anchor_normals
+        is_held = np.array([a.id in held for a in scn.anchors])
         if glyphs:
-            mu = grasp.mean_limit(psi, a.f_normal, a.f_lateral) * GLYPH_SCALE
-            pts = p + mu[:, None] * np.stack([np.cos(base + psi), np.sin(base + psi)], axis=1)
-            ax.add_patch(Polygon(np.vstack([p, pts]), closed=True, facecolor="#9ecae1",
-                                 edgecolor="#4292c6", lw=0.5, alpha=0.55, zorder=2))
-        colour = "red" if a.id in held else "black"
-        tip = p + 0.25 * n
-        ax.plot([p[0], tip[0]], [p[1], tip[1]], color=colour, lw=1.6 if a.id in held else 0.9,
-                zorder=3)
-        ax.plot(*p, "o", color=colour, ms=3, zorder=4)
+            psi = np.linspace(-math.pi / 2 + 1e-3, math.pi / 2 - 1e-3, 41)
+            polys = []
+            for a, pos, normal in zip(scn.anchors, p, n, strict=True):
+                base = math.atan2(normal[1], normal[0])
+                mu = grasp.mean_limit(psi, a.f_normal, a.f_lateral) * GLYPH_SCALE
+                pts = pos + mu[:, None] * np.stack([np.cos(base + psi), np.sin(base + psi)],
+                                                   axis=1)
+                polys.append(np.vstack([pos, pts]))
+            ax.add_collection(PolyCollection(polys, closed=True, facecolors="#9ecae1",
+                                             edgecolors="#4292c6", linewidths=0.5, alpha=0.55,
+                                             zorder=2))
+        segments = np.stack([p, p + 0.25 * n], axis=1)
+        ax.add_collection(LineCollection(segments, colors=np.where(is_held, "red", "black"),
+                                         linewidths=np.where(is_held, 1.6, 0.9), zorder=3))
+        for mask, colour in ((~is_held, "black"), (is_held, "red")):
+            if mask.any():
+                ax.plot(p[mask, 0], p[mask, 1], "o", ls="none", color=colour, ms=3, zorder=4)
     gx, gy = scn.goal_position
     ax.add_patch(Circle((gx, gy), scn.goal_tolerance, facecolor="none", edgecolor="#2171b5",
                         ls="--", lw=1.2, zorder=2))
@@ -79,6 +89,7 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
     ax.add_patch(Polygon(corners, closed=True, facecolor="#525252", edgecolor="black",
                          alpha=alpha, zorder=6))
     sh = geometry.shoulder_positions(robot, pose)[0]
+    booms, tips, colours, styles = [], [], [], []
     for i in range(4):
         if stance.attached[i]:
             tip = stance.positions[i]
@@ -88,10 +99,20 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
             tip, colour, ls = np.asarray(free_tip), "#636363", ":"
         else:
             continue
-        ax.plot([sh[i, 0], tip[0]], [sh[i, 1], tip[1]], color=colour, lw=2.6, ls=ls,
-                alpha=alpha, zorder=7, solid_capstyle="round")
-        ax.plot(*tip, "s", color=colour, ms=4, alpha=alpha, zorder=8)
-        if label_booms:
+        booms.append(i)
+        tips.append(tip)
+        colours.append(colour)
+        styles.append(ls)
+    if not booms:
+        return
+    tips_arr = np.array(tips, dtype=float)
+    ax.add_collection(LineCollection(np.stack([sh[booms], tips_arr], axis=1), colors=colours,
+                                     linewidths=2.6, linestyles=styles, alpha=alpha, zorder=7,
+                                     capstyle="round"))
+    ax.scatter(tips_arr[:, 0], tips_arr[:, 1], marker="s", s=16, c=colours, alpha=alpha,
+               zorder=8, linewidths=0)
+    if label_booms:
+        for i, tip in zip(booms, tips_arr, strict=True):
             mid = 0.5 * (sh[i] + tip)
             text = f"{i}"
             if probabilities is not None and stance.attached[i]:

@@ -23,6 +23,7 @@ from rb_drake.stance import Stance
 FORMAT = "reachbot-scenario/1"
 MARS_GRAVITY = (0.0, -3.71)
 ANCHOR_DEPTH_TOL = 0.01  # m: an anchor may sit this far inside its rock (numerical slack)
+ANCHOR_GAP_TOL = 0.05    # m: ... and this far off the rock surface (a gripper grasps rock)
 
 
 class ScenarioError(ValueError):
@@ -243,6 +244,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     goal = rd.mapping("goal", rd.require("", data, "goal"))
     goal_pos = rd.vector("goal.position", rd.require("goal", goal, "position"), 2)
     tol = rd.number("goal.tolerance", goal.get("tolerance", 0.5), positive=True)
+    _check_goal(rd, rock, np.array(goal_pos), tol)
 
     scn = Scenario(name=name, gravity=(gravity[0], gravity[1]), robot=robot, walls=tuple(walls),
                    anchors=tuple(anchors), start_pose=(pose[0], pose[1], pose[2]),
@@ -281,7 +283,9 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
         norm = math.hypot(nx, ny)
         if norm < 1e-9:
             raise rd.fail(f"{field}.normal", "the zero vector has no direction")
-        normal = (nx / norm, ny / norm)
+        # A unit vector (as Scenario.to_dict writes them) is kept bit for bit, so that a plan's
+        # embedded scenario reads back exactly (rbp plan --from-plan repeats the plan).
+        normal = (nx, ny) if abs(norm - 1.0) <= 1e-15 else (nx / norm, ny / norm)
     limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
     sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
     fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),
@@ -299,7 +303,23 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     if rock.polygons and rock.contains(p + 0.05 * np.array(normal)):
         raise rd.fail(f"{field}.normal", f"anchor {aid!r}: the normal points into the rock; "
                       "it must point out of the wall, into free space")
+    if rock.polygons and (gap := float(rock.distance(p))) > ANCHOR_GAP_TOL and not rock.contains(p):
+        raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is off its wall: "
+                      f"{gap:.3f} m from the nearest rock surface (at most {ANCHOR_GAP_TOL} m)")
     return Anchor(aid, pos, normal, fn, ft, sn, st)
+
+
+def _check_goal(rd: _Reader, rock: Rock, goal: np.ndarray, tolerance: float) -> None:
+    """The goal's position must be free space (the body's centre goes there); the message says
+    when the whole tolerance disc is rock as well."""
+    if not rock.polygons or not rock.contains(goal):
+        return
+    depth = float(rock.distance(goal))
+    where = f"goal {[float(v) for v in goal]} is inside rock ({depth:.3f} m from the surface)"
+    if depth >= tolerance:
+        where += f", and so is its whole tolerance disc (radius {tolerance:g} m)"
+    raise rd.fail("goal.position", f"{where}: the body's centre cannot go there; put the goal "
+                  "in free space")
 
 
 def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:

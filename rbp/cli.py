@@ -1,7 +1,7 @@
 """The `rbp` command line. Heavy modules are imported inside each command, so --help is instant.
 
 A user's mistake (a bad scenario, a missing file) ends with one line on stderr naming the file,
-the field and the reason, and exit status 2; never a traceback.
+the field and the reason, and exit status 2; never a traceback. Exit statuses: EXIT_STATUSES.
 """
 
 from __future__ import annotations
@@ -11,7 +11,18 @@ import json
 import sys
 from pathlib import Path
 
-EXIT_USAGE = 2
+EXIT_OK = 0           # done: a plan was found and written, a plan verified, ...
+EXIT_FAILED = 1       # ran, but no route / planning failed / the plan does not verify
+EXIT_USAGE = 2        # bad input (one line naming the file, field and reason), or unwritable output
+EXIT_INTERRUPTED = 3  # Ctrl-C: one line, no traceback, no half-written file
+
+EXIT_STATUSES = """exit status:
+  0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
+  1  ran but failed: no route or planning failed (rbp plan still writes the plan file, with
+     success: false and the reason), a plan that does not verify, a failed execution
+  2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
+     output that cannot be written
+  3  interrupted (Ctrl-C): one line on stderr; no output file is left half-written"""
 
 
 class UserError(Exception):
@@ -95,73 +106,6 @@ def cmd_scenario_list(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(label: str):
-    """A one-line progress display on stderr (only on a terminal)."""
-    interactive = sys.stderr.isatty()
-
-    def show(expansions: int, tested: int) -> None:
-        if interactive:
-            print(f"\r{label}: {expansions} stances expanded, {tested} transitions tested",
-                  end="", file=sys.stderr, flush=True)
-
-    def done() -> None:
-        if interactive:
-            print(file=sys.stderr)
-
-    return show, done
-
-
-def run_planner(scn, planner: str, seed: int, expansions: int, dt: float = 0.5,
-                motion: bool = True, optimise: bool = True):
-    """The whole pipeline (footsteps, then seeds and SCP per phase) -> plan dictionary."""
-    from planning.footsteps import FootstepConfig
-    from planning.pipeline import PipelineConfig, plan_climb
-
-    if not dt > 0:
-        raise UserError(f"--dt: must be positive, got {dt}")
-    cfg = PipelineConfig(footstep=FootstepConfig(seed=seed, max_expansions=expansions), dt=dt,
-                         optimise=optimise)
-    show, done = _progress(f"{planner} on {scn.name}")
-    interactive = sys.stderr.isatty()
-
-    def phase(message: str) -> None:
-        if interactive:
-            print(f"\r\033[K{planner} on {scn.name}: {message}", end="", file=sys.stderr,
-                  flush=True)
-
-    if not motion:
-        from planning.baseline import plan_naive
-        from planning.footsteps import plan_footsteps
-        from planning.plan import build_plan
-
-        fp = (plan_footsteps(scn, cfg.footstep, progress=show) if planner == "rbp"
-              else plan_naive(scn, cfg.footstep))
-        done()
-        return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
-    plan = plan_climb(scn, planner, cfg, progress=phase, footstep_progress=show)
-    done()
-    return plan
-
-
-def _write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str | None) -> None:
-    from planning.figures import animate_plan, phase_figure, snapshots_figure
-    from rb_drake.files import atomic_save_figure
-
-    picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
-    print(f"wrote {picture}")
-    with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
-    if phase is not None:
-        if phase not in with_motion:
-            raise UserError(f"--phase-figure: phase {phase} has no trajectory; phases with one: "
-                            f"{with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
-        fig = out.with_name(f"{out.stem}-phase{phase}.png")
-        atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
-        print(f"wrote {fig}")
-    if animate:
-        animate_plan(scn, plan, animate)
-        print(f"wrote {animate}")
-
-
 def _summary(plan: dict) -> str:
     if not plan["success"]:
         return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s")
@@ -172,17 +116,20 @@ def _summary(plan: dict) -> str:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
+    from rbp.plan_cli import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
-    scn = _load(args.scenario)
-    plan = run_planner(scn, args.planner, args.seed, args.max_expansions, args.dt,
-                       motion=not args.footsteps_only, optimise=not args.no_scp)
+    scn, planner, cfg, motion = plan_setup(args)
+    record = SearchRecord()
+    plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record)
+    plan["provenance"] = provenance(scn, planner, cfg, motion, getattr(args, "argv", None))
     out = Path(args.output)
     write_plan(plan, out)
     print(f"wrote {out}")
-    _write_pictures(scn, plan, out, args.phase_figure, args.animate)
+    if not args.no_pictures:
+        write_pictures(scn, plan, out, args.phase_figure, args.animate, search=record.last)
     _print_motion(plan)
     print(_summary(plan))
-    return 0
+    return EXIT_OK if plan["success"] else EXIT_FAILED
 
 
 def _print_motion(plan: dict) -> None:
@@ -271,9 +218,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
           f"wrote {picture} and {data}")
     if args.plan:
+        from planning.footsteps import FootstepConfig
+        from planning.pipeline import PipelineConfig
         from planning.plan import write_plan
+        from rbp.plan_cli import provenance, run_planner, write_pictures
 
-        plan = run_planner(scn, "rbp", 0, 400)
+        cfg = PipelineConfig(footstep=FootstepConfig(seed=0, max_expansions=400))
+        plan = run_planner(scn, "rbp", cfg)
+        plan["provenance"] = provenance(scn, "rbp", cfg, True, getattr(args, "argv", None))
         write_plan(plan, out / "plan.json")
         print(f"wrote {out / 'plan.json'}")
         from planning.pipeline import motion_summary
@@ -281,14 +233,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
         # Fig. 6 for the phase where SCP gained most
         rows = motion_summary(plan)
         best = max(rows, key=lambda r: r["mean"] - r["seed_mean"])["phase"] if rows else None
-        _write_pictures(scn, plan, out / "plan.json", best, None)
+        write_pictures(scn, plan, out / "plan.json", best, None)
         _print_motion(plan)
         print(_summary(plan))
-    return 0
+        if not plan["success"]:
+            return EXIT_FAILED
+    return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.split("\n\n")[0],
+                                     epilog=EXIT_STATUSES,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run the main job on the bundled demo cave")
@@ -299,19 +255,32 @@ def build_parser() -> argparse.ArgumentParser:
                       help="only check and draw the cave (skip the footstep plan)")
     demo.set_defaults(func=cmd_demo)
 
-    plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture")
-    plan.add_argument("scenario", help="scenario file or bundled cave name")
+    plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture",
+                          epilog=EXIT_STATUSES,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+    plan.add_argument("scenario", nargs="?",
+                      help="scenario file or bundled cave name (not with --from-plan)")
     plan.add_argument("-o", "--output", required=True, help="plan file to write (.json)")
-    plan.add_argument("--planner", choices=("rbp", "naive"), default="rbp")
-    plan.add_argument("--seed", type=int, default=0, help="seed of the planner's sampling")
-    plan.add_argument("--max-expansions", type=int, default=1000,  # FootstepConfig's
+    plan.add_argument("--planner", choices=("rbp", "naive"), help="default rbp")
+    plan.add_argument("--config", metavar="FILE",
+                      help="planner configuration (YAML: footstep, seed, scp, dt, optimise, "
+                           "motion_retries; see docs/formats.md); flags given override it")
+    plan.add_argument("--from-plan", metavar="PLAN",
+                      help="repeat the plan PLAN was made with: its scenario, planner, "
+                           "configuration and seed (flags given override them)")
+    plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
+    plan.add_argument("--max-expansions", type=int,
                       help="give up after expanding this many stances (default 1000)")
-    plan.add_argument("--dt", type=float, default=0.5,
+    plan.add_argument("--dt", type=float,
                       help="seconds between trajectory steps (default 0.5; steps are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",
                       help="keep the seed trajectories (no sequential convex programming)")
     plan.add_argument("--footsteps-only", action="store_true",
                       help="stop after the footstep plan (phases hold only transition poses)")
+    plan.add_argument("--no-pictures", action="store_true",
+                      help="write the plan file only (no PLAN.png, no search picture)")
+    plan.add_argument("-q", "--quiet", action="store_true",
+                      help="no progress line (it is shown only when stderr is a terminal)")
     plan.add_argument("--phase-figure", type=int, metavar="K",
                       help="also draw phase K's tensions and probability, seed against SCP "
                            "(the paper's Fig. 6), beside the plan")
@@ -368,26 +337,32 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns its exit status (EXIT_STATUSES)."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Outputs are written to a temporary file and renamed, so nothing is left half-written.
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
     args = build_parser().parse_args(argv)
+    args.argv = argv  # the command line, for the plan's provenance
+    from planning.config_io import ConfigError
     from rb_drake.scenario import ScenarioError
 
     try:
         return int(args.func(args) or 0)
-    except ScenarioError as e:
+    except (ScenarioError, ConfigError, UserError) as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
-    except UserError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as e:
+    except OSError as e:  # an output that cannot be written, an input that cannot be read
         print(f"error: {e.filename or ''}: {e.strerror}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -446,7 +446,7 @@ def test_cli_plan_without_route_writes_failed_plan(tmp_path: Path,
                                                    unreachable: Scenario) -> None:
     (tmp_path / "FAR.yaml").write_text(scenario_to_yaml(unreachable))
     proc = run_rbp("plan", "FAR.yaml", "-o", "far.json", "--max-expansions", "5", cwd=tmp_path)
-    assert proc.returncode == 0, describe(proc)
+    assert proc.returncode == 1, describe(proc)  # no route: status 1, the plan still written
     assert "Traceback" not in proc.stderr, proc.stderr
     assert proc.stdout.strip().splitlines()[-1].startswith("success: false"), describe(proc)
     plan = json.loads((tmp_path / "far.json").read_text())

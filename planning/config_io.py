@@ -1,0 +1,150 @@
+"""Planner configurations as plain data, for YAML files and the plan file's provenance.
+
+`config_to_dict` writes any configuration dataclass (`PipelineConfig` and the dataclasses it
+nests) with `dataclasses.asdict`, infinities as the strings "inf" / "-inf" (JSON has no
+infinity). `config_from_dict` reads one back, generically over the dataclass's fields and their
+type hints (nested dataclasses, bool, int, float, str, tuples, `X | None`), on top of a base
+configuration: keys left out keep the base's values. A mistake raises `ConfigError` naming the
+file, the dotted key and the reason: unknown keys (with the known ones), wrong types.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A configuration refused: `source` (file), `field` (dotted key) and `reason`."""
+
+    def __init__(self, source: str, field: str, reason: str):
+        super().__init__(f"{source}: {field}: {reason}")
+        self.source = source
+        self.field = field
+        self.reason = reason
+
+
+def config_to_dict(config: Any) -> dict[str, Any]:
+    """Every field of a configuration dataclass, nested ones as mappings, JSON-safe."""
+    return _plain(dataclasses.asdict(config))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    if hasattr(value, "item") and not isinstance(value, str):  # numpy scalars
+        return _plain(value.item())
+    return value
+
+
+def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None,
+                     prefix: str = "") -> T:
+    """`base` (default `cls()`) with the keys of `data` replaced, checked against cls's fields."""
+    base = cls() if base is None else base
+    where = prefix or "(top level)"
+    if not isinstance(data, dict):
+        raise ConfigError(source, where, f"expected a mapping, got {_describe(data)}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    hints = typing.get_type_hints(cls)
+    changes = {}
+    for key, value in data.items():
+        field = f"{prefix}.{key}" if prefix else str(key)
+        if key not in fields:
+            raise ConfigError(source, field, f"unknown key; expected one of {sorted(fields)}")
+        changes[key] = _convert(value, hints[key], source, field, getattr(base, key))
+    return dataclasses.replace(base, **changes)
+
+
+def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
+    def fail(expected: str) -> ConfigError:
+        return ConfigError(source, field, f"expected {expected}, got {_describe(value)}")
+
+    if dataclasses.is_dataclass(tp):
+        return config_from_dict(tp, value, source, base=current, prefix=field)
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        options = [a for a in args if a is not type(None)]
+        reasons = []
+        for option in options:
+            try:
+                return _convert(value, option, source, field, current)
+            except ConfigError as e:
+                reasons.append(e.reason)
+        raise ConfigError(source, field, " or ".join(reasons)) if reasons else fail("a value")
+    if origin is typing.Literal:
+        if value not in args:
+            raise fail(f"one of {list(args)}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise fail("a list")
+        if len(args) == 2 and args[1] is Ellipsis:
+            kinds = [args[0]] * len(value)
+        elif len(value) != len(args):
+            raise fail(f"a list of {len(args)}")
+        else:
+            kinds = list(args)
+        return tuple(_convert(v, k, source, f"{field}[{i}]", None)
+                     for i, (v, k) in enumerate(zip(value, kinds, strict=True)))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise fail("true or false")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise fail("an integer")
+        return value
+    if tp is float:
+        if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):
+            return float(value)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise fail("a number")
+        if math.isnan(value):
+            raise fail("a number (not nan)")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise fail("a string")
+        return value
+    return value  # a type this reader does not know: taken as written
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+def load_config(path: str | Path, cls: type[T], base: T | None = None) -> T:
+    """Read a YAML configuration file on top of `base`; raises ConfigError."""
+    import yaml
+
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(source, "(file)", "no such file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(source, "(file)", f"cannot read: {e}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
+        problem = getattr(e, "problem", None) or " ".join(str(e).split())
+        raise ConfigError(source, where, f"not valid YAML: {problem}") from None
+    return config_from_dict(cls, {} if data is None else data, source, base=base)

@@ -1,0 +1,161 @@
+"""`rbp plan`: the planner's configuration (defaults, --config FILE, flags, --from-plan), the
+run with its progress line, the plan's provenance, and the pictures.
+
+The configuration is `planning.pipeline.PipelineConfig`, built in layers: its defaults, then a
+plan's recorded configuration (--from-plan), then a YAML file (--config), then the flags given
+(--seed, --max-expansions, --dt, --no-scp). The plan file records the result under
+`provenance` with the rbp version and the command line, so `--from-plan` repeats it exactly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
+                   "config")
+
+
+def rbp_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("rbp")
+    except metadata.PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown"
+
+
+def plan_setup(args: argparse.Namespace):
+    """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
+    from planning.config_io import load_config
+    from planning.pipeline import PipelineConfig
+    from rbp.cli import UserError, _load
+
+    cfg = PipelineConfig()
+    planner, motion = args.planner or "rbp", not args.footsteps_only
+    if args.from_plan:
+        if args.scenario is not None:
+            raise UserError(f"{args.scenario}: (argument): give a scenario or --from-plan, "
+                            "not both (the plan holds its scenario)")
+        scn, recorded, cfg = _from_plan(Path(args.from_plan))
+        planner = args.planner or recorded["planner"]
+        motion = recorded["motion"] and not args.footsteps_only
+    elif args.scenario is None:
+        raise UserError("scenario: (argument): give a scenario file or bundled cave name, or "
+                        "--from-plan PLAN")
+    else:
+        scn = _load(args.scenario)
+    if args.config:
+        cfg = load_config(args.config, PipelineConfig, base=cfg)
+    flags: dict[str, Any] = {}
+    if args.seed is not None:
+        flags["seed"] = args.seed
+    if args.max_expansions is not None:
+        flags["max_expansions"] = args.max_expansions
+    if flags:
+        cfg = dataclasses.replace(cfg, footstep=dataclasses.replace(cfg.footstep, **flags))
+    if args.dt is not None:
+        cfg = dataclasses.replace(cfg, dt=args.dt)
+    if args.no_scp:
+        cfg = dataclasses.replace(cfg, optimise=False)
+    if not cfg.dt > 0:
+        raise UserError(f"--dt: must be positive, got {cfg.dt}")
+    if not cfg.footstep.max_expansions >= 1:
+        raise UserError(f"--max-expansions: must be 1 or more, got {cfg.footstep.max_expansions}")
+    return scn, planner, cfg, motion
+
+
+def _from_plan(path: Path):
+    """The scenario, provenance and configuration a plan file was planned with."""
+    from planning.config_io import config_from_dict
+    from planning.pipeline import PipelineConfig
+    from rb_drake.scenario import scenario_from_dict
+    from rbp.cli import UserError, read_plan
+
+    plan = read_plan(path)
+    recorded = plan.get("provenance")
+    if recorded is None:
+        raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
+                        "(written by an older rbp), so it cannot be repeated")
+    scn = scenario_from_dict(plan["scenario"], source=f"{path}: scenario", check_start=True)
+    cfg = config_from_dict(PipelineConfig, recorded["config"], str(path),
+                           prefix="provenance.config")
+    return scn, recorded, cfg
+
+
+def provenance(scn, planner: str, cfg, motion: bool, argv: list[str] | None) -> dict[str, Any]:
+    """How a plan was made: enough to make it again (`rbp plan --from-plan`)."""
+    from planning.config_io import config_to_dict
+
+    return {
+        "rbp_version": rbp_version(),
+        "command": shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
+        "planner": planner,
+        "motion": motion,
+        "seed": cfg.footstep.seed,
+        "scenario_source": scn.source,
+        "config": config_to_dict(cfg),
+    }
+
+
+class SearchRecord:
+    """Keeps the footstep plans a run produced (the last one explains a failed search)."""
+
+    def __init__(self) -> None:
+        self.last = None
+
+    def __call__(self, fp) -> None:
+        self.last = fp
+
+
+def run_planner(scn, planner: str, cfg, motion: bool = True, quiet: bool = False,
+                record: SearchRecord | None = None) -> dict[str, Any]:
+    """The whole pipeline (footsteps, then seeds and SCP per phase) -> plan dictionary."""
+    from planning.pipeline import plan_climb
+    from rbp.progress import SearchProgress
+
+    with SearchProgress(f"{planner} on {scn.name}", cfg.footstep.max_expansions,
+                        quiet=quiet) as bar:
+        if not motion:
+            from planning.baseline import plan_naive
+            from planning.footsteps import plan_footsteps
+            from planning.plan import build_plan
+
+            fp = (plan_footsteps(scn, cfg.footstep, progress=bar.search) if planner == "rbp"
+                  else plan_naive(scn, cfg.footstep))
+            if record is not None:
+                record(fp)
+            return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
+        return plan_climb(scn, planner, cfg, progress=bar.phase, footstep_progress=bar.search,
+                          footsteps_done=record)
+
+
+def write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str | None,
+                   search=None) -> None:
+    """The snapshots (PLAN.png), the failed search's picture (PLAN-search.png) when the
+    footstep search failed, Fig. 6 of phase `phase`, and the animation."""
+    from planning.figures import animate_plan, phase_figure, search_figure, snapshots_figure
+    from rb_drake.files import atomic_save_figure
+    from rbp.cli import UserError
+
+    with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
+    if phase is not None and phase not in with_motion:
+        raise UserError(f"--phase-figure: phase {phase} has no trajectory; phases with one: "
+                        f"{with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
+    picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
+    print(f"wrote {picture}")
+    if search is not None and not search.success:
+        path = out.with_name(f"{out.stem}-search.png")
+        atomic_save_figure(search_figure(scn, search), path, dpi=110)
+        print(f"wrote {path}")
+    if phase is not None:
+        fig = out.with_name(f"{out.stem}-phase{phase}.png")
+        atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
+        print(f"wrote {fig}")
+    if animate:
+        animate_plan(scn, plan, animate)
+        print(f"wrote {animate}")

@@ -1,0 +1,150 @@
+"""Exit statuses of `rbp plan` (and the entry point): 0 plan found, 1 no route, 2 bad input,
+3 interrupted; each with one line on stderr and never a half-written file."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from cli_helpers import ROOT, run_rbp
+from conftest import SHAFT
+
+from rbp import cli, plan_cli
+
+
+def leftovers(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".tmp"))
+
+
+@pytest.fixture
+def stuck_shaft(tmp_path: Path) -> Path:
+    """The test shaft: four anchors only, so no boom can move and the goal is out of reach."""
+    path = tmp_path / "stuck.yaml"
+    path.write_text(yaml.safe_dump(SHAFT, sort_keys=False))
+    return path
+
+
+def test_plan_found_exits_0(tmp_path: Path) -> None:
+    proc = run_rbp("plan", "demo-crevasse", "-o", "p.json", "--footsteps-only", cwd=tmp_path)
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}"
+    plan = json.loads((tmp_path / "p.json").read_text())
+    assert plan["success"] is True, plan["reason"]
+
+
+def test_no_route_exits_1_and_still_writes_the_plan(tmp_path: Path, stuck_shaft: Path) -> None:
+    proc = run_rbp("plan", str(stuck_shaft), "-o", "p.json", "--max-expansions", "20",
+                   cwd=tmp_path)
+    assert proc.returncode == 1, f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}"
+    assert "Traceback" not in proc.stderr, proc.stderr
+    plan = json.loads((tmp_path / "p.json").read_text())
+    assert plan["success"] is False and plan["reason"], f"success {plan['success']}"
+    assert proc.stdout.strip().splitlines()[-1].startswith("success: false"), proc.stdout
+    assert leftovers(tmp_path) == [], leftovers(tmp_path)
+    # the failed search is pictured beside the plan
+    for name in ("p.png", "p-search.png"):
+        picture = tmp_path / name
+        assert picture.is_file() and picture.stat().st_size > 1000, f"{name} missing or tiny"
+        assert f"wrote {name}" in proc.stdout, proc.stdout
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"goal": {"position": [0.0, 7.0], "tolerance": -1}}, "goal.tolerance"),
+    ({"start": {"pose": [0.0, 1.0, 0.0], "stance": ["a0", "a1", "a2", "a9"]}},
+     "start.stance[3]"),
+    ({"goal": {"position": [1.6, 4.0], "tolerance": 0.5}}, "goal.position"),  # in rock
+])
+def test_bad_scenario_exits_2_with_one_line(tmp_path: Path, change: dict, field: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({**SHAFT, **change}, sort_keys=False))
+    proc = run_rbp("plan", str(path), "-o", "p.json", cwd=tmp_path)
+    assert proc.returncode == 2, f"exit {proc.returncode}\n{proc.stderr}"
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}: {field}:"), proc.stderr
+    assert not (tmp_path / "p.json").exists(), "a plan file was written for bad input"
+
+
+def test_unwritable_output_exits_2(tmp_path: Path, stuck_shaft: Path) -> None:
+    (tmp_path / "file").write_text("not a folder")
+    proc = run_rbp("plan", str(stuck_shaft), "-o", "file/p.json", "--max-expansions", "5",
+                   cwd=tmp_path)
+    assert proc.returncode == 2, f"exit {proc.returncode}\n{proc.stderr}"
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_interrupt_while_planning_exits_3(tmp_path: Path, stuck_shaft: Path, monkeypatch,
+                                          capsys) -> None:
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plan_cli, "run_planner", interrupted)
+    out = tmp_path / "p.json"
+    assert cli.main(["plan", str(stuck_shaft), "-o", str(out)]) == cli.EXIT_INTERRUPTED
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == ["interrupted"], err
+    assert not out.exists(), "a plan file was written by an interrupted run"
+
+
+def test_interrupt_while_writing_leaves_no_file(tmp_path: Path, stuck_shaft: Path, monkeypatch,
+                                                capsys) -> None:
+    """Ctrl-C in the middle of writing the plan: neither the plan nor a temporary file stays."""
+    real_dumps = json.dumps
+
+    def dumps(obj, *args, **kwargs):
+        if isinstance(obj, dict) and obj.get("format") == "reachbot-plan/1":
+            raise KeyboardInterrupt
+        return real_dumps(obj, *args, **kwargs)
+
+    monkeypatch.setattr(json, "dumps", dumps)
+    out = tmp_path / "p.json"
+    status = cli.main(["plan", str(stuck_shaft), "-o", str(out), "--max-expansions", "5"])
+    assert status == cli.EXIT_INTERRUPTED, status
+    assert capsys.readouterr().err.strip().splitlines()[-1] == "interrupted"
+    assert not out.exists() and leftovers(tmp_path) == [], sorted(os.listdir(tmp_path))
+
+
+def test_sigint_exits_3_without_traceback(tmp_path: Path) -> None:
+    """A real Ctrl-C (SIGINT) during a long search: one line, status 3, no plan file."""
+    env = {**os.environ, "MPLBACKEND": "Agg", "LCM_DEFAULT_URL": "memq://",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "rbp", "plan", "shaft-1", "-o", "p.json",
+                             "--max-expansions", "100000"], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)  # past start-up (a fraction of a second), inside the plan (over 10 s)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3, f"exit {proc.returncode}\n{out}\n{err}"
+    assert err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err, err
+    assert not (tmp_path / "p.json").exists() and leftovers(tmp_path) == []
+
+
+def test_help_documents_the_exit_statuses(tmp_path: Path) -> None:
+    for args in (("--help",), ("plan", "--help")):
+        proc = run_rbp(*args, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        text = " ".join(proc.stdout.split())
+        for line in ("exit status:", "0 done", "1 ran but failed", "2 bad input",
+                     "3 interrupted"):
+            assert line in text, f"{line!r} missing from rbp {' '.join(args)}:\n{proc.stdout}"
+
+
+def test_plan_without_pictures_loads_no_matplotlib(tmp_path: Path, stuck_shaft: Path) -> None:
+    """matplotlib is imported only when a picture is drawn (it costs about 0.3 s)."""
+    out = tmp_path / "p.json"
+    code = ("import sys; from rbp.cli import main; "
+            f"status = main(['plan', {str(stuck_shaft)!r}, '-o', {str(out)!r}, '--no-pictures', "
+            "'--max-expansions', '5']); "
+            "print(status, 'matplotlib' in sys.modules)")
+    env = {**os.environ, "MPLBACKEND": "Agg",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, check=False)
+    assert proc.stdout.strip().splitlines()[-1] == "1 False", proc.stdout + proc.stderr
+    assert out.is_file() and not (tmp_path / "p.png").exists()

@@ -1,0 +1,61 @@
+"""Progress lines: shown (tqdm) on a terminal, silent with --quiet and when stderr is not one."""
+
+from __future__ import annotations
+
+import io
+import sys
+
+from experiments.sweep import ProgressDisplay
+from rbp.progress import SearchProgress
+
+
+class Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def record(name: str, error: str | None = None) -> dict:
+    return {"name": name, "error": error, "timing": {"trial": 0.5}}
+
+
+def test_search_progress_on_a_terminal(monkeypatch) -> None:
+    term = Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    with SearchProgress("rbp on cave", budget=100) as bar:
+        bar.search(3, 10)
+        bar.search(7, 25, 1.234)
+        bar.phase("phase 1/5: body movement")
+    text = term.getvalue()
+    assert "7/100 stances expanded" in text and "25 transitions tested" in text, repr(text)
+    assert "phase 1/5: body movement" in text, repr(text)
+    assert "nearest 1.23 m from the goal" in text, repr(text)
+
+
+def test_search_progress_quiet_or_not_a_terminal(monkeypatch) -> None:
+    for stream, quiet in ((Terminal(), True), (io.StringIO(), False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        with SearchProgress("rbp on cave", budget=100, quiet=quiet) as bar:
+            bar.search(3, 10)
+            bar.phase("phase 1/5")
+        assert stream.getvalue() == "", f"quiet={quiet}: {stream.getvalue()!r}"
+
+
+def test_sweep_progress_bar_on_a_terminal() -> None:
+    term = Terminal()
+    progress = ProgressDisplay(4, 1, term)
+    progress.update(record("a"))
+    progress.update(record("b", "ValueError: boom"))
+    progress.close()
+    text = term.getvalue()
+    assert text.startswith("resuming: 1 of 4 trials already finished"), repr(text)
+    assert "3/4" in text and "1 errors" in text, repr(text)
+
+
+def test_sweep_progress_lines_in_a_log() -> None:
+    log = io.StringIO()
+    progress = ProgressDisplay(2, 0, log)
+    progress.update(record("a"))
+    progress.update(record("b", "ValueError: boom\nmore"))
+    progress.close()
+    assert log.getvalue().splitlines() == ["[1/2] a: done (0.5 s)",
+                                           "[2/2] b: ERROR ValueError: boom (0.5 s)"]

@@ -238,11 +238,12 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     time_limit: float | None = None,
                     exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                     memo: LatticeMemo | None = None,
-                    progress: Callable[[int, int], None] | None = None,
+                    progress: Callable[..., None] | None = None,
                     ignore_grasps: bool = False) -> CompleteResult:
     """A* over (stance, component) vertices on the pose lattice (module doc).
 
-    `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit."""
+    `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit.
+    `progress(expansions, transitions tested, nearest goal distance)` after each expansion."""
     from planning.footsteps import boom_costs, goal_distance
 
     cfg = lattice or LatticeConfig()
@@ -286,7 +287,13 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     reached_at: dict[Vertex, np.ndarray] = {}
     expanded: list[tuple[Vertex, np.ndarray]] = []
     expansions = 0
+    nearest = math.inf
     stop, reason = "noroute", ""
+
+    def settled(stance: tuple) -> bool:
+        """Whether every component of `stance` is expanded already (its lattice known)."""
+        lat = memo.lattices.get(stance)
+        return lat is not None and all((stance, c) in closed for c in range(lat.n_components))
 
     def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
                    child: Stance4, comp: int | None) -> tuple:
@@ -302,6 +309,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         _, _, g, kind, payload = heapq.heappop(open_list)
         if kind == 1:
             (stance, comp), j, anchor = payload
+            child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
+            if settled(child):  # it can lead nowhere new
+                continue
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
@@ -311,7 +321,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 tested += 1
             if not len(tr.keys):
                 continue
-            child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
             graph.add_edge((stance, comp), child, boom=j, anchor=anchor)
             # The child's lattice (and so which of its components the move enters) waits until
             # the child is popped: most children are never expanded.
@@ -342,9 +351,10 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         reached_at[vertex] = pose
         expanded.append((vertex, pose))
         expansions += 1
-        if progress is not None:
-            progress(expansions, tested)
         stance, comp = vertex
+        nearest = min(nearest, goal_distance(scn, stance))
+        if progress is not None:
+            progress(expansions, tested, nearest)
         lat = memo.lattices[stance]
         in_comp = lat.component == comp
         near_goal = np.flatnonzero(in_comp & (np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
@@ -376,6 +386,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 if (stance, j, anchor) in excluded:
                     continue
                 child = tuple(anchor if i == j else a for i, a in enumerate(stance))
+                if settled(child):
+                    continue
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
                                            g + c_attach, 1, (vertex, j, anchor)))
     if stop == "noroute":

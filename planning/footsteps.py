@@ -204,13 +204,14 @@ class FootstepMemo:
 
 
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
-                   progress: Callable[[int, int], None] | None = None,
+                   progress: Callable[..., None] | None = None,
                    exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                    memo: FootstepMemo | None = None) -> FootstepPlan:
     """RBP's footstep plan from the scenario's start stance to a stance that reaches the goal.
 
     `exclude` holds moves (stance, boom, new anchor) not to take (the pipeline excludes one
-    whose motion could not be planned); `memo` carries searched transitions between calls."""
+    whose motion could not be planned); `memo` carries searched transitions between calls;
+    `progress(expansions, transitions tested, nearest goal distance in m)` follows the search."""
     cfg = config or FootstepConfig()
     if cfg.search not in SEARCHES:
         raise ValueError(f"search must be one of {SEARCHES}, got {cfg.search!r}")
@@ -278,9 +279,12 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     def is_goal(node: Stance4, pose: np.ndarray):
         return goal_pose_in(scn, node, goal_rng, cfg.goal_samples)
 
+    nearest = [math.inf]
+
     def on_expand(n: int, node: Stance4) -> None:
         if progress is not None:
-            progress(n, tested)
+            nearest[0] = min(nearest[0], goal_distance(scn, node))
+            progress(n, tested, nearest[0])
 
     result = lazy_astar(start, successors, evaluate, heuristic,
                         is_goal=lambda n, d: _as_goal(is_goal(n, d)),
@@ -319,7 +323,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
 
 
 def _plan_complete(scn: Scenario, cfg: FootstepConfig,
-                   progress: Callable[[int, int], None] | None,
+                   progress: Callable[..., None] | None,
                    exclude: Collection[tuple[tuple[str, ...], int, str]],
                    memo: FootstepMemo) -> FootstepPlan:
     """plan_footsteps through the complete search (planning.complete)."""

@@ -138,7 +138,7 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
 
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
                progress: Progress | None = None,
-               footstep_progress: Callable[[int, int], None] | None = None,
+               footstep_progress: Callable[..., None] | None = None,
                footsteps_done: Callable[[FootstepPlan], None] | None = None) -> dict[str, Any]:
     """The whole plan-file dictionary (`reachbot-plan/1`) for a scenario.
 

@@ -271,6 +271,17 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
     plan.add_argument("--max-expansions", type=int,
                       help="give up after expanding this many stances (default 1000)")
+    plan.add_argument("--search", choices=("hybrid", "complete", "sampled"),
+                      help="footstep search: hybrid (default: sampling for 150 expansions, then "
+                           "the complete search), complete (on the 2 cm x 2.5 deg pose lattice: "
+                           "finds a route whenever one exists there, and proves it when none "
+                           "does) or sampled (the search before the complete one)")
+    plan.add_argument("--thorough", action="store_true",
+                      help="the oracle: the complete search without an expansion budget, so it "
+                           "ends with a route or a proof that none exists (bound it with "
+                           "--time-limit)")
+    plan.add_argument("--time-limit", type=float, metavar="SECONDS",
+                      help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,
                       help="seconds between trajectory steps (default 0.5; steps are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",

@@ -56,6 +56,12 @@ def plan_setup(args: argparse.Namespace):
         flags["seed"] = args.seed
     if args.max_expansions is not None:
         flags["max_expansions"] = args.max_expansions
+    if args.search is not None:
+        flags["search"] = args.search
+    if args.thorough:  # the oracle: complete, no expansion budget
+        flags["search"], flags["max_expansions"] = "complete", None
+    if args.time_limit is not None:
+        flags["time_limit"] = args.time_limit
     if flags:
         cfg = dataclasses.replace(cfg, footstep=dataclasses.replace(cfg.footstep, **flags))
     if args.dt is not None:
@@ -64,8 +70,17 @@ def plan_setup(args: argparse.Namespace):
         cfg = dataclasses.replace(cfg, optimise=False)
     if not cfg.dt > 0:
         raise UserError(f"--dt: must be positive, got {cfg.dt}")
-    if not cfg.footstep.max_expansions >= 1:
-        raise UserError(f"--max-expansions: must be 1 or more, got {cfg.footstep.max_expansions}")
+    budget = cfg.footstep.max_expansions
+    if budget is not None and not budget >= 1:
+        raise UserError(f"--max-expansions: must be 1 or more, got {budget}")
+    limit = cfg.footstep.time_limit
+    if limit is not None and not limit > 0:
+        raise UserError(f"--time-limit: must be positive, got {limit}")
+    from planning.footsteps import SEARCHES
+
+    if cfg.footstep.search not in SEARCHES:
+        raise UserError(f"footstep.search: must be one of {', '.join(SEARCHES)}, got "
+                        f"{cfg.footstep.search!r}")
     return scn, planner, cfg, motion
 
 

@@ -48,11 +48,20 @@ def assert_quantiles(q: dict[str, Any], what: str) -> None:
 
 def test_baseline_comparison(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     out = tmp_path / "baseline"
-    result = run_experiment("baseline_comparison", ["--trials", "2", *TINY], out, monkeypatch)
+    result = run_experiment("baseline_comparison", ["--trials", "2", *TINY, "--oracle-time",
+                                                    "20"], out, monkeypatch)
     assert_png(out / "baseline.png")
     assert len(list((out / "trials").glob("*.json"))) == 2, "one record per trial"
     assert [t["kind"] for t in result["trials"]] == ["shaft", "crevasse"], "kinds alternate"
-    for planner in ("rbp", "naive"):
+    oracle = result["oracle"]
+    assert sum(oracle["labels"].values()) == 2, oracle
+    for t in result["trials"]:
+        assert t["label"] in ("route", "noroute", "undecided"), t
+        assert (t["label"] == "route") == t["oracle"]["success"], t
+        assert (t["label"] == "noroute") == (t["oracle"]["stop"] in ("noroute", "nostart")), t
+    for planner, line in oracle["planned_of_route"].items():
+        assert line["planned"] <= line["route"] == oracle["labels"]["route"], (planner, line)
+    for planner in ("rbp", "rbp-sampled", "oracle", "naive"):
         s = result["summary"][planner]
         assert s["p_path_over_0.95"] <= s["p_path_over_0.90"] <= s["successes"] <= s["trials"] \
             == 2, s

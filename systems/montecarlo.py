@@ -239,8 +239,11 @@ def shifted_phases(phases: list[dict[str, Any]], dt: float) -> list[dict[str, An
 
 
 def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]]) -> dict[str, Any]:
-    plan = {k: v for k, v in request.plan.items() if k != "phases"}
+    plan = {k: v for k, v in request.plan.items() if k not in ("phases", "verified")}
     plan["phases"] = phases
+    # The continuation starts where the grasp failed, not at the scenario's start.
+    held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
+    plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
     score_plan(plan, request.scenario.robot.attach_failure)
     return plan
 

@@ -65,12 +65,14 @@ def verify_plan(plan: dict[str, Any], source: str = "<plan>") -> list[Problem]:
 
             pose = np.asarray(step["pose"], dtype=float)
             tip = np.asarray(step["free_tip"], dtype=float) if reach else None
-            p_grasp, p_success, effort = _check_configuration(scn, stance, pose, tip, step, fail)
+            with np.errstate(all="ignore"):  # absurd numbers fail the checks, not numpy
+                p_grasp, p_success, effort = _check_configuration(scn, stance, pose, tip, step,
+                                                                  fail)
             problems += out
             efforts.append(effort)
             recomputed.append(Configuration(tuple(phase["stance"]), p_grasp, p_success))
         _check_motion(plan, k, efforts, problems)
-    if plan["success"] and plan["phases"]:
+    if plan["success"] and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(plan_configurations(plan), robot.attach_failure)
         for name, a, b in (("p_path", mine.p_path, plan["p_path"]),
@@ -91,10 +93,10 @@ def _check_motion(plan: dict[str, Any], k: int, efforts: list[float],
         return
     n_steps = len(efforts)
     for name in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
-        if len(motion.get(name) or []) != n_steps:
-            problems.append(Problem("recorded-value", f"motion.{name} has "
-                                    f"{len(motion.get(name) or [])} entries for {n_steps} steps",
-                                    k, None, locate(plan, k)))
+        entries = motion.get(name) if isinstance(motion, dict) else None
+        if not isinstance(entries, list) or len(entries) != n_steps:
+            problems.append(Problem("recorded-value", f"motion.{name} is not a list of one "
+                                    f"entry per step ({n_steps})", k, None, locate(plan, k)))
             return
     for n, (a, b) in enumerate(zip(efforts, motion["effort"], strict=True)):
         if not _same(a, b):
@@ -154,7 +156,7 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
         fail("pull-angle", "a grasp is pulled at 90 degrees or more from its normal")
     lp = stance.log_prob(fa, np.nan_to_num(psi))
     p_success = float(np.exp(lp[att].sum()))
-    if p_success < robot.p_min - TOL:
+    if not p_success >= robot.p_min - TOL:
         fail("probability", f"P = {p_success:.5f} below p_min {robot.p_min}")
     if not _same(p_success, step["p_success"]):
         fail("recorded-value", f"p_success {step['p_success']} but recomputed {p_success}")

@@ -224,3 +224,55 @@ def test_a_wrong_plan_is_not_stamped(plan: Plan, tmp_path: Path) -> None:
     assert main(["check", "--stamp", str(path)]) == 1
     assert "verified" not in json.loads(path.read_text())
 
+
+
+# Wrong files: never a traceback
+
+def _weird(plan: Plan, case: str) -> Any:
+    k = _body(plan)
+    reach = next(k for k, p in enumerate(plan["phases"]) if p["kind"] == "reach")
+    if case == "motion not a record":
+        plan["phases"][k]["motion"] = 5
+    elif case == "motion lists short":
+        plan["phases"][k]["motion"]["effort"] = [1.0]
+    elif case == "unknown anchors":
+        plan["phases"][k]["stance"] = ["x", "y", "z", "w"]
+    elif case == "reach frees another boom":
+        j = plan["phases"][reach]["free_boom"]
+        plan["phases"][reach]["free_boom"] = (j + 1) % 4
+    elif case == "body with a free tip":
+        plan["phases"][k]["steps"][0]["free_tip"] = [0.0, 0.0]
+    elif case == "body with a free boom":
+        plan["phases"][k]["stance"][1] = None
+    elif case == "bad robot":
+        plan["robot"]["boom_length"] = [2.0, 1.0]
+    elif case == "scenario robot not a mapping":
+        plan["scenario"]["robot"] = [1, 2]
+    elif case == "huge pose":
+        plan["phases"][k]["steps"][1]["pose"] = [1e300, -1e300, 1e300]
+    elif case == "no phases":
+        plan["phases"] = []
+    elif case == "nested":
+        return "[" * 10_000 + "]" * 10_000
+    elif case == "empty start":
+        plan["start"] = {"pose": [0.0, 0.0, 0.0], "stance": ["a", "b", "c", "d"]}
+    return plan
+
+
+@pytest.mark.parametrize("case", [
+    "motion not a record", "motion lists short", "unknown anchors", "reach frees another boom",
+    "body with a free tip", "body with a free boom", "bad robot", "scenario robot not a mapping",
+    "huge pose", "no phases", "nested", "empty start"])
+def test_wrong_files_give_a_message_not_a_traceback(
+        plan: Plan, tmp_path: Path, case: str, capsys: pytest.CaptureFixture[str]) -> None:
+    content = _weird(plan, case)
+    path = tmp_path / "plan.json"
+    path.write_text(content if isinstance(content, str) else json.dumps(content))
+    code = main(["check", str(path)])  # an exception here fails the test
+    out, err = capsys.readouterr()
+    assert code in (1, 2), f"{case}: exit {code}\n{out}{err}"
+    assert "Traceback" not in out + err
+    if code == 2:
+        assert err.count("\n") == 1 and err.startswith(f"error: {path}"), err
+    else:
+        assert f"{path}: " in out and "problems" in out, out

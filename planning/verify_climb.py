@@ -233,6 +233,8 @@ def _times(plan, fail) -> None:
         if "time_step" in plan and not regular and "start" not in plan:
             # Only a continuation (`start`) splices in phases that hold end poses only.
             fail("phase-form", "a phase of a full plan without its trajectory (motion)", k)
+        if "motion" in phase and "time_step" not in plan:
+            fail("phase-form", "a trajectory (motion) in a plan without time_step", k)
         for n in range(1, len(steps)):
             gap = steps[n]["t"] - steps[n - 1]["t"]
             if not gap > 0:

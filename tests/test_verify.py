@@ -153,6 +153,15 @@ def test_a_jump_of_the_free_tip(plan: Plan) -> None:
     assert (k, 2) in found.get("continuity", set()), found
 
 
+@pytest.mark.parametrize("drop", ["time_step", "motion"])
+def test_a_trajectory_cannot_shed_its_time_step_or_motion(plan: Plan, drop: str) -> None:
+    """Without them the trajectory's continuity and spacing would go unchecked."""
+    k = _body(plan)
+    del (plan if drop == "time_step" else plan["phases"][k])[drop]
+    found = rules_at(verify_plan(plan))
+    assert (0 if drop == "time_step" else k, None) in found.get("phase-form", set()), found
+
+
 def test_messages_name_phase_step_and_rule(plan: Plan, tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     k = _body(plan)

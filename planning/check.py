@@ -23,7 +23,7 @@ from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import MIN_CONDITIONING, wrench_conditioning
 from rb_drake.grasp import HALF_PI
-from rb_drake.scenario import scenario_from_dict
+from rb_drake.scenario import ScenarioError, scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
 
 TOL = 1e-9
@@ -45,7 +45,11 @@ def verify_plan(plan: dict[str, Any], source: str = "<plan>") -> list[Problem]:
     robot raises rb_drake.scenario.ScenarioError (bad input, not a wrong plan)."""
     scenario = dict(plan["scenario"])
     scenario["robot"] = plan["robot"]
-    scn = scenario_from_dict(scenario, source, check_start=False)
+    try:
+        scn = scenario_from_dict(scenario, source, check_start=False)
+    except ScenarioError as e:  # name the field as it is in the plan file
+        field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
+        raise ScenarioError(source, field, e.reason) from None
     robot = scn.robot
     problems = climb_problems(plan, scn)
     bad_form = {p.phase for p in problems if p.rule in ("phase-form", "stance")

@@ -285,3 +285,13 @@ def test_wrong_files_give_a_message_not_a_traceback(
         assert err.count("\n") == 1 and err.startswith(f"error: {path}"), err
     else:
         assert f"{path}: " in out and "problems" in out, out
+
+
+def test_a_bad_scenario_in_a_plan_names_its_field_in_the_plan(
+        plan: Plan, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    plan["scenario"]["goal"]["tolerance"] = -1.0
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(plan))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {path}: scenario.goal.tolerance: ") and err.count("\n") == 1, err

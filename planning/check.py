@@ -1,9 +1,12 @@
 """`rbp check`: re-verify a plan file from scratch, trusting none of the planner's bookkeeping.
 
-The scenario and robot are rebuilt from the plan file itself; every configuration is checked
-with the plan's own tensions (not re-optimised): kinematic limits, collisions, statics to
-1e-6 N, tension bounds, shoulder torque, and P >= p_min recomputed from the limit surfaces; the
-stance sequence must be consistent, and p_min, p_path and the regrasp count are recomputed.
+The scenario and robot are rebuilt from the plan file itself. `planning.verify_climb` checks the
+climb as a whole (start, goal, phase order and joins, stance sequence, time, continuity, the
+robot stored once); here every configuration is checked with the plan's own tensions (not
+re-optimised): kinematic limits, collisions, statics to 1e-6 N, tension bounds, shoulder torque,
+and P >= p_min recomputed from the limit surfaces; every recorded per-step value (each grasp's
+P, P, shoulder torque, summed tension) is recomputed and compared, and p_min, p_path and the
+regrasp count are recomputed. Each problem names its rule (`verify_climb.RULES`), phase and step.
 """
 
 from __future__ import annotations
@@ -15,61 +18,65 @@ import numpy as np
 
 from planning.plan import plan_configurations
 from planning.probability import Configuration, path_probability
+from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import MIN_CONDITIONING, wrench_conditioning
 from rb_drake.grasp import HALF_PI
-from rb_drake.scenario import scenario_from_dict
+from rb_drake.scenario import ScenarioError, scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
 
 TOL = 1e-9
+REL = 1e-9  # recorded values equal their recomputation to this relative tolerance...
+ABS = 1e-12  # ...or this absolute one
+
+
+def _same(a: float, b: Any) -> bool:
+    return isinstance(b, int | float) and math.isclose(a, b, rel_tol=REL, abs_tol=ABS)
 
 
 def check_plan(plan: dict[str, Any], source: str = "<plan>") -> list[str]:
-    """Every problem found in `plan`, in words; [] for a valid plan."""
+    """Every problem found in `plan`, in words ("WHERE: RULE: WHAT"); [] for a valid plan."""
+    return [str(p) for p in verify_plan(plan, source)]
+
+
+def verify_plan(plan: dict[str, Any], source: str = "<plan>") -> list[Problem]:
+    """Every broken rule in a schema-valid `plan`; [] for a valid plan. A malformed scenario or
+    robot raises rb_drake.scenario.ScenarioError (bad input, not a wrong plan)."""
     scenario = dict(plan["scenario"])
     scenario["robot"] = plan["robot"]
-    scn = scenario_from_dict(scenario, source, check_start=False)
+    try:
+        scn = scenario_from_dict(scenario, source, check_start=False)
+    except ScenarioError as e:  # name the field as it is in the plan file
+        field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
+        raise ScenarioError(source, field, e.reason) from None
     robot = scn.robot
-    problems: list[str] = []
+    problems = climb_problems(plan, scn)
+    bad_form = {p.phase for p in problems if p.rule in ("phase-form", "stance")
+                and p.step is None}
     recomputed: list[Configuration] = []
-    previous: list[str | None] | None = None
-    arriving: tuple[int, str] | None = None  # (boom, anchor) a reach phase ended on
     for k, phase in enumerate(plan["phases"]):
-        stance_ids = tuple(phase["stance"])
-        where = f"phases[{k}] ({phase['kind']})"
-        try:
-            stance = scn.stance(stance_ids)
-        except KeyError as e:
-            problems.append(f"{where}: unknown anchor {e}")
+        if k in bad_form:  # reported; its configurations cannot be set up
             continue
-        if phase["kind"] == "reach":
-            j = phase["free_boom"]
-            if phase["to_anchor"] not in scn.anchor_index:
-                problems.append(f"{where}: unknown to_anchor {phase['to_anchor']!r}")
-            arriving = (j, phase["to_anchor"])
-            if stance_ids[j] is not None:
-                problems.append(f"{where}: free boom {j} holds {stance_ids[j]}")
-            if previous is not None and previous[j] != phase["from_anchor"]:
-                problems.append(f"{where}: boom {j} leaves {phase['from_anchor']} but held "
-                                f"{previous[j]}")
-        elif previous is not None:
-            expected = list(previous)
-            if arriving is not None:
-                expected[arriving[0]] = arriving[1]
-            changed = [i for i in range(4) if expected[i] != stance_ids[i]]
-            if changed:
-                problems.append(f"{where}: booms {changed} hold {[stance_ids[i] for i in changed]}"
-                                f" but the phases before lead to {[expected[i] for i in changed]}")
-            arriving = None
-        previous = list(stance_ids)
+        stance = scn.stance(tuple(phase["stance"]))
+        reach = phase["kind"] == "reach"
+        efforts = []
         for n, step in enumerate(phase["steps"]):
-            at = f"{where} step {n} (t={step['t']})"
+            out: list[Problem] = []
+
+            def fail(rule: str, text: str, k=k, n=n, out=out) -> None:
+                out.append(Problem(rule, text, k, n, locate(plan, k, n)))
+
             pose = np.asarray(step["pose"], dtype=float)
-            tip = np.asarray(step["free_tip"], dtype=float) if "free_tip" in step else None
-            p_grasp, p_success = _check_configuration(scn, stance, pose, tip, step, at, problems)
-            recomputed.append(Configuration(stance_ids, p_grasp, p_success))
-    if plan["success"]:
+            tip = np.asarray(step["free_tip"], dtype=float) if reach else None
+            with np.errstate(all="ignore"):  # absurd numbers fail the checks, not numpy
+                p_grasp, p_success, effort = _check_configuration(scn, stance, pose, tip, step,
+                                                                  fail)
+            problems += out
+            efforts.append(effort)
+            recomputed.append(Configuration(tuple(phase["stance"]), p_grasp, p_success))
+        _check_motion(plan, k, efforts, problems)
+    if plan["success"] and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(plan_configurations(plan), robot.attach_failure)
         for name, a, b in (("p_path", mine.p_path, plan["p_path"]),
@@ -77,12 +84,32 @@ def check_plan(plan: dict[str, Any], source: str = "<plan>") -> list[str]:
                            ("p_grasps", mine.p_grasps, plan.get("p_grasps", mine.p_grasps)),
                            ("regrasps", mine.regrasps, plan["regrasps"]),
                            ("p_path from the file's own p_grasp", theirs.p_path, plan["p_path"])):
-            if b is None or not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12):
-                problems.append(f"{name}: the plan says {b}, recomputed {a}")
+            if not _same(a, b):
+                problems.append(Problem("summary", f"{name}: the plan says {b}, recomputed {a}"))
     return problems
 
 
-def _check_configuration(scn, stance, pose, tip, step, at, problems):
+def _check_motion(plan: dict[str, Any], k: int, efforts: list[float],
+                  problems: list[Problem]) -> None:
+    """A phase's `motion` record: one entry per step; `effort` is the summed tension."""
+    motion = plan["phases"][k].get("motion")
+    if motion is None:
+        return
+    n_steps = len(efforts)
+    for name in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
+        entries = motion.get(name) if isinstance(motion, dict) else None
+        if not isinstance(entries, list) or len(entries) != n_steps:
+            problems.append(Problem("recorded-value", f"motion.{name} is not a list of one "
+                                    f"entry per step ({n_steps})", k, None, locate(plan, k)))
+            return
+    for n, (a, b) in enumerate(zip(efforts, motion["effort"], strict=True)):
+        if not _same(a, b):
+            problems.append(Problem("recorded-value", f"motion.effort {b} but the tensions sum "
+                                    f"to {a}", k, n, locate(plan, k, n)))
+
+
+def _check_configuration(scn, stance, pose, tip, step, fail):
+    """Checks one configuration; (p_grasp per boom, P, summed tension) recomputed."""
     robot = scn.robot
     f = np.array([np.nan if v is None else v for v in step["tension"]], dtype=float)
     prob = statics_problem(robot, scn.gravity_vector, pose, stance, tip)
@@ -94,43 +121,51 @@ def _check_configuration(scn, stance, pose, tip, step, at, problems):
     for i in np.flatnonzero(used):
         L, th = geo.length[0, i], geo.shoulder_angle[0, i]
         if not lo - TOL <= L <= hi + TOL:
-            problems.append(f"{at}: boom {i} length {L:.4f} m outside [{lo}, {hi}]")
-        if abs(th) > robot.shoulder_range + TOL:
-            problems.append(f"{at}: boom {i} shoulder angle {math.degrees(th):.2f} deg")
+            fail("kinematics", f"boom {i} length {L:.4f} m outside [{lo}, {hi}]")
+        if not abs(th) <= robot.shoulder_range + TOL:
+            fail("kinematics", f"boom {i} shoulder angle {math.degrees(th):.2f} deg")
     rock = scn.rock
     corners = geometry.body_corners(robot, pose)
     if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any():
-        problems.append(f"{at}: body collides with rock")
-    targets = geo.shoulders[0] + geo.d[0]
-    for i in np.flatnonzero(used):
-        end = targets[i] - ANCHOR_CLEARANCE * geo.u[0, i]
-        if rock.segments_hit(geo.shoulders[0, i], end)[()]:
-            problems.append(f"{at}: boom {i} collides with rock")
+        fail("collision", "body collides with rock")
+    booms = np.flatnonzero(used)
+    ends = geo.shoulders[0, booms] + geo.d[0, booms] - ANCHOR_CLEARANCE * geo.u[0, booms]
+    for i in booms[rock.segments_hit(geo.shoulders[0, booms], ends)]:  # one batch per pose
+        fail("collision", f"boom {i} collides with rock")
     att = stance.attached
+    if tip is not None:
+        torque = float(prob.shoulder_torque[0])
+        if not abs(torque) <= robot.shoulder_torque_max + TOL:
+            fail("torque", f"shoulder torque {torque:.3f} N m over the limit "
+                 f"{robot.shoulder_torque_max}")
+        if not _same(torque, step.get("shoulder_torque")):
+            fail("recorded-value", f"shoulder_torque {step.get('shoulder_torque')} but "
+                 f"recomputed {torque}")
     if np.any(np.isnan(f[att])) or np.any(~np.isnan(f[~att])):
-        problems.append(f"{at}: tensions must be given exactly for the attached booms")
-        return [None] * 4, 0.0
+        fail("statics", "tensions must be given exactly for the attached booms")
+        return [None] * 4, 0.0, math.nan
     fa = np.where(att, f, 0.0)
     residual = np.abs(prob.A[0] @ fa - prob.b[0]).max()
-    if residual > STATICS_TOL:
-        problems.append(f"{at}: statics residual {residual:.2e} N > {STATICS_TOL}")
+    if not residual <= STATICS_TOL:
+        fail("statics", f"statics residual {residual:.2e} N > {STATICS_TOL}")
     lo_f, hi_f = robot.boom_tension
     if np.any(fa[att] < lo_f - TOL) or np.any(fa[att] > hi_f + TOL):
-        problems.append(f"{at}: tensions {np.round(fa[att], 3).tolist()} outside "
-                        f"[{lo_f}, {hi_f}] N")
-    if tip is not None and abs(prob.shoulder_torque[0]) > robot.shoulder_torque_max + TOL:
-        problems.append(f"{at}: shoulder torque {prob.shoulder_torque[0]:.3f} N m over the limit")
+        fail("tension", f"tensions {np.round(fa[att], 3).tolist()} outside [{lo_f}, {hi_f}] N")
     kappa = float(wrench_conditioning(robot, prob.A, att)[0])
-    if kappa < MIN_CONDITIONING:
-        problems.append(f"{at}: the booms nearly meet in one point (wrench conditioning "
-                        f"{kappa:.4f} < {MIN_CONDITIONING})")
+    if not kappa >= MIN_CONDITIONING:
+        fail("conditioning", f"the booms nearly meet in one point (wrench conditioning "
+             f"{kappa:.4f} < {MIN_CONDITIONING})")
     psi = prob.pull_angles[0]
     if np.any(np.abs(psi[att]) >= HALF_PI):
-        problems.append(f"{at}: a grasp is pulled at 90 degrees or more from its normal")
+        fail("pull-angle", "a grasp is pulled at 90 degrees or more from its normal")
     lp = stance.log_prob(fa, np.nan_to_num(psi))
     p_success = float(np.exp(lp[att].sum()))
-    if p_success < robot.p_min - TOL:
-        problems.append(f"{at}: P = {p_success:.5f} below p_min {robot.p_min}")
-    if not math.isclose(p_success, step["p_success"], rel_tol=1e-9, abs_tol=1e-12):
-        problems.append(f"{at}: p_success {step['p_success']} but recomputed {p_success}")
-    return [float(np.exp(v)) if att[i] else None for i, v in enumerate(lp)], p_success
+    if not p_success >= robot.p_min - TOL:
+        fail("probability", f"P = {p_success:.5f} below p_min {robot.p_min}")
+    if not _same(p_success, step["p_success"]):
+        fail("recorded-value", f"p_success {step['p_success']} but recomputed {p_success}")
+    p_grasp = [float(np.exp(v)) if att[i] else None for i, v in enumerate(lp)]
+    for i, (mine, theirs) in enumerate(zip(p_grasp, step["p_grasp"], strict=True)):
+        if (mine is None) != (theirs is None) or (mine is not None and not _same(mine, theirs)):
+            fail("recorded-value", f"p_grasp[{i}] {theirs} but recomputed {mine}")
+    return p_grasp, p_success, float(fa[att].sum())

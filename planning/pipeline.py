@@ -21,7 +21,7 @@ import numpy as np
 
 from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
-from planning.plan import build_motion_plan, build_plan
+from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
 from rb_drake.scenario import Scenario
@@ -191,7 +191,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         plan["p_path"] = plan["p_min"] = None
         return plan
     timing["total"] = time.perf_counter() - t_start
-    return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt)
+    return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
+                             step_limits(cfg.seed.step, cfg.seed.turn_step))
 
 
 def failed_move(fp: FootstepPlan, done: int) -> tuple[tuple[str, ...], int, str]:

@@ -19,6 +19,7 @@ import numpy as np
 
 from planning.footsteps import FootstepPlan
 from planning.probability import Configuration, PathProbability, path_probability
+from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
 from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import Scenario
@@ -133,17 +134,40 @@ def _steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], pose
     return steps
 
 
+def step_limits(step: float, turn_step: float) -> dict[str, float]:
+    """The plan's limits between successive trajectory steps for seeds `step` apart (m) and
+    `turn_step` (rad): SCP may stretch a seed's steps, up to STEP_STRETCH times."""
+    return {"step": STEP_STRETCH * step, "turn_step": STEP_STRETCH * turn_step}
+
+
+def within_limits(poses: np.ndarray, tips: np.ndarray | None, limits: dict[str, float]) -> bool:
+    """Whether successive poses (and free tips) keep within `limits` (`step_limits`)."""
+    d = np.diff(poses, axis=0)
+    ok = np.all(np.hypot(d[:, 0], d[:, 1]) <= limits["step"])
+    ok &= np.all(np.abs(d[:, 2]) <= limits["turn_step"])
+    if tips is not None:
+        ok &= np.all(np.linalg.norm(np.diff(tips, axis=0), axis=1) <= limits["step"])
+    return bool(ok)
+
+
 def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: str,
-                      timing: dict[str, float], dt: float) -> dict[str, Any]:
+                      timing: dict[str, float], dt: float,
+                      limits: dict[str, float] | None = None) -> dict[str, Any]:
     """The plan-file dictionary with full trajectories (`pipeline.PhaseMotion`s), one step
     every `dt` seconds, and a dwell of dt at the end of each phase. Each phase also records
-    its seed (`motion`): method, per-step probability and effort, and what SCP made of it."""
+    its seed (`motion`): method, per-step probability and effort, and what SCP made of it.
+
+    `limits` (`step_limits`; default: those of `verify_climb.DEFAULT_LIMITS`) bound the step
+    between successive configurations and are recorded in the plan; an SCP result that breaks
+    them is not used (the seed, within them, stands)."""
     plan = build_plan(scn, fp, planner, timing)
     plan["time_step"] = dt
+    plan["limits"] = limits = dict(limits or DEFAULT_LIMITS)
     phases = []
     t = 0.0
     for m in motions:
-        if m.result is not None:
+        used = m.result is not None and within_limits(m.result.poses, m.seed.tips, limits)
+        if used:
             poses, tensions = m.result.poses, m.result.tensions
             seed_tensions = m.result.seed_tensions
         else:  # the seed with its robust allocation (per-row tips in a reach phase)
@@ -173,8 +197,9 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
             "seed_effort": [float(np.nansum(f)) for f in seed_tensions],
             "effort": [float(np.nansum(f)) for f in tensions],
             "optimised": m.result is not None,
-            "improved": bool(m.result is not None and m.result.improved),
-            "scp_status": m.result.status if m.result is not None else "not run",
+            "improved": bool(used and m.result.improved),
+            "scp_status": (m.result.status if used else "not run" if m.result is None
+                           else "seed kept: SCP's steps exceed the plan's limits"),
             "scp_iterations": int(m.result.iterations) if m.result is not None else 0,
         }
         phases.append(phase)

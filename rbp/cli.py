@@ -150,26 +150,38 @@ def _print_motion(plan: dict) -> None:
 
 
 def read_plan(path: Path) -> dict:
-    """A plan file, parsed and validated against the schema; a user's mistake is a UserError
-    naming the file, the field and the reason (shared by check, simulate and rig-run)."""
-    import jsonschema
-
-    from planning.plan import validate
+    """A plan file, parsed and validated against the schema, NaN and Infinity refused; a user's
+    mistake is a UserError naming the file, the field and the reason (shared by check, simulate
+    and rig-run)."""
+    from planning.plan_file import PlanFileError, read_plan_file
 
     try:
-        plan = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: (file): no such file") from None
-    except IsADirectoryError:
-        raise UserError(f"{path}: (file): is a directory, not a plan file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path}: (file): not a JSON plan: {e}") from None
-    try:
-        validate(plan)
-    except jsonschema.ValidationError as e:
-        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise UserError(f"{path}: {field}: {e.message}") from None
-    return plan
+        return read_plan_file(path)
+    except PlanFileError as e:
+        raise UserError(f"{path}: {e}") from None
+
+
+def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
+    """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
+    verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
+    since is not verified again; `verify=False` (--no-verify) skips the check, loudly."""
+    from planning.check import check_plan
+    from planning.plan_file import has_valid_stamp
+
+    if not verify:
+        print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
+              "is executed as it is", file=sys.stderr)
+        return False
+    if has_valid_stamp(plan):
+        return False
+    problems = check_plan(plan, str(path))
+    for p in problems[:20]:
+        print(f"error: {path}: {p}", file=sys.stderr)
+    if problems:
+        more = f" ({len(problems) - 20} more not shown)" if len(problems) > 20 else ""
+        print(f"error: {path}: the plan fails verification ({len(problems)} problems{more}); "
+              f"refused (rbp check {path} lists them all)", file=sys.stderr)
+    return bool(problems)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -186,6 +198,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     n = sum(len(p["steps"]) for p in plan["phases"])
     print(f"{path}: ok: {len(plan['phases'])} phases, {n} configurations verified; "
           + _summary(plan))
+    if args.stamp:
+        from planning.plan import write_plan
+        from planning.plan_file import stamp
+
+        write_plan(stamp(plan), path)
+        print(f"{path}: stamped as verified")
     return 0
 
 
@@ -301,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     check = sub.add_parser("check", help="re-verify a plan file from scratch")
     check.add_argument("plan")
+    check.add_argument("--stamp", action="store_true",
+                       help="when the plan verifies, write into it a stamp (a hash of its "
+                            "content) so simulate and rig-run need not verify it again")
     check.set_defaults(func=cmd_check)
 
     scn = sub.add_parser("scenario", help="generate, check and show caves")

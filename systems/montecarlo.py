@@ -238,9 +238,20 @@ def shifted_phases(phases: list[dict[str, Any]], dt: float) -> list[dict[str, An
     return out
 
 
-def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]]) -> dict[str, Any]:
-    plan = {k: v for k, v in request.plan.items() if k != "phases"}
+def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]],
+                 planned: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The continuation: the executed plan's fields with these phases; `planned`, the new
+    plan they come from, if any, gives its time step and step limits (its trajectories')."""
+    plan = {k: v for k, v in request.plan.items()
+            if k not in ("phases", "verified", "time_step", "limits")}
+    for key in ("time_step", "limits"):
+        source = request.plan if planned is None else planned
+        if key in source:
+            plan[key] = source[key]
     plan["phases"] = phases
+    # The continuation starts where the grasp failed, not at the scenario's start.
+    held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
+    plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
     score_plan(plan, request.scenario.robot.attach_failure)
     return plan
 
@@ -324,7 +335,7 @@ class FootstepReplanner:
             reach = {"kind": "reach", "stance": list(request.stance), "free_boom": j,
                      "from_anchor": request.anchor, "to_anchor": new.id, "steps": [a, b]}
             rest = shifted_phases(plan["phases"], REACH_DURATION)
-            return _finish_plan(request, [reach, *rest])
+            return _finish_plan(request, [reach, *rest], plan)
         return None
 
 

@@ -35,7 +35,8 @@ def rig_plan(scn: Scenario, goal_pose: np.ndarray | None = None,
              num_steps: int = 11) -> dict[str, Any]:
     """A one-phase plan file: the body moves in a straight line from the start pose to the goal.
 
-    The goal pose defaults to the scenario's goal position at the start heading. Each of the
+    The goal pose defaults to the scenario's goal position at the start heading; the plan's
+    scenario has its goal there, so that the plan verifies (`rbp check`). Each of the
     `num_steps` evenly spaced poses carries the robust tension allocation and its probabilities
     (as `planning.plan` builds them); time stamps assume the plan file's nominal speeds. A
     stand-in for the seed + SCP body planner: the plan fails where a pose is infeasible.
@@ -60,10 +61,12 @@ def rig_plan(scn: Scenario, goal_pose: np.ndarray | None = None,
     bad = np.flatnonzero(~check.feasible)
     reason = ("" if not len(bad) else f"pose {bad[0]} of the straight line: "
               f"{REASON_TEXT[Reason(check.reason[bad[0]])]}")
+    scenario = scn.to_dict(resolved=True)
+    scenario["goal"]["position"] = [float(goal[0]), float(goal[1])]  # the plan ends there
     plan: dict[str, Any] = {
         "format": FORMAT, "planner": "rbp", "success": not len(bad), "reason": reason,
         "p_min": None, "p_path": None, "regrasps": 0, "timing": {k: 0.0 for k in STAGES},
-        "scenario": scn.to_dict(resolved=True), "robot": scn.robot.to_dict(),
+        "scenario": scenario, "robot": scn.robot.to_dict(),
         "phases": [{"kind": "body", "stance": list(stance_ids), "free_boom": None,
                     "steps": steps}],
     }

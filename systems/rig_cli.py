@@ -27,6 +27,9 @@ def add_rig_commands(subparsers) -> None:
                      help="seconds between commands (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
+    run.add_argument("--no-verify", dest="verify", action="store_false",
+                     help="run the plan without verifying it first (experiments only; warns "
+                          "on stderr; the rig's own limit and rate guards stay on)")
     run.set_defaults(func=cmd_rig_run)
 
     replay = subparsers.add_parser("rig-replay",
@@ -53,7 +56,7 @@ def _summary(record, stance_ids) -> list[str]:
 
 
 def cmd_rig_run(args: argparse.Namespace) -> int:
-    from rbp.cli import UserError, read_plan
+    from rbp.cli import UserError, read_plan, refuse_wrong_plan
     from systems.rig import RigSimConfig
     from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
@@ -61,6 +64,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     plan = read_plan(path)
     if not args.period > 0:
         raise UserError(f"--period: must be positive, got {args.period}")
+    if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
+        return 1  # before any LCM traffic
     config = RigLcmConfig(url=args.lcm_url, period=args.period)
     sim = RigSimConfig(seed=args.seed) if args.sim_rig else None
     try:

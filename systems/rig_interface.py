@@ -8,9 +8,11 @@ load-cell force and hinge angle. `run_rig` executes one phase and logs every mes
 log; `replay_log` feeds a log back through the same monitor; `report_figure` draws it.
 
 Because this drives hardware: commands are clamped to the robot's boom-length and tension
-limits, a non-finite command is refused (the last safe one is repeated), the command holds still
-when no status has come back for `status_timeout`, and a status that does not decode or is out
-of range is logged as received but ignored (`StatusFilter` keeps the last good one).
+limits, their change from one command to the next is bounded (`max_length_rate`,
+`max_tension_rate`: no plan can command a jump), a non-finite command is refused (the last
+safe one is repeated), the command holds still when no status has come back for
+`status_timeout`, and a status that does not decode or is out of range is logged as received
+but ignored (`StatusFilter` keeps the last good one).
 
 Python LeafSystems are never freed in pydrake 1.51 (STACK.md section 5): `run_rig` builds its
 diagram once per run, and `replay_log` one monitor per log.
@@ -63,6 +65,10 @@ class RigLcmConfig:
     setup_channel: str = "RIG_SETUP"
     period: float = 0.1  # s between commands
     status_timeout: float = 0.5  # s without a good status before the command holds still
+    # The largest change of a command per second: the simulated winch's speed, 4x the boom
+    # rates of the bundled plans (about 0.13 m/s); twice their tension rates (about 13 N/s).
+    max_length_rate: float = 0.5    # m/s per boom
+    max_tension_rate: float = 25.0  # N/s per boom
 
 
 class RigInputError(ValueError):
@@ -147,6 +153,7 @@ class CommandMemory(NamedTuple):
     refused: int = 0                # commands that were not finite: the last one repeated
     held: int = 0                   # commands held still because no status came back
     clamped: int = 0                # commands clamped to the boom limits
+    rate_limited: int = 0           # commands whose change was cut to the rate bounds
 
 
 class RigCommandSource(LeafSystem):
@@ -155,7 +162,9 @@ class RigCommandSource(LeafSystem):
 
     Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
     are the plan's tensions, both interpolated linearly in time and clamped to the robot's
-    `boom_length` and `boom_tension` limits. A command with a NaN or inf is refused and the
+    `boom_length` and `boom_tension` limits; each then moves from the last command sent by at
+    most `max_length_rate` x `period` (m) and `max_tension_rate` x `period` (N), so a jump
+    in the plan becomes a ramp. A command with a NaN or inf is refused and the
     last one sent is repeated; so is the last one when no status came back for
     `status_timeout` (the rig holds still). The state (`CommandMemory`) changes only in the
     periodic update, which stores the command the publisher just sent.
@@ -163,7 +172,8 @@ class RigCommandSource(LeafSystem):
 
     def __init__(self, robot: RobotParams, anchors: np.ndarray, pose: PiecewisePolynomial,
                  tension: PiecewisePolynomial, time_offset: float = 0.0, period: float = 0.1,
-                 status_timeout: float = float("inf")):
+                 status_timeout: float = float("inf"), max_length_rate: float = float("inf"),
+                 max_tension_rate: float = float("inf")):
         if not (np.all(np.isfinite(pose.value(time_offset)))
                 and np.all(np.isfinite(tension.value(time_offset)))):
             raise ValueError("the first command must be finite: nothing safe comes before it")
@@ -174,6 +184,7 @@ class RigCommandSource(LeafSystem):
         self._tension = tension
         self._time_offset = time_offset
         self._status_timeout = status_timeout
+        self._max_step = (max_length_rate * period, max_tension_rate * period)  # m, N
         self._memory = self.DeclareAbstractState(AbstractValue.Make(CommandMemory(None, None)))
         self.last_status_time_port = self.DeclareVectorInputPort("last_status_time", 1)
         self.command_port = self.DeclareAbstractOutputPort(
@@ -187,7 +198,8 @@ class RigCommandSource(LeafSystem):
         return context.get_abstract_state(self._memory).get_value()
 
     def _decide(self, context) -> tuple[np.ndarray, np.ndarray, str]:
-        """(boom lengths, tensions, what happened: "ok", "clamped", "refused" or "held")."""
+        """(boom lengths, tensions, what happened: "ok", "clamped", "rate-limited", "refused"
+        or "held")."""
         t = self._time_offset + context.get_time()
         memory = self.memory(context)
         if memory.boom_length is not None and self.last_status_time_port.HasValue(context):
@@ -204,7 +216,16 @@ class RigCommandSource(LeafSystem):
         # A plan on a limit may miss it by round-off: that is not worth reporting.
         clamped = max(np.abs(safe_length - length).max(),
                       np.abs(safe_tension - tension).max()) > CLAMP_REPORT_TOL
-        return safe_length, safe_tension, "clamped" if clamped else "ok"
+        if memory.boom_length is None:  # the first command: the plan's start, nothing before
+            return safe_length, safe_tension, "clamped" if clamped else "ok"
+        # Both ends lie within the limits, so the ramp between them does too.
+        dl, df = self._max_step
+        ramp_length = memory.boom_length + np.clip(safe_length - memory.boom_length, -dl, dl)
+        ramp_tension = memory.tension + np.clip(safe_tension - memory.tension, -df, df)
+        limited = max(np.abs(ramp_length - safe_length).max(),
+                      np.abs(ramp_tension - safe_tension).max()) > CLAMP_REPORT_TOL
+        what = "rate-limited" if limited else "clamped" if clamped else "ok"
+        return ramp_length, ramp_tension, what
 
     def _calc_command(self, context, output) -> None:
         length, tension, _ = self._decide(context)
@@ -219,7 +240,8 @@ class RigCommandSource(LeafSystem):
         memory = self.memory(context)
         state.get_mutable_abstract_state(self._memory).set_value(CommandMemory(
             length.copy(), tension.copy(), memory.refused + (what == "refused"),
-            memory.held + (what == "held"), memory.clamped + (what == "clamped")))
+            memory.held + (what == "held"), memory.clamped + (what == "clamped"),
+            memory.rate_limited + (what == "rate-limited")))
 
 
 class RawSerializer(SerializerInterface):
@@ -360,7 +382,7 @@ def build_rig_diagram(phase: BodyPhase, bus: DrakeLcm, config: RigLcmConfig) -> 
     scn = phase.scenario
     source = builder.AddNamedSystem("command_source", RigCommandSource(
         scn.robot, phase.stance.positions, phase.pose, phase.tension, phase.start_time,
-        config.period, config.status_timeout))
+        config.period, config.status_timeout, config.max_length_rate, config.max_tension_rate))
     publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
         channel=config.command_channel, lcm_type=rig_command_t, lcm=bus,
         publish_period=config.period))
@@ -395,6 +417,7 @@ class SafetyReport(NamedTuple):
     refused: int            # non-finite commands replaced by the last safe one
     held: int               # commands held still: no good status for status_timeout
     bad_statuses: int       # statuses ignored: undecodable or out of range
+    rate_limited: int = 0   # commands whose change was cut to the rate bounds
 
     def messages(self, config: RigLcmConfig) -> list[str]:
         """One line per guard that acted, for the run's output."""
@@ -407,6 +430,9 @@ class SafetyReport(NamedTuple):
                          "safe one)")
         if self.clamped:
             lines.append(f"  clamped {self.clamped} commands to the boom limits")
+        if self.rate_limited:
+            lines.append(f"  slowed {self.rate_limited} commands to the rate bounds "
+                         f"({config.max_length_rate:g} m/s, {config.max_tension_rate:g} N/s)")
         if self.bad_statuses:
             lines.append(f"  ignored {self.bad_statuses} bad statuses (kept in the log)")
         return lines
@@ -511,7 +537,8 @@ def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
     simulator.AdvanceTo((last_command + 0.5) * config.period)
     commands = parts.source.memory(parts.source.GetMyContextFromRoot(root))
     bad = parts.status_filter.current(filter_context).bad
-    return _record(rows), SafetyReport(commands.clamped, commands.refused, commands.held, bad)
+    return _record(rows), SafetyReport(commands.clamped, commands.refused, commands.held, bad,
+                                       commands.rate_limited)
 
 
 def _record(rows: list[tuple]) -> GraspRecord:

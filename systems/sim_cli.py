@@ -35,18 +35,22 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--replan", choices=("retry", "footsteps"),
                    help="continue failed climbs on a new plan: re-grasp the same anchor "
                         "(retry) or plan again from where the robot is (footsteps, slow)")
+    p.add_argument("--no-verify", dest="verify", action="store_false",
+                   help="simulate the plan without verifying it first (experiments only; "
+                        "warns on stderr)")
     p.set_defaults(func=cmd_simulate)
     return p
 
 
-def _load_plan(path: Path) -> dict[str, Any]:
-    from rbp.cli import UserError, read_plan
+def _load_plan(path: Path, verify: bool = True) -> dict[str, Any] | None:
+    """The plan to simulate; None when it fails verification (the problems are printed)."""
+    from rbp.cli import UserError, read_plan, refuse_wrong_plan
 
     plan = read_plan(path)
     if not plan["success"]:
         raise UserError(f"{path}: success: the plan found no route ({plan['reason']}); "
                         "nothing to simulate")
-    return plan
+    return None if refuse_wrong_plan(plan, path, verify) else plan
 
 
 def _progress(label: str):
@@ -73,7 +77,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.replan and args.trials == 0:
         raise UserError("--replan: replanning continues failed trials; give --trials N > 0")
     path = Path(args.plan)
-    plan = _load_plan(path)
+    plan = _load_plan(path, getattr(args, "verify", True))
+    if plan is None:
+        return 1
 
     from rb_drake.files import atomic_write_text
     from systems.diagram import ClimbSimulator

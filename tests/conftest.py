@@ -95,3 +95,21 @@ def start_pose(shaft: Scenario) -> np.ndarray:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20240611)
+
+
+MUTATION_CAVES = ("demo-shaft", "demo-crevasse", "rockfall-3")
+
+
+@pytest.fixture(scope="session")
+def cave_plans() -> dict[str, dict]:
+    """Full plans (`rbp plan`'s pipeline) of three bundled caves, planned once per session:
+    the valid plans the verifier tests damage. Tests deep-copy before changing one."""
+    from planning.pipeline import plan_climb
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    plans = {}
+    for name in MUTATION_CAVES:
+        plan = plan_climb(load_scenario(bundled_caves()[name]))
+        assert plan["success"], f"{name}: {plan['reason']}"
+        plans[name] = plan
+    return plans

@@ -255,7 +255,7 @@ def test_check_catches_a_changed_tension(fresh: dict[str, Any]) -> None:
 def test_check_catches_a_wrong_p_path(fresh: dict[str, Any]) -> None:
     fresh["p_path"] = 0.99
     problems = check_plan(fresh)
-    assert any(p.startswith("p_path") and "0.99" in p for p in problems), (
+    assert any(p.startswith("plan: summary: p_path") and "0.99" in p for p in problems), (
         f"p_path 0.99 not caught: {problems}")
 
 
@@ -263,7 +263,7 @@ def test_check_catches_a_wrong_p_grasps(fresh: dict[str, Any]) -> None:
     assert fresh["p_grasps"] > fresh["p_path"], "the plan's regrasps must lower p_path"
     fresh["p_grasps"] = fresh["p_path"]
     problems = check_plan(fresh)
-    assert any(p.startswith("p_grasps") for p in problems), (
+    assert any(p.startswith("plan: summary: p_grasps") for p in problems), (
         f"p_grasps set to p_path not caught: {problems}")
 
 

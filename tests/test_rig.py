@@ -333,7 +333,9 @@ def with_reach_phase(plan: dict[str, Any]) -> dict[str, Any]:
     ("reach phase", "phases[1].kind"),
     ("unknown anchor", "phases[0].stance[2]"),
 ])
-def test_bad_plan_input(case: str, field: str, plan: dict[str, Any], tmp_path: Path) -> None:
+def test_bad_plan_input(case: str, field: str, plan: dict[str, Any], tmp_path: Path,
+                        capsys: pytest.CaptureFixture[str]) -> None:
+    """The rig's own reading of a plan (behind the verifier, which --no-verify skips)."""
     path = tmp_path / "plan.json"
     phase = {"phase out of range": "5", "negative phase": "-1", "reach phase": "1"}.get(case, "0")
     if case == "not json":
@@ -350,10 +352,57 @@ def test_bad_plan_input(case: str, field: str, plan: dict[str, Any], tmp_path: P
     log = tmp_path / "never.lcm"
     with pytest.raises(UserError) as err:
         cmd_rig_run(parse("rig-run", str(path), "--phase", phase, "--sim-rig", "--log",
-                          str(log)))
+                          str(log), "--no-verify"))
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"{path}: {field}:"), message
     assert not log.exists(), "a refused run must not write a log"
+    if field not in ("(file)", "phases/0/steps/0/pose"):  # read_plan refused those first
+        assert "WARNING" in capsys.readouterr().err, "--no-verify must say so on stderr"
+
+
+@pytest.mark.parametrize("fault", ["reach phase", "moved pose", "goal", "stamped then edited"])
+def test_a_wrong_plan_is_refused_before_any_lcm_traffic(
+        fault: str, plan: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """rig-run verifies the plan first: exit 1, the verifier's message, and no run at all."""
+    import systems.rig_interface as rig_interface
+    from planning.plan_file import stamp
+
+    bad = copy.deepcopy(plan)
+    if fault == "reach phase":
+        bad = with_reach_phase(plan)
+    elif fault == "moved pose":
+        bad["phases"][0]["steps"][3]["pose"][0] += 0.05
+    elif fault == "goal":
+        bad["scenario"]["goal"]["position"][1] += 1.0
+    else:  # a stamp does not survive an edit
+        bad = stamp(plan)
+        bad["phases"][0]["steps"][3]["tension"][0] += 1.0
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(bad))
+
+    def no_run(*_args, **_kwargs):
+        raise AssertionError("run_rig called for a plan that fails verification")
+
+    monkeypatch.setattr(rig_interface, "run_rig", no_run)
+    log = tmp_path / "never.lcm"
+    assert cmd_rig_run(parse("rig-run", str(path), "--sim-rig", "--log", str(log))) == 1
+    err = capsys.readouterr().err
+    assert "fails verification" in err and f"{path}: phases[" in err, err
+    assert not log.exists(), "a refused run must not write a log"
+
+
+def test_a_stamped_plan_is_not_verified_again(plan: dict[str, Any], tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    import planning.check
+    from planning.plan_file import stamp
+    from rbp.cli import refuse_wrong_plan
+
+    def no_check(*_args, **_kwargs):
+        raise AssertionError("a plan with a valid stamp was verified again")
+
+    monkeypatch.setattr(planning.check, "check_plan", no_check)
+    assert refuse_wrong_plan(stamp(plan), tmp_path / "plan.json") is False
 
 
 def test_sim_rig_refuses_a_network_url(plan_file: Path, tmp_path: Path) -> None:

@@ -1,6 +1,6 @@
 """The rig interface's guards (because it drives hardware), each against a misbehaving fake rig
 on `memq://`: commands within the boom limits, no non-finite command, a hold when the rig
-stops answering, and bad statuses logged but ignored.
+stops answering, bad statuses logged but ignored, and command changes within the rate bounds.
 
 The fake rig replaces `RigSimulatorLcm` inside `run_rig` (same constructor), so the runs are
 the real `run_rig` on the in-process bus; each run takes about 0.1 s.
@@ -38,6 +38,7 @@ from systems.rig_interface import (
 )
 
 CONFIG = RigLcmConfig()
+NO_RATE_BOUND = RigLcmConfig(max_length_rate=math.inf, max_tension_rate=math.inf)
 # What a misbehaving rig sends for command k given the simulated status: bytes, or None.
 Misbehaviour = Callable[[int, rig_status_t], bytes | None]
 
@@ -134,7 +135,7 @@ def test_commands_are_clamped_to_the_limits(scn: Scenario, plan: dict[str, Any],
     steps = bad["phases"][0]["steps"]
     steps[4]["tension"] = [50.0, -5.0, 3.0, 3.0]  # beyond the 20 N limit, and pushing
     steps[6]["pose"] = [2.0, 0.0, 0.0]            # far outside the frame: booms over 2 m
-    run, _ = run_with(bad, honest, tmp_path / "clamp.lcm")
+    run, _ = run_with(bad, honest, tmp_path / "clamp.lcm", NO_RATE_BOUND)  # the clamp alone
     times, lengths, tensions = command_arrays(logged(tmp_path / "clamp.lcm")[0])
     lo_len, hi_len = scn.robot.boom_length
     lo_ten, hi_ten = scn.robot.boom_tension
@@ -155,6 +156,37 @@ def test_commands_are_clamped_to_the_limits(scn: Scenario, plan: dict[str, Any],
         f"{run.safety.clamped} commands reported clamped, {int(outside.sum())} were")
     assert run.safety.refused == run.safety.held == run.safety.bad_statuses == 0, run.safety
     assert any("clamped" in line for line in run.safety.messages(CONFIG)), "no clamp message"
+
+
+def test_commands_change_at_most_the_rate_bounds(scn: Scenario, plan: dict[str, Any],
+                                                 tmp_path: Path) -> None:
+    """A plan that jumps (a pose 0.3 m off and tensions from one limit to the other, 0.05 s
+    after the step before) becomes a ramp: no two successive commands differ by more than
+    rate x period, and all stay within the limits."""
+    bad = copy.deepcopy(plan)
+    steps = bad["phases"][0]["steps"]
+    steps[6]["t"] = steps[5]["t"] + 0.05  # 0.05 s after the step before
+    steps[6]["tension"] = [20.0, 0.5, 20.0, 0.5]
+    steps[6]["pose"][0] += 0.3
+    run, _ = run_with(bad, honest, tmp_path / "rate.lcm")
+    times, lengths, tensions = command_arrays(logged(tmp_path / "rate.lcm")[0])
+    raw_len, raw_ten = planned(bad, times)
+    step_len = CONFIG.max_length_rate * CONFIG.period  # m per command
+    step_ten = CONFIG.max_tension_rate * CONFIG.period  # N per command
+    assert np.abs(np.diff(raw_len, axis=0)).max() > 2 * step_len, "the plan must jump in length"
+    assert np.abs(np.diff(raw_ten, axis=0)).max() > 2 * step_ten, "the plan must jump in tension"
+    d_len, d_ten = np.abs(np.diff(lengths, axis=0)), np.abs(np.diff(tensions, axis=0))
+    assert d_len.max() <= step_len + 1e-9, f"a boom length changed {d_len.max():.4f} m at once"
+    assert d_ten.max() <= step_ten + 1e-9, f"a tension changed {d_ten.max():.3f} N at once"
+    lo_ten, hi_ten = scn.robot.boom_tension
+    assert np.all((tensions >= lo_ten - 1e-9) & (tensions <= hi_ten + 1e-9)), "outside limits"
+    assert run.safety.rate_limited > 0, run.safety
+    assert any("rate bounds" in line for line in run.safety.messages(CONFIG)), "no rate message"
+
+
+def test_a_valid_plan_is_not_slowed(plan: dict[str, Any], tmp_path: Path) -> None:
+    run, _ = run_with(plan, honest, tmp_path / "ok.lcm")
+    assert run.safety.rate_limited == run.safety.clamped == 0, run.safety
 
 
 @pytest.mark.parametrize(("field", "value"), [("tension", math.nan), ("pose", math.inf)])

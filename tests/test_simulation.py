@@ -683,9 +683,11 @@ def _args(*argv: str) -> argparse.Namespace:
 
 
 def _short_plan(plan: dict[str, Any]) -> dict[str, Any]:
-    """The first body phase alone (a 5 s run): a valid plan for the command-line tests."""
+    """The first body phase alone (a 5 s run): a valid plan for the command-line tests, its
+    goal where that phase ends (`rbp simulate` verifies the plan first)."""
     short = copy.deepcopy(plan)
     short["phases"] = short["phases"][:1]
+    short["scenario"]["goal"]["position"] = short["phases"][0]["steps"][-1]["pose"][:2]
     prob = path_probability(_configurations(short), short["robot"]["attach_failure"])
     short["p_path"], short["p_min"], short["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
     validate(short)
@@ -731,6 +733,36 @@ def test_cli_user_errors_name_file_and_field(tmp_path: Path, good_plan: dict[str
         cmd_simulate(_args(str(path)))
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"{path}: {field}:"), message
+
+
+@pytest.mark.parametrize("verify", [True, False])
+def test_cli_refuses_a_wrong_plan_before_simulating(
+        good_plan: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str], verify: bool) -> None:
+    """A plan that fails `rbp check` is refused (exit 1, the verifier's problems on stderr)
+    before any simulator is built; --no-verify skips the check and says so on stderr."""
+    import systems.diagram
+
+    bad = _short_plan(good_plan)
+    bad["phases"][0]["steps"][1]["p_grasp"][0] = 0.5
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(bad))
+
+    class BuiltError(Exception):
+        pass
+
+    def no_simulator(*_args, **_kwargs):
+        raise BuiltError
+
+    monkeypatch.setattr(systems.diagram, "ClimbSimulator", no_simulator)
+    if verify:
+        assert cmd_simulate(_args(str(path), "--trials", "0")) == 1
+        err = capsys.readouterr().err
+        assert ": recorded-value: p_grasp[0] 0.5" in err and "phases[0] (body) step 1" in err, err
+    else:
+        with pytest.raises(BuiltError):
+            cmd_simulate(_args(str(path), "--trials", "0", "--no-verify"))
+        assert "WARNING" in capsys.readouterr().err
 
 
 def test_cli_rejects_negative_trials(tmp_path: Path) -> None:

@@ -1,0 +1,108 @@
+"""Reading a plan file strictly, and the stamp `rbp check --stamp` leaves on a verified plan.
+
+Python's json reads `NaN`, `Infinity` and numbers too large for a float (`1e999`, read as inf)
+without a word, and JSON Schema's "number" lets them through: here each is refused when the
+file is read, naming the field, so none reaches numpy. The stamp (`verified`) is the SHA-256 of
+the plan's canonical JSON without the stamp, with the verifier's version: a consumer that finds
+a matching stamp need not verify again, and any edit to the file makes the stamp stale. It
+guards against mistakes and stale files, not against forgery: anyone can compute it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+VERIFIER = "rbp-verify/1"  # bump when the rules change: older stamps then no longer count
+
+
+class PlanFileError(ValueError):
+    """A plan file that cannot be used: `field` (path in the file) and `reason`."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+class _Bad:
+    """Stands in for a non-finite number while the file is parsed, to locate it afterwards."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+
+def _float(text: str) -> float | _Bad:
+    value = float(text)
+    return value if math.isfinite(value) else _Bad(text)
+
+
+def parse_plan_text(text: str) -> Any:
+    """The JSON value of `text`; raises PlanFileError naming the first non-finite number's
+    field, and json.JSONDecodeError for text that is not JSON."""
+    data = json.loads(text, parse_constant=_Bad, parse_float=_float)
+    found = _find_bad(data, "")
+    if found is not None:
+        field, bad = found
+        raise PlanFileError(field or "(top level)", f"must be a finite number, got {bad.text}")
+    return data
+
+
+def _find_bad(value: Any, path: str) -> tuple[str, _Bad] | None:
+    if isinstance(value, _Bad):
+        return path, value
+    items = (value.items() if isinstance(value, dict)
+             else enumerate(value) if isinstance(value, list) else ())
+    for key, item in items:
+        sub = f"{path}[{key}]" if isinstance(key, int) else (f"{path}.{key}" if path else key)
+        found = _find_bad(item, sub)
+        if found is not None:
+            return found
+    return None
+
+
+def read_plan_file(path: str | Path) -> dict[str, Any]:
+    """A plan file parsed and validated against the schema; raises PlanFileError with the field
+    ("(file)" when it cannot be read or is not JSON) and the reason."""
+    import jsonschema
+
+    from planning.plan import validate
+
+    path = Path(path)
+    try:
+        plan = parse_plan_text(path.read_text())
+    except FileNotFoundError:
+        raise PlanFileError("(file)", "no such file") from None
+    except IsADirectoryError:
+        raise PlanFileError("(file)", "is a directory, not a plan file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
+    try:
+        validate(plan)
+    except jsonschema.ValidationError as e:
+        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise PlanFileError(field, e.message) from None
+    return plan
+
+
+def content_hash(plan: dict[str, Any]) -> str:
+    """SHA-256 of the plan's canonical JSON (sorted keys), without its stamp."""
+    body = {k: v for k, v in plan.items() if k != "verified"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(f"{VERIFIER}\n{text}".encode()).hexdigest()
+
+
+def stamp(plan: dict[str, Any]) -> dict[str, Any]:
+    """The plan with the stamp of this verifier (call only on a plan that verified)."""
+    return {k: v for k, v in plan.items() if k != "verified"} | {
+        "verified": {"sha256": content_hash(plan), "verifier": VERIFIER}}
+
+
+def has_valid_stamp(plan: dict[str, Any]) -> bool:
+    """Whether the plan carries this verifier's stamp and is unchanged since."""
+    mark = plan.get("verified")
+    return (isinstance(mark, dict) and mark.get("verifier") == VERIFIER
+            and mark.get("sha256") == content_hash(plan))

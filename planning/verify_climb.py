@@ -1,0 +1,276 @@
+"""The rules that tie a plan's configurations into one climb, and the plan to its cave.
+
+`planning.check` verifies each configuration on its own (limits, statics, probabilities);
+this module verifies what lies between them: the robot stored once, the climb starting at the
+scenario's start and (when the plan claims success) ending in its goal, phases alternating and
+joining exactly, the stance sequence following from the reach phases, time increasing, and
+successive configurations within the plan's own step and turn limits. Each rule has a short id
+(`RULES`, documented in docs/formats.md); every `Problem` names its rule, phase and step.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from rb_drake.params import ParamError, robot_from_dict
+from rb_drake.scenario import Scenario
+
+RULES = {
+    "robot": "the robot under `scenario` is the robot at the top level",
+    "start": "the climb starts at t = 0 at the start pose, in the start stance",
+    "goal": "a plan that claims success ends inside the goal disc",
+    "phase-order": "phases alternate body, reach, ..., and a successful plan ends on a body phase",
+    "phase-form": "a phase's stance, free boom and steps fit its kind",
+    "stance": "each phase's anchors follow from the phase before (a reach frees one boom, the "
+              "next body phase holds it on to_anchor)",
+    "reach-ends": "the free gripper starts on from_anchor and ends on to_anchor",
+    "phase-join": "each phase starts where and when the phase before ended",
+    "time-order": "time strictly increases within a phase; in a trajectory, by time_step",
+    "continuity": "successive configurations of a trajectory within the plan's step and turn "
+                  "limits (body and free tip)",
+    "recorded-value": "every recorded per-step value equals its recomputation",
+    "kinematics": "boom lengths and shoulder angles within the robot's limits",
+    "collision": "neither body nor booms cross rock",
+    "statics": "the tensions balance gravity (to 1e-6 N) on exactly the attached booms",
+    "tension": "tensions within the robot's tension limits",
+    "torque": "the free boom's shoulder torque within its limit",
+    "conditioning": "the booms' wrench not degenerate (not all through one point)",
+    "pull-angle": "no grasp pulled at 90 degrees or more from its normal",
+    "probability": "every configuration's P at least p_min",
+    "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation",
+}
+
+POSE_TOL = 1e-9   # m, rad: phases join and the climb starts exactly (plans copy these values)
+TIME_TOL = 1e-6   # s: plans round time stamps to 6 decimals
+LIMIT_TOL = 1e-9  # m, rad: above a step limit by more than this is a jump
+# The planner's step limits when a plan file does not record them (plans before `limits`):
+# PipelineConfig's seed step and turn step (0.05 m, 0.05 rad) stretched by STEP_STRETCH.
+STEP_STRETCH = 2.0  # SCP may lengthen a seed's step up to this factor (planning.plan)
+DEFAULT_LIMITS = {"step": 0.1, "turn_step": 0.1}
+
+
+class Problem(NamedTuple):
+    """One broken rule: where (`phase`, `step`: indices, None for the whole plan) and why."""
+
+    rule: str
+    text: str
+    phase: int | None = None
+    step: int | None = None
+    where: str = ""  # "phases[3] (reach) step 5 (t=2.5)"; "" for the whole plan
+
+    def __str__(self) -> str:
+        return f"{self.where or 'plan'}: {self.rule}: {self.text}"
+
+
+def locate(plan: dict[str, Any], k: int | None, n: int | None = None) -> str:
+    """"phases[k] (kind) step n (t=...)" for the messages."""
+    if k is None:
+        return ""
+    phase = plan["phases"][k]
+    where = f"phases[{k}] ({phase['kind']})"
+    if n is not None:
+        where += f" step {n} (t={phase['steps'][n]['t']})"
+    return where
+
+
+def step_limits(plan: dict[str, Any]) -> dict[str, float]:
+    """The plan's own limits between successive configurations of a trajectory."""
+    return dict(DEFAULT_LIMITS) | dict(plan.get("limits") or {})
+
+
+def climb_problems(plan: dict[str, Any], scn: Scenario) -> list[Problem]:
+    """Every broken rule between configurations and between the plan and its cave."""
+    out: list[Problem] = []
+
+    def fail(rule: str, text: str, k: int | None = None, n: int | None = None) -> None:
+        out.append(Problem(rule, text, k, n, locate(plan, k, n)))
+
+    _robot(plan, fail)
+    if not plan["phases"]:  # a plan that found no route may hold none
+        if plan["success"]:
+            fail("phase-order", "the plan claims success but has no phases")
+        return out
+    _start(plan, scn, fail)
+    _phase_order(plan, fail)
+    _stances(plan, scn, fail)
+    _joins(plan, fail)
+    _times(plan, fail)
+    _continuity(plan, fail)
+    _goal(plan, scn, fail)
+    return out
+
+
+def _robot(plan, fail) -> None:
+    block = plan["scenario"].get("robot")
+    if block is None:
+        return
+    try:
+        inner = robot_from_dict(block)
+    except ParamError as e:
+        fail("robot", f"scenario.robot.{e.field}: {e.reason}")
+        return
+    if inner != robot_from_dict(plan["robot"]):
+        a, b = inner.to_dict(), robot_from_dict(plan["robot"]).to_dict()
+        names = [name for name in a if a[name] != b[name]]
+        fail("robot", f"the robot under scenario differs from the top-level robot in {names}")
+
+
+def _start(plan, scn: Scenario, fail) -> None:
+    """The first configuration is the scenario's start, or the plan's `start` (a continuation
+    after a failed grasp starts where the robot was)."""
+    start = plan.get("start") or {"pose": list(scn.start_pose), "stance": list(scn.start_stance)}
+    first = plan["phases"][0]
+    step = first["steps"][0]
+    held = list(first["stance"])
+    if first["kind"] == "reach" and first.get("free_boom") in range(4):
+        held[first["free_boom"]] = first.get("from_anchor")
+    if held != list(start["stance"]):
+        fail("start", f"the climb starts in stance {held}, not the start stance "
+             f"{list(start['stance'])}", 0, 0)
+    gap = np.abs(np.subtract(step["pose"], start["pose"])).max()
+    if not gap <= POSE_TOL:
+        fail("start", f"the first pose {step['pose']} is not the start pose {start['pose']} "
+             f"(off by {gap:.3g})", 0, 0)
+    if step["t"] != 0:
+        fail("start", f"the climb starts at t = {step['t']}, not 0", 0, 0)
+
+
+def _phase_order(plan, fail) -> None:
+    phases = plan["phases"]
+    for k in range(1, len(phases)):
+        if phases[k]["kind"] == phases[k - 1]["kind"]:
+            fail("phase-order", f"two {phases[k]['kind']} phases in a row", k)
+    if plan["success"] and phases[-1]["kind"] != "body":
+        fail("phase-order", "a successful climb ends on a body phase", len(phases) - 1)
+    reaches = sum(p["kind"] == "reach" for p in phases)
+    if reaches != plan["regrasps"]:
+        fail("summary", f"regrasps: the plan says {plan['regrasps']}, its phases hold {reaches} "
+             "reach phases")
+    for k, phase in enumerate(phases):
+        free = [i for i, a in enumerate(phase["stance"]) if a is None]
+        if phase["kind"] == "body" and free:
+            fail("phase-form", f"a body phase holds all four anchors, not {phase['stance']}", k)
+        if phase["kind"] == "reach" and free != [phase["free_boom"]]:
+            fail("phase-form", f"a reach phase frees exactly boom {phase['free_boom']}, not "
+                 f"{phase['stance']}", k)
+        held = [a for a in phase["stance"] if a is not None]
+        if len(set(held)) != len(held):
+            fail("phase-form", f"two booms on one anchor: {phase['stance']}", k)
+        tips = ["free_tip" in s for s in phase["steps"]]
+        if any(tips) != (phase["kind"] == "reach") or (any(tips) and not all(tips)):
+            fail("phase-form", "free_tip is given on every step of a reach phase and only there",
+                 k)
+
+
+def _stances(plan, scn: Scenario, fail) -> None:
+    phases = plan["phases"]
+    for k, phase in enumerate(phases):
+        unknown = [a for a in phase["stance"] if a is not None and a not in scn.anchor_index]
+        if unknown:
+            fail("stance", f"unknown anchors {unknown}", k)
+        if phase["kind"] != "reach":
+            continue
+        j = phase["free_boom"]
+        for end, name, n in (("from_anchor", "starts", 0), ("to_anchor", "ends", -1)):
+            anchor = phase[end]
+            if anchor not in scn.anchor_index:
+                fail("stance", f"unknown {end} {anchor!r}", k)
+                continue
+            tip = phase["steps"][n].get("free_tip")
+            if tip is None:
+                continue
+            p = scn.anchors[scn.anchor_index[anchor]].position
+            gap = math.dist(tip, p)
+            if not gap <= POSE_TOL:
+                fail("reach-ends", f"the free gripper {name} {gap:.3g} m from {end} {anchor}",
+                     k, n % len(phase["steps"]))
+    for k in range(1, len(phases)):
+        before, phase = phases[k - 1], phases[k]
+        if phase["kind"] == "reach" and before["kind"] == "body":
+            j = phase["free_boom"]
+            if before["stance"][j] != phase["from_anchor"]:
+                fail("stance", f"boom {j} leaves {phase['from_anchor']} but held "
+                     f"{before['stance'][j]}", k)
+            expected = [None if i == j else a for i, a in enumerate(before["stance"])]
+        elif phase["kind"] == "body" and before["kind"] == "reach":
+            j = before["free_boom"]
+            expected = [before["to_anchor"] if i == j else a
+                        for i, a in enumerate(before["stance"])]
+        else:
+            continue  # phase-order says what is wrong
+        changed = [i for i in range(4) if expected[i] != phase["stance"][i]]
+        if changed:
+            fail("stance", f"booms {changed} hold {[phase['stance'][i] for i in changed]} but "
+                 f"the phases before lead to {[expected[i] for i in changed]}", k)
+
+
+def _joins(plan, fail) -> None:
+    phases = plan["phases"]
+    for k in range(1, len(phases)):
+        a, b = phases[k - 1]["steps"][-1], phases[k]["steps"][0]
+        gap = np.abs(np.subtract(a["pose"], b["pose"])).max()
+        if not gap <= POSE_TOL:
+            fail("phase-join", f"starts {gap:.3g} away from where phases[{k - 1}] ended "
+                 f"({b['pose']} after {a['pose']})", k, 0)
+        if abs(b["t"] - a["t"]) > TIME_TOL:
+            fail("phase-join", f"starts at t = {b['t']}, phases[{k - 1}] ended at t = {a['t']}",
+                 k, 0)
+
+
+def is_trajectory(plan, phase) -> bool:
+    """Whether a phase holds a trajectory (one step every time_step) rather than end poses."""
+    return "time_step" in plan and "motion" in phase
+
+
+def _times(plan, fail) -> None:
+    dt = plan.get("time_step")
+    for k, phase in enumerate(plan["phases"]):
+        steps = phase["steps"]
+        regular = is_trajectory(plan, phase)
+        if "time_step" in plan and not regular and "start" not in plan:
+            # Only a continuation (`start`) splices in phases that hold end poses only.
+            fail("phase-form", "a phase of a full plan without its trajectory (motion)", k)
+        if "motion" in phase and "time_step" not in plan:
+            fail("phase-form", "a trajectory (motion) in a plan without time_step", k)
+        for n in range(1, len(steps)):
+            gap = steps[n]["t"] - steps[n - 1]["t"]
+            if not gap > 0:
+                fail("time-order", f"t = {steps[n]['t']} does not follow t = "
+                     f"{steps[n - 1]['t']}", k, n)
+            elif regular and abs(gap - dt) > TIME_TOL:
+                fail("time-order", f"{gap:.6g} s after the step before, not time_step {dt} s",
+                     k, n)
+
+
+def _continuity(plan, fail) -> None:
+    lim = step_limits(plan)
+    for k, phase in enumerate(plan["phases"]):
+        if not is_trajectory(plan, phase) or len(phase["steps"]) < 2:
+            continue
+        poses = np.array([s["pose"] for s in phase["steps"]], dtype=float)
+        d = np.diff(poses, axis=0)
+        moves = [("the body moves", np.hypot(d[:, 0], d[:, 1]), lim["step"], "m"),
+                 ("the body turns", np.abs(d[:, 2]), lim["turn_step"], "rad")]
+        if phase["kind"] == "reach" and all("free_tip" in s for s in phase["steps"]):
+            tips = np.array([s["free_tip"] for s in phase["steps"]], dtype=float)
+            moves.append(("the free tip moves", np.linalg.norm(np.diff(tips, axis=0), axis=1),
+                          lim["step"], "m"))
+        for what, size, limit, unit in moves:
+            for n in np.flatnonzero(~(size <= limit + LIMIT_TOL)):
+                fail("continuity", f"{what} {size[n]:.4g} {unit} in one step (limit {limit:g})",
+                     k, int(n) + 1)
+
+
+def _goal(plan, scn: Scenario, fail) -> None:
+    if not plan["success"]:
+        return
+    k = len(plan["phases"]) - 1
+    n = len(plan["phases"][k]["steps"]) - 1
+    end = plan["phases"][k]["steps"][n]["pose"]
+    gap = math.dist(end[:2], scn.goal_position)
+    if not gap <= scn.goal_tolerance + POSE_TOL:
+        fail("goal", f"the plan claims success but ends {gap:.3f} m from the goal "
+             f"{list(scn.goal_position)} (tolerance {scn.goal_tolerance} m)", k, n)

@@ -161,12 +161,19 @@ def goal_moved(plan: Plan, rng: Rng) -> Fault | None:
     end = np.array(plan["phases"][-1]["steps"][-1]["pose"][:2]) if plan["phases"] else None
     if end is None or not plan["success"]:
         return None
+    from rb_drake.collision import Rock
+
     goal = out["scenario"]["goal"]
-    d = goal["tolerance"] + rng.uniform(0.1, 3.0)
-    a = rng.uniform(0, 2 * math.pi)
-    goal["position"] = [float(end[0] + d * math.cos(a)), float(end[1] + d * math.sin(a))]
-    return Fault("goal-moved", out, frozenset({"goal"}), None,
-                 f"goal moved {d:.2f} m from the last pose")
+    rock = Rock([np.asarray(w, dtype=float) for w in plan["scenario"]["walls"]])
+    for _ in range(20):  # a goal in free space: one in rock is refused as a bad scenario
+        d = goal["tolerance"] + rng.uniform(0.1, 3.0)
+        a = rng.uniform(0, 2 * math.pi)
+        position = [float(end[0] + d * math.cos(a)), float(end[1] + d * math.sin(a))]
+        if not rock.contains(np.array([position]))[0]:
+            goal["position"] = position
+            return Fault("goal-moved", out, frozenset({"goal"}), None,
+                         f"goal moved {d:.2f} m from the last pose")
+    return None
 
 
 ROBOT_EDITS = ("body_mass", "gripper_mass", "boom_linear_density", "shoulder_torque_max",

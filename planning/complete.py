@@ -61,6 +61,7 @@ class LatticeMemo:
 
     lattices: dict[tuple, StanceLattice] = dataclasses.field(default_factory=dict)
     transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
+    config: LatticeConfig | None = None  # the lattice all of it was decided on
 
 
 class LatticeTransition(NamedTuple):
@@ -248,6 +249,10 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
 
     cfg = lattice or LatticeConfig()
     memo = memo if memo is not None else LatticeMemo()
+    if memo.config is None:
+        memo.config = cfg
+    elif memo.config != cfg:
+        raise ValueError(f"a memo of lattice {memo.config} cannot serve lattice {cfg}")
     t0 = time.perf_counter()
     robot = scn.robot
     c_attach = max(-math.log(1.0 - robot.attach_failure) if robot.attach_failure < 1 else 1e3,

@@ -166,10 +166,19 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
 
 
 STOP_REASONS = {
-    "budget": "stopped on its budget (max_expansions reached)",
-    "exhausted": "exhausted: every stance it could reach was expanded",
-    "noroute": "no route at the search's resolution",
+    "budget": "stopped on its budget (max_expansions or time_limit reached): no claim",
+    "exhausted": "exhausted: every stance it could reach was expanded (not a proof)",
+    "noroute": "proved no route at the lattice's resolution",
+    "nostart": "the start pose joins no lattice pose of its stance",
 }
+
+
+def _lattice_of(fp):
+    """The lattice the complete search used (its memo's, else the default)."""
+    from planning.lattice import LatticeConfig
+
+    return getattr(getattr(getattr(fp, "memo", None), "lattice", None), "config", None) or (
+        LatticeConfig())
 
 
 def search_figure(scn: Scenario, fp):
@@ -206,6 +215,9 @@ def search_figure(scn: Scenario, fp):
         ax.plot(*scn.start_pose[:2], "X", color="#cb181d", ms=11, zorder=9, ls="none",
                 label="start (the search recorded no stances)")
     why = STOP_REASONS.get(getattr(fp, "stop", "") or "", "stopped")
+    if getattr(fp, "stop", "") == "noroute":
+        lattice = _lattice_of(fp)
+        why += f" ({lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg)"
     ax.plot([], [], ls="none", label=f"search {why}")
     draw.frame_axes(ax, scn)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), fontsize=7, framealpha=0.9)

@@ -38,7 +38,9 @@ def test_search_picture_is_written(shaft, failed, tmp_path: Path) -> None:
 @pytest.mark.parametrize("stop", ["budget", "exhausted", "noroute"])
 def test_legend_says_why_it_stopped(shaft, failed, stop: str) -> None:
     texts = legend_texts(search_figure(shaft, failed._replace(stop=stop)))
-    assert f"search {STOP_REASONS[stop]}" in texts, texts
+    assert any(t.startswith(f"search {STOP_REASONS[stop]}") for t in texts), texts
+    if stop == "noroute":
+        assert any("2 cm / 2.5 deg" in t for t in texts), texts
 
 
 def test_missing_exploration_is_tolerated(shaft, failed, tmp_path: Path) -> None:

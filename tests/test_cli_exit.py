@@ -114,10 +114,13 @@ def test_sigint_exits_3_without_traceback(tmp_path: Path) -> None:
     """A real Ctrl-C (SIGINT) during a long search: one line, status 3, no plan file."""
     env = {**os.environ, "MPLBACKEND": "Agg", "LCM_DEFAULT_URL": "memq://",
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    # A shell that started this run in the background ignores SIGINT, and children inherit
+    # that: give the child the default disposition, so Python installs its handler.
     proc = subprocess.Popen([sys.executable, "-m", "rbp", "plan", "shaft-1", "-o", "p.json",
                              "--max-expansions", "100000"], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)  # past start-up (a fraction of a second), inside the plan (over 10 s)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(3.0)  # past start-up (about a second), inside the plan (over 10 s)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 3, f"exit {proc.returncode}\n{out}\n{err}"

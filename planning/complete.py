@@ -53,6 +53,7 @@ from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
 Vertex = tuple[Stance4, int]  # (stance, component)
+ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
 
 
 @dataclasses.dataclass
@@ -87,6 +88,9 @@ class CompleteResult(NamedTuple):
     expanded: list[tuple[Vertex, np.ndarray]]   # (vertex, pose reached at), in order
     frontier: list[tuple[Vertex, np.ndarray]]
     graph: nx.DiGraph
+    # per edge, its most robust lattice poses in the component entered, best first (the
+    # first is `poses`'): others for the pipeline where the gripper's path fails at the first
+    alternatives: list[np.ndarray] | None = None
 
 
 def _lattice(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
@@ -286,7 +290,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     start_pose = np.asarray(scn.start_pose, dtype=float)
     for comp in joined:
         heapq.heappush(open_list, (heuristic(start), next(tie), 0.0, 0,
-                                   ((start, comp), None, start_pose, None, None, 0.0)))
+                                   ((start, comp), None, start_pose, None, None, 0.0,
+                                     None)))
     closed: dict[Vertex, float] = {}
     parent: dict[Vertex, tuple] = {}
     reached_at: dict[Vertex, np.ndarray] = {}
@@ -304,11 +309,12 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                    child: Stance4, comp: int | None) -> tuple:
         """An open-list entry for the child reached through the most robust pose of `pick`."""
         (stance, _), j, anchor = move
-        best = pick[int(np.argmax(tr.worst[pick]))]
-        pose = poses_of(_unpack(tr.keys[best], cfg.angle_count), cfg)[0]
+        order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
+        poses = poses_of(_unpack(tr.keys[order], cfg.angle_count), cfg)
+        pose = poses[0]
         g_child = g_parent + c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
         return (g_child + heuristic(child), next(tie), g_child, 0,
-                ((child, comp), move, pose, np.exp(tr.r4[best]), tr, g_parent))
+                ((child, comp), move, pose, np.exp(tr.r4[order[0]]), tr, g_parent, poses))
 
     while open_list:
         _, _, g, kind, payload = heapq.heappop(open_list)
@@ -332,7 +338,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             heapq.heappush(open_list, edge_entry(g - c_attach, payload, tr,
                                                  np.arange(len(tr.keys)), child, None))
             continue
-        (child, comp), move, pose, p4, tr, g_parent = payload
+        (child, comp), move, pose, p4, tr, g_parent, alternatives = payload
         if comp is None:  # entered through a move: split among the child's components
             child_lat = _lattice(scn, memo, child, cfg, ignore_grasps)
             rows = child_lat.find(tr.keys)
@@ -352,7 +358,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if vertex in closed:
             continue
         closed[vertex] = g
-        parent[vertex] = (par, pose, p4)
+        parent[vertex] = (par, pose, p4, alternatives)
         reached_at[vertex] = pose
         expanded.append((vertex, pose))
         expansions += 1
@@ -366,15 +372,16 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                                               <= scn.goal_tolerance))
         if len(near_goal):
             goal_pose = lat.poses[near_goal[int(np.argmax(lat.robustness[near_goal]))]]
-            path, poses, probs = [vertex], [], []
+            path, poses, probs, others = [vertex], [], [], []
             while parent[path[-1]][0] is not None:
-                (pv, _j, _a), pz, pp = parent[path[-1]]
+                (pv, _j, _a), pz, pp, alt = parent[path[-1]]
                 poses.append(pz)
                 probs.append(pp)
+                others.append(alt)
                 path.append(pv)
             return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1],
                                   goal_pose, expansions, tested, expanded,
-                                  _frontier(open_list, closed), graph)
+                                  _frontier(open_list, closed), graph, others[::-1])
         if max_expansions is not None and expansions >= max_expansions:
             stop = "budget"
             reason = (f"gave up after {expansions} expansions without reaching the goal "

@@ -88,6 +88,9 @@ class Step(NamedTuple):
     pose: np.ndarray
     probabilities: np.ndarray  # the four configurations' P (transition.CONFIG_NAMES order)
     found_pose: np.ndarray | None = None  # the search's pose, when polishing moved it
+    # (K, 3) other poses that hold the move (and join the same body motions), best first: the
+    # complete search's, for the pipeline to try where the gripper's path fails at `pose`
+    alternatives: np.ndarray | None = None
 
 
 class FootstepPlan(NamedTuple):
@@ -349,15 +352,17 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                             result.stop, explored, frontier, memo)
     stances = [v[0] for v in result.path]
     steps = []
-    for a, b, pose, probabilities in zip(stances[:-1], stances[1:], result.poses,
-                                         result.probabilities, strict=True):
+    others = result.alternatives or [None] * len(result.poses)
+    for a, b, pose, probabilities, alternatives in zip(stances[:-1], stances[1:], result.poses,
+                                                       result.probabilities, others,
+                                                       strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
         found = np.asarray(pose, dtype=float)
         pose = found
         if cfg.polish_rounds > 0:
             pose, probabilities = polish_transition(
                 scn, a, j, b[j], found, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
-        steps.append(Step(j, a[j], b[j], pose, probabilities, found))
+        steps.append(Step(j, a[j], b[j], pose, probabilities, found, alternatives))
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
                         time.perf_counter() - t0, search, None, "", explored, frontier, memo)

@@ -98,6 +98,16 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
                                         cfg.seed, seed=seed_value + k)
                 if unpolished.success:
                     reach, ends[k] = unpolished, found[k]
+            # The complete search knows other poses that hold the move and join the same body
+            # motions: the gripper's path may clear where it did not.
+            for other in (step.alternatives if step.alternatives is not None else [])[1:]:
+                if reach.success:
+                    break
+                again = reach_seed(scn, stance, step.boom, step.to_anchor, other, cfg.seed,
+                                   seed=seed_value + k)
+                if again.success:
+                    reach, ends[k], found[k] = again, np.asarray(other, dtype=float), other
+                    found_ends[k] = found[k]
             clock("seed_reach", t0)
         if progress is not None:
             progress(f"phase {len(motions) + 1}/{n_phases}: body movement")

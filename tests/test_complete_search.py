@@ -273,3 +273,24 @@ def test_same_plan_twice(demo: Scenario) -> None:
     assert a.success and a.stances == b.stances
     for s, t in zip(a.steps, b.steps, strict=True):
         assert np.array_equal(s.pose, t.pose)
+
+
+def test_alternative_poses_hold_the_move(demo: Scenario) -> None:
+    """Each step of a complete-search plan carries other lattice poses for the pipeline (where
+    the gripper's path fails at the first): each holds all four configurations of the move,
+    the first is the pose the search found, and they are sorted by their worst robustness."""
+    fp = plan_footsteps(demo, FootstepConfig(search="complete"))
+    assert fp.success and fp.steps, fp.reason
+    for k, step in enumerate(fp.steps):
+        alt = step.alternatives
+        assert alt is not None and len(alt) >= 1, f"step {k}: no alternatives"
+        assert np.array_equal(alt[0], step.found_pose), f"step {k}: first is not the found pose"
+        stance = fp.stances[k]
+        s_old, s_three, s_new = transition_stances(demo, stance, step.boom, step.to_anchor)
+        worst = np.full(len(alt), np.inf)
+        for st, tip in ((s_old, None), (s_three, s_old.positions[step.boom]),
+                        (s_three, s_new.positions[step.boom]), (s_new, None)):
+            check = check_poses(demo, st, alt, tip)
+            assert check.feasible.all(), f"step {k}: alternatives {np.flatnonzero(~check.feasible)}"
+            worst = np.minimum(worst, check.allocation.robustness)
+        assert np.all(np.diff(worst) <= 1e-9), f"step {k}: not sorted best first"

@@ -44,10 +44,11 @@ from planning.lattice import (
     LatticeConfig,
     StanceLattice,
     pack,
-    packed_configs,
     poses_of,
     stance_lattice,
+    unpack,
 )
+from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility_kernel import reach_violation, score_poses, score_rows
 from rb_drake.scenario import Scenario
 
@@ -106,9 +107,7 @@ def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, compone
                        ignore_grasps: bool = False) -> LatticeTransition:
     """Decide boom `boom`'s move to `anchor` from component `component` of `stance` on every
     lattice pose (see the module doc)."""
-    from planning.transition import _anchor_table
-
-    table = _anchor_table(scn)
+    table = anchor_table(scn)
     free = len(table.row)
     rows = np.flatnonzero((lat.component == component) & lat.release[:, boom])
     target = table.positions[table.row[anchor]]
@@ -123,7 +122,7 @@ def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, compone
     held = [table.row[a] for a in stance]
     three = [free if i == boom else held[i] for i in range(4)]
     new = [table.row[anchor] if i == boom else held[i] for i in range(4)]
-    stances, tips = packed_configs(scn, table, [three, new], [table.row[anchor], free])
+    stances, tips = pack_rows(table, [three, new], [table.row[anchor], free])
     poses = lat.poses[rows]
     n = len(rows)
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
@@ -294,7 +293,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                                      None)))
     closed: dict[Vertex, float] = {}
     parent: dict[Vertex, tuple] = {}
-    reached_at: dict[Vertex, np.ndarray] = {}
     expanded: list[tuple[Vertex, np.ndarray]] = []
     expansions = 0
     nearest = math.inf
@@ -310,7 +308,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         """An open-list entry for the child reached through the most robust pose of `pick`."""
         (stance, _), j, anchor = move
         order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
-        poses = poses_of(_unpack(tr.keys[order], cfg.angle_count), cfg)
+        poses = poses_of(unpack(tr.keys[order], cfg.angle_count), cfg)
         pose = poses[0]
         g_child = g_parent + c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
         return (g_child + heuristic(child), next(tie), g_child, 0,
@@ -359,7 +357,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             continue
         closed[vertex] = g
         parent[vertex] = (par, pose, p4, alternatives)
-        reached_at[vertex] = pose
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex
@@ -411,16 +408,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph)
-
-
-def _unpack(key: np.ndarray, angle_count: int) -> np.ndarray:
-    """Lattice indices of packed keys (`lattice.pack`'s inverse)."""
-    from planning.lattice import _SPAN
-
-    key = np.asarray(key, dtype=np.int64).reshape(-1)
-    m = key % angle_count - angle_count // 2
-    rest = key // angle_count
-    return np.column_stack([rest // _SPAN - _SPAN // 2, rest % _SPAN - _SPAN // 2, m])
 
 
 def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:

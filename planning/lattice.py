@@ -25,7 +25,8 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from rb_drake.feasibility_kernel import PackedStances, reach_violation, score_rows
+from planning.transition import anchor_table, pack_rows
+from rb_drake.feasibility_kernel import reach_violation, score_rows
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 
@@ -59,6 +60,14 @@ def pack(idx: np.ndarray, angle_count: int) -> np.ndarray:
     idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
     return ((idx[:, 0] + _SPAN // 2) * _SPAN + (idx[:, 1] + _SPAN // 2)) * angle_count + (
         idx[:, 2] + angle_count // 2)
+
+
+def unpack(keys: np.ndarray, angle_count: int) -> np.ndarray:
+    """Lattice indices (i, k, m) of packed keys: `pack`'s inverse."""
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1)
+    rest = keys // angle_count
+    return np.column_stack([rest // _SPAN - _SPAN // 2, rest % _SPAN - _SPAN // 2,
+                            keys % angle_count - angle_count // 2])
 
 
 def poses_of(idx: np.ndarray, cfg: LatticeConfig) -> np.ndarray:
@@ -181,23 +190,10 @@ class StanceLattice(NamedTuple):
         return np.where(hit & (self.keys[pos] == keys) if hit else False, pos, -1)
 
 
-def packed_configs(scn: Scenario, table, rows: list[list[int]], tips: list[int]) -> tuple[
-        PackedStances, np.ndarray]:
-    """Kernel stances from anchor-table rows (a row index of `free` leaves that boom free)."""
-    idx = np.array(rows)
-    free = len(table.row)
-    stances = PackedStances(table.positions[idx], table.normals[idx], table.f_normal[idx],
-                            table.f_lateral[idx], table.sigma_normal[idx],
-                            table.sigma_lateral[idx], idx != free)
-    return stances, table.positions[np.array(tips)]
-
-
 def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
                    ignore_grasps: bool = False) -> StanceLattice:
     """The feasible lattice poses of `stance`, their release booms and components."""
-    from planning.transition import _anchor_table
-
-    table = _anchor_table(scn)
+    table = anchor_table(scn)
     free = len(table.row)
     held = [table.row[a] for a in stance]
     anchors = table.positions[held]
@@ -205,7 +201,7 @@ def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
     reachable = len(idx)
     poses = poses_of(idx, cfg)
     rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
-    stances, tips = packed_configs(scn, table, rows, [free, *held])
+    stances, tips = pack_rows(table, rows, [free, *held])
     P = len(idx)
     check = score_rows(scn, stances, tips, poses, np.arange(P), np.zeros(P, np.int64),
                        np.zeros(P, np.int64), ignore_grasps, decide_only=True)

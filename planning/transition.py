@@ -112,7 +112,7 @@ class _AnchorTable(NamedTuple):
 _ANCHOR_TABLES: dict[int, tuple[weakref.ref, _AnchorTable]] = {}
 
 
-def _anchor_table(scn: Scenario) -> _AnchorTable:
+def anchor_table(scn: Scenario) -> _AnchorTable:
     hit = _ANCHOR_TABLES.get(id(scn))
     if hit is not None and hit[0]() is scn:
         return hit[1]
@@ -139,7 +139,7 @@ def _configurations(scn: Scenario, old: tuple[str, ...], boom: int,
     """A move's stances (old 4-stance, 3-stance, new 4-stance if any) and free-gripper tips
     (none, at the old anchor, at the new one) as kernel rows, and each configuration's
     (CONFIG_NAMES order) stance row and tip row."""
-    table = _anchor_table(scn)
+    table = anchor_table(scn)
     free = len(table.row)
     held = [table.row[a] for a in old]
     rows = [held, held.copy()]
@@ -149,11 +149,19 @@ def _configurations(scn: Scenario, old: tuple[str, ...], boom: int,
         rows.append(held.copy())
         rows[2][boom] = table.row[new_anchor]
         tips.append(rows[2][boom])
+    stances, tip_points = pack_rows(table, rows, tips)
+    return stances, tip_points, _STANCE_OF, _TIP_OF
+
+
+def pack_rows(table: _AnchorTable, rows: list[list[int]],
+              tips: list[int]) -> tuple[PackedStances, np.ndarray]:
+    """Kernel stances from rows of anchor-table indices, one per boom (the table's last row,
+    `len(table.row)`, leaves that boom free), and the tips' positions from table indices."""
     idx = np.array(rows)
     stances = PackedStances(table.positions[idx], table.normals[idx], table.f_normal[idx],
                             table.f_lateral[idx], table.sigma_normal[idx],
-                            table.sigma_lateral[idx], idx != free)
-    return stances, table.positions[tips], _STANCE_OF, _TIP_OF
+                            table.sigma_lateral[idx], idx != len(table.row))
+    return stances, table.positions[np.array(tips)]
 
 
 _STANCE_OF = np.array([0, 1, 1, 2])

@@ -49,6 +49,7 @@ from planning.lattice import (
     unpack,
 )
 from planning.transition import anchor_table, pack_rows
+from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import reach_violation, score_poses, score_rows
 from rb_drake.scenario import Scenario
 
@@ -199,9 +200,6 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     """Whether some lattice pose within the goal tolerance could hold a stance at all: its body
     clear of rock and every boom reaching some anchor (a necessary condition for a goal vertex,
     so False proves that no route exists at the lattice's resolution)."""
-    from rb_drake import geometry
-    from rb_drake.feasibility import rock_inside_body
-
     goal = np.asarray(scn.goal_position, dtype=float)
     tol, dx = scn.goal_tolerance, cfg.position_step
     i = np.arange(math.ceil((goal[0] - tol) / dx), math.floor((goal[0] + tol) / dx) + 1)
@@ -225,14 +223,7 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
             ok &= (v == 0.0).any(axis=1)
         if not ok.any():
             continue
-        poses = poses[ok]
-        if scn.rock.polygons:
-            corners = geometry.body_corners(scn.robot, poses)
-            hit = scn.rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
-            hit |= rock_inside_body(scn.rock, corners)
-            if (~hit).any():
-                return True
-        else:
+        if not scn.rock.polygons or not body_in_rock(scn.robot, scn.rock, poses[ok]).all():
             return True
     return False
 

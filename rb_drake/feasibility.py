@@ -145,10 +145,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     rock = world.rock
     if rock.polygons:
         rows = survivors()
-        corners = geometry.body_corners(robot, poses[rows])
-        body_hit = rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
-        body_hit |= rock_inside_body(rock, corners)
-        flag(body_hit, Reason.BODY_COLLISION, rows)
+        flag(body_in_rock(robot, rock, poses[rows]), Reason.BODY_COLLISION, rows)
         rows = survivors()
         with np.errstate(invalid="ignore"):
             end = targets[rows] - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
@@ -188,6 +185,14 @@ def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.nd
     return out
 
 
+def body_in_rock(robot: RobotParams, rock: Rock, poses: np.ndarray) -> np.ndarray:
+    """Per pose (P, 3), whether the body square meets rock: an edge crossing, a corner inside
+    rock, or a rock polygon wholly inside the body."""
+    corners = geometry.body_corners(robot, poses)
+    hit = rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any(axis=1)
+    return hit | rock_inside_body(rock, corners)
+
+
 def rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
     """Whether some rock polygon lies entirely inside the body square (its vertex inside)."""
     if not len(rock.vertex):
@@ -222,9 +227,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
             out.append(f"boom {i}: shoulder angle {th:+.1f} deg outside +-{rng} deg")
     rock = world.rock
     if rock.polygons:
-        corners = geometry.body_corners(robot, pose)
-        if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any() or rock_inside_body(
-                rock, corners)[0]:
+        if body_in_rock(robot, rock, pose[None])[0]:
             out.append("body collides with rock")
         end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[0])
         for i in range(4):

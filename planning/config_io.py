@@ -17,17 +17,14 @@ import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
+from rb_drake.scenario import ScenarioError
+
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
-    """A configuration refused: `source` (file), `field` (dotted key) and `reason`."""
-
-    def __init__(self, source: str, field: str, reason: str):
-        super().__init__(f"{source}: {field}: {reason}")
-        self.source = source
-        self.field = field
-        self.reason = reason
+class ConfigError(ScenarioError):
+    """A configuration refused: `source` (file), `field` (dotted key) and `reason`, as a
+    scenario's mistakes are reported."""
 
 
 def config_to_dict(config: Any) -> dict[str, Any]:

@@ -310,19 +310,27 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
-        probabilities = cache[(a, j, b[j])].probabilities
-        found = pose
-        if cfg.polish_rounds > 0:
-            # The search accepts the first feasible pose of each transition; the few on the
-            # chosen path get a local search for robustness (p_path rises by 0.03-0.08).
-            pose, probabilities = polish_transition(
-                scn, a, j, b[j], pose, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
-        steps.append(Step(j, a[j], b[j], pose, probabilities, found))
+        steps.append(polished_step(scn, cfg, a, j, b[j], pose,
+                                   cache[(a, j, b[j])].probabilities))
     seconds = time.perf_counter() - t0
     explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
                         result.expansions, tested, seconds, result, cache, "", explored,
                         frontier, memo)
+
+
+def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], boom: int,
+                  anchor: str, pose: np.ndarray, probabilities: np.ndarray,
+                  alternatives: np.ndarray | None = None) -> Step:
+    """A step of the found path. The search accepts a transition at the first pose it finds
+    (sampled) or its most robust lattice pose (complete); the few on the chosen path get a
+    local search for robustness (p_path rises by 0.03-0.08), keeping the found pose."""
+    found = pose
+    if cfg.polish_rounds > 0:
+        pose, probabilities = polish_transition(scn, stance, boom, anchor, found,
+                                                edge_rng(cfg.seed, stance, boom, "polish"),
+                                                cfg.polish_rounds)
+    return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)
 
 
 def _plan_complete(scn: Scenario, cfg: FootstepConfig,
@@ -357,12 +365,8 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                                                        result.probabilities, others,
                                                        strict=True):
         j = next(i for i in range(4) if a[i] != b[i])
-        found = np.asarray(pose, dtype=float)
-        pose = found
-        if cfg.polish_rounds > 0:
-            pose, probabilities = polish_transition(
-                scn, a, j, b[j], found, edge_rng(cfg.seed, a, j, "polish"), cfg.polish_rounds)
-        steps.append(Step(j, a[j], b[j], pose, probabilities, found, alternatives))
+        steps.append(polished_step(scn, cfg, a, j, b[j], np.asarray(pose, dtype=float),
+                                   probabilities, alternatives))
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
                         time.perf_counter() - t0, search, None, "", explored, frontier, memo)

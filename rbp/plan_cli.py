@@ -79,8 +79,9 @@ def plan_setup(args: argparse.Namespace):
     from planning.footsteps import SEARCHES
 
     if cfg.footstep.search not in SEARCHES:
-        raise UserError(f"footstep.search: must be one of {', '.join(SEARCHES)}, got "
-                        f"{cfg.footstep.search!r}")
+        source = args.config or args.from_plan or "(configuration)"
+        raise UserError(f"{source}: footstep.search: must be one of {', '.join(SEARCHES)}, "
+                        f"got {cfg.footstep.search!r}")
     return scn, planner, cfg, motion
 
 

@@ -40,14 +40,8 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.lattice import (
-    LatticeConfig,
-    StanceLattice,
-    pack,
-    poses_of,
-    stance_lattice,
-    unpack,
-)
+from planning.components import INFEASIBLE, Component, StanceComponents
+from planning.lattice import LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import reach_violation, score_poses, score_rows
@@ -60,9 +54,9 @@ ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
 
 @dataclasses.dataclass
 class LatticeMemo:
-    """Stance lattices and transitions already decided on one scenario (same lattice)."""
+    """Stance components and transitions already decided on one scenario (same lattice)."""
 
-    lattices: dict[tuple, StanceLattice] = dataclasses.field(default_factory=dict)
+    lattices: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
     transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
     config: LatticeConfig | None = None  # the lattice all of it was decided on
 
@@ -96,26 +90,33 @@ class CompleteResult(NamedTuple):
 
 
 def _lattice(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
-             ignore_grasps: bool) -> StanceLattice:
+             ignore_grasps: bool) -> StanceComponents:
     hit = memo.lattices.get(stance)
     if hit is None:
-        hit = memo.lattices[stance] = stance_lattice(scn, stance, cfg, ignore_grasps)
+        hit = memo.lattices[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)
     return hit
 
 
-def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, component: int,
-                       boom: int, anchor: str, cfg: LatticeConfig,
-                       ignore_grasps: bool = False) -> LatticeTransition:
-    """Decide boom `boom`'s move to `anchor` from component `component` of `stance` on every
-    lattice pose (see the module doc)."""
-    table = anchor_table(scn)
-    free = len(table.row)
-    rows = np.flatnonzero((lat.component == component) & lat.release[:, boom])
-    target = table.positions[table.row[anchor]]
+def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarray:
+    """Rows of component `lat` at which boom `boom` may let go and reaches `anchor`: the poses
+    a transition of that move can use."""
+    rows = np.flatnonzero(lat.release[:, boom])
     if len(rows):
+        target = scn.anchor_positions[scn.anchor_index[anchor]]
         reach = reach_violation(scn.robot, lat.poses[rows], target[None],
                                 np.array([boom]))[:, 0] == 0.0
         rows = rows[reach]
+    return rows
+
+
+def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
+                       ignore_grasps: bool = False,
+                       rows: np.ndarray | None = None) -> LatticeTransition:
+    """Decide boom `boom`'s move to `anchor` from component `lat` of `stance` on every lattice
+    pose (see the module doc); `rows`: `move_rows`, if known."""
+    table = anchor_table(scn)
+    free = len(table.row)
+    rows = move_rows(scn, lat, boom, anchor) if rows is None else rows
     tested = len(rows)
     empty = LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
     if not tested:
@@ -127,14 +128,17 @@ def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, compone
     poses = lat.poses[rows]
     n = len(rows)
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
+    # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
+    # these poses; the new 4-stance's segments are all decided by then.
     first = score_rows(scn, stances, tips, poses, np.arange(n), np.zeros(n, np.int64),
-                       np.zeros(n, np.int64), ignore_grasps, decide_only=True)
+                       np.zeros(n, np.int64), ignore_grasps, decide_only=True,
+                       collide=1 << boom)
     ok = np.flatnonzero(first.feasible)
     if not len(ok):
         return empty
     second = score_rows(scn, stances, tips, poses[ok], np.arange(len(ok)),
                         np.ones(len(ok), np.int64), np.ones(len(ok), np.int64), ignore_grasps,
-                        decide_only=True)
+                        decide_only=True, collide=0)
     keep = ok[second.feasible]
     if not len(keep):
         return empty
@@ -144,11 +148,10 @@ def lattice_transition(scn: Scenario, lat: StanceLattice, stance: tuple, compone
     return LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested)
 
 
-def candidate_anchors(scn: Scenario, lat: StanceLattice, stance: tuple, component: int,
-                      boom: int) -> np.ndarray:
-    """Indices of every anchor boom `boom` reaches from some release pose of the component
+def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
+    """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
     (exact on the lattice), the stance's own anchors excluded."""
-    rows = np.flatnonzero((lat.component == component) & lat.release[:, boom])
+    rows = np.flatnonzero(lat.release[:, boom])
     if not len(rows):
         return np.zeros(0, dtype=np.int64)
     pts = scn.anchor_positions
@@ -169,26 +172,27 @@ def candidate_anchors(scn: Scenario, lat: StanceLattice, stance: tuple, componen
     return near[reach]
 
 
-def start_components(scn: Scenario, lat: StanceLattice, cfg: LatticeConfig,
+def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
                      link_step: float = 0.005) -> dict[int, np.ndarray]:
     """The components the start pose is joined to, each with the lattice pose it joins: a
     feasible lattice pose of a neighbouring cell (within one step in x, y and phi) whose
     straight segment from the start pose is feasible every `link_step` m or rad."""
     start = np.asarray(scn.start_pose, dtype=float)
     out: dict[int, np.ndarray] = {}
-    if not len(lat.keys):
-        return out
     base = np.floor(start / np.array([cfg.position_step, cfg.position_step,
                                       cfg.angle_step])).astype(np.int64)
     corners = np.array(list(itertools.product((0, 1), repeat=3))) + base
-    rows = lat.find(pack(corners, cfg.angle_count))
-    rows = rows[rows >= 0]
+    keys = pack(corners, cfg.angle_count)
+    held = []  # (robustness, component, pose) of each feasible corner
+    for key, comp in zip(keys, lat.component_of(keys), strict=True):
+        if comp >= 0:
+            c = lat.components[comp]
+            row = int(np.searchsorted(c.keys, key))
+            held.append((-float(c.robustness[row]), int(comp), c.poses[row]))
     stance = scn.stance(scn.start_stance)
-    for row in sorted(rows, key=lambda k: -lat.robustness[k]):
-        comp = int(lat.component[row])
+    for _, comp, end in sorted(held, key=lambda h: h[0]):
         if comp in out:
             continue
-        end = lat.poses[row]
         n = max(2, int(np.ceil(np.abs(end - start).max() / link_step)) + 1)
         link = start + np.linspace(0.0, 1.0, n)[:, None] * (end - start)
         if score_poses(scn, stance, link).feasible.all():
@@ -289,11 +293,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     nearest = math.inf
     stop, reason = "noroute", ""
 
-    def settled(stance: tuple) -> bool:
-        """Whether every component of `stance` is expanded already (its lattice known)."""
-        lat = memo.lattices.get(stance)
-        return lat is not None and all((stance, c) in closed for c in range(lat.n_components))
-
     def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
                    child: Stance4, comp: int | None) -> tuple:
         """An open-list entry for the child reached through the most robust pose of `pick`."""
@@ -310,14 +309,18 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if kind == 1:
             (stance, comp), j, anchor = payload
             child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
-            if settled(child):  # it can lead nowhere new
-                continue
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
-                lat = memo.lattices[stance]
+                lat = memo.lattices[stance].components[comp]
+                rows = move_rows(scn, lat, j, anchor)
+                known = memo.lattices.get(child)
+                if known is not None and all(
+                        c == INFEASIBLE or (c >= 0 and (child, int(c)) in closed)
+                        for c in np.unique(known.known_component(lat.keys[rows]))):
+                    continue  # every pose it could use enters an expanded vertex: nothing new
                 tr = memo.transitions[key] = lattice_transition(
-                    scn, lat, stance, comp, j, anchor, cfg, ignore_grasps)
+                    scn, lat, stance, j, anchor, ignore_grasps, rows)
                 tested += 1
             if not len(tr.keys):
                 continue
@@ -329,11 +332,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             continue
         (child, comp), move, pose, p4, tr, g_parent, alternatives = payload
         if comp is None:  # entered through a move: split among the child's components
-            child_lat = _lattice(scn, memo, child, cfg, ignore_grasps)
-            rows = child_lat.find(tr.keys)
-            if (rows < 0).any():  # the kernel is deterministic: never expected
+            comps = _lattice(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
+            if (comps < 0).any():  # the kernel is deterministic: never expected
                 raise RuntimeError("a transition pose is missing from the new stance's lattice")
-            comps = child_lat.component[rows]
             hit = np.unique(comps)
             if len(hit) > 1 or (child, int(hit[0])) in closed:
                 for c2 in hit:
@@ -354,10 +355,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         nearest = min(nearest, goal_distance(scn, stance))
         if progress is not None:
             progress(expansions, tested, nearest)
-        lat = memo.lattices[stance]
-        in_comp = lat.component == comp
-        near_goal = np.flatnonzero(in_comp & (np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
-                                              <= scn.goal_tolerance))
+        lat = memo.lattices[stance].components[comp]
+        near_goal = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
+                                   <= scn.goal_tolerance)
         if len(near_goal):
             goal_pose = lat.poses[near_goal[int(np.argmax(lat.robustness[near_goal]))]]
             path, poses, probs, others = [vertex], [], [], []
@@ -381,13 +381,11 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                       "reaching the goal")
             break
         for j in range(4):
-            for k in candidate_anchors(scn, lat, stance, comp, j):
+            for k in candidate_anchors(scn, lat, stance, j):
                 anchor = scn.anchors[k].id
                 if (stance, j, anchor) in excluded:
                     continue
                 child = tuple(anchor if i == j else a for i, a in enumerate(stance))
-                if settled(child):
-                    continue
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
                                            g + c_attach, 1, (vertex, j, anchor)))
     if stop == "noroute":

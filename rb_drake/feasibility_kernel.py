@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import weakref
 from functools import lru_cache
+from statistics import NormalDist
 from typing import NamedTuple
 
 import numpy as np
@@ -70,7 +71,10 @@ _MIN_CONDITIONING = 27
 _REGULARISATION = 28
 _STATICS_TOL = 29
 _CLEARANCE = 30
-_N_PARAMS = 31
+_Z_FLOOR = 31       # Phi^-1(p_min), less a margin: no grasp of a feasible pose has a lower z
+_N_PARAMS = 32
+
+ALL_SEGMENTS = 0b11111  # `score_rows(collide=)`: bit i boom i's segment, bit 4 the body
 
 # Reason codes (feasibility.Reason), as plain ints for the compiled code.
 _BOOM_LENGTH, _SHOULDER_ANGLE, _BODY_COLLISION, _BOOM_COLLISION = 1, 2, 3, 4
@@ -138,13 +142,18 @@ def score_poses(world: World, stance: Stance, poses: np.ndarray,
 
 def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np.ndarray,
                pose_row: np.ndarray, stance_row: np.ndarray, tip_row: np.ndarray,
-               ignore_grasps: bool = False, decide_only: bool = False) -> KernelCheck:
+               ignore_grasps: bool = False, decide_only: bool = False,
+               collide: int = ALL_SEGMENTS) -> KernelCheck:
     """`score_poses` for R rows at once, each its own configuration: row r is pose
     poses[pose_row[r]] in stance stances[stance_row[r]], with the free gripper of a 3-stance
     at tips[tip_row[r]] (tips: (T, 2); ignored in a 4-stance). Lets one call score several
     stances, as a transition's four configurations. With `decide_only` (the lattice search,
     which asks only which rows are feasible) each row stops at a failing test: the violation
-    is NaN and an infeasible row's reason is one failing test, not always the first."""
+    is NaN and an infeasible row's reason is one failing test, not always the first.
+    `collide` (decide_only only) tests only the segments of its bits for collision: those of
+    the others must be known clear, e.g. decided in another configuration at the same pose."""
+    if collide != ALL_SEGMENTS and not decide_only:
+        raise ValueError("collide leaves out collision tests: only with decide_only")
     R = len(pose_row)
     reason = np.empty(R, dtype=np.int64)
     robustness = np.empty(R)
@@ -156,7 +165,8 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
         _score_kernel(_floats(poses, (-1, 3)), _robot_params(world.robot, world.gravity_vector),
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
-                      bool(decide_only), reason, robustness, log_probs, tensions, violation)
+                      bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
+                      violation)
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation)
 
 
@@ -217,6 +227,10 @@ def _pack_robot(robot: RobotParams, g_x: float, g_y: float) -> np.ndarray:
     p[_REGULARISATION] = REGULARISATION
     p[_STATICS_TOL] = STATICS_TOL
     p[_CLEARANCE] = ANCHOR_CLEARANCE
+    # A feasible pose has r = sum_i log P_i >= log p_min with every term <= 0, so each grasp's
+    # z is at least Phi^-1(p_min); the margin keeps the bound from deciding a rounding tie.
+    p_min = math.exp(robot.log_p_min)
+    p[_Z_FLOOR] = NormalDist().inv_cdf(p_min) - 1e-6 if 0.0 < p_min < 1.0 else -math.inf
     return p
 
 
@@ -465,10 +479,12 @@ def _slope(t, fp, n, mu, sigma, dz, reg, curvature) -> tuple[float, float]:
 
 @njit(cache=True, error_model="numpy")
 def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, work, rhs,
-               w) -> tuple[bool, bool]:
+               w, z_floor) -> tuple[bool, bool, bool]:
     """statics.allocate for four attached booms: the most robust member of the family
     fp + t n within the tension bounds, into f (NaN where there is none). Leaves fp and the
-    unnormalised null vector (minors) for the violation; returns (ok, A A^T regular)."""
+    unnormalised null vector (minors) for the violation; returns (ok, A A^T regular, short):
+    `short` when no member within the bounds gives every grasp z >= z_floor, so that none
+    can be robust enough (then f is not computed; z_floor = -inf never stops it)."""
     for c in range(4):  # null vector by signed 3x3 minors
         m = 0
         for j in range(4):
@@ -517,6 +533,19 @@ def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, w
             dz[i] = -n[i] / sigma[i]
         else:
             sigma[i], mu[i], dz[i] = 1.0, 1e6, 0.0
+    if ok and z_floor > -math.inf:  # each grasp's z >= z_floor: f_i <= mu_i - z_floor sigma_i
+        c_lo, c_hi = t_lo, t_hi
+        for i in range(4):
+            if abs(psi[i]) < HALF_PI and abs(n[i]) >= 1e-12:
+                bound = (mu[i] - z_floor * sigma[i] - fp[i]) / n[i]
+                if n[i] > 0.0:
+                    c_hi = min(c_hi, bound)
+                else:
+                    c_lo = max(c_lo, bound)
+            elif abs(psi[i]) < HALF_PI and fp[i] > mu[i] - z_floor * sigma[i]:
+                c_lo, c_hi = math.inf, -math.inf
+        if not c_lo <= c_hi:
+            return ok, regular, True
     # The concave objective's slope has one root in [t_lo, t_hi]: safeguarded Newton steps
     # inside a shrinking bracket, as statics.allocate (same start, steps and order). allocate
     # always takes NEWTON_STEPS steps; here they stop once a Newton step moves t by less than
@@ -544,7 +573,7 @@ def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, w
             t = step if inside else 0.5 * (lo + hi)
     for i in range(4):
         f[i] = fp[i] + t * n[i]
-    return ok, regular
+    return ok, regular, False
 
 
 @njit(cache=True, error_model="numpy")
@@ -555,9 +584,30 @@ def _mean_limit(psi, fn, ft):
 
 @njit(cache=True, error_model="numpy")
 def _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance, edges, owner,
-                    near_hit, near_ray, parity, vertices) -> int:
+                    near_hit, near_ray, parity, vertices, collide) -> int:
     """_BODY_COLLISION, _BOOM_COLLISION or 0 for the pose (x, y, phi = atan2(s, c)) whose booms
-    run from the shoulders sh to the targets tg along u (collision.Rock's tests)."""
+    run from the shoulders sh to the targets tg along u (collision.Rock's tests), testing the
+    segments of `collide`'s bits only (ALL_SEGMENTS)."""
+    if collide & 16:
+        code = _body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit,
+                               near_ray, parity, vertices)
+        if code:
+            return code
+    for i in range(4):
+        if not collide & (1 << i):
+            continue
+        ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
+        uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
+        ex = tg[i, 0] - clearance * ux
+        ey = tg[i, 1] - clearance * uy
+        if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
+            return _BOOM_COLLISION
+    return 0
+
+
+@njit(cache=True, error_model="numpy")
+def _body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit, near_ray,
+                    parity, vertices) -> int:
     for q in range(4):
         cx[q] = x + (c * corner_x[q] - s * corner_y[q])
         cy[q] = y + (s * corner_x[q] + c * corner_y[q])
@@ -577,20 +627,13 @@ def _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance
                 break
         if inside:
             return _BODY_COLLISION
-    for i in range(4):
-        ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
-        uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
-        ex = tg[i, 0] - clearance * ux
-        ey = tg[i, 1] - clearance * uy
-        if _segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
-            return _BOOM_COLLISION
     return 0
 
 
 @njit(cache=True, error_model="numpy")
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
-                  vertices, ignore_grasps, decide_only, reason_out, r_out, lp_out, f_out,
+                  vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
                   v_out) -> None:
     """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
 
@@ -704,7 +747,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         if code == 0 and has_rock and not decide_only:
             code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
                                    prm[_CLEARANCE], edges, owner, near_hit, near_ray, parity,
-                                   vertices)
+                                   vertices, ALL_SEGMENTS)
         if decide_only and code != 0:
             reason_out[row] = code
             r_out[row] = -math.inf
@@ -741,8 +784,17 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             else:
                 ten = 100.0
         else:
-            ok, regular = _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors,
-                                     vec, work, rhs, w)
+            z_floor = prm[_Z_FLOOR] if decide_only and not ignore_grasps else -math.inf
+            ok, regular, short = _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp,
+                                            minors, vec, work, rhs, w, z_floor)
+            if short:  # decide_only: no member of the family is robust enough
+                reason_out[row] = _PROBABILITY
+                r_out[row] = -math.inf
+                for i in range(4):
+                    lp_out[row, i] = math.nan
+                    f_out[row, i] = math.nan
+                v_out[row] = math.nan
+                continue
             ten = 100.0
             if regular:  # violation: the least violating member of the family
                 ten = math.inf
@@ -797,7 +849,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             if code == 0 and has_rock:
                 code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
                                        prm[_CLEARANCE], edges, owner, near_hit, near_ray,
-                                       parity, vertices)
+                                       parity, vertices, collide)
             if code != 0:
                 reason_out[row] = code
                 v_out[row] = math.nan
@@ -841,6 +893,91 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             if statics_ok:
                 v += max(0.0, log_p_min - r)
         v_out[row] = 0.0 if code == 0 else max(v, 1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# The flood fill of the complete search's components (planning.flood)
+
+
+@njit(cache=True, error_model="numpy")
+def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, f_lateral,
+                  sigma_normal, sigma_lateral, attached, tips, edges, owner, vertices,
+                  ignore_grasps):  # pragma: no cover - compiled
+    """The lattice poses 26-connected to `seed` that are feasible in stance row 0, inside
+    `box` (planning.flood.grow_component): (indices, robustness, indices scored infeasible).
+    Waves of poses, each scored in one `_score_kernel` call (decide_only)."""
+    i0, k0, m0 = box[0, 0], box[0, 1], -(n_phi // 2)
+    ni, nk = box[1, 0] - i0 + 1, box[1, 1] - k0 + 1
+    state = np.zeros((ni, nk, n_phi), dtype=np.int8)  # 0 unseen, 1 queued
+    wave = np.empty((64, 3), dtype=np.int64)
+    wave[0] = seed
+    n_wave = 1
+    state[seed[0] - i0, seed[1] - k0, seed[2] - m0] = 1
+    out = np.empty((256, 3), dtype=np.int64)
+    out_r = np.empty(256)
+    n_out = 0
+    bad = np.empty((256, 3), dtype=np.int64)
+    n_bad = 0
+    nxt = np.empty((256, 3), dtype=np.int64)
+    while n_wave:
+        poses = np.empty((n_wave, 3))
+        for w in range(n_wave):
+            poses[w, 0] = wave[w, 0] * dx
+            poses[w, 1] = wave[w, 1] * dx
+            poses[w, 2] = wave[w, 2] * dphi
+        rows = np.arange(n_wave)
+        zeros = np.zeros(n_wave, dtype=np.int64)
+        reason = np.empty(n_wave, dtype=np.int64)
+        r = np.empty(n_wave)
+        _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                      sigma_lateral, attached, tips, rows, zeros, zeros, edges, owner, vertices,
+                      ignore_grasps, True, ALL_SEGMENTS, reason, r, np.empty((n_wave, 4)),
+                      np.empty((n_wave, 4)), np.empty(n_wave))
+        n_next = 0
+        for w in range(n_wave):
+            if reason[w] != 0:
+                if n_bad == bad.shape[0]:
+                    bad = _grown(bad)
+                bad[n_bad] = wave[w]
+                n_bad += 1
+                continue
+            if n_out == out.shape[0]:
+                out = _grown(out)
+                grown_r = np.empty(2 * out_r.shape[0])
+                grown_r[:n_out] = out_r
+                out_r = grown_r
+            out[n_out] = wave[w]
+            out_r[n_out] = r[w]
+            n_out += 1
+            for di in range(-1, 2):
+                a = wave[w, 0] + di - i0
+                if a < 0 or a >= ni:
+                    continue
+                for dk in range(-1, 2):
+                    b = wave[w, 1] + dk - k0
+                    if b < 0 or b >= nk:
+                        continue
+                    for dm in range(-1, 2):
+                        c = wave[w, 2] + dm - m0
+                        if c < 0 or c >= n_phi or state[a, b, c]:
+                            continue
+                        state[a, b, c] = 1
+                        if n_next == nxt.shape[0]:
+                            nxt = _grown(nxt)
+                        nxt[n_next, 0] = a + i0
+                        nxt[n_next, 1] = b + k0
+                        nxt[n_next, 2] = c + m0
+                        n_next += 1
+        wave, nxt = nxt, wave
+        n_wave = n_next
+    return out[:n_out].copy(), out_r[:n_out].copy(), bad[:n_bad].copy()
+
+
+@njit(cache=True, error_model="numpy")
+def _grown(a):  # pragma: no cover - compiled
+    b = np.empty((2 * a.shape[0], a.shape[1]), dtype=a.dtype)
+    b[:a.shape[0]] = a
+    return b
 
 
 def reach_violation(robot: RobotParams, poses: np.ndarray, targets: np.ndarray,

@@ -19,12 +19,14 @@ import numpy as np
 import pytest
 
 from planning.complete import (
+    LatticeMemo,
     candidate_anchors,
     complete_search,
     goal_is_holdable,
     lattice_transition,
     start_components,
 )
+from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
 from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
 from planning.lattice import (
     LatticeConfig,
@@ -121,6 +123,50 @@ def test_stance_lattice_is_the_feasible_set_with_release_booms(demo: Scenario) -
     assert lat.n_components == len(set(where.values()))
 
 
+def all_components(scn: Scenario, stance: tuple[str, ...],
+                   cfg: LatticeConfig) -> StanceComponents:
+    """The stance's components, every one grown (from the feasible poses stance_lattice finds)."""
+    found = StanceComponents(scn, stance, cfg)
+    found.component_of(stance_lattice(scn, stance, cfg).keys)
+    return found
+
+
+@pytest.mark.parametrize("cave", ["demo-shaft", "rockfall-3"])
+def test_grown_components_are_the_lattice_components(cave: str) -> None:
+    """Each component the flood fill grows from one of its poses is the component
+    stance_lattice labels by scoring the whole reachable lattice: the same poses, robustness
+    and release sets, for the stances a short search enters."""
+    scn = load_scenario(bundled_caves()[cave])
+    memo = LatticeMemo()
+    complete_search(scn, COARSE, max_expansions=6, memo=memo)
+    stances = list(memo.lattices)
+    compared = 0
+    for stance in stances:
+        lat = stance_lattice(scn, stance, COARSE)
+        grown = StanceComponents(scn, stance, COARSE)
+        for comp in range(lat.n_components):
+            mine = lat.component == comp
+            seed = lat.keys[np.flatnonzero(mine)[len(np.flatnonzero(mine)) // 2]]
+            label = int(grown.component_of(np.array([seed]))[0])
+            assert label >= 0, f"{stance}: a feasible seed grew no component"
+            got = grown.components[label]
+            assert np.array_equal(got.keys, lat.keys[mine]), (
+                f"{stance} component {comp}: {len(got.keys)} poses grown, {mine.sum()} labelled")
+            for name in ("robustness", "release", "release_r"):
+                assert np.array_equal(getattr(got, name), getattr(lat, name)[mine]), name
+            compared += 1
+        assert len(grown.components) == lat.n_components
+        # A reachable pose no component holds is answered infeasible, and its neighbours in
+        # the flood's boundary are known without scoring again.
+        reach = reachable_lattice(scn.robot, scn.stance(stance).positions, np.arange(4), COARSE)
+        keys = pack(reach, COARSE.angle_count)
+        outside = keys[~np.isin(keys, lat.keys)]
+        if len(outside):
+            assert (grown.component_of(outside[:50]) == INFEASIBLE).all()
+            assert UNKNOWN not in grown.known_component(outside[:50])
+    assert compared >= 6, f"too few components to compare ({compared})"
+
+
 def all_transition_poses(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
                          cfg: LatticeConfig) -> set[int]:
     """Brute force: every lattice pose of a box over the five anchors' reach at which all four
@@ -144,10 +190,9 @@ def all_transition_poses(scn: Scenario, stance: tuple[str, ...], boom: int, anch
 def lattice_poses_of_move(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
                           cfg: LatticeConfig) -> dict[int, float]:
     """The search's answer over every component: key -> worst robustness of the four."""
-    lat = stance_lattice(scn, stance, cfg)
     out: dict[int, float] = {}
-    for comp in range(lat.n_components):
-        tr = lattice_transition(scn, lat, stance, comp, boom, anchor, cfg)
+    for comp in all_components(scn, stance, cfg).components:
+        tr = lattice_transition(scn, comp, stance, boom, anchor)
         out.update(zip(tr.keys.tolist(), tr.worst.tolist(), strict=True))
     return out
 
@@ -156,11 +201,10 @@ def lattice_poses_of_move(scn: Scenario, stance: tuple[str, ...], boom: int, anc
 def move(demo: Scenario) -> tuple[tuple[str, ...], int, str, dict[int, float]]:
     """A move from the demo's start stance that holds at many lattice poses."""
     stance = tuple(demo.start_stance)
-    lat = stance_lattice(demo, stance, COARSE)
     best = None
     for j in range(4):
-        for comp in range(lat.n_components):
-            for k in candidate_anchors(demo, lat, stance, comp, j):
+        for comp in all_components(demo, stance, COARSE).components:
+            for k in candidate_anchors(demo, comp, stance, j):
                 found = lattice_poses_of_move(demo, stance, j, demo.anchors[k].id, COARSE)
                 if best is None or len(found) > len(best[3]):
                     best = (stance, j, demo.anchors[k].id, found)
@@ -195,23 +239,22 @@ def test_planted_narrow_window_is_found(demo: Scenario, move, window: int) -> No
 def test_every_reachable_anchor_is_a_candidate(demo: Scenario) -> None:
     """candidate_anchors drops no anchor that the boom reaches from a release pose."""
     stance = tuple(demo.start_stance)
-    lat = stance_lattice(demo, stance, COARSE)
     held = {demo.anchor_index[a] for a in stance}
     for j in range(4):
-        for comp in range(lat.n_components):
-            rows = (lat.component == comp) & lat.release[:, j]
-            got = set(candidate_anchors(demo, lat, stance, comp, j).tolist())
+        for comp in all_components(demo, stance, COARSE).components:
+            rows = comp.release[:, j]
+            got = set(candidate_anchors(demo, comp, stance, j).tolist())
             if not rows.any():
                 assert not got
                 continue
-            v = reach_violation(demo.robot, lat.poses[rows], demo.anchor_positions,
+            v = reach_violation(demo.robot, comp.poses[rows], demo.anchor_positions,
                                 np.full(len(demo.anchors), j))
             want = set(np.flatnonzero((v == 0.0).any(axis=0)).tolist()) - held
             assert got == want, f"boom {j}: missing {want - got}, extra {got - want}"
 
 
 def test_start_is_joined_to_the_lattice(demo: Scenario) -> None:
-    lat = stance_lattice(demo, tuple(demo.start_stance), LatticeConfig())
+    lat = StanceComponents(demo, tuple(demo.start_stance), LatticeConfig())
     joined = start_components(demo, lat, LatticeConfig())
     assert joined, "the demo's start pose joins no lattice pose"
     for pose in joined.values():

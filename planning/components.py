@@ -1,0 +1,101 @@
+"""The connected components of one stance's feasible lattice poses, found as the search needs them.
+
+A vertex of the complete search is (4-stance, component). `StanceComponents` holds the
+components of one stance found so far, each grown by `planning.flood` from a pose the search
+entered at, with the booms that may let go at each of its poses: the same sets, pose for pose,
+as `lattice.stance_lattice` finds by scoring the stance's whole reachable lattice, but only for
+the components the search enters.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from planning.flood import grow_component, reach_box
+from planning.lattice import LatticeConfig, pack, poses_of, unpack
+from planning.transition import anchor_table, pack_rows
+from rb_drake.feasibility_kernel import score_rows
+from rb_drake.scenario import Scenario
+
+INFEASIBLE = -1  # component_of / known_component: a pose no component holds
+UNKNOWN = -2     # known_component: a pose not scored yet
+
+
+class Component(NamedTuple):
+    """One connected component of a stance's feasible lattice poses, sorted by key."""
+
+    keys: np.ndarray        # (F,) int64 lattice keys, sorted
+    idx: np.ndarray         # (F, 3) lattice indices
+    poses: np.ndarray       # (F, 3)
+    robustness: np.ndarray  # (F,) r in the 4-stance
+    release: np.ndarray     # (F, 4) bool: boom j may let go (3-stance, gripper at its anchor)
+    release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
+
+
+class StanceComponents:
+    """The components of one 4-stance's feasible lattice poses found so far (module doc)."""
+
+    def __init__(self, scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
+                 ignore_grasps: bool = False):
+        table = anchor_table(scn)
+        free = len(table.row)
+        held = [table.row[a] for a in stance]
+        # Row 0 the 4-stance, row 1 + j the 3-stance with boom j's gripper at its anchor.
+        rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
+        self._stances, self._tips = pack_rows(table, rows, [free, *held])
+        self._box = reach_box(table.positions[held], scn.robot.max_reach, cfg)
+        self._scn, self._cfg, self._ignore = scn, cfg, ignore_grasps
+        self.components: list[Component] = []
+        self._keys = np.zeros(0, dtype=np.int64)    # every pose scored, sorted
+        self._labels = np.zeros(0, dtype=np.int64)  # its component (INFEASIBLE if none)
+        self.scored = 0                             # poses scored
+
+    def component_of(self, keys: np.ndarray) -> np.ndarray:
+        """The component holding each lattice key (INFEASIBLE where the pose is infeasible),
+        growing the components not found yet."""
+        keys = np.asarray(keys, dtype=np.int64).reshape(-1)
+        labels = self.known_component(keys)
+        while (labels == UNKNOWN).any():
+            self._grow(int(keys[np.argmax(labels == UNKNOWN)]))
+            labels = self.known_component(keys)
+        return labels
+
+    def known_component(self, keys: np.ndarray) -> np.ndarray:
+        """What is known of each key's pose: its component, INFEASIBLE (scored, or next to a
+        component found) or UNKNOWN."""
+        if not len(self._keys):
+            return np.full(len(keys), UNKNOWN, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
+        return np.where(self._keys[pos] == keys, self._labels[pos], UNKNOWN)
+
+    def _grow(self, key: int) -> None:
+        """Grow the component of lattice key `key` (or learn that its pose is infeasible)."""
+        seed = unpack(np.array([key]), self._cfg.angle_count)[0]
+        idx, r, infeasible = grow_component(self._scn, self._stances, seed, self._box,
+                                            self._cfg, self._ignore)
+        self.scored += len(idx) + len(infeasible)
+        bad = pack(infeasible, self._cfg.angle_count)
+        if not len(idx):
+            self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int64))
+            return
+        keys = pack(idx, self._cfg.angle_count)
+        order = np.argsort(keys)
+        keys, idx, r = keys[order], idx[order], r[order]
+        poses = poses_of(idx, self._cfg)
+        F = len(idx)
+        rel = score_rows(self._scn, self._stances, self._tips, poses, np.tile(np.arange(F), 4),
+                         np.repeat(np.arange(1, 5), F), np.repeat(np.arange(1, 5), F),
+                         self._ignore, decide_only=True, collide=0)  # segments as in row 0
+        release = rel.feasible.reshape(4, F).T
+        release_r = np.where(release, rel.robustness.reshape(4, F).T, -np.inf)
+        self.components.append(Component(keys, idx, poses, r, release, release_r))
+        self._remember(np.concatenate([keys, bad]), np.concatenate([
+            np.full(F, len(self.components) - 1, dtype=np.int64),
+            np.full(len(bad), INFEASIBLE, dtype=np.int64)]))
+
+    def _remember(self, keys: np.ndarray, labels: np.ndarray) -> None:
+        all_keys = np.concatenate([self._keys, keys])
+        order = np.argsort(all_keys, kind="stable")
+        self._keys, self._labels = all_keys[order], np.concatenate([self._labels, labels])[order]

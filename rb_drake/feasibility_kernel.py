@@ -387,6 +387,34 @@ def _smallest_singular_value(B: np.ndarray, k: int) -> float:
     return smallest
 
 
+@njit(cache=True, error_model="numpy")
+def _singular_value_above(B: np.ndarray, k: int, tau: float) -> int:
+    """Whether the smallest singular value of the 3 x k matrix B[:, :k] is at least tau: 1 or 0
+    where Sylvester's criterion on B B^T - tau^2 I decides it by a wide margin (1e-9 relative,
+    far above rounding), -1 where it is too close to call (then ask the SVD)."""
+    g00 = g01 = g02 = g11 = g12 = g22 = 0.0
+    for j in range(k):
+        g00 += B[0, j] * B[0, j]
+        g01 += B[0, j] * B[1, j]
+        g02 += B[0, j] * B[2, j]
+        g11 += B[1, j] * B[1, j]
+        g12 += B[1, j] * B[2, j]
+        g22 += B[2, j] * B[2, j]
+    scale = g00 + g11 + g22  # >= the largest eigenvalue of B B^T
+    t2 = tau * tau
+    a00, a11, a22 = g00 - t2, g11 - t2, g22 - t2
+    d1 = a00
+    d2 = a00 * a11 - g01 * g01
+    d3 = (a00 * (a11 * a22 - g12 * g12) - g01 * (g01 * a22 - g12 * g02)
+          + g02 * (g01 * g12 - a11 * g02))
+    eps = 1e-9
+    if d1 > eps * scale and d2 > eps * scale * scale and d3 > eps * scale * scale * scale:
+        return 1  # B B^T - tau^2 I positive definite: every singular value above tau
+    if d1 < -eps * scale or d2 < -eps * scale * scale or d3 < -eps * scale * scale * scale:
+        return 0  # a negative leading minor: not positive semi-definite
+    return -1
+
+
 # ---------------------------------------------------------------------------------------------
 # Collision (collision.Rock.segments_hit / contains, feasibility.rock_inside_body)
 
@@ -861,7 +889,13 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 B[1, m] = A[1, i]
                 B[2, m] = A[2, i] * prm[_MOMENT_SCALE]
                 m += 1
-        kappa = _smallest_singular_value(B, m)
+        if decide_only:  # only kappa < MIN_CONDITIONING matters: decided cheaply if clear-cut
+            above = _singular_value_above(B, m, prm[_MIN_CONDITIONING])
+            if above < 0:
+                above = int(_smallest_singular_value(B, m) >= prm[_MIN_CONDITIONING])
+            kappa = math.inf if above else 0.0
+        else:
+            kappa = _smallest_singular_value(B, m)
         if code == 0 and kappa < prm[_MIN_CONDITIONING]:
             code = _SINGULAR
         if code == 0 and not statics_ok:

@@ -264,8 +264,16 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     graph = nx.DiGraph()
     tested = 0
 
+    distances: dict[tuple, float] = {}
+
+    def distance(stance: tuple) -> float:
+        d = distances.get(stance)
+        if d is None:
+            d = distances[stance] = goal_distance(scn, stance)
+        return d
+
     def heuristic(stance: tuple) -> float:
-        return heuristic_weight * c_attach * goal_distance(scn, stance) / max_step
+        return heuristic_weight * c_attach * distance(stance) / max_step
 
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
@@ -352,7 +360,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex
-        nearest = min(nearest, goal_distance(scn, stance))
+        nearest = min(nearest, distance(stance))
         if progress is not None:
             progress(expansions, tested, nearest)
         lat = memo.lattices[stance].components[comp]

@@ -43,15 +43,15 @@ from planning.transition import (
     ReleaseSet,
     Transition,
     TransitionConfig,
+    anchor_table,
     find_transition,
+    pack_rows,
     polish_transition,
     reachable_anchors,
     release_poses,
-    transition_stances,
 )
-from rb_drake.feasibility_kernel import score_poses
+from rb_drake.feasibility_kernel import score_poses, score_rows
 from rb_drake.scenario import Scenario
-from rb_drake.stance import Stance
 
 Stance4 = tuple[str, str, str, str]
 
@@ -133,17 +133,19 @@ def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.r
 def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
                pose: np.ndarray) -> np.ndarray:
     """Per boom, the worst -log P_i over the transition's four configurations at `pose`."""
-    s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
-    # Two checks of two rows, as in the transition search: the 4-stances as a per-row stance,
-    # the 3-stances with a per-row tip.
-    poses = np.vstack([pose, pose])
-    second = np.array([False, True])
-    tips = np.vstack([s_old.positions[boom], s_new.positions[boom]])
-    worst = np.zeros(4)
-    for stance, tip in ((Stance.mix(s_old, s_new, second), None), (s_three, tips)):
-        lp = score_poses(scn, stance, poses, tip).log_probs
-        worst = np.maximum(worst, -np.nan_to_num(lp, nan=0.0).min(axis=0))
-    return worst
+    table = anchor_table(scn)
+    free = len(table.row)
+    held = [table.row[a] for a in old]
+    target = table.row[new_anchor]
+    three = [free if i == boom else held[i] for i in range(4)]
+    new = [target if i == boom else held[i] for i in range(4)]
+    # One compiled call of four rows: old 4-stance, 3-stance with the gripper at its old and at
+    # its new anchor, new 4-stance.
+    stances, tips = pack_rows(table, [held, three, new], [held[boom], target])
+    lp = score_rows(scn, stances, tips, np.asarray(pose, dtype=float).reshape(1, 3),
+                    np.zeros(4, np.int64), np.array([0, 1, 1, 2]),
+                    np.array([0, 0, 1, 0])).log_probs
+    return np.maximum(0.0, -np.nan_to_num(lp, nan=0.0).min(axis=0))
 
 
 def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:

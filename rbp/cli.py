@@ -289,11 +289,11 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
     plan.add_argument("--max-expansions", type=int,
                       help="give up after expanding this many stances (default 1000)")
-    plan.add_argument("--search", choices=("hybrid", "complete", "sampled"),
-                      help="footstep search: hybrid (default: sampling for 150 expansions, then "
-                           "the complete search), complete (on the 2 cm x 2.5 deg pose lattice: "
-                           "finds a route whenever one exists there, and proves it when none "
-                           "does) or sampled (the search before the complete one)")
+    plan.add_argument("--search", choices=("complete", "hybrid", "sampled"),
+                      help="footstep search: complete (default; on the 2 cm x 2.5 deg pose "
+                           "lattice: finds a route whenever one exists there, and proves it "
+                           "when none does), sampled (the search before the complete one) or "
+                           "hybrid (sampling for 150 expansions, then the complete search)")
     plan.add_argument("--thorough", action="store_true",
                       help="the oracle: the complete search without an expansion budget, so it "
                            "ends with a route or a proof that none exists (bound it with "
@@ -376,6 +376,21 @@ def main(argv: list[str] | None = None) -> int:
         # Outputs are written to a temporary file and renamed, so nothing is left half-written.
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SystemError as e:
+        # Ctrl-C while compiled (numba) code calls back into Python arrives wrapped this way.
+        if not _caused_by_interrupt(e):
+            raise
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _caused_by_interrupt(error: BaseException | None) -> bool:
+    seen = 0
+    while error is not None and seen < 10:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        error, seen = error.__cause__ or error.__context__, seen + 1
+    return False
 
 
 def _main(argv: list[str] | None) -> int:

@@ -116,16 +116,21 @@ def test_sigint_exits_3_without_traceback(tmp_path: Path) -> None:
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     # A shell that started this run in the background ignores SIGINT, and children inherit
     # that: give the child the default disposition, so Python installs its handler.
-    proc = subprocess.Popen([sys.executable, "-m", "rbp", "plan", "shaft-1", "-o", "p.json",
-                             "--max-expansions", "100000"], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    # A 20 m shaft: its search runs for minutes (a bundled cave plans in seconds now).
+    made = run_rbp("scenario", "generate", "--kind", "shaft", "--seed", "1002", "--length",
+                   "20", "20", "-o", "long.yaml", cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    proc = subprocess.Popen([sys.executable, "-m", "rbp", "plan", "long.yaml", "-o", "p.json",
+                             "--max-expansions", "100000", "--footsteps-only"], cwd=tmp_path,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    time.sleep(3.0)  # past start-up (about a second), inside the plan (over 10 s)
+    time.sleep(3.0)  # past start-up (about a second), inside the search (minutes)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 3, f"exit {proc.returncode}\n{out}\n{err}"
     assert err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err, err
-    assert not (tmp_path / "p.json").exists() and leftovers(tmp_path) == []
+    assert not (tmp_path / "p.json").exists()
+    assert leftovers(tmp_path) == [], sorted(os.listdir(tmp_path))
 
 
 def test_help_documents_the_exit_statuses(tmp_path: Path) -> None:

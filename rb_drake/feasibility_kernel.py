@@ -815,16 +815,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             z_floor = prm[_Z_FLOOR] if decide_only and not ignore_grasps else -math.inf
             ok, regular, short = _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp,
                                             minors, vec, work, rhs, w, z_floor)
-            if short:  # decide_only: no member of the family is robust enough
-                reason_out[row] = _PROBABILITY
-                r_out[row] = -math.inf
-                for i in range(4):
-                    lp_out[row, i] = math.nan
-                    f_out[row, i] = math.nan
-                v_out[row] = math.nan
-                continue
             ten = 100.0
-            if regular:  # violation: the least violating member of the family
+            if regular and not decide_only:  # violation: the least violating member
                 ten = math.inf
                 for bound in (f_lo, f_hi):
                     for q in range(4):
@@ -836,6 +828,21 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                             fi = fp[i] + tq * minors[i]
                             total += max(0.0, f_lo - fi) + max(0.0, fi - f_hi)
                         ten = min(ten, total)
+            if short:  # decide_only: no member of the family is robust enough
+                code = _PROBABILITY
+        if decide_only and code == 0:  # tensions out of bounds fail statics whatever follows
+            for i in range(4):
+                if att[i] and not (math.isfinite(f[i]) and f_lo - 1e-9 <= f[i] <= f_hi + 1e-9):
+                    code = _STATICS
+                    break
+        if decide_only and code != 0:
+            reason_out[row] = code
+            r_out[row] = -math.inf
+            for i in range(4):
+                lp_out[row, i] = math.nan
+                f_out[row, i] = math.nan
+            v_out[row] = math.nan
+            continue
         residual = 0.0
         for r in range(3):
             acc = 0.0

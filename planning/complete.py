@@ -103,7 +103,7 @@ def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarr
     rows = np.flatnonzero(lat.release[:, boom])
     if len(rows):
         target = scn.anchor_positions[scn.anchor_index[anchor]]
-        reach = reach_violation(scn.robot, lat.poses[rows], target[None],
+        reach = reach_violation(scn.robot, lat.poses_at(rows), target[None],
                                 np.array([boom]))[:, 0] == 0.0
         rows = rows[reach]
     return rows
@@ -125,7 +125,7 @@ def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     three = [free if i == boom else held[i] for i in range(4)]
     new = [table.row[anchor] if i == boom else held[i] for i in range(4)]
     stances, tips = pack_rows(table, [three, new], [table.row[anchor], free])
-    poses = lat.poses[rows]
+    poses = lat.poses_at(rows)
     n = len(rows)
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
     # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
@@ -155,7 +155,7 @@ def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -
     if not len(rows):
         return np.zeros(0, dtype=np.int64)
     pts = scn.anchor_positions
-    poses = lat.poses[rows]
+    poses = lat.poses_at(rows)
     centre = poses[:, :2].mean(axis=0)
     spread = float(np.linalg.norm(poses[:, :2] - centre, axis=1).max())
     near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) <= scn.robot.max_reach + spread
@@ -188,7 +188,7 @@ def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
         if comp >= 0:
             c = lat.components[comp]
             row = int(np.searchsorted(c.keys, key))
-            held.append((-float(c.robustness[row]), int(comp), c.poses[row]))
+            held.append((-float(c.robustness[row]), int(comp), c.poses_at(np.array([row]))[0]))
     stance = scn.stance(scn.start_stance)
     for _, comp, end in sorted(held, key=lambda h: h[0]):
         if comp in out:
@@ -367,7 +367,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         near_goal = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
                                    <= scn.goal_tolerance)
         if len(near_goal):
-            goal_pose = lat.poses[near_goal[int(np.argmax(lat.robustness[near_goal]))]]
+            goal_pose = lat.poses_at(near_goal[[int(np.argmax(lat.robustness[near_goal]))]])[0]
             path, poses, probs, others = [vertex], [], [], []
             while parent[path[-1]][0] is not None:
                 (pv, _j, _a), pz, pp, alt = parent[path[-1]]

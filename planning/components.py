@@ -24,14 +24,28 @@ UNKNOWN = -2     # known_component: a pose not scored yet
 
 
 class Component(NamedTuple):
-    """One connected component of a stance's feasible lattice poses, sorted by key."""
+    """One connected component of a stance's feasible lattice poses, sorted by key. A search
+    keeps thousands: poses are decoded from the keys when asked for, not stored."""
 
     keys: np.ndarray        # (F,) int64 lattice keys, sorted
-    idx: np.ndarray         # (F, 3) lattice indices
-    poses: np.ndarray       # (F, 3)
     robustness: np.ndarray  # (F,) r in the 4-stance
     release: np.ndarray     # (F, 4) bool: boom j may let go (3-stance, gripper at its anchor)
     release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
+    lattice: LatticeConfig
+
+    @property
+    def idx(self) -> np.ndarray:
+        """(F, 3) lattice indices."""
+        return unpack(self.keys, self.lattice.angle_count)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(F, 3) body poses."""
+        return poses_of(self.idx, self.lattice)
+
+    def poses_at(self, rows: np.ndarray) -> np.ndarray:
+        """The body poses of `rows`."""
+        return poses_of(unpack(self.keys[rows], self.lattice.angle_count), self.lattice)
 
 
 class StanceComponents:
@@ -49,7 +63,7 @@ class StanceComponents:
         self._scn, self._cfg, self._ignore = scn, cfg, ignore_grasps
         self.components: list[Component] = []
         self._keys = np.zeros(0, dtype=np.int64)    # every pose scored, sorted
-        self._labels = np.zeros(0, dtype=np.int64)  # its component (INFEASIBLE if none)
+        self._labels = np.zeros(0, dtype=np.int32)  # its component (INFEASIBLE if none)
         self.scored = 0                             # poses scored
 
     def component_of(self, keys: np.ndarray) -> np.ndarray:
@@ -78,22 +92,22 @@ class StanceComponents:
         self.scored += len(idx) + len(infeasible)
         bad = pack(infeasible, self._cfg.angle_count)
         if not len(idx):
-            self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int64))
+            self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int32))
             return
         keys = pack(idx, self._cfg.angle_count)
         order = np.argsort(keys)
-        keys, idx, r = keys[order], idx[order], r[order]
-        poses = poses_of(idx, self._cfg)
+        keys, r = keys[order], r[order]
+        poses = poses_of(idx[order], self._cfg)
         F = len(idx)
         rel = score_rows(self._scn, self._stances, self._tips, poses, np.tile(np.arange(F), 4),
                          np.repeat(np.arange(1, 5), F), np.repeat(np.arange(1, 5), F),
                          self._ignore, decide_only=True, collide=0)  # segments as in row 0
         release = rel.feasible.reshape(4, F).T
         release_r = np.where(release, rel.robustness.reshape(4, F).T, -np.inf)
-        self.components.append(Component(keys, idx, poses, r, release, release_r))
+        self.components.append(Component(keys, r, release, release_r, self._cfg))
         self._remember(np.concatenate([keys, bad]), np.concatenate([
-            np.full(F, len(self.components) - 1, dtype=np.int64),
-            np.full(len(bad), INFEASIBLE, dtype=np.int64)]))
+            np.full(F, len(self.components) - 1, dtype=np.int32),
+            np.full(len(bad), INFEASIBLE, dtype=np.int32)]))
 
     def _remember(self, keys: np.ndarray, labels: np.ndarray) -> None:
         all_keys = np.concatenate([self._keys, keys])

@@ -48,6 +48,7 @@ context, set before each run, so one diagram serves every plan (including replan
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -69,6 +70,7 @@ from systems.trajectory import PlanSource, PlanTrajectory, StrengthDraws
 SAMPLE_PERIOD = 0.02  # s: loggers and the failure check run at this period, on the same grid
 PLANT_TIME_STEP = 1e-2  # s, the full (discrete) plant's period
 BOOM_MASS_PERIOD = 0.1  # s, how often the free boom's mass follows its length (full plant)
+RAMP_MASS_PERIOD = 0.02  # s, how often a ramped boom's mass follows its share (full plant)
 
 
 class SimulationRecord(NamedTuple):
@@ -157,13 +159,18 @@ class ClimbSimulator:
         connect = builder.Connect
         self.robot_plant: ReachBotPlant | None = None
         if plant == "full":
-            rb = build_plant(robot, g, time_step, hold_tips=True, live_outputs=True,
+            # The plant's arm links (ARM_MASS each) ride on the shoulders, which the model's
+            # robot has not: its body is lighter by their mass, so the whole weighs what the
+            # model's robot weighs (and, shoulders symmetric about the centre, has its moment).
+            # A plant 2 % heavier than the plan loads every grasp 2 % past its plan.
+            light = dataclasses.replace(robot, body_mass=robot.body_mass - NUM_BOOMS * ARM_MASS)
+            rb = build_plant(light, g, time_step, hold_tips=True, live_outputs=True,
                              joint_limits=False)
             self.robot_plant = rb
             self.plant = builder.AddSystem(rb.plant)
             # the arm links ride on the shoulders: the body carries them
             self.controller = builder.AddSystem(TensionController(
-                robot, g, np.array([robot.body_mass + NUM_BOOMS * ARM_MASS] * 2 + [
+                light, g, np.array([robot.body_mass] * 2 + [
                     izz + ARM_MASS * float(np.sum(np.asarray(robot.shoulders) ** 2))]),
                 gains, ARM_MASS, fixed_boom_mass=True, tip_push=True))
             limb = builder.AddSystem(LimbController(rb, robot, g, gains))
@@ -173,7 +180,8 @@ class ClimbSimulator:
                 booms[joint.velocity_start(), i] = -1.0
             tensions = builder.AddSystem(MatrixGain(booms))
             total = builder.AddSystem(Adder(2, self.plant.num_velocities()))
-            self.monitor = builder.AddSystem(AnchorLoadMonitor(rb, robot))
+            self.monitor = builder.AddSystem(AnchorLoadMonitor(rb, robot, g))
+            connect(src.GetOutputPort("free_limb"), self.monitor.GetInputPort("free_limb"))
             full_state = self.plant.get_state_output_port()
             body_selector = builder.AddSystem(_selector(
                 self.plant, rb.base.position_start() + np.arange(3),
@@ -292,13 +300,23 @@ class ClimbSimulator:
     def _advance(self, plan: PlanTrajectory, k: int, end: float) -> bool:
         """Advance to `end` (in phase k); False when a grasp failure stopped the run. With the
         full plant in a reach phase, in steps of BOOM_MASS_PERIOD, after each of which the
-        free boom's mass follows its planned length."""
-        free = self.robot_plant is not None and plan.phases[k].stance.free_boom is not None
+        free boom's mass follows its planned length; in a release or attach ramp in steps of
+        RAMP_MASS_PERIOD, the ramped boom's mass following its share."""
+        phase = plan.phases[k]
+        free = self.robot_plant is not None and phase.stance.free_boom is not None
+        ramps = phase.ramps if self.robot_plant is not None else ()
         while True:
             t = self.context.get_time()
-            if free:
+            in_ramp = any(t0 - 1e-9 <= t < t1 - 1e-9 for t0, t1, _ in ramps)
+            if free or in_ramp:
                 self._set_free_boom_mass(plan, k, t)
-            stop = min(end, t + BOOM_MASS_PERIOD) if free else end
+            stop = end
+            if free:
+                stop = min(end, t + BOOM_MASS_PERIOD)
+            elif in_ramp:
+                stop = min(end, t + RAMP_MASS_PERIOD)
+            elif ramps:  # to the next ramp's start
+                stop = min([end, *(t0 for t0, _, _ in ramps if t0 > t + 1e-9)])
             status = self.simulator.AdvanceTo(stop)
             if status.reason() == status.ReturnReason.kReachedTerminationCondition:
                 return False
@@ -310,9 +328,9 @@ class ClimbSimulator:
         """The free boom's mass at its planned length at t, half at its tip and half at its
         shoulder (the weight and moments of the uniform boom of the model); others massless."""
         masses = np.zeros(NUM_BOOMS)
-        j = plan.phases[k].stance.free_boom
-        if j is not None:
-            masses[j] = plan.free_boom_mass(t)
+        limb = plan.carried_limb(min(max(t, plan.phases[k].start), plan.phases[k].end - 1e-9))
+        if limb[5] >= 0:
+            masses[int(limb[5])] = limb[4]
         self.robot_plant.set_boom_masses(
             self.plant.GetMyMutableContextFromRoot(context or self.context), masses)
 

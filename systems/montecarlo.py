@@ -46,6 +46,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from planning.plan import score_plan
+from planning.ramps import add_ramps
 from rb_drake import grasp
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -252,6 +253,7 @@ def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]],
     # The continuation starts where the grasp failed, not at the scenario's start.
     held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
     plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
+    plan = add_ramps(plan, request.scenario)  # the new phases' attach and release
     score_plan(plan, request.scenario.robot.attach_failure)
     return plan
 

@@ -87,12 +87,17 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     out = copy.deepcopy(phase)
     out["steps"] = new
     motion = out.get("motion")
-    if motion is not None:
-        motion["seed_p_success"] = [st["p_success"] for st in new]
-        motion["seed_tension"] = [list(st["tension"]) for st in new]
-        motion["seed_effort"] = [float(np.nansum([v for v in st["tension"] if v is not None]))
-                                 for st in new]
-        motion["effort"] = list(motion["seed_effort"])
+    if motion is not None:  # the seed's record on the same path, for SCP's statistics
+        m = len(path)
+        seed_p = _interpolate(np.array(motion["seed_p_success"][:m], dtype=float)[:, None], s)
+        seed_f = _interpolate(np.array([[np.nan if v is None else v for v in row]
+                                        for row in motion["seed_tension"][:m]]), s)
+        seed_p, seed_f = np.vstack([seed_p, seed_p[-1:]]), np.vstack([seed_f, seed_f[-1:]])
+        motion["seed_p_success"] = [float(v) for v in seed_p[:, 0]]
+        motion["seed_tension"] = [[None if np.isnan(v) else float(v) for v in row]
+                                  for row in seed_f]
+        motion["seed_effort"] = [float(np.nansum(row)) for row in seed_f]
+        motion["effort"] = [float(sum(v for v in st["tension"] if v is not None)) for st in new]
         motion["eased"] = ease
     return out
 

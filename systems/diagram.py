@@ -59,6 +59,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder, EventStatus
 from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain
 
+from planning.ramps import RELEASE_TENSION
 from rb_drake import geometry
 from rb_drake.params import NUM_BOOMS
 from rb_drake.plant import ARM_MASS, BODY_THICKNESS, ReachBotPlant, build_plant
@@ -116,6 +117,8 @@ class SimulationRecord(NamedTuple):
     def implied_p_path(self) -> float:
         """The climb's success probability implied by the simulated forces: the product of the
         holdings' smallest P_i times (1 - attach_failure) per regrasp."""
+        if self.failure is not None and self.failure.cause == "handover":
+            return 0.0  # the climb could not go on
         af = self.plan.scenario.robot.attach_failure
         return float(np.prod(self.holding_minimum()) * (1.0 - af) ** self.plan.regrasps)
 
@@ -255,6 +258,9 @@ class ClimbSimulator:
         self.simulator.set_monitor(self._stop_on_failure)
         self.context = self.simulator.get_mutable_context()
         self._stop = True
+        self._step = time_step if plant == "full" else 1e-3  # the last step before a release
+        self._last_tension: np.ndarray | None = None
+        self._handover: Failure | None = None
 
     def _stop_on_failure(self, root: Context) -> EventStatus:
         if self._stop and self.failures.failed(self.failures.GetMyContextFromRoot(root)):
@@ -287,17 +293,59 @@ class ClimbSimulator:
         self._stop = stop_on_failure
         self.simulator.Initialize()
         ends = [p.end for p in plan.phases]
+        self._handover = None
         for k, end in enumerate(ends):
             if end > ctx.get_time():
+                if k > 0 and not self._gripper_may_switch(plan, k, before=True):
+                    break
                 if k > 0 and self.robot_plant is not None:
                     self._enter_phase(plan, k)
+                if k > 0 and not self._gripper_may_switch(plan, k, before=False):
+                    break
                 if not self._advance(plan, k, end):
                     break
             if progress is not None:
                 progress(k + 1, len(ends), ctx.get_time())
         return self._record(plan)
 
+    def _gripper_may_switch(self, plan: PlanTrajectory, k: int, before: bool) -> bool:
+        """Whether the gripper that opens (phase k a reach) or closes (phase k-1 a reach) at
+        phase k's start may do so: its boom's tension at most RELEASE_TENSION, the tension
+        applied over the last plant step before an opening (`before`), the one commanded for
+        the first step after a closing. Otherwise the gripper stays shut (open), the climb
+        cannot go on, and the run stops with a `handover` failure."""
+        phases = plan.phases
+        opening = phases[k].stance.free_boom is not None
+        closing = phases[k - 1].stance.free_boom is not None
+        if before and opening:
+            j, tension = phases[k].stance.free_boom, self._last_tension
+        elif not before and closing:
+            j = phases[k - 1].stance.free_boom
+            ctl = self.controller.GetMyContextFromRoot(self.context)
+            tension = self.controller.GetOutputPort("tension").Eval(ctl)
+        else:
+            return True
+        if tension is None or tension[j] <= RELEASE_TENSION:
+            return True
+        t = self.context.get_time()
+        anchor = (phases[k - 1] if opening else phases[k]).stance.ids[j] or ""
+        self._handover = Failure(t, k - 1 if opening else k, int(j), anchor, "handover",
+                                 float("nan"), float(tension[j]))
+        return False
+
     def _advance(self, plan: PlanTrajectory, k: int, end: float) -> bool:
+        """Advance to `end` (`_advance_to`), keeping, when a reach phase follows, the boom
+        tensions of the last plant step before it (`_gripper_may_switch`)."""
+        self._last_tension = None
+        if k + 1 < len(plan.phases) and plan.phases[k + 1].stance.free_boom is not None:
+            last = end - self._step
+            if last > self.context.get_time() + 1e-9 and not self._advance_to(plan, k, last):
+                return False
+            ctl = self.controller.GetMyContextFromRoot(self.context)
+            self._last_tension = self.controller.GetOutputPort("tension").Eval(ctl).copy()
+        return self._advance_to(plan, k, end)
+
+    def _advance_to(self, plan: PlanTrajectory, k: int, end: float) -> bool:
         """Advance to `end` (in phase k); False when a grasp failure stopped the run. With the
         full plant in a reach phase, in steps of BOOM_MASS_PERIOD, after each of which the
         free boom's mass follows its planned length; in a release or attach ramp in steps of
@@ -390,7 +438,7 @@ class ClimbSimulator:
         n = min(len(times), *(len(d) for d in data.values()))
         data = {name: d[:n] for name, d in data.items()}
         state = self.failures.state(self.failures.GetMyContextFromRoot(self.context))
-        failure = None
+        failure = self._handover
         if state[0] > 0:
             k, boom = int(state[2]), int(state[3])
             failure = Failure(float(state[1]), k, boom, plan.phases[k].stance.ids[boom] or "",

@@ -135,7 +135,8 @@ class Cause:
 
     OVERLOAD = 1  # the force exceeded the holding's drawn limit (or |psi| >= pi/2)
     ATTACH = 2    # a new grasp did not take hold on contact
-    NAMES: ClassVar[dict[int, str]] = {1: "overload", 2: "attach"}
+    HANDOVER = 3  # a gripper had to open or close on a loaded boom: it did not, the climb stops
+    NAMES: ClassVar[dict[int, str]] = {1: "overload", 2: "attach", 3: "handover"}
 
 
 FAILURE_FIELDS = ("failed", "time", "phase", "boom", "cause", "probability", "draw",

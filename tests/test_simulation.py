@@ -35,7 +35,7 @@ from planning.plan import (
     validate,
 )
 from planning.probability import path_probability
-from planning.ramps import add_ramps
+from planning.ramps import RELEASE_TENSION, add_ramps
 from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario
@@ -807,3 +807,57 @@ def test_plan_errors_name_the_field(good_plan: dict[str, Any], change, field: st
     with pytest.raises(PlanError) as err:
         PlanTrajectory(plan, plan_scenario(plan))
     assert err.value.field == field, str(err.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# Release and attach
+
+
+def test_grippers_open_and_close_only_on_slack_booms(good: SimulationRecord) -> None:
+    """Executing a plan with ramps: the freed boom's tension on the last sample before its
+    gripper opens and on the first after it closes is below RELEASE_TENSION, and during the
+    ramps the ramped grasp's load (the monitor's, less the limb's weight its shoulder holds) is
+    its boom's tension."""
+    traj = good.plan
+    assert good.failure is None, good.failure
+    checked = 0
+    for phase in traj.phases:
+        j = phase.stance.free_boom
+        if j is None:
+            continue
+        before = np.flatnonzero(good.times < phase.start - 1e-9)[-1]
+        after = np.flatnonzero(good.times > phase.end + 1e-9)[0]
+        for s, what in ((before, "opens"), (after, "closes")):
+            assert good.tension[s, j] <= RELEASE_TENSION, (
+                f"t={good.times[s]}: boom {j} pulls {good.tension[s, j]} N as its gripper {what}")
+        checked += 1
+    assert checked == traj.regrasps
+    for phase in traj.phases:
+        for t0, t1, j in phase.ramps:
+            rows = np.flatnonzero((good.times > t0 + 1e-9) & (good.times < t1 - 1e-9))
+            assert len(rows) > 10
+            np.testing.assert_allclose(good.force[rows, j], good.tension[rows, j], atol=0.02,
+                                       err_msg=f"ramp of boom {j} over [{t0}, {t1}]")
+
+
+def test_a_plan_without_its_release_ramp_stops_there(good_plan: dict[str, Any],
+                                                     sim: ClimbSimulator) -> None:
+    """The release ramp taken out (plan_faults.ramp_removed): the gripper would open on a boom
+    still pulling, so it stays shut, the run stops with a `handover` failure at that phase and
+    no Monte Carlo climb gets past it."""
+    from planning.plan_faults import ramp_removed
+
+    fault = next(f for f in (ramp_removed(good_plan, np.random.default_rng(seed))
+                             for seed in range(20))
+                 if "release" in f.what)
+    traj = PlanTrajectory(fault.plan, plan_scenario(fault.plan))
+    record = sim.run(traj)
+    failure = record.failure
+    assert failure is not None and failure.cause == "handover", failure
+    j = traj.phases[fault.phase + 1].stance.free_boom
+    assert (failure.phase, failure.boom) == (fault.phase, j), failure
+    assert failure.draw > RELEASE_TENSION, f"its boom pulled {failure.draw} N"
+    assert record.times[-1] <= traj.phases[fault.phase].end + 1e-9
+    assert record.implied_p_path() == 0.0
+    mc = monte_carlo(record, 200, 3)
+    assert mc.successes == 0 and mc.to_json()["failures"]["handover"] > 0, mc.to_json()["failures"]

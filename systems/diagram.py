@@ -25,8 +25,11 @@ tension T is its prismatic joint's force -T, so the constraint turns it into the
 on the body at the shoulder. The free boom of a reach phase follows the planned tip
 (`LimbController`); its mass (boom_linear_density times its planned length, half at the tip
 and half at the shoulder: the weight and moments of the model's uniform boom) is updated every
-BOOM_MASS_PERIOD, and anchored booms are massless as in the model (the plant keeps its 10 g arm
-links and the grippers, whose weight the anchors carry). The monitor (`AnchorLoadMonitor`)
+BOOM_MASS_PERIOD, and anchored booms are massless as in the model (the grippers' weight the
+anchors carry; the body is lighter by the 10 g arm links at its shoulders, so the robot weighs
+what the model's weighs). In a release or attach ramp (`planning.ramps`) the ramped boom's mass
+and the share of its limb its joints hold follow the plan's share every RAMP_MASS_PERIOD, and a
+gripper opens or closes only on a boom pulling at most RELEASE_TENSION (`_gripper_may_switch`). The monitor (`AnchorLoadMonitor`)
 reads each anchored boom's pull on its gripper from the plant's joint reaction forces.
 
 `plant="body"` is the body alone on a planar joint (continuous): `BoomForces` applies each

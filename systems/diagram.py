@@ -29,8 +29,9 @@ BOOM_MASS_PERIOD, and anchored booms are massless as in the model (the grippers'
 anchors carry; the body is lighter by the 10 g arm links at its shoulders, so the robot weighs
 what the model's weighs). In a release or attach ramp (`planning.ramps`) the ramped boom's mass
 and the share of its limb its joints hold follow the plan's share every RAMP_MASS_PERIOD, and a
-gripper opens or closes only on a boom pulling at most RELEASE_TENSION (`_gripper_may_switch`). The monitor (`AnchorLoadMonitor`)
-reads each anchored boom's pull on its gripper from the plant's joint reaction forces.
+gripper opens or closes only on a boom pulling at most RELEASE_TENSION (`_gripper_may_switch`).
+The monitor (`AnchorLoadMonitor`) reads each anchored boom's pull on its gripper from the
+plant's joint reaction forces.
 
 `plant="body"` is the body alone on a planar joint (continuous): `BoomForces` applies each
 attached boom's tension along its unit vector (as the generalized force of the planar joint)

@@ -33,6 +33,7 @@ from experiments.sweep import (
 )
 
 TOLERANCE = 0.005  # |p_sim - p_path| of a calibrated plan
+RESIDUAL_RANGE = 0.05  # the residual panel's scale below 0; plans further off are labelled
 EARTH_G = 9.81
 
 # name: how to make the cave (a bundled cave by name, or the generator's kind, seed, length in
@@ -187,11 +188,19 @@ def calibration_figure(rows: list[dict[str, Any]]):
     res.errorbar(k - 0.12, (y - x)[order], yerr=[(y - ci[:, 0])[order], (ci[:, 1] - y)[order]],
                  fmt="o", ms=4, color="#2171b5", capsize=2, label="rate - p_path, 95 % CI")
     res.plot(k + 0.12, (ps - x)[order], "x", color="#cb181d", ms=6, label="p_sim - p_path")
+    low, high = -RESIDUAL_RANGE, 0.6 * RESIDUAL_RANGE
+    for n, i in enumerate(order):  # off the scale: drawn at its edge with the value
+        gap = ps[i] - x[i]
+        if gap < low:
+            res.annotate(f"{gap:+.3f}", (n, low), xytext=(n, low + 0.2 * RESIDUAL_RANGE),
+                         ha="center", fontsize=7, color="#cb181d",
+                         arrowprops={"arrowstyle": "->", "color": "#cb181d"})
+    res.set_ylim(low, high)
     res.set_xticks(k, [f"{rows[i]['cave']} ({rows[i]['regrasps']})" for i in order],
                    rotation=60, ha="right", fontsize=7)
     res.set_ylabel("against p_path")
     res.set_title("by plan (regrasps), in order of p_path", fontsize=10)
-    res.legend(fontsize=7, loc="lower left")
+    res.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     return fig
 

@@ -1,17 +1,19 @@
-"""Reach phases that start and stop gently: the free gripper and the body speed up and slow
-down over several time steps instead of one.
+"""Motions that start and stop gently: in every trajectory phase the body (and, reaching, the
+free gripper) speeds up and slows down over several time steps instead of one.
 
 A reach phase moves a cantilevered limb whose inertia about its shoulder is ten times the
 body's, on a body held by three booms whose moment direction is weak: to swing the limb
 from rest to its cruising speed within one time step (0.5 s, the plan's knots 5 cm apart) the
 booms must give it a moment they answer with newtons of tension, which the quasi-static plan
 does not see (measured on a shaft plan: one grasp at P = 0.947 where the plan has 0.991, just
-after its gripper let go). The configurations are the plan's own: `ease_reaches` re-times each
-reach phase's path so that its speed grows linearly from rest over EASE_STEPS time steps and
-falls linearly to rest over as many at its end, the configurations in between interpolated
-on the path (pose and free tip linearly between the planned steps) with the 3-stance's
-tensions (unique) and checked like every other. Cruising, the path keeps its planned steps and
-speed; each end adds EASE_STEPS / 2 time steps.
+after its gripper let go). A body phase starting from rest jolts the body the same way (a
+grasp at P = 0.984 fell to 0.964 on a shaft plan, just after an attach ramp). The
+configurations are the plan's own: `ease_motions` re-times each phase's path so that its
+speed grows linearly from rest over EASE_STEPS time steps and falls linearly to rest over as
+many at its end, the configurations in between interpolated on the path (pose and free tip
+linearly between the planned steps) with the most robust tensions there (unique in a
+3-stance), checked like every other. Cruising, the path keeps its planned steps and speed;
+each end adds EASE_STEPS / 2 time steps.
 """
 
 from __future__ import annotations
@@ -56,7 +58,7 @@ def _interpolate(values: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
                ease: int = EASE_STEPS) -> dict[str, Any] | None:
-    """The reach phase re-timed to start and stop gently, its first step at t0 (None when its
+    """The phase re-timed to start and stop gently, its first step at t0 (None when its
     path is too short to ease or an interpolated configuration is infeasible). The phase's
     last step is its dwell (a repeat of the one before), kept."""
     from planning.plan import _steps_with_tensions
@@ -68,12 +70,16 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     if ease < 2 or intervals < ease:
         return None
     poses = np.array([s["pose"] for s in path], dtype=float)
-    tips = np.array([s["free_tip"] for s in path], dtype=float)
+    reach = phase["kind"] == "reach"
+    tips = np.array([s["free_tip"] for s in path], dtype=float) if reach else None
     s = np.concatenate([[0.0], _progress(intervals, ease)])
-    new_poses, new_tips = _interpolate(poses, s), _interpolate(tips, s)
     exact = np.abs(s - np.round(s)) < 1e-9
+    new_poses = _interpolate(poses, s)
     new_poses[exact] = poses[np.round(s[exact]).astype(int)]
-    new_tips[exact] = tips[np.round(s[exact]).astype(int)]
+    new_tips = None
+    if reach:
+        new_tips = _interpolate(tips, s)
+        new_tips[exact] = tips[np.round(s[exact]).astype(int)]
     stance = scn.stance(tuple(phase["stance"]))
     check = check_poses(scn, stance, new_poses, new_tips, full=True)
     if not check.feasible.all():
@@ -102,10 +108,10 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     return out
 
 
-def ease_reaches(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
-    """The plan with every trajectory reach phase eased (`ease_phase`) where it can be, later
-    steps shifted in time. Plans without a time step (end poses only) are left as they are:
-    their two-step phases are executed rest to rest at minimum-jerk timing already."""
+def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
+    """The plan with every trajectory phase (body and reach) eased (`ease_phase`) where it can
+    be, later steps shifted in time. Plans without a time step (end poses only) are left as
+    they are: their two-step phases are executed rest to rest at minimum-jerk timing already."""
     dt = plan.get("time_step")
     if not dt:
         return plan
@@ -115,7 +121,7 @@ def ease_reaches(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
         if shift:
             for step in phase["steps"]:
                 step["t"] = round(float(step["t"]) + shift, 6)
-        if phase["kind"] != "reach" or "motion" not in phase:
+        if "motion" not in phase:
             continue
         t0 = float(phase["steps"][0]["t"])
         eased = None

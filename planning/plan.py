@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from planning.easing import ease_reaches
+from planning.easing import ease_motions
 from planning.footsteps import FootstepPlan
 from planning.probability import Configuration, PathProbability, path_probability
 from planning.ramps import add_ramps
@@ -209,7 +209,7 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         }
         phases.append(phase)
     plan["phases"] = phases
-    plan = add_ramps(ease_reaches(plan, scn), scn)
+    plan = add_ramps(ease_motions(plan, scn), scn)
     score_plan(plan, scn.robot.attach_failure)
     return plan
 

@@ -136,24 +136,32 @@ def test_a_release_without_its_last_ramp_step_is_rejected(cave_plans) -> None:
     assert problems and problems[0].phase == k, [str(p) for p in verify_plan(plan)][:5]
 
 
-def test_eased_reaches_start_and_stop_gently(cave_plans) -> None:
-    """An eased reach's free tip moves an eighth (EASE_STEPS 4) or a quarter (2) of a planned
-    interval in its first and last time steps (at most that share of the step limit), then
-    more: the speed grows from rest over several steps and falls to rest the same way."""
+def test_eased_motions_start_and_stop_gently(cave_plans) -> None:
+    """An eased phase's free tip (reaching) or body moves an eighth (EASE_STEPS 4) or a
+    quarter (2) of a planned interval in its first and last time steps (at most that share of
+    the step limit), then three times as much: the speed grows from rest over several steps
+    and falls to rest the same way. Ramp steps and the final dwell stand still around it."""
     plan = cave_plans["demo-shaft"]
-    limit = plan["limits"]["step"]
-    eased = 0
+    limit, turn_limit = plan["limits"]["step"], plan["limits"]["turn_step"]
+    eased = {"body": 0, "reach": 0}
     for k, phase in enumerate(plan["phases"]):
         ease = phase.get("motion", {}).get("eased")
-        if phase["kind"] != "reach" or not ease:
+        if not ease:
             continue
-        tips = np.array([s["free_tip"] for s in phase["steps"][:-1]])
-        moves = np.linalg.norm(np.diff(tips, axis=0), axis=1)
-        share = _progress(len(moves) - ease, ease)[0]
+        steps = [s for s in phase["steps"] if "ramp" not in s][:-1]  # the motion, no dwell
+        key = "free_tip" if phase["kind"] == "reach" else "pose"
+        points = np.array([s[key] for s in steps])
+        moves = [(np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1), limit)]
+        if phase["kind"] == "body":
+            moves.append((np.abs(np.diff(points[:, 2])), turn_limit))
+        share = _progress(len(steps) - 1 - ease, ease)[0]
         assert share == pytest.approx(1.0 / (2 * ease))
-        for n in (0, -1):
-            assert moves[n] <= share * limit + 1e-12, (
-                f"phases[{k}]: move {n} of the free tip {moves[n]} m, over {share} x {limit}")
-        assert moves[1] >= 2.9 * moves[0] - 1e-12, f"phases[{k}]: {moves[:3]} does not speed up"
-        eased += 1
-    assert eased >= plan["regrasps"] // 2, f"{eased} eased reaches of {plan['regrasps']}"
+        for move, lim in moves:
+            for n in (0, -1):
+                assert move[n] <= share * lim + 1e-12, (
+                    f"phases[{k}]: move {n} {move[n]}, over {share} x {lim}")
+            assert move[1] >= 2.9 * move[0] - 1e-12 and move[-2] >= 2.9 * move[-1] - 1e-12, (
+                f"phases[{k}]: {move[:3]} ... {move[-3:]} does not ease in and out")
+        eased[phase["kind"]] += 1
+    assert eased["reach"] >= plan["regrasps"] // 2 and eased["body"] >= plan["regrasps"] // 2, (
+        f"eased phases {eased} of {plan['regrasps']} regrasps")

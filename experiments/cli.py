@@ -17,6 +17,7 @@ EXPERIMENTS = {
     "seed_vs_scp": "what SCP makes of the seeds, per phase and over trials (Fig. 6)",
     "rig_experiment": "a body movement on the (simulated) rig over LCM (Fig. 7)",
     "monte_carlo": "predicted p_path against simulated success rates (calibration)",
+    "calibration": "p_path against 2000 simulated climbs on a fixed set of caves (issue 17)",
     "param_sweep": "success rate and p_path against one parameter",
 }
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from planning.plan import plan_configurations
 from planning.probability import Configuration, path_probability
+from planning.ramps import ramp_statics
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
@@ -145,12 +146,26 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
         fail("statics", "tensions must be given exactly for the attached booms")
         return [None] * 4, 0.0, math.nan
     fa = np.where(att, f, 0.0)
-    residual = np.abs(prob.A[0] @ fa - prob.b[0]).max()
+    load = prob.b[0]
+    lo_f, hi_f = robot.boom_tension
+    lower = np.where(att, lo_f, 0.0)
+    ramp = step.get("ramp")
+    if ramp is not None:  # a release or attach ramp: boom j's limb partly on its shoulder
+        j, share = int(ramp["boom"]), float(ramp["share"])
+        if tip is not None or not att[j]:
+            fail("phase-form", f"a ramp step of boom {j} in a configuration where it is free")
+        else:
+            _, load, torque = ramp_statics(scn, pose, stance, j, share)
+            lower[j] = 0.0  # the ramped boom goes slack
+            if not abs(torque) <= robot.shoulder_torque_max + TOL:
+                fail("torque", f"boom {j}'s shoulder torque {torque:.3f} N m (share {share:.3f} "
+                     f"of its limb) over the limit {robot.shoulder_torque_max}")
+    residual = np.abs(prob.A[0] @ fa - load).max()
     if not residual <= STATICS_TOL:
         fail("statics", f"statics residual {residual:.2e} N > {STATICS_TOL}")
-    lo_f, hi_f = robot.boom_tension
-    if np.any(fa[att] < lo_f - TOL) or np.any(fa[att] > hi_f + TOL):
-        fail("tension", f"tensions {np.round(fa[att], 3).tolist()} outside [{lo_f}, {hi_f}] N")
+    if np.any(fa[att] < lower[att] - TOL) or np.any(fa[att] > hi_f + TOL):
+        fail("tension", f"tensions {np.round(fa[att], 3).tolist()} outside [{lo_f}, {hi_f}] N"
+             + (" (a ramped boom down to 0)" if ramp is not None else ""))
     kappa = float(wrench_conditioning(robot, prob.A, att)[0])
     if not kappa >= MIN_CONDITIONING:
         fail("conditioning", f"the booms nearly meet in one point (wrench conditioning "

@@ -1,7 +1,9 @@
 """The plan file (format `reachbot-plan/1`): built from a footstep plan, written, validated.
 
 A plan alternates body phases (a 4-stance, the body moving) and reach phases (a 3-stance, the
-free gripper moving from one anchor to the next at a fixed pose). At the footstep stage each
+free gripper moving from one anchor to the next at a fixed pose); a body phase ends with the
+release ramp of the boom the next reach frees and starts with the attach ramp of the boom the
+reach before moved (`planning.ramps`). At the footstep stage each
 phase holds only the configurations the footstep planner found: a body phase from one
 transition pose to the next, a reach phase at its transition pose with the free gripper at the
 old and at the new anchor. Each configuration is evaluated with the robust force allocation,
@@ -17,8 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from planning.easing import ease_motions
 from planning.footsteps import FootstepPlan
 from planning.probability import Configuration, PathProbability, path_probability
+from planning.ramps import add_ramps
 from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
 from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
@@ -103,6 +107,7 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
                 "steps": [_configuration(scn, three, step.pose, old, t),
                           _configuration(scn, three, step.pose, new, t + REACH_DURATION)]})
             t += REACH_DURATION
+    plan = add_ramps(plan, scn)
     if fp.success:
         score_plan(plan, scn.robot.attach_failure)
     return plan
@@ -204,6 +209,7 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         }
         phases.append(phase)
     plan["phases"] = phases
+    plan = add_ramps(ease_motions(plan, scn), scn)
     score_plan(plan, scn.robot.attach_failure)
     return plan
 

@@ -306,6 +306,63 @@ def bad_number(plan: Plan, rng: Rng) -> Fault | None:
                  f"{holder[path[-1]]}", bad_number=True)
 
 
+def _ramps(plan: Plan) -> list[tuple[int, list[int]]]:
+    """(phase, the indices of its ramp steps) of every release and attach ramp."""
+    out = []
+    for k, phase in enumerate(plan["phases"]):
+        marked = [n for n, s in enumerate(phase["steps"]) if "ramp" in s]
+        lead = [n for n in marked if n < len(phase["steps"]) // 2]
+        trail = [n for n in marked if n >= len(phase["steps"]) // 2]
+        out += [(k, run) for run in (lead, trail) if run]
+    return out
+
+
+def ramp_removed(plan: Plan, rng: Rng) -> Fault | None:
+    """A release or attach ramp taken out, everything after it moved earlier by its length
+    and the phase's motion record kept one entry per step: a gripper that opens (or closes)
+    on a loaded boom, with time, joins and records all in order."""
+    ramps = _ramps(plan)
+    if not ramps:
+        return None
+    k, run = ramps[int(rng.integers(len(ramps)))]
+    out = copy.deepcopy(plan)
+    phase = out["phases"][k]
+    times = [s["t"] for s in phase["steps"]]
+    lead = run[0] == 0
+    span = times[run[-1] + 1] - times[0] if lead else times[-1] - times[run[0] - 1]
+    phase["steps"] = [s for n, s in enumerate(phase["steps"]) if n not in run]
+    motion = phase.get("motion")
+    if motion is not None:
+        for name in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
+            motion[name] = [v for n, v in enumerate(motion[name]) if n not in run]
+    later = phase["steps"] if lead else []
+    for other in out["phases"][k + 1:]:
+        later = later + other["steps"]
+    for step in later:
+        step["t"] = round(step["t"] - span, 6)
+    score_plan(out, out["robot"]["attach_failure"])
+    return Fault("ramp-removed", out, frozenset({"release", "attach"}), k,
+                 f"phases[{k}]: the {'attach' if lead else 'release'} ramp (steps {run}) "
+                 "removed")
+
+
+def release_loaded(plan: Plan, rng: Rng) -> Fault | None:
+    """The ramped boom still pulls (1 to 5 N more) when its gripper opens or closes."""
+    ramps = _ramps(plan)
+    if not ramps:
+        return None
+    k, run = ramps[int(rng.integers(len(ramps)))]
+    out = copy.deepcopy(plan)
+    n = run[0] if run[0] == 0 else run[-1]  # the contact: the attach's first, release's last
+    step = out["phases"][k]["steps"][n]
+    j = step["ramp"]["boom"]
+    step["tension"][j] += float(rng.uniform(1.0, 5.0))
+    return Fault("release-loaded", out, frozenset({"release", "attach", "statics",
+                                                   "recorded-value"}), k,
+                 f"phases[{k}] step {n}: boom {j} pulls {step['tension'][j]:.2f} N at its "
+                 "gripper's contact")
+
+
 FAULTS: dict[str, Callable[[Plan, Rng], Fault | None]] = {
     "step-removed": step_removed,
     "step-duplicated": step_duplicated,
@@ -322,6 +379,8 @@ FAULTS: dict[str, Callable[[Plan, Rng], Fault | None]] = {
     "value-changed": value_changed,
     "summary-edited": summary_edited,
     "bad-number": bad_number,
+    "ramp-removed": ramp_removed,
+    "release-loaded": release_loaded,
 }
 
 

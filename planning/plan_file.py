@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-VERIFIER = "rbp-verify/1"  # bump when the rules change: older stamps then no longer count
+VERIFIER = "rbp-verify/2"  # bump when the rules change: older stamps then no longer count
 
 
 class PlanFileError(ValueError):

@@ -10,11 +10,13 @@ successive configurations within the plan's own step and turn limits. Each rule 
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning.ramps import RAMP_DURATION, RELEASE_TENSION
 from rb_drake.params import ParamError, robot_from_dict
 from rb_drake.scenario import Scenario
 
@@ -29,6 +31,14 @@ RULES = {
     "reach-ends": "the free gripper starts on from_anchor and ends on to_anchor",
     "phase-join": "each phase starts where and when the phase before ended",
     "time-order": "time strictly increases within a phase; in a trajectory, by time_step",
+    "release": "a body phase that a reach phase follows ends with a release ramp at the "
+               "transition pose: the freed boom's tension falls (its shoulder taking up its "
+               "limb) over at least RAMP_DURATION to at most RELEASE_TENSION when its "
+               "gripper opens",
+    "attach": "a body phase that follows a reach phase starts with an attach ramp at the "
+              "transition pose: the gripper closes with its boom's tension at most "
+              "RELEASE_TENSION, which rises (its shoulder letting go of its limb) over at "
+              "least RAMP_DURATION before the body moves",
     "continuity": "successive configurations of a trajectory within the plan's step and turn "
                   "limits (body and free tip)",
     "recorded-value": "every recorded per-step value equals its recomputation",
@@ -99,6 +109,7 @@ def climb_problems(plan: dict[str, Any], scn: Scenario) -> list[Problem]:
     _joins(plan, fail)
     _times(plan, fail)
     _continuity(plan, fail)
+    _ramps(plan, fail)
     _goal(plan, scn, fail)
     return out
 
@@ -274,3 +285,88 @@ def _goal(plan, scn: Scenario, fail) -> None:
     if not gap <= scn.goal_tolerance + POSE_TOL:
         fail("goal", f"the plan claims success but ends {gap:.3f} m from the goal "
              f"{list(scn.goal_position)} (tolerance {scn.goal_tolerance} m)", k, n)
+
+
+SHARE_TOL = 1e-9  # a ramp's share reaches 1 exactly (plans write the value 1.0)
+TENSION_TOL = 1e-9  # N, for the ramps' monotonic tensions
+
+
+def _ramp_run(steps: list, boom: int, from_end: bool) -> int:
+    """How many steps at the start (or end) of a phase are ramp steps of `boom`."""
+    order = reversed(steps) if from_end else iter(steps)
+    n = 0
+    for step in order:
+        ramp = step.get("ramp")
+        if ramp is None or ramp.get("boom") != boom:
+            break
+        n += 1
+    return n
+
+
+def _ramps(plan, fail) -> None:
+    """Every release and attach is ramped (RULES "release", "attach"); ramp steps appear only
+    there."""
+    phases = plan["phases"]
+    for k, phase in enumerate(phases):
+        steps = phase["steps"]
+        marked = [n for n, s in enumerate(steps) if "ramp" in s]
+        if phase["kind"] != "body":
+            for n in marked:
+                fail("phase-form", "a ramp step in a reach phase", k, n)
+            continue
+        lead = trail = 0
+        before = phases[k - 1] if k > 0 else None
+        after = phases[k + 1] if k + 1 < len(phases) else None
+        if before is not None and before["kind"] == "reach":
+            j = before.get("free_boom")
+            lead = _ramp_run(steps, j, from_end=False)
+            _check_ramp(plan, k, j, list(range(lead + 1)), "attach", fail)
+        if after is not None and after["kind"] == "reach" and len(steps) > lead:
+            j = after.get("free_boom")
+            trail = min(_ramp_run(steps, j, from_end=True), len(steps) - lead - 1)
+            _check_ramp(plan, k, j, list(range(len(steps) - 1, len(steps) - trail - 2, -1)),
+                        "release", fail)
+        for n in marked:
+            if lead <= n < len(steps) - trail:
+                fail("phase-form", "a ramp step away from a release or an attach", k, n)
+
+
+def _check_ramp(plan, k: int, boom, order: list[int], rule: str, fail) -> None:
+    """One ramp of body phase k: `order` lists its step indices from the gripper's contact (the
+    attach's first step, the release's last) to the first (last) configuration without a ramp,
+    where the body is at rest on four booms."""
+    steps = plan["phases"][k]["steps"]
+    contact = steps[order[0]]
+    where = order[0]
+    f = contact["tension"][boom] if isinstance(boom, int) and 0 <= boom < 4 else None
+    if "ramp" not in contact or f is None:
+        fail(rule, f"boom {boom}'s gripper {'closes' if rule == 'attach' else 'opens'} at "
+             f"tension {f} N: no {rule} ramp (the tension must be at most {RELEASE_TENSION} N "
+             "there)", k, where)
+        return
+    if not f <= RELEASE_TENSION:
+        fail(rule, f"boom {boom}'s gripper {'closes' if rule == 'attach' else 'opens'} at "
+             f"tension {f:.4g} N, over {RELEASE_TENSION} N", k, where)
+    if not abs(contact["ramp"]["share"] - 1.0) <= SHARE_TOL:
+        fail(rule, f"boom {boom}'s shoulder carries {contact['ramp']['share']} of its limb when "
+             "its gripper lets go or takes hold, not all of it", k, where)
+    pose = contact["pose"]
+    for a, b in itertools.pairwise(order):  # from the contact outwards
+        sa, sb = steps[a], steps[b]
+        if not np.abs(np.subtract(sb["pose"], pose)).max() <= POSE_TOL:
+            fail(rule, "the body moves during the ramp", k, b)
+        share_a = sa["ramp"]["share"]
+        share_b = sb.get("ramp", {"share": 0.0})["share"]
+        fa, fb = sa["tension"][boom], sb["tension"][boom]
+        if fb is None or not (share_b <= share_a + SHARE_TOL and fb >= fa - TENSION_TOL):
+            fail(rule, f"boom {boom}'s load must move monotonically between its shoulder and "
+                 f"its gripper (share {share_a:.3f} -> {share_b:.3f}, tension {fa} -> {fb})",
+                 k, b)
+    end = steps[order[-1]]
+    if "ramp" in end and end["ramp"].get("boom") == boom:
+        fail(rule, f"the {rule} ramp of boom {boom} has no configuration on four booms at its "
+             "end", k, order[-1])
+    span = abs(float(end["t"]) - float(contact["t"]))
+    if not span >= RAMP_DURATION - TIME_TOL:
+        fail(rule, f"the {rule} ramp of boom {boom} lasts {span:.3g} s, under "
+             f"{RAMP_DURATION} s", k, where)

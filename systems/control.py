@@ -74,18 +74,22 @@ class BodyStatics:
         return A
 
     def limb_wrench(self, pose: np.ndarray, stance: Stance, free_limb: np.ndarray) -> np.ndarray:
-        """The free limb's weight on the body: [W_limb; tau_limb] (zero in a 4-stance)."""
-        j = free_boom(stance)
-        if j is None:
+        """The carried limb's weight on the body: [W_limb; tau_limb], times the share its
+        shoulder carries (1 for the free boom, less in a release or attach ramp; zero when no
+        shoulder carries a limb)."""
+        j = int(free_limb[5])
+        if j < 0:
             return np.zeros(3)
+        share = float(free_limb[6])
         x, y, phi = (float(v) for v in pose[:3])
         c, s = math.cos(phi), math.sin(phi)
         sx, sy = self.shoulders[j]
         px, py = x + c * sx - s * sy, y + s * sx + c * sy
         tx, ty = float(free_limb[0]), float(free_limb[1])
+        # free_limb's boom mass is already the share's (the plant's, in the full diagram)
         m_boom = (float(free_limb[4]) if self.fixed_boom_mass
-                  else self.robot.boom_linear_density * math.hypot(tx - px, ty - py))
-        m_grip = self.robot.gripper_mass
+                  else share * self.robot.boom_linear_density * math.hypot(tx - px, ty - py))
+        m_grip = share * self.robot.gripper_mass
         gx, gy = self.gravity
         # the boom's weight at its midpoint, the gripper's at the tip; moments about the centre
         ax = m_boom * (0.5 * (px + tx) - x) + m_grip * (tx - x)
@@ -164,6 +168,9 @@ class ControlGains:
         return 2.0 * self.limb_damping_ratio * 2.0 * math.pi * self.limb_frequency_hz
 
 
+RAMP_WEIGHT = 1.0  # N of wrench error per N of a ramped boom's tension off its feed-forward
+
+
 class TensionProjector:
     """Boom tensions that make a wanted body wrench w as far as it is worth it: the attached
     booms within the tension bounds, free booms at 0, minimising
@@ -199,13 +206,19 @@ class TensionProjector:
             self.options.SetOption(self.solver.id(), name, 1e-9)
 
     def __call__(self, A: np.ndarray, w: np.ndarray, f_ref: np.ndarray,
-                 attached: np.ndarray) -> np.ndarray:
+                 attached: np.ndarray, ramped: int = -1) -> np.ndarray:
+        """`ramped`: a boom in a release or attach ramp (planning.ramps), which may go slack
+        (lower bound 0) and keeps to its feed-forward (weight RAMP_WEIGHT): its gripper opens
+        only on a slack boom, and the other three can make any wrench."""
         mask = attached.astype(float)
         lo, hi = self.lo * mask, self.hi * mask
+        rho = np.full(NUM_BOOMS, self.rho)
+        if ramped >= 0:
+            lo[ramped], rho[ramped] = 0.0, RAMP_WEIGHT
         f_ref = f_ref * mask
         H = A.T @ A
-        H.flat[::NUM_BOOMS + 1] += self.rho
-        g = A.T @ w + self.rho * f_ref
+        H.flat[::NUM_BOOMS + 1] += rho
+        g = A.T @ w + rho * f_ref
         f = np.linalg.solve(H, g) * mask  # the free boom's column is zero: its f is 0
         if (f >= lo - 1e-12).all() and (f <= hi + 1e-12).all():
             return np.minimum(np.maximum(f, lo), hi)
@@ -261,8 +274,11 @@ class TensionController(LeafSystem):
             px, py = (float(a) for a in self._tip_push.Eval(context))
             ax, ay = float(free_limb[0] - pose[0]), float(free_limb[1] - pose[1])
             wanted += (px, py, ax * py - ay * px)
+        j = int(free_limb[5])
+        ramped = j if j >= 0 and stance.attached[j] else -1
         output.SetFromVector(self.projector(self._statics.wrench_matrix(pose, stance), wanted,
-                                            self._feedforward.Eval(context), stance.attached))
+                                            self._feedforward.Eval(context), stance.attached,
+                                            ramped))
 
 
 class LimbController(LeafSystem):
@@ -309,8 +325,8 @@ class LimbController(LeafSystem):
 
     def _calc_force(self, context: Context, output: BasicVector) -> None:
         u = np.zeros(self._nv)
-        j = free_boom(self._stance.Eval(context))
-        if j is not None:
+        j = int(self._free_limb.Eval(context)[5])
+        if j >= 0:
             torque, force = self._command.Eval(context)[:2]
             u[self._v_sh[j]], u[self._v_boom[j]] = torque, force
         output.SetFromVector(u)
@@ -319,19 +335,25 @@ class LimbController(LeafSystem):
         output.SetFromVector(self._command.Eval(context)[2:])
 
     def _calc_command(self, context: Context, value: AbstractValue) -> None:
-        """[shoulder torque, boom force, push_x, push_y] of the free boom (zeros if none)."""
-        j = free_boom(self._stance.Eval(context))
-        if j is None:
+        """[shoulder torque, boom force, push_x, push_y] of the carried limb (zeros if none).
+        A boom in a release or attach ramp has its gripper on its anchor: its joints only hold
+        the share of its limb's weight (no PD: the gripper holds the tip, no push)."""
+        limb = self._free_limb.Eval(context)
+        j = int(limb[5])
+        if j < 0:
             value.set_value(np.zeros(4))
             return
         x = self._state.Eval(context)
+        if self._stance.Eval(context).attached[j]:
+            value.set_value(self._ramp_hold(x, j, float(limb[4]), float(limb[6])))
+            return
         q, v = x[:self._nq], x[self._nq:]
         b, vb = self._q_base, self._v_base
         phi, vx, vy, w = float(q[b + 2]), float(v[vb]), float(v[vb + 1]), float(v[vb + 2])
         c, s = math.cos(phi), math.sin(phi)
         sx, sy = self._shoulders[j]
         rx, ry = c * sx - s * sy, s * sx + c * sy
-        tx, ty, tvx, tvy, boom_mass = (float(a) for a in self._free_limb.Eval(context))
+        tx, ty, tvx, tvy, boom_mass = (float(a) for a in limb[:5])
         dx, dy = tx - float(q[b]) - rx, ty - float(q[b + 1]) - ry
         length_d = math.hypot(dx, dy)
         ux, uy = dx / length_d, dy / length_d
@@ -354,3 +376,18 @@ class LimbController(LeafSystem):
         across = pd_torque / length
         value.set_value(np.array([pd_torque + hold_torque, pd_force + hold_force,
                                   pd_force * ex - across * ey, pd_force * ey + across * ex]))
+
+    def _ramp_hold(self, x: np.ndarray, j: int, boom_mass: float, share: float) -> np.ndarray:
+        """The joints of boom j, gripper on its anchor, holding `share` of its gripper and the
+        tip half of its boom (the plant's boom mass, already the share's): the body then
+        carries that share of the limb's cantilevered weight, as the ramp's statics have it,
+        and the gripper's anchor the rest of the gripper's weight."""
+        q = x[:self._nq]
+        phi = float(q[self._q_base + 2])
+        theta, length = float(q[self._q_sh[j]]), float(q[self._q_boom[j]])
+        beta = phi + self._alpha[j] + theta
+        ex, ey = math.cos(beta), math.sin(beta)
+        gx, gy = self._g
+        m_tip = share * self._tip_mass[j] + 0.5 * boom_mass
+        return np.array([-length * m_tip * (ex * gy - ey * gx), -m_tip * (ex * gx + ey * gy),
+                         0.0, 0.0])

@@ -25,9 +25,13 @@ tension T is its prismatic joint's force -T, so the constraint turns it into the
 on the body at the shoulder. The free boom of a reach phase follows the planned tip
 (`LimbController`); its mass (boom_linear_density times its planned length, half at the tip
 and half at the shoulder: the weight and moments of the model's uniform boom) is updated every
-BOOM_MASS_PERIOD, and anchored booms are massless as in the model (the plant keeps its 10 g arm
-links and the grippers, whose weight the anchors carry). The monitor (`AnchorLoadMonitor`)
-reads each anchored boom's pull on its gripper from the plant's joint reaction forces.
+BOOM_MASS_PERIOD, and anchored booms are massless as in the model (the grippers' weight the
+anchors carry; the body is lighter by the 10 g arm links at its shoulders, so the robot weighs
+what the model's weighs). In a release or attach ramp (`planning.ramps`) the ramped boom's mass
+and the share of its limb its joints hold follow the plan's share every RAMP_MASS_PERIOD, and a
+gripper opens or closes only on a boom pulling at most RELEASE_TENSION (`_gripper_may_switch`).
+The monitor (`AnchorLoadMonitor`) reads each anchored boom's pull on its gripper from the
+plant's joint reaction forces.
 
 `plant="body"` is the body alone on a planar joint (continuous): `BoomForces` applies each
 attached boom's tension along its unit vector (as the generalized force of the planar joint)
@@ -48,6 +52,7 @@ context, set before each run, so one diagram serves every plan (including replan
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -58,6 +63,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder, EventStatus
 from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain
 
+from planning.ramps import RELEASE_TENSION
 from rb_drake import geometry
 from rb_drake.params import NUM_BOOMS
 from rb_drake.plant import ARM_MASS, BODY_THICKNESS, ReachBotPlant, build_plant
@@ -69,6 +75,7 @@ from systems.trajectory import PlanSource, PlanTrajectory, StrengthDraws
 SAMPLE_PERIOD = 0.02  # s: loggers and the failure check run at this period, on the same grid
 PLANT_TIME_STEP = 1e-2  # s, the full (discrete) plant's period
 BOOM_MASS_PERIOD = 0.1  # s, how often the free boom's mass follows its length (full plant)
+RAMP_MASS_PERIOD = 0.02  # s, how often a ramped boom's mass follows its share (full plant)
 
 
 class SimulationRecord(NamedTuple):
@@ -114,6 +121,8 @@ class SimulationRecord(NamedTuple):
     def implied_p_path(self) -> float:
         """The climb's success probability implied by the simulated forces: the product of the
         holdings' smallest P_i times (1 - attach_failure) per regrasp."""
+        if self.failure is not None and self.failure.cause == "handover":
+            return 0.0  # the climb could not go on
         af = self.plan.scenario.robot.attach_failure
         return float(np.prod(self.holding_minimum()) * (1.0 - af) ** self.plan.regrasps)
 
@@ -157,13 +166,18 @@ class ClimbSimulator:
         connect = builder.Connect
         self.robot_plant: ReachBotPlant | None = None
         if plant == "full":
-            rb = build_plant(robot, g, time_step, hold_tips=True, live_outputs=True,
+            # The plant's arm links (ARM_MASS each) ride on the shoulders, which the model's
+            # robot has not: its body is lighter by their mass, so the whole weighs what the
+            # model's robot weighs (and, shoulders symmetric about the centre, has its moment).
+            # A plant 2 % heavier than the plan loads every grasp 2 % past its plan.
+            light = dataclasses.replace(robot, body_mass=robot.body_mass - NUM_BOOMS * ARM_MASS)
+            rb = build_plant(light, g, time_step, hold_tips=True, live_outputs=True,
                              joint_limits=False)
             self.robot_plant = rb
             self.plant = builder.AddSystem(rb.plant)
             # the arm links ride on the shoulders: the body carries them
             self.controller = builder.AddSystem(TensionController(
-                robot, g, np.array([robot.body_mass + NUM_BOOMS * ARM_MASS] * 2 + [
+                light, g, np.array([robot.body_mass] * 2 + [
                     izz + ARM_MASS * float(np.sum(np.asarray(robot.shoulders) ** 2))]),
                 gains, ARM_MASS, fixed_boom_mass=True, tip_push=True))
             limb = builder.AddSystem(LimbController(rb, robot, g, gains))
@@ -173,7 +187,8 @@ class ClimbSimulator:
                 booms[joint.velocity_start(), i] = -1.0
             tensions = builder.AddSystem(MatrixGain(booms))
             total = builder.AddSystem(Adder(2, self.plant.num_velocities()))
-            self.monitor = builder.AddSystem(AnchorLoadMonitor(rb, robot))
+            self.monitor = builder.AddSystem(AnchorLoadMonitor(rb, robot, g))
+            connect(src.GetOutputPort("free_limb"), self.monitor.GetInputPort("free_limb"))
             full_state = self.plant.get_state_output_port()
             body_selector = builder.AddSystem(_selector(
                 self.plant, rb.base.position_start() + np.arange(3),
@@ -247,6 +262,9 @@ class ClimbSimulator:
         self.simulator.set_monitor(self._stop_on_failure)
         self.context = self.simulator.get_mutable_context()
         self._stop = True
+        self._step = time_step if plant == "full" else 1e-3  # the last step before a release
+        self._last_tension: np.ndarray | None = None
+        self._handover: Failure | None = None
 
     def _stop_on_failure(self, root: Context) -> EventStatus:
         if self._stop and self.failures.failed(self.failures.GetMyContextFromRoot(root)):
@@ -279,26 +297,78 @@ class ClimbSimulator:
         self._stop = stop_on_failure
         self.simulator.Initialize()
         ends = [p.end for p in plan.phases]
+        self._handover = None
         for k, end in enumerate(ends):
             if end > ctx.get_time():
+                if k > 0 and not self._gripper_may_switch(plan, k, before=True):
+                    break
                 if k > 0 and self.robot_plant is not None:
                     self._enter_phase(plan, k)
+                if k > 0 and not self._gripper_may_switch(plan, k, before=False):
+                    break
                 if not self._advance(plan, k, end):
                     break
             if progress is not None:
                 progress(k + 1, len(ends), ctx.get_time())
         return self._record(plan)
 
+    def _gripper_may_switch(self, plan: PlanTrajectory, k: int, before: bool) -> bool:
+        """Whether the gripper that opens (phase k a reach) or closes (phase k-1 a reach) at
+        phase k's start may do so: its boom's tension at most RELEASE_TENSION, the tension
+        applied over the last plant step before an opening (`before`), the one commanded for
+        the first step after a closing. Otherwise the gripper stays shut (open), the climb
+        cannot go on, and the run stops with a `handover` failure."""
+        phases = plan.phases
+        opening = phases[k].stance.free_boom is not None
+        closing = phases[k - 1].stance.free_boom is not None
+        if before and opening:
+            j, tension = phases[k].stance.free_boom, self._last_tension
+        elif not before and closing:
+            j = phases[k - 1].stance.free_boom
+            ctl = self.controller.GetMyContextFromRoot(self.context)
+            tension = self.controller.GetOutputPort("tension").Eval(ctl)
+        else:
+            return True
+        if tension is None or tension[j] <= RELEASE_TENSION:
+            return True
+        t = self.context.get_time()
+        anchor = (phases[k - 1] if opening else phases[k]).stance.ids[j] or ""
+        self._handover = Failure(t, k - 1 if opening else k, int(j), anchor, "handover",
+                                 float("nan"), float(tension[j]))
+        return False
+
     def _advance(self, plan: PlanTrajectory, k: int, end: float) -> bool:
+        """Advance to `end` (`_advance_to`), keeping, when a reach phase follows, the boom
+        tensions of the last plant step before it (`_gripper_may_switch`)."""
+        self._last_tension = None
+        if k + 1 < len(plan.phases) and plan.phases[k + 1].stance.free_boom is not None:
+            last = end - self._step
+            if last > self.context.get_time() + 1e-9 and not self._advance_to(plan, k, last):
+                return False
+            ctl = self.controller.GetMyContextFromRoot(self.context)
+            self._last_tension = self.controller.GetOutputPort("tension").Eval(ctl).copy()
+        return self._advance_to(plan, k, end)
+
+    def _advance_to(self, plan: PlanTrajectory, k: int, end: float) -> bool:
         """Advance to `end` (in phase k); False when a grasp failure stopped the run. With the
         full plant in a reach phase, in steps of BOOM_MASS_PERIOD, after each of which the
-        free boom's mass follows its planned length."""
-        free = self.robot_plant is not None and plan.phases[k].stance.free_boom is not None
+        free boom's mass follows its planned length; in a release or attach ramp in steps of
+        RAMP_MASS_PERIOD, the ramped boom's mass following its share."""
+        phase = plan.phases[k]
+        free = self.robot_plant is not None and phase.stance.free_boom is not None
+        ramps = phase.ramps if self.robot_plant is not None else ()
         while True:
             t = self.context.get_time()
-            if free:
+            in_ramp = any(t0 - 1e-9 <= t < t1 - 1e-9 for t0, t1, _ in ramps)
+            if free or in_ramp:
                 self._set_free_boom_mass(plan, k, t)
-            stop = min(end, t + BOOM_MASS_PERIOD) if free else end
+            stop = end
+            if free:
+                stop = min(end, t + BOOM_MASS_PERIOD)
+            elif in_ramp:
+                stop = min(end, t + RAMP_MASS_PERIOD)
+            elif ramps:  # to the next ramp's start
+                stop = min([end, *(t0 for t0, _, _ in ramps if t0 > t + 1e-9)])
             status = self.simulator.AdvanceTo(stop)
             if status.reason() == status.ReturnReason.kReachedTerminationCondition:
                 return False
@@ -310,9 +380,9 @@ class ClimbSimulator:
         """The free boom's mass at its planned length at t, half at its tip and half at its
         shoulder (the weight and moments of the uniform boom of the model); others massless."""
         masses = np.zeros(NUM_BOOMS)
-        j = plan.phases[k].stance.free_boom
-        if j is not None:
-            masses[j] = plan.free_boom_mass(t)
+        limb = plan.carried_limb(min(max(t, plan.phases[k].start), plan.phases[k].end - 1e-9))
+        if limb[5] >= 0:
+            masses[int(limb[5])] = limb[4]
         self.robot_plant.set_boom_masses(
             self.plant.GetMyMutableContextFromRoot(context or self.context), masses)
 
@@ -372,7 +442,7 @@ class ClimbSimulator:
         n = min(len(times), *(len(d) for d in data.values()))
         data = {name: d[:n] for name, d in data.items()}
         state = self.failures.state(self.failures.GetMyContextFromRoot(self.context))
-        failure = None
+        failure = self._handover
         if state[0] > 0:
             k, boom = int(state[2]), int(state[3])
             failure = Failure(float(state[1]), k, boom, plan.phases[k].stance.ids[boom] or "",

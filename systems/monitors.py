@@ -20,9 +20,10 @@ from rb_drake import geometry, grasp
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.plant import ReachBotPlant
 from rb_drake.stance import Stance
-from systems.trajectory import StrengthDraws
+from systems.trajectory import FREE_LIMB_SIZE, StrengthDraws
 
 GRASP_FIELDS = ("pull_angle", "force", "probability")  # the monitor's output, 4 values each
+SLACK_FORCE = 1e-3  # N: below this a grasp's pull angle is its boom's (its pull has no direction)
 
 
 def grasp_state(robot: RobotParams, pose: np.ndarray, stance: Stance,
@@ -69,12 +70,15 @@ class AnchorLoadMonitor(LeafSystem):
     anchor; the ball constraint's force would add the gripper's own weight and inertia, which
     the model (and the plan's P) leave out."""
 
-    def __init__(self, rb: ReachBotPlant, robot: RobotParams):
+    def __init__(self, rb: ReachBotPlant, robot: RobotParams, gravity: np.ndarray | None = None):
         super().__init__()
         plant = rb.plant
         self._robot = robot
+        self._tip_mass = [tip.default_mass() for tip in rb.tips]
+        self._g = np.zeros(2) if gravity is None else np.asarray(gravity, dtype=float)[:2]
         self._nq = plant.num_positions()
         self._q_base = rb.base.position_start()
+        self._pose_rows = self._q_base + np.arange(3)
         self._q_sh = [j.position_start() for j in rb.shoulders]
         self._joints = [int(j.index()) for j in rb.booms]
         self._state = self.DeclareVectorInputPort(
@@ -82,10 +86,13 @@ class AnchorLoadMonitor(LeafSystem):
         self._reaction = self.DeclareAbstractInputPort(
             "reaction_forces", plant.get_reaction_forces_output_port().Allocate())
         self._stance = self.DeclareAbstractInputPort("stance", AbstractValue.Make(None))
+        self._free_limb = self.DeclareVectorInputPort("free_limb", FREE_LIMB_SIZE)
         self.DeclareVectorOutputPort("grasp", 3 * NUM_BOOMS, self._calc)
 
     def pulls(self, context: Context) -> np.ndarray:
-        """The booms' pulls on their grippers in the world, (4, 2)."""
+        """The booms' pulls on their grippers in the world, (4, 2). A boom in a release or
+        attach ramp also holds a share of its gripper's weight (and its tip half of the boom,
+        `LimbController`): that part does not load the grasp, so it is taken off."""
         q = self._state.Eval(context)[:self._nq]
         reaction = self._reaction.Eval(context)
         phi = float(q[self._q_base + 2])
@@ -95,6 +102,10 @@ class AnchorLoadMonitor(LeafSystem):
             beta = phi + self._robot.shoulder_directions[i] + float(q[self._q_sh[i]])
             c, s = math.cos(beta), math.sin(beta)
             out[i] = (c * f[0] - s * f[1], s * f[0] + c * f[1])
+        limb = self._free_limb.Eval(context)
+        j = int(limb[5])
+        if j >= 0 and self._stance.Eval(context).attached[j]:
+            out[j] += (float(limb[6]) * self._tip_mass[j] + 0.5 * float(limb[4])) * self._g
         return out
 
     def _calc(self, context: Context, output: BasicVector) -> None:
@@ -105,6 +116,13 @@ class AnchorLoadMonitor(LeafSystem):
             direction = pull / force[:, None]
         normals = np.where(stance.attached[:, None], stance.normals, 1.0)
         psi = geometry.pull_angles(-direction, normals)  # pull_angles takes shoulder -> anchor
+        # A slack boom's pull (a ramp's end) has no direction to speak of: it is the boom's
+        slack = stance.attached & (force <= SLACK_FORCE)
+        if slack.any():
+            geo = geometry.boom_geometry(self._robot, self._state.Eval(context)[self._pose_rows],
+                                         np.where(stance.attached[:, None], stance.positions,
+                                                  0.0))
+            psi = np.where(slack, geometry.pull_angles(geo.u[0], normals), psi)
         p = grasp.prob(force, psi, stance.f_normal, stance.f_lateral, stance.sigma_normal,
                        stance.sigma_lateral)
         out = np.concatenate([psi, force, p])
@@ -117,7 +135,8 @@ class Cause:
 
     OVERLOAD = 1  # the force exceeded the holding's drawn limit (or |psi| >= pi/2)
     ATTACH = 2    # a new grasp did not take hold on contact
-    NAMES: ClassVar[dict[int, str]] = {1: "overload", 2: "attach"}
+    HANDOVER = 3  # a gripper had to open or close on a loaded boom: it did not, the climb stops
+    NAMES: ClassVar[dict[int, str]] = {1: "overload", 2: "attach", 3: "handover"}
 
 
 FAILURE_FIELDS = ("failed", "time", "phase", "boom", "cause", "probability", "draw",

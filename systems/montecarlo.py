@@ -46,6 +46,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from planning.plan import score_plan
+from planning.ramps import add_ramps
 from rb_drake import grasp
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -116,13 +117,20 @@ def first_failures(record: SimulationRecord, quantiles: np.ndarray,
         if hold.attach:
             failed = attach_draws[:, h] < af
             key[failed, h] = rows[0] * 8.0 + hold.boom
+    # A run the simulator stopped at a gripper that could not open or close unloaded
+    # (`ClimbSimulator._gripper_may_switch`) fails every trial that gets that far.
+    stopped = record.failure is not None and record.failure.cause == "handover"
+    last = (len(record.times) - 1) * 8.0 + 7.0 if stopped else np.inf
+    key = np.column_stack([key, np.full(n, last)])
     h = np.argmin(key, axis=1)
     best = key[np.arange(n), h]
     failed = np.isfinite(best)
     best = np.where(failed, best, 0.0)
     sample = np.where(failed, best // 8, -1).astype(int)
+    handover = failed & (h == len(plan.holdings))
     cause = np.where(failed, np.where((best % 8) >= 4, Cause.OVERLOAD, Cause.ATTACH), 0)
-    return FirstFailures(sample, np.where(failed, h, -1), cause)
+    cause = np.where(handover, Cause.HANDOVER, cause)
+    return FirstFailures(sample, np.where(failed & ~handover, h, -1), cause)
 
 
 class TrialFailure(NamedTuple):
@@ -145,6 +153,8 @@ class TrialFailure(NamedTuple):
         why = (f"force {self.force:.2f} N over its drawn limit "
                f"{self.limit:.2f} N" if self.cause == "overload" and self.limit is not None
                else "pulled at |psi| >= 90 deg" if self.cause == "overload"
+               else f"its boom still pulled {self.force:.2f} N: the gripper stayed as it was"
+               if self.cause == "handover"
                else "the new grasp did not take hold")
         return (f"phase {self.phase} ({self.kind}), t = {self.time:.2f} s, boom {self.boom} on "
                 f"{self.anchor}: {self.cause} ({why}; P = {self.probability:.4f})")
@@ -155,6 +165,12 @@ def describe_failures(record: SimulationRecord, first: FirstFailures, quantiles:
     out = []
     for trial in np.flatnonzero(first.sample >= 0):
         s, h = int(first.sample[trial]), int(first.holding[trial])
+        if first.cause[trial] == Cause.HANDOVER:
+            stop = record.failure
+            out.append(TrialFailure(
+                int(trial), offset + stop.time, stop.phase, record.plan.phases[stop.phase].kind,
+                stop.boom, stop.anchor, "handover", 1.0, 0.0, stop.draw, None, 0.0))
+            continue
         hold = record.plan.holdings[h]
         attach = first.cause[trial] == Cause.ATTACH
         u = float(attach_draws[trial, h] if attach else quantiles[trial, h])
@@ -252,6 +268,7 @@ def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]],
     # The continuation starts where the grasp failed, not at the scenario's start.
     held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
     plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
+    plan = add_ramps(plan, request.scenario)  # the new phases' attach and release
     score_plan(plan, request.scenario.robot.attach_failure)
     return plan
 
@@ -382,7 +399,8 @@ class MonteCarloResult(NamedTuple):
             "ci95": list(self.ci95), "p_path": self.p_path, "p_sim": self.p_sim,
             "seed": self.seed,
             "failures": {"attach": causes.get("attach", 0),
-                         "overload": causes.get("overload", 0)},
+                         "overload": causes.get("overload", 0),
+                         "handover": causes.get("handover", 0)},
             "failure_sites": self.failure_sites(),
             "replanning": None,
         }
@@ -436,6 +454,8 @@ class _Replanning:
         s, h, cause = (int(first.sample[trial]), int(first.holding[trial]),
                        Cause.NAMES[int(first.cause[trial])])
         for depth in range(self.max_replans):
+            if h < 0:  # a gripper that could not hand its load over: no state to replan from
+                return "handover" if depth == 0 else "failed again, handover"
             hold = record.plan.holdings[h]
             new, why = self._replanned(record, s, hold.boom, hold.anchor, cause)
             if new is None:

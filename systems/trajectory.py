@@ -7,6 +7,7 @@ simulation cannot run raises `PlanError`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
@@ -58,6 +59,11 @@ class PhaseTrajectory(NamedTuple):
     tension: PiecewisePolynomial       # (4,) feed-forward, 0 for the free boom
     free_tip: PiecewisePolynomial | None  # (2,) in a reach phase
     free_tip_rate: PiecewisePolynomial | None = None  # its derivative
+    # (4,) the share of each boom's limb its shoulder carries: 1 for the free boom, between 0
+    # and 1 for a boom in a release or attach ramp (planning.ramps), else 0
+    share: PiecewisePolynomial | None = None
+    ramps: tuple = ()  # (t0, t1, boom) of each release or attach ramp in the phase
+    grid: tuple | None = None  # the tensions' grid and values, and what refine_tensions needs
 
 
 def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
@@ -93,6 +99,32 @@ def _smooth(times: np.ndarray, values: np.ndarray, rest: bool) -> PiecewisePolyn
     if len(times) < 3:
         return _hold(times, values)
     return PiecewisePolynomial.CubicShapePreserving(times, values.T, rest)
+
+
+def _ramp_count(steps: list[dict[str, Any]], reverse: bool) -> int:
+    """How many steps at the start (end) of a phase are ramp steps."""
+    n = 0
+    for step in (reversed(steps) if reverse else steps):
+        if "ramp" not in step:
+            break
+        n += 1
+    return n
+
+
+def _ramp_grid(times: np.ndarray, tensions: np.ndarray, shares: np.ndarray,
+               resample: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ramp's tensions and shares between its steps, each interval at minimum-jerk timing
+    (the load changes smoothly, at rest at every step): every point lies on the segment
+    between two steps, where statics hold exactly and no grasp's P falls below the ends'."""
+    if resample is None:
+        return times, tensions, shares
+    t_out, f_out, s_out = [times[:1]], [tensions[:1]], [shares[:1]]
+    for n in range(len(times) - 1):
+        t, prog, _ = rest_to_rest(times[n], times[n + 1], resample)
+        t_out.append(t[1:])
+        f_out.append(tensions[n] + prog[1:, None] * (tensions[n + 1] - tensions[n]))
+        s_out.append(shares[n] + prog[1:, None] * (shares[n + 1] - shares[n]))
+    return np.concatenate(t_out), np.vstack(f_out), np.vstack(s_out)
 
 
 def rest_to_rest(t0: float, t1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,6 +197,8 @@ class PlanTrajectory:
             for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
                 rates[n] = estimate.value(times[n]).ravel()
             self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+        if resample is not None:
+            self.phases = [self._refine_tensions(p) for p in self.phases]
         self.velocity = self.pose.derivative(1)
         self.acceleration = self.velocity.derivative(1)
         self.starts = np.array([p.start for p in self.phases])
@@ -193,6 +227,7 @@ class PlanTrajectory:
             raise PlanError(f"{where}.steps[0].t",
                             f"starts at {times[0]} but the phase before ends at {previous_end}")
         tensions = np.zeros((len(steps), NUM_BOOMS))
+        shares = np.zeros((len(steps), NUM_BOOMS))
         for n, s in enumerate(steps):
             for i in range(NUM_BOOMS):
                 if stance.attached[i]:
@@ -200,57 +235,168 @@ class PlanTrajectory:
                         raise PlanError(f"{where}.steps[{n}].tension[{i}]",
                                         "an attached boom needs a tension")
                     tensions[n, i] = s["tension"][i]
+            ramp = s.get("ramp")
+            if ramp is not None:
+                j = int(ramp["boom"])
+                if not stance.attached[j]:
+                    raise PlanError(f"{where}.steps[{n}].ramp",
+                                    f"a ramp of boom {j}, which is free here")
+                shares[n, j] = float(ramp["share"])
         poses = np.array([s["pose"] for s in steps], dtype=float)
         tips = None
         if stance.free_boom is not None:
             if any("free_tip" not in s for s in steps):
                 raise PlanError(f"{where}.steps", "a phase with a free boom needs free_tip")
             tips = np.array([s["free_tip"] for s in steps], dtype=float)
+            shares[:, stance.free_boom] = 1.0
         start, end = float(times[0]), float(times[-1])
-        if len(steps) > 3 and resample is not None:
-            times = _finish_over_dwell(times, poses, tips)
-        if len(steps) != 2 or resample is None:
-            free_tip = None
-            if tips is not None:
-                free_tip = _hold(times, tips) if resample is None else _smooth(times, tips, True)
-            traj = PhaseTrajectory(phase["kind"], start, end, stance, _hold(times, tensions),
-                                   free_tip, _rate(free_tip))
-            return traj, times, poses, np.full_like(poses, np.nan)
-        t, prog, rate = rest_to_rest(times[0], times[1], resample)
-        line = poses[0] + prog[:, None] * (poses[1] - poses[0])
+        # the ramps at either end (planning.ramps), the motion between them
+        lead = _ramp_count(steps, reverse=False)
+        trail = min(_ramp_count(steps, reverse=True), len(steps) - lead - 1)
+        a, b = lead, len(steps) - trail
+        sections_t, sections_f, sections_s = [], [], []
+        knots_t, knots_q, knots_v = [], [], []
+        if lead:
+            t, f, sh = _ramp_grid(times[:a + 1], tensions[:a + 1], shares[:a + 1], resample)
+            sections_t.append(t[:-1])
+            sections_f.append(f[:-1])
+            sections_s.append(sh[:-1])
+            knots_t.append(times[:a])
+            knots_q.append(poses[:a])
+            knots_v.append(np.zeros((a, 3)))
+        m_times, m_poses = times[a:b], poses[a:b]
+        m_tips = None if tips is None else tips[a:b]
         free_tip = None
-        if tips is not None:
-            delta = tips[1] - tips[0]
-            free_tip = PiecewisePolynomial.CubicHermite(
-                t, (tips[0] + prog[:, None] * delta).T, (rate[:, None] * delta).T)
-        ff = tensions[0] + prog[:, None] * (tensions[1] - tensions[0])
-        inner = slice(1, len(t) - 1)
-        grid_tips = None if tips is None else tips[0] + prog[inner, None] * (tips[1] - tips[0])
-        alloc = allocate(scn.robot, scn.gravity_vector, line[inner], stance, grid_tips)
-        ok = np.flatnonzero(alloc.statics_ok)
-        ff[1 + ok] = np.where(stance.attached, np.nan_to_num(alloc.tensions[ok]), 0.0)
-        traj = PhaseTrajectory(phase["kind"], start, end, stance, _hold(t, ff),
-                               free_tip, _rate(free_tip))
-        return traj, t, line, rate[:, None] * (poses[1] - poses[0])
+        if len(m_times) > 3 and resample is not None:
+            m_times = _finish_over_dwell(m_times, m_poses, m_tips)
+        refine = None
+        if len(m_times) != 2 or resample is None:
+            if m_tips is not None:
+                free_tip = (_hold(m_times, m_tips) if resample is None
+                            else _smooth(m_times, m_tips, True))
+            if resample is None or len(m_times) < 2:
+                sections_t.append(m_times)
+                sections_f.append(tensions[a:b])
+                sections_s.append(shares[a:b])
+            else:  # a dense grid, its tensions made once the body's spline exists (refine)
+                dense = np.concatenate([m_times[:1]] + [
+                    rest_to_rest(t0, t1, resample)[0][1:]
+                    for t0, t1 in itertools.pairwise(m_times)])
+                start_row = sum(len(x) for x in sections_t)
+                sections_t.append(dense)
+                sections_f.append(_hold(m_times, tensions[a:b]).vector_values(dense).T)
+                sections_s.append(np.repeat(shares[a:a + 1], len(dense), axis=0))
+                refine = (start_row, m_times, tensions[a:b])
+            knots_t.append(m_times)
+            knots_q.append(m_poses)
+            knots_v.append(np.full_like(m_poses, np.nan))
+        else:
+            t, prog, rate = rest_to_rest(m_times[0], m_times[1], resample)
+            line = m_poses[0] + prog[:, None] * (m_poses[1] - m_poses[0])
+            if m_tips is not None:
+                delta = m_tips[1] - m_tips[0]
+                free_tip = PiecewisePolynomial.CubicHermite(
+                    t, (m_tips[0] + prog[:, None] * delta).T, (rate[:, None] * delta).T)
+            ff = tensions[a] + prog[:, None] * (tensions[a + 1] - tensions[a])
+            inner = slice(1, len(t) - 1)
+            grid_tips = (None if m_tips is None
+                         else m_tips[0] + prog[inner, None] * (m_tips[1] - m_tips[0]))
+            alloc = allocate(scn.robot, scn.gravity_vector, line[inner], stance, grid_tips)
+            ok = np.flatnonzero(alloc.statics_ok)
+            ff[1 + ok] = np.where(stance.attached, np.nan_to_num(alloc.tensions[ok]), 0.0)
+            sections_t.append(t)
+            sections_f.append(ff)
+            sections_s.append(np.repeat(shares[a:a + 1], len(t), axis=0))
+            knots_t.append(t)
+            knots_q.append(line)
+            knots_v.append(rate[:, None] * (m_poses[1] - m_poses[0]))
+        if trail:
+            t, f, sh = _ramp_grid(times[b - 1:], tensions[b - 1:], shares[b - 1:], resample)
+            sections_t.append(t[1:])
+            sections_f.append(f[1:])
+            sections_s.append(sh[1:])
+            knots_t.append(times[b:])
+            knots_q.append(poses[b:])
+            knots_v.append(np.zeros((trail, 3)))
+        grid = np.concatenate(sections_t)
+        ramps = []
+        if lead:
+            ramps.append((float(times[0]), float(times[a]), int(steps[0]["ramp"]["boom"])))
+        if trail:
+            ramps.append((float(times[b - 1]), end, int(steps[-1]["ramp"]["boom"])))
+        traj = PhaseTrajectory(phase["kind"], start, end, stance,
+                               _hold(grid, np.vstack(sections_f)), free_tip, _rate(free_tip),
+                               _hold(grid, np.vstack(sections_s)), tuple(ramps),
+                               (grid, np.vstack(sections_f), refine))
+        return (traj, np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v))
+
+    def _refine_tensions(self, phase: PhaseTrajectory) -> PhaseTrajectory:
+        """A trajectory phase's feed-forward between its steps: the most robust allocation at
+        the body's spline (and the free tip) there, plus the plan's own departure from that
+        allocation interpolated linearly between the steps, so the plan's tensions are met at
+        every step. Linear interpolation of the steps' tensions alone is out of equilibrium
+        between them, and the controller's correction nearest it can load one grasp well past
+        both ends where a step turns the body (by 0.7 N and 0.007 in P on a shaft plan)."""
+        grid, values, refine = phase.grid
+        if refine is None:
+            return phase
+        row, times, tensions = refine
+        n = len(np.flatnonzero((grid >= times[0] - 1e-12) & (grid <= times[-1] + 1e-12)))
+        t = grid[row:row + n]
+        poses = self.pose.vector_values(t).T
+        tips = None if phase.free_tip is None else phase.free_tip.vector_values(t).T
+        scn = self.scenario
+        alloc = allocate(scn.robot, scn.gravity_vector, poses, phase.stance, tips)
+        f = np.where(phase.stance.attached, np.nan_to_num(alloc.tensions), 0.0)
+        at_steps = np.searchsorted(t, times - 1e-9)
+        ok = alloc.statics_ok[at_steps].all() and alloc.statics_ok.all()
+        if not ok:  # keep the linear interpolation where the allocation fails
+            return phase
+        offset = tensions - f[at_steps]
+        f = f + _hold(times, offset).vector_values(t).T
+        values = values.copy()
+        values[row:row + n] = np.where(phase.stance.attached, f, 0.0)
+        return phase._replace(tension=_hold(grid, values))
 
     @property
     def end_time(self) -> float:
         return self.phases[-1].end
 
-    def free_boom_mass(self, t: float) -> float:
-        """The free boom's mass at time t (0 when none): boom_linear_density times its planned
-        length, shoulder (on the planned pose) to the planned tip."""
+    def carried_limb(self, t: float) -> np.ndarray:
+        """The limb a shoulder carries at time t, FREE_LIMB_FIELDS: the free boom's (its planned
+        tip and rate) or, in a release or attach ramp, the ramped boom's (its gripper on its
+        anchor, at rest); `boom_mass` is boom_linear_density times its planned length (shoulder
+        on the planned pose to the tip) times the share its shoulder carries. Zeros and boom -1
+        when no shoulder carries a limb."""
         phase = self.phase_at(t)
+        out = np.zeros(FREE_LIMB_SIZE)
+        out[5] = -1.0
+        share = phase.share.value(t).ravel() if phase.share is not None else np.zeros(4)
         j = free_boom(phase.stance)
-        if j is None:
-            return 0.0
+        if j is not None:
+            tip = phase.free_tip.value(t).ravel()
+            out[2:4] = phase.free_tip_rate.value(t).ravel()
+            s = 1.0
+        else:
+            j = int(np.argmax(share))
+            s = float(share[j])
+            if s <= 0.0:
+                return out
+            tip = phase.stance.positions[j]
         robot = self.scenario.robot
         x, y, phi = (float(v) for v in self.pose.value(t).ravel())
         sx, sy = robot.shoulders[j]
-        tx, ty = (float(v) for v in phase.free_tip.value(t).ravel())
-        c, s = math.cos(phi), math.sin(phi)
-        return robot.boom_linear_density * math.hypot(tx - x - c * sx + s * sy,
-                                                      ty - y - s * sx - c * sy)
+        tx, ty = float(tip[0]), float(tip[1])
+        c, si = math.cos(phi), math.sin(phi)
+        length = math.hypot(tx - x - c * sx + si * sy, ty - y - si * sx - c * sy)
+        out[0:2] = tx, ty
+        out[4] = s * robot.boom_linear_density * length
+        out[5], out[6] = j, s
+        return out
+
+    def free_boom_mass(self, t: float) -> float:
+        """The carried limb's boom mass at time t (`carried_limb`; 0 when none)."""
+        return float(self.carried_limb(t)[4])
 
     def phase_index(self, t: float) -> int:
         return max(0, int(np.searchsorted(self.starts, t, side="right")) - 1)
@@ -320,9 +466,10 @@ class StrengthDraws(NamedTuple):
 
 
 _PLAN_PLACEHOLDER = AbstractValue.Make(None)
-# PlanSource's free_limb output: the planned free tip (x, y), its velocity and the free boom's
-# mass in the plant (zeros when every boom is attached)
-FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass")
+# PlanSource's free_limb output: the limb a shoulder carries (`PlanTrajectory.carried_limb`):
+# the planned free tip (x, y), its velocity, the boom's mass in the plant, the boom (-1: none)
+# and the share of the limb its shoulder carries (1 for a free boom, less in a ramp)
+FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass", "boom", "share")
 FREE_LIMB_SIZE = len(FREE_LIMB_FIELDS)
 
 
@@ -363,14 +510,7 @@ class PlanSource(LeafSystem):
         output.SetFromVector(self._phase(context).tension.value(context.get_time()).ravel())
 
     def _calc_free_limb(self, context: Context, output: BasicVector) -> None:
-        plan, t = self.plan(context), context.get_time()
-        phase = plan.phase_at(t)
-        if phase.free_tip is None:
-            output.SetFromVector(np.zeros(FREE_LIMB_SIZE))
-            return
-        output.SetFromVector(np.concatenate([phase.free_tip.value(t).ravel(),
-                                             phase.free_tip_rate.value(t).ravel(),
-                                             [plan.free_boom_mass(t)]]))
+        output.SetFromVector(self.plan(context).carried_limb(context.get_time()))
 
     def _calc_phase(self, context: Context, output: BasicVector) -> None:
         output.SetAtIndex(0, self.plan(context).phase_index(context.get_time()))

@@ -191,3 +191,32 @@ def test_rbp_experiment_command_runs_the_script(tmp_path: Path,
     for name in EXPERIMENTS:
         module = ROOT / "experiments" / f"{name}.py"
         assert "def main(" in module.read_text(), f"{module}: no main()"
+
+
+def test_calibration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                     capsys: pytest.CaptureFixture[str]) -> None:
+    """The calibration experiment on one short cave (the set patched in): a row per plan whose
+    interval holds its rate, `calibrated` as defined, the figure, and a second run that
+    resumes from the trial records; an unknown cave is refused with exit status 2."""
+    import experiments.calibration as calibration
+
+    monkeypatch.setattr(calibration, "CAVES", {"short": {"kind": "shaft", "seed": 2,
+                                                         "length": [3.0, 3.2]}})
+    out = tmp_path / "cal"
+    args = ["--runs", "200", "--workers", "1", "--out", str(out)]
+    assert calibration.main(args) == 0
+    result = json.loads((out / "results.json").read_text())
+    assert_png(out / "calibration.png")
+    assert len(result["plans"]) + len(result["failed_plans"]) == 1, result
+    for row in result["plans"]:
+        lo, hi = row["ci95"]
+        assert row["runs"] == 200 and lo <= row["rate"] <= hi, row
+        expected = lo <= row["p_path"] <= hi and abs(row["p_sim"] - row["p_path"]) <= 0.005
+        assert row["calibrated"] == expected, row
+        assert row["verified"], f"the plan passes rbp check: {row}"
+    capsys.readouterr()
+    assert calibration.main(args) == 0
+    assert "already finished" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as bad:
+        calibration.main([*args, "--caves", "nowhere"])
+    assert bad.value.code == 2

@@ -64,8 +64,10 @@ def trial_cave(params: dict[str, Any]):
 # The footstep planners an experiment can compare: rbp (the default, complete search with its
 # expansion budget), rbp-sampled (the sampling search of commit 36a65ef, for before/after
 # ratios in one run), oracle (the complete search without an expansion budget, stopped only
-# by --oracle-time: it labels each cave route / noroute / undecided) and the naive baseline.
+# by --oracle-time: it labels each cave route / noroute / undecided) and the naive baseline;
+# also rbp-hybrid (sampled for 150 expansions, then complete: the default before this one).
 PLANNERS = ("rbp", "rbp-sampled", "oracle", "naive")
+OTHER_PLANNERS = ("rbp-hybrid",)
 ORACLE_SECONDS = 600.0
 
 
@@ -74,6 +76,8 @@ def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = O
 
     if planner == "rbp-sampled":
         return FootstepConfig(search="sampled", max_expansions=max_expansions)
+    if planner == "rbp-hybrid":
+        return FootstepConfig(search="hybrid", max_expansions=max_expansions)
     if planner == "oracle":
         return FootstepConfig(max_expansions=None, time_limit=oracle_seconds)
     return FootstepConfig(max_expansions=max_expansions)
@@ -335,7 +339,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
     add_cave_arguments(parser)
     parser.add_argument("--planners", default=",".join(PLANNERS),
-                        help="comma-separated planners among " + ",".join(PLANNERS) +
+                        help="comma-separated planners among "
+                        + ",".join(PLANNERS + OTHER_PLANNERS) +
                         " (default all; rbp-sampled is the search before the complete one, "
                         "oracle labels each cave)")
     parser.add_argument("--motion", action="store_true",
@@ -347,8 +352,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     args = parser.parse_args(argv)
     check_cave_arguments(parser, args)
     planners = [p for p in args.planners.split(",") if p]
-    if not planners or not set(planners) <= set(PLANNERS):
-        parser.error(f"--planners: choose from {','.join(PLANNERS)}, got {args.planners!r}")
+    if not planners or not set(planners) <= set(PLANNERS + OTHER_PLANNERS):
+        parser.error(f"--planners: choose from {','.join(PLANNERS + OTHER_PLANNERS)}, got "
+                     f"{args.planners!r}")
     if not args.oracle_time > 0:
         parser.error(f"--oracle-time: must be positive, got {args.oracle_time}")
 

@@ -37,7 +37,7 @@ class PipelineConfig:
     scp: ScpConfig = dataclasses.field(default_factory=ScpConfig)
     dt: float = 0.5        # s between trajectory steps: with 5 cm steps, 0.1 m/s
     optimise: bool = True  # False: the seeds are the plan (no SCP)
-    motion_retries: int = 3  # footstep searches again, each without a move whose motion failed
+    motion_retries: int = 10  # footstep searches again, each without a move whose motion failed
 
 
 class PhaseMotion(NamedTuple):

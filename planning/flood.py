@@ -22,7 +22,13 @@ from __future__ import annotations
 import numpy as np
 
 from planning.lattice import LatticeConfig
-from rb_drake.feasibility_kernel import PackedStances, _packed_rock, _robot_params, flood_kernel
+from rb_drake.feasibility_kernel import (
+    ALL_SEGMENTS,
+    PackedStances,
+    _packed_rock,
+    _robot_params,
+    flood_kernel,
+)
 from rb_drake.scenario import Scenario
 
 
@@ -49,4 +55,5 @@ def grow_component(scn: Scenario, stances: PackedStances, seed: np.ndarray,
     prm = _robot_params(scn.robot, scn.gravity_vector)
     return flood_kernel(seed, np.ascontiguousarray(box), float(cfg.position_step),
                          float(cfg.angle_step), int(n), prm, *stances,
-                         np.full((1, 2), np.nan), edges, owner, vertices, bool(ignore_grasps))
+                         np.full((1, 2), np.nan), edges, owner, vertices, bool(ignore_grasps),
+                         True, int(ALL_SEGMENTS))

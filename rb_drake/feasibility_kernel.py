@@ -943,10 +943,12 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 @njit(cache=True, error_model="numpy")
 def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, f_lateral,
                   sigma_normal, sigma_lateral, attached, tips, edges, owner, vertices,
-                  ignore_grasps):  # pragma: no cover - compiled
+                  ignore_grasps, decide_only, collide):  # pragma: no cover - compiled
     """The lattice poses 26-connected to `seed` that are feasible in stance row 0, inside
     `box` (planning.flood.grow_component): (indices, robustness, indices scored infeasible).
-    Waves of poses, each scored in one `_score_kernel` call (decide_only)."""
+    Waves of poses, each scored in one `_score_kernel` call (decide_only). `decide_only` (True)
+    and `collide` (ALL_SEGMENTS) come in as arguments, not literals, so that `_score_kernel` is
+    called with the types Python calls it with: one compilation serves both."""
     i0, k0, m0 = box[0, 0], box[0, 1], -(n_phi // 2)
     ni, nk = box[1, 0] - i0 + 1, box[1, 1] - k0 + 1
     state = np.zeros((ni, nk, n_phi), dtype=np.int8)  # 0 unseen, 1 queued
@@ -972,7 +974,7 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
         r = np.empty(n_wave)
         _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                       sigma_lateral, attached, tips, rows, zeros, zeros, edges, owner, vertices,
-                      ignore_grasps, True, ALL_SEGMENTS, reason, r, np.empty((n_wave, 4)),
+                      ignore_grasps, decide_only, collide, reason, r, np.empty((n_wave, 4)),
                       np.empty((n_wave, 4)), np.empty(n_wave))
         n_next = 0
         for w in range(n_wave):

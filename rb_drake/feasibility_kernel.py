@@ -659,6 +659,17 @@ def _body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_h
 
 
 @njit(cache=True, error_model="numpy")
+def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
+    """decide_only: row `row` is infeasible for `code`; nothing else of it is computed."""
+    reason_out[row] = code
+    r_out[row] = -math.inf
+    for i in range(4):
+        lp_out[row, i] = math.nan
+        f_out[row, i] = math.nan
+    v_out[row] = math.nan
+
+
+@njit(cache=True, error_model="numpy")
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
                   vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
@@ -777,12 +788,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                                    prm[_CLEARANCE], edges, owner, near_hit, near_ray, parity,
                                    vertices, ALL_SEGMENTS)
         if decide_only and code != 0:
-            reason_out[row] = code
-            r_out[row] = -math.inf
-            for i in range(4):
-                lp_out[row, i] = math.nan
-                f_out[row, i] = math.nan
-            v_out[row] = math.nan
+            _reject(row, code, reason_out, r_out, lp_out, f_out, v_out)
             continue
         # -- force allocation (statics.allocate, statics._finish)
         if free >= 0:
@@ -836,12 +842,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                     code = _STATICS
                     break
         if decide_only and code != 0:
-            reason_out[row] = code
-            r_out[row] = -math.inf
-            for i in range(4):
-                lp_out[row, i] = math.nan
-                f_out[row, i] = math.nan
-            v_out[row] = math.nan
+            _reject(row, code, reason_out, r_out, lp_out, f_out, v_out)
             continue
         residual = 0.0
         for r in range(3):

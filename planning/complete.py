@@ -56,7 +56,7 @@ ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
 class LatticeMemo:
     """Stance components and transitions already decided on one scenario (same lattice)."""
 
-    lattices: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
+    components: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
     transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
     config: LatticeConfig | None = None  # the lattice all of it was decided on
 
@@ -89,11 +89,11 @@ class CompleteResult(NamedTuple):
     alternatives: list[np.ndarray] | None = None
 
 
-def _lattice(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
-             ignore_grasps: bool) -> StanceComponents:
-    hit = memo.lattices.get(stance)
+def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
+                       ignore_grasps: bool) -> StanceComponents:
+    hit = memo.components.get(stance)
     if hit is None:
-        hit = memo.lattices[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)
+        hit = memo.components[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)
     return hit
 
 
@@ -259,7 +259,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     goal = np.asarray(scn.goal_position, dtype=float)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
-    start_lat = _lattice(scn, memo, start, cfg, ignore_grasps)
+    start_lat = _stance_components(scn, memo, start, cfg, ignore_grasps)
     joined = start_components(scn, start_lat, cfg)
     graph = nx.DiGraph()
     tested = 0
@@ -320,9 +320,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
-                lat = memo.lattices[stance].components[comp]
+                lat = memo.components[stance].components[comp]
                 rows = move_rows(scn, lat, j, anchor)
-                known = memo.lattices.get(child)
+                known = memo.components.get(child)
                 if known is not None and all(
                         c == INFEASIBLE or (c >= 0 and (child, int(c)) in closed)
                         for c in np.unique(known.known_component(lat.keys[rows]))):
@@ -340,7 +340,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             continue
         (child, comp), move, pose, p4, tr, g_parent, alternatives = payload
         if comp is None:  # entered through a move: split among the child's components
-            comps = _lattice(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
+            comps = _stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             if (comps < 0).any():  # the kernel is deterministic: never expected
                 raise RuntimeError("a transition pose is missing from the new stance's lattice")
             hit = np.unique(comps)
@@ -363,7 +363,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         nearest = min(nearest, distance(stance))
         if progress is not None:
             progress(expansions, tested, nearest)
-        lat = memo.lattices[stance].components[comp]
+        lat = memo.components[stance].components[comp]
         near_goal = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
                                    <= scn.goal_tolerance)
         if len(near_goal):

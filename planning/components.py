@@ -34,16 +34,11 @@ class Component(NamedTuple):
     lattice: LatticeConfig
 
     @property
-    def idx(self) -> np.ndarray:
-        """(F, 3) lattice indices."""
-        return unpack(self.keys, self.lattice.angle_count)
-
-    @property
     def poses(self) -> np.ndarray:
         """(F, 3) body poses."""
-        return poses_of(self.idx, self.lattice)
+        return self.poses_at(slice(None))
 
-    def poses_at(self, rows: np.ndarray) -> np.ndarray:
+    def poses_at(self, rows: np.ndarray | slice) -> np.ndarray:
         """The body poses of `rows`."""
         return poses_of(unpack(self.keys[rows], self.lattice.angle_count), self.lattice)
 
@@ -64,7 +59,6 @@ class StanceComponents:
         self.components: list[Component] = []
         self._keys = np.zeros(0, dtype=np.int64)    # every pose scored, sorted
         self._labels = np.zeros(0, dtype=np.int32)  # its component (INFEASIBLE if none)
-        self.scored = 0                             # poses scored
 
     def component_of(self, keys: np.ndarray) -> np.ndarray:
         """The component holding each lattice key (INFEASIBLE where the pose is infeasible),
@@ -89,7 +83,6 @@ class StanceComponents:
         seed = unpack(np.array([key]), self._cfg.angle_count)[0]
         idx, r, infeasible = grow_component(self._scn, self._stances, seed, self._box,
                                             self._cfg, self._ignore)
-        self.scored += len(idx) + len(infeasible)
         bad = pack(infeasible, self._cfg.angle_count)
         if not len(idx):
             self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int32))

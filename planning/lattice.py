@@ -13,6 +13,10 @@ feasibility kernel, and keeps the feasible ones with:
 - the connected component each belongs to (26-neighbours on the lattice): the body can move
   between two poses of one component through feasible poses, one lattice step at a time.
 Nothing here samples: a lattice pose is in the set exactly when the kernel finds it feasible.
+
+The search itself grows only the components it enters (`planning.components`, by flood fill);
+`stance_lattice`, which scores the whole reachable lattice, is the reference the tests hold
+those components equal to.
 """
 
 from __future__ import annotations

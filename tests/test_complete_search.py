@@ -139,7 +139,7 @@ def test_grown_components_are_the_lattice_components(cave: str) -> None:
     scn = load_scenario(bundled_caves()[cave])
     memo = LatticeMemo()
     complete_search(scn, COARSE, max_expansions=6, memo=memo)
-    stances = list(memo.lattices)
+    stances = list(memo.components)
     compared = 0
     for stance in stances:
         lat = stance_lattice(scn, stance, COARSE)

@@ -17,7 +17,7 @@ import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
-from rb_drake.scenario import ScenarioError
+from rb_drake.scenario import ScenarioError, read_yaml_file
 
 T = TypeVar("T")
 
@@ -127,21 +127,5 @@ def _describe(value: Any) -> str:
 
 def load_config(path: str | Path, cls: type[T], base: T | None = None) -> T:
     """Read a YAML configuration file on top of `base`; raises ConfigError."""
-    import yaml
-
-    path = Path(path)
-    source = str(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise ConfigError(source, "(file)", "no such file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(source, "(file)", f"cannot read: {e}") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
-        problem = getattr(e, "problem", None) or " ".join(str(e).split())
-        raise ConfigError(source, where, f"not valid YAML: {problem}") from None
-    return config_from_dict(cls, {} if data is None else data, source, base=base)
+    data = read_yaml_file(path, ConfigError)
+    return config_from_dict(cls, {} if data is None else data, str(path), base=base)

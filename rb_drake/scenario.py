@@ -324,25 +324,32 @@ def _check_goal(rd: _Reader, rock: Rock, goal: np.ndarray, tolerance: float) -> 
 
 def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
     """Read and validate a scenario file; raises ScenarioError (never a bare parser error)."""
+    data = read_yaml_file(path)
+    return scenario_from_dict(data, str(path), check_start=check_start)
+
+
+def read_yaml_file(path: str | Path, error: type[ScenarioError] = ScenarioError) -> Any:
+    """The YAML document of a file; a missing or unreadable file or bad YAML raises `error`
+    (ScenarioError or a subclass) naming the file and, for bad YAML, the line and column."""
     path = Path(path)
     source = str(path)
     try:
         text = path.read_text()
     except FileNotFoundError:
-        raise ScenarioError(source, "(file)", "no such file") from None
+        raise error(source, "(file)", "no such file") from None
     except OSError as e:
-        raise ScenarioError(source, "(file)", f"cannot read: {e.strerror}") from None
+        raise error(source, "(file)", f"cannot read: {e.strerror}") from None
     except UnicodeDecodeError as e:
-        raise ScenarioError(source, "(file)", f"not UTF-8 text (byte {e.start}): is this the "
-                            "right file?") from None
+        raise error(source, "(file)", f"not UTF-8 text (byte {e.start}): is this the "
+                    "right file?") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
         problem = getattr(e, "problem", None) or " ".join(str(e).split())
-        raise ScenarioError(source, where, f"not valid YAML: {problem}") from None
-    return scenario_from_dict(data, source, check_start=check_start)
+        raise error(source, where, f"not valid YAML: {problem}") from None
+    return data
 
 
 def scenario_to_yaml(scn: Scenario) -> str:

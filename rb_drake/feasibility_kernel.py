@@ -670,14 +670,16 @@ def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
 
 
 @njit(cache=True, error_model="numpy")
-def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, ignore_grasps,
-               work, rhs, w, f, lp, B) -> float:
+def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi,
+               ignore_grasps, work, rhs, w, f, lp, B) -> float:
     """r of the 3-stance with boom j's gripper at its anchor, at a pose feasible in the
     4-stance whose geometry (L, sh, tg, u, psi, A) is given; NaN where it is infeasible
     (r itself may be -inf with ignore_grasps).
     The same operations, in the same order, as `_score_kernel` on that 3-stance's row with
     decide_only and collide=0 (its boom lengths, shoulder angles, pull angles and segments
-    are the 4-stance's, all passed), so the decision and r are bitwise the same."""
+    are the 4-stance's, all passed), so the decision and r are bitwise the same. `mu`,
+    `sigma` and `minors` are the 4-stance's allocation's (`_allocate4`): each grasp's mean
+    limit and spread, and the signed determinant of A without each column."""
     gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
     b0 = -prm[_BODY_MASS] * gx
     b1 = -prm[_BODY_MASS] * gy
@@ -693,14 +695,15 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, i
            + m_grip * ((tx - x) * gy - (ty - y) * gx))
     torque = (m_boom * ((mx - px) * gy - (my - py) * gx)
               + m_grip * ((tx - px) * gy - (ty - py) * gx))
+    if abs(torque) > prm[_TORQUE_MAX]:  # the cheap tests first
+        return math.nan
     m = 0
     for i in range(4):
         if i != j:
             for r in range(3):
                 work[r, m] = A[r, i]
             m += 1
-    det = _det3(work)
-    ok = abs(det) > 1e-12
+    ok = abs(minors[j]) > 1e-12  # |_det3(work)|: the minor is it, signed
     rhs[0], rhs[1], rhs[2] = b0, b1, b2
     _solve3(work, rhs, w)
     m = 0
@@ -713,6 +716,10 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, i
     for i in range(4):  # tensions out of bounds fail statics whatever follows
         if i != j and not (math.isfinite(f[i]) and f_lo - 1e-9 <= f[i] <= f_hi + 1e-9):
             return math.nan
+    if not ignore_grasps:  # every grasp's z >= Phi^-1(p_min), else r < log p_min (exact)
+        for i in range(4):
+            if i != j and abs(psi[i]) < HALF_PI and (mu[i] - f[i]) / sigma[i] < prm[_Z_FLOOR]:
+                return math.nan
     residual = 0.0
     for r in range(3):
         acc = 0.0
@@ -727,8 +734,7 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, i
             statics_ok = statics_ok and math.isfinite(f[i]) and (
                 f_lo - 1e-9 <= f[i] <= f_hi + 1e-9)
             if abs(psi[i]) < HALF_PI:
-                sig = sn[i] + (abs(psi[i]) / HALF_PI) * (st[i] - sn[i])
-                lp[i] = log_ndtr((_mean_limit(psi[i], fn[i], ft[i]) - fi) / sig)
+                lp[i] = log_ndtr((mu[i] - fi) / sigma[i])
             else:
                 lp[i] = -math.inf
         else:
@@ -818,6 +824,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     cx = np.empty(4)
     cy = np.empty(4)
     for row in range(pose_row.shape[0]):
+        if release_out.shape[0]:
+            for j in range(4):
+                release_out[row, j] = math.nan
         k, sk, tk = pose_row[row], stance_row[row], tip_row[row]
         att = attached[sk]
         free = -1
@@ -831,6 +840,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         fn, ft = f_normal[sk], f_lateral[sk]
         sn, st = sigma_normal[sk], sigma_lateral[sk]
         # -- geometry (geometry.boom_geometry, statics.statics_problem)
+        reach_code = 0
         for i in range(4):
             sx, sy = prm[_SHOULDER + 2 * i], prm[_SHOULDER + 2 * i + 1]
             off[i, 0], off[i, 1] = c * sx - s * sy, s * sx + c * sy
@@ -843,6 +853,13 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             L[i] = math.sqrt(dx * dx + dy * dy)
             u[i, 0], u[i, 1] = dx / L[i], dy / L[i]
             theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[_DIRECTION + i])
+            if decide_only:  # a boom out of reach decides the row: the rest is not needed
+                if L[i] < L_lo or L[i] > L_hi:
+                    reach_code = _BOOM_LENGTH
+                elif abs(theta[i]) > rng + 1e-12:
+                    reach_code = _SHOULDER_ANGLE
+                if reach_code:
+                    break
             if att[i]:
                 nx, ny = normals[sk, i, 0], normals[sk, i, 1]
                 vx, vy = -u[i, 0], -u[i, 1]
@@ -852,6 +869,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             else:
                 psi[i] = math.nan
                 A[0, i] = A[1, i] = A[2, i] = 0.0
+        if reach_code:
+            _reject(row, reach_code, reason_out, r_out, lp_out, f_out, v_out)
+            continue
         b[0] = -prm[_BODY_MASS] * gx
         b[1] = -prm[_BODY_MASS] * gy
         b[2] = 0.0
@@ -1021,14 +1041,11 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         reason_out[row] = code
         if decide_only:
             v_out[row] = math.nan
-            if release_out.shape[0]:
+            if release_out.shape[0] and code == 0 and free < 0:
                 for j in range(4):
-                    release_out[row, j] = math.nan
-                if code == 0 and free < 0:
-                    for j in range(4):
-                        release_out[row, j] = _release_r(
-                            j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi,
-                            ignore_grasps, work, rhs, w, f, lp, B)
+                    release_out[row, j] = _release_r(
+                        j, x, y, L, sh, tg, u, psi, A, prm, vec[1], vec[2], minors, f_lo, f_hi,
+                        ignore_grasps, work, rhs, w, f, lp, B)
             continue
         # -- feasibility.violation
         v = 0.0

@@ -40,7 +40,7 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.components import INFEASIBLE, Component, StanceComponents
+from planning.components import INFEASIBLE, UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility import body_in_rock
@@ -119,16 +119,44 @@ def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarr
 
 
 def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
-                       ignore_grasps: bool = False,
-                       rows: np.ndarray | None = None) -> LatticeTransition:
+                       ignore_grasps: bool = False, rows: np.ndarray | None = None,
+                       arrival: StanceComponents | None = None) -> LatticeTransition:
     """Decide boom `boom`'s move to `anchor` from component `lat` of `stance` on every lattice
-    pose (see the module doc); `rows`: `move_rows`, if known."""
-    table = anchor_table(scn)
-    free = len(table.row)
+    pose (see the module doc); `rows`: `move_rows`, if known. `arrival`: the new stance's
+    components found so far, if any: a pose they already decide (in a component, or scored
+    infeasible) is looked up, not scored again (the same answer: module doc)."""
     rows = move_rows(scn, lat, boom, anchor) if rows is None else rows
     tested = len(rows)
+    if arrival is None or not tested:
+        return _scored_transition(scn, lat, stance, boom, anchor, ignore_grasps, rows, tested)
+    labels = arrival.known_component(lat.keys[rows])
+    parts = [_scored_transition(scn, lat, stance, boom, anchor, ignore_grasps,
+                                rows[labels == UNKNOWN], tested)]
+    for c in np.unique(labels[labels >= 0]):
+        # In component c of the new stance S': feasible there, its segment to the new anchor
+        # clear, and the 3-stance with the gripper at the new anchor is S''s release set of
+        # this boom, decided by the flood fill with the same operations.
+        src = rows[labels == c]
+        comp = arrival.components[int(c)]
+        at = np.searchsorted(comp.keys, lat.keys[src])
+        ok = comp.release[at, boom]
+        src, at = src[ok], at[ok]
+        r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom],
+                              comp.release_r[at, boom], comp.robustness[at]])
+        parts.append(LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested))
+    keys = np.concatenate([p.keys for p in parts])
+    order = np.argsort(keys, kind="stable")
+    return LatticeTransition(keys[order], np.concatenate([p.worst for p in parts])[order],
+                             np.concatenate([p.r4 for p in parts])[order], tested)
+
+
+def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
+                       ignore_grasps: bool, rows: np.ndarray, tested: int) -> LatticeTransition:
+    """The move decided by the kernel on `rows` of `lat` (`lattice_transition`)."""
+    table = anchor_table(scn)
+    free = len(table.row)
     empty = LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
-    if not tested:
+    if not len(rows):
         return empty
     held = [table.row[a] for a in stance]
     three = [free if i == boom else held[i] for i in range(4)]
@@ -337,7 +365,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                         for c in np.unique(known.known_component(lat.keys[rows]))):
                     continue  # every pose it could use enters an expanded vertex: nothing new
                 tr = memo.transitions[key] = lattice_transition(
-                    scn, lat, stance, j, anchor, ignore_grasps, rows)
+                    scn, lat, stance, j, anchor, ignore_grasps, rows, known)
                 tested += 1
             if not len(tr.keys):
                 continue

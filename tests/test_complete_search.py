@@ -219,6 +219,27 @@ def test_transition_test_finds_every_lattice_pose(demo: Scenario, move) -> None:
                                 f"poses missed, {len(set(found) - want)} wrongly accepted")
 
 
+def test_transition_looked_up_in_known_arrival_components(demo: Scenario, move) -> None:
+    """Where the new stance's components are already known, a move's poses are looked up in
+    its release sets instead of scored: the same poses and the same four r, to the bit, for
+    every arrival stance known in part (a few components grown) or whole."""
+    stance, boom, anchor, found = move
+    child = tuple(anchor if i == boom else a for i, a in enumerate(stance))
+    whole = all_components(demo, child, COARSE)
+    part = StanceComponents(demo, child, COARSE)
+    part.component_of(whole.components[0].keys[:1])  # one component and its boundary
+    for arrival in (part, whole):
+        for comp in all_components(demo, stance, COARSE).components:
+            scored = lattice_transition(demo, comp, stance, boom, anchor)
+            looked = lattice_transition(demo, comp, stance, boom, anchor, arrival=arrival)
+            np.testing.assert_array_equal(looked.keys, scored.keys)
+            np.testing.assert_array_equal(looked.r4, scored.r4)
+            np.testing.assert_array_equal(looked.worst, scored.worst)
+            assert looked.tested == scored.tested
+    decided = whole.known_component(np.array(list(found), dtype=np.int64))
+    assert (decided != UNKNOWN).all(), "the whole arrival stance decides every move pose"
+
+
 @pytest.mark.parametrize("window", [1, 3])
 def test_planted_narrow_window_is_found(demo: Scenario, move, window: int) -> None:
     """Raise p_min until only the `window` most robust lattice poses hold the move (every other

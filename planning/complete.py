@@ -401,8 +401,11 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if progress is not None:
             progress(expansions, tested, nearest)
         lat = memo.components[stance].components[comp]
-        near_goal = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
-                                   <= scn.goal_tolerance)
+        lo, hi = lat.box  # no pose within the tolerance unless its bounding box is
+        box_gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - goal, goal - hi))))
+        near_goal = (np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
+                                    <= scn.goal_tolerance)
+                     if box_gap <= scn.goal_tolerance else ())
         if len(near_goal):
             goal_pose = lat.poses_at(near_goal[[int(np.argmax(lat.robustness[near_goal]))]])[0]
             path, poses, probs, others = [vertex], [], [], []

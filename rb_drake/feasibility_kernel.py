@@ -975,7 +975,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 fi = f[i] if math.isfinite(f[i]) else 0.0
                 statics_ok = statics_ok and math.isfinite(f[i]) and (
                     f_lo - 1e-9 <= f[i] <= f_hi + 1e-9)
-                if abs(psi[i]) < HALF_PI:
+                if abs(psi[i]) < HALF_PI and free < 0:  # _allocate4's mu and sigma: the same
+                    lp[i] = log_ndtr((vec[1, i] - fi) / vec[2, i])
+                elif abs(psi[i]) < HALF_PI:
                     sig = sn[i] + (abs(psi[i]) / HALF_PI) * (st[i] - sn[i])
                     lp[i] = log_ndtr((_mean_limit(psi[i], fn[i], ft[i]) - fi) / sig)
                 else:
@@ -1234,11 +1236,14 @@ def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
     dx = tx - (x + (c * sx - s * sy))
     dy = ty - (y + (s * sx + c * sy))
     length = math.sqrt(dx * dx + dy * dy)
+    # The violation, a sum of non-negative terms, is 0 exactly when each term is: the length's
+    # first, so that a boom out of reach costs no atan2.
+    if length > params[_L_HI] or length < params[_L_LO]:
+        return False
     w = (math.atan2(dy, dx) - phi - params[_DIRECTION + i] + math.pi) % _TWO_PI - math.pi
     if w >= math.pi:
         w -= _TWO_PI
-    return (max(0.0, length - params[_L_HI]) + max(0.0, params[_L_LO] - length)
-            + max(0.0, abs(w) - params[_RANGE])) == 0.0
+    return abs(w) <= params[_RANGE]
 
 
 @njit(cache=True)

@@ -55,6 +55,7 @@ from rb_drake.feasibility import (
     Reason,
     World,
     check_poses,
+    pull_within,
     rock_inside_body,
     wrench_conditioning,
 )
@@ -500,6 +501,8 @@ class PhaseProgram:
             return "shoulder angle out of range"
         if np.any(np.abs(prob.shoulder_torque) > robot.shoulder_torque_max):
             return "shoulder torque over the limit"
+        if not pull_within(robot, prob.pull_angles[:, self.stance.attached]).all():
+            return f"a grasp pulled at {robot.max_pull_angle_deg} deg or more from its normal"
         if np.any(wrench_conditioning(robot, prob.A, self.stance.attached) < MIN_CONDITIONING):
             return "booms nearly meet in one point (wrench conditioning)"
         rock = self.world.rock

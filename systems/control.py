@@ -23,7 +23,7 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem, ValuePro
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.plant import ReachBotPlant
 from rb_drake.stance import Stance
-from systems.trajectory import FREE_LIMB_SIZE, free_boom
+from systems.trajectory import FREE_LIMB_SIZE, control_robot, free_boom
 
 
 class BodyStatics:
@@ -248,7 +248,7 @@ class TensionController(LeafSystem):
         self._statics = BodyStatics(robot, gravity, shoulder_mass, fixed_boom_mass)
         self._inertia = np.asarray(inertia, dtype=float)
         self._gains = gains
-        self.projector = TensionProjector(robot.boom_tension, gains.tension_weight)
+        self.projector = TensionProjector(control_robot(robot).boom_tension, gains.tension_weight)
         self._state = self.DeclareVectorInputPort("state", 6)
         self._desired = self.DeclareVectorInputPort("desired_state", 6)
         self._acceleration = self.DeclareVectorInputPort("desired_acceleration", 3)

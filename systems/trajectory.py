@@ -17,28 +17,23 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario, scenario_from_dict
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
 
-# The least tension the execution commands to an anchored boom, below the planner's lower
-# bound `boom_tension[0]` (0.5 N by default). The most robust allocation puts safe booms on that
-# bound, and a plan is verified at its steps only: between two steps the body passes poses
-# where the boom on its bound would have to pull less (crevasse-2: three booms' lines nearly
-# meet in one point, the fourth's tension is fixed by the geometry and dips to 0.49 N between
-# steps at 0.50 and 0.58 N; a controller held to 0.5 N raised the other three to 22 N, P 0.67),
-# or where the pose loop needs less (a 3-stance has no freedom left: crevasse seed 6's body
-# turned until the geometry balanced, 18 mm off). 0.1 N leaves 0.4 N of authority below the
-# plan and is twice RELEASE_TENSION (0.05 N), the slack at which a gripper may open, so a held
-# boom never looks released (docs/model.md, "The controller's tension floor").
-CONTROL_TENSION_FLOOR = 0.1
-
 
 def control_robot(robot: RobotParams) -> RobotParams:
     """The robot as the execution drives it: the planner's, with the lower tension bound of an
-    anchored boom lowered to CONTROL_TENSION_FLOOR (the feed-forward's allocation and the
-    tension controller's bounds)."""
+    anchored boom lowered to planning.ramps.CONTROL_TENSION_FLOOR (the feed-forward's
+    allocation and the tension controller's bounds). The most robust allocation puts safe
+    booms on the planner's bound, and a plan is verified at its steps only: between two steps
+    the statics can ask a boom on its bound for less (crevasse-2: three booms' lines nearly
+    meet in one point, the fourth's tension is fixed by the geometry and dips to 0.49 N
+    between steps at 0.50 and 0.58 N; held to 0.5 N, the feed-forward raised the other three
+    to 22 N, P 0.67), and a 3-stance's pose loop can need less (crevasse seed 6's body turned
+    until the geometry balanced, 18 mm off)."""
     lo, hi = robot.boom_tension
     return robot.replace(boom_tension=(min(lo, CONTROL_TENSION_FLOOR), hi))
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from planning.between import between, between_steps
 from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
@@ -167,6 +168,20 @@ def inertial_excess(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: 
     return np.where(ok, out, np.inf) if P else out
 
 
+def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float]:
+    """(whether the motion between the steps fails `between_steps`, the inertial excess):
+    the smaller the better; (False, 0.0) passes both."""
+    steps = phase["steps"]
+    stance = scn.stance(tuple(phase["stance"]))
+    poses = np.array([st["pose"] for st in steps], dtype=float)
+    tips = (np.array([st["free_tip"] for st in steps], dtype=float)
+            if phase["kind"] == "reach" else None)
+    with np.errstate(divide="ignore"):
+        lp = np.log(np.array([[1.0 if p is None else p for p in st["p_grasp"]] for st in steps]))
+    failed = between_steps(scn, stance, poses, lp, None if tips is None else between(tips))
+    return bool(failed), max(0.0, float(phase["motion"]["inertial_excess"]))
+
+
 def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
     """The plan with every trajectory phase (body and reach) eased (`ease_phase`) where it can
     be, later steps shifted in time. Plans without a time step (end poses only) are left as
@@ -183,8 +198,8 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
         if "motion" not in phase:
             continue
         t0 = float(phase["steps"][0]["t"])
-        eased = None
-        for slow in SLOW_FACTORS:  # slower where the inertial tensions leave the bounds
+        eased, best = None, (True, np.inf)
+        for slow in SLOW_FACTORS:  # slower where the motion between steps or its inertia fails
             candidate = None
             for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
                 candidate = ease_phase(scn, phase, dt, t0, e, slow)
@@ -192,10 +207,10 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
                     break
             if candidate is None:
                 break
-            if eased is None or (candidate["motion"]["inertial_excess"]
-                                 < eased["motion"]["inertial_excess"] - 1e-9):
-                eased = candidate
-            if eased["motion"]["inertial_excess"] <= 0.0:
+            score = _motion_score(scn, candidate)
+            if eased is None or score < best:
+                eased, best = candidate, score
+            if best == (False, 0.0):
                 break
         if eased is None:
             continue

@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from planning.between import between, between_steps
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import (
@@ -253,7 +254,7 @@ class PhaseProgram:
         if self.free is not None and (tips is None or np.shape(tips) != (N, 2)):
             raise ValueError(f"a reach phase needs the free tip at each of the {N} steps")
         self.tips = None if tips is None else np.asarray(tips, dtype=float)
-        self.between_tips = None if tips is None else _between(self.tips)
+        self.between_tips = None if tips is None else between(self.tips)
         targets = np.where(stance.attached[:, None], stance.positions, 0.0)
         self.targets = np.broadcast_to(targets, (N, 4, 2)).copy()
         if self.free is not None:
@@ -778,45 +779,6 @@ class PhaseProgram:
             v[interior] = np.linalg.lstsq(Dv[:, interior].toarray(), -(Dq @ poses.ravel()),
                                           rcond=None)[0]
         return v.reshape(N, 3)
-
-
-BETWEEN = (0.25, 0.5, 0.75)  # where between two steps `between_steps` tests the motion
-BETWEEN_DIP = 1e-3  # log P a grasp may lose between two steps, below the less of its ends
-
-
-def _between(values: np.ndarray) -> np.ndarray:
-    """values (N, n) at the fractions BETWEEN of each interval, linearly: (N - 1) * 3 rows."""
-    a, b = values[:-1, None, :], values[1:, None, :]
-    w = np.asarray(BETWEEN)[None, :, None]
-    return ((1.0 - w) * a + w * b).reshape(-1, values.shape[1])
-
-
-def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np.ndarray,
-                  between_tips: np.ndarray | None = None) -> str:
-    """Why the motion between successive steps fails ('' when it does not): at BETWEEN of
-    each interval (poses and free tip linear, the most robust tensions), a configuration
-    must be feasible and each grasp hold with log P at least the less of its two ends' less
-    BETWEEN_DIP (`log_probs`: (N, 4) at the steps). A plan is verified at its steps, but it is
-    executed everywhere between them: where the booms' lines nearly meet in one point the
-    tensions that hold the body swing within one interval (simulated: a grasp at P 0.998 at
-    both ends fell to 0.84 between them; the statics left the tension bounds between steps
-    that were inside them), which p_path, a product over the steps, cannot see."""
-    if len(poses) < 2:
-        return ""
-    mid = _between(poses)
-    check = check_poses(world, stance, mid, between_tips)
-    if not check.feasible.all():
-        k = int(np.argmin(check.feasible))
-        return (f"between steps {k // len(BETWEEN)} and {k // len(BETWEEN) + 1}: "
-                f"{Reason(int(check.reason[k])).name}")
-    att = stance.attached
-    ends = np.minimum(log_probs[:-1], log_probs[1:])[:, att]
-    floor = np.repeat(ends, len(BETWEEN), axis=0) - BETWEEN_DIP
-    low = check.allocation.log_probs[:, att] < floor
-    if low.any():
-        k = int(np.flatnonzero(low.any(axis=1))[0])
-        return f"a grasp weaker between steps {k // len(BETWEEN)} and {k // len(BETWEEN) + 1}"
-    return ""
 
 
 def optimise_body(scn: Scenario, stance_ids: tuple[str, ...], seed_poses: np.ndarray, dt: float,

@@ -17,26 +17,10 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
-from planning.ramps import CONTROL_TENSION_FLOOR
-from rb_drake.params import NUM_BOOMS, RobotParams
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario, scenario_from_dict
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
-
-
-def control_robot(robot: RobotParams) -> RobotParams:
-    """The robot as the execution drives it: the planner's, with the lower tension bound of an
-    anchored boom lowered to planning.ramps.CONTROL_TENSION_FLOOR (the feed-forward's
-    allocation and the tension controller's bounds). The most robust allocation puts safe
-    booms on the planner's bound, and a plan is verified at its steps only: between two steps
-    the statics can ask a boom on its bound for less (crevasse-2: three booms' lines nearly
-    meet in one point, the fourth's tension is fixed by the geometry and dips to 0.49 N
-    between steps at 0.50 and 0.58 N; held to 0.5 N, the feed-forward raised the other three
-    to 22 N, P 0.67), and a 3-stance's pose loop can need less (crevasse seed 6's body turned
-    until the geometry balanced, 18 mm off)."""
-    lo, hi = robot.boom_tension
-    return robot.replace(boom_tension=(min(lo, CONTROL_TENSION_FLOOR), hi))
-
 
 DWELL_MOTION = 0.8  # of a trajectory phase's final dwell spent finishing its last motion
 
@@ -362,7 +346,7 @@ class PlanTrajectory:
         poses = self.pose.vector_values(t).T
         tips = None if phase.free_tip is None else phase.free_tip.vector_values(t).T
         scn = self.scenario
-        alloc = allocate(control_robot(scn.robot), scn.gravity_vector, poses, phase.stance, tips)
+        alloc = allocate(scn.robot, scn.gravity_vector, poses, phase.stance, tips)
         f = np.where(phase.stance.attached, np.nan_to_num(alloc.tensions), 0.0)
         at_steps = np.searchsorted(t, times - 1e-9)
         ok = alloc.statics_ok[at_steps].all() and alloc.statics_ok.all()

@@ -13,6 +13,7 @@ it on footsteps only.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -25,6 +26,7 @@ from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
 from rb_drake.scenario import Scenario
+from rb_drake.statics import allocate, statics_problem
 
 PLANNERS = ("rbp", "naive")
 
@@ -139,11 +141,41 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             t0 = time.perf_counter()
             result = optimise_reach(scn, three, step.boom, seed.poses, seed.tips, cfg.dt, cfg.scp)
             clock("scp_reach", t0)
-        motions.append(PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor,
-                                   seed, result))
+        motion = PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor, seed,
+                             result)
+        after = tuple(step.to_anchor if i == step.boom else a for i, a in enumerate(stance))
+        short = _handover_shortfall(scn, motion, tuple(stance), after)
+        if short:
+            return motions, (f"reach phase {len(motions)} (boom {step.boom} "
+                             f"{step.from_anchor} -> {step.to_anchor}): {short}")
+        motions.append(motion)
         pose = np.asarray(ends[k], dtype=float)
         found_pose = np.asarray(found[k], dtype=float)
     return motions, ""
+
+
+def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | None, ...],
+                        after: tuple[str | None, ...]) -> str:
+    """'' when the ends of the release and attach ramps (planning.ramps) hold with p_min:
+    there the reach's first (last) configuration's grasps hold the body, and the freed boom's
+    grasp, unloaded but not yet open (already closed), still counts with its P at zero
+    tension, below 1 where its pull angle is large (the lateral limit against its deviation:
+    rockfall-3 had a ramp end at P 0.9499)."""
+    robot, g = scn.robot, scn.gravity_vector
+    j = reach.free_boom
+    three = scn.stance(reach.stance)
+    tips = reach.seed.tips  # SCP keeps the free tip's path
+    for name, ids, n in (("release", before, 0), ("attach", after, -1)):
+        pose = reach.poses[n]
+        f = allocate(robot, g, pose, three, tips[n]).tensions[0]
+        four = scn.stance(ids)
+        psi = statics_problem(robot, g, pose, four).pull_angles[0]
+        lp = four.log_prob(np.where(four.attached, np.nan_to_num(f), 0.0), np.nan_to_num(psi))
+        p = float(np.exp(lp[four.attached].sum()))
+        if not p >= robot.p_min:
+            return (f"the {name} ramp ends at P = {p:.4f} below p_min {robot.p_min} (boom {j}'s "
+                    f"grasp unloaded at P = {math.exp(lp[j]):.4f})")
+    return ""
 
 
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,

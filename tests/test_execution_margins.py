@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 from conftest import build_shaft
 
-from planning.between import BETWEEN, between, between_steps
+from planning.between import BETWEEN, BETWEEN_DIP, between, between_steps
 from planning.check import verify_plan
 from planning.easing import _progress, inertial_excess
 from planning.ramps import CONTROL_TENSION_FLOOR, RELEASE_TENSION
 from rb_drake.feasibility import check_poses
 from rb_drake.params import ParamError, RobotParams, robot_from_dict
+from rb_drake.scenario import bundled_caves, load_scenario
 from rb_drake.statics import statics_problem
 from systems.control import TensionProjector, control_bounds
 
@@ -81,9 +82,10 @@ def test_controller_goes_below_the_planners_bound_down_to_its_floor() -> None:
     assert (lo, hi) == (CONTROL_TENSION_FLOOR, robot.boom_tension[1])
     assert RELEASE_TENSION < CONTROL_TENSION_FLOOR < robot.boom_tension[0]
     scn = build_shaft()
-    stance = scn.stance(scn.start_stance).without(3)
+    four = scn.stance(scn.start_stance)
+    stance = four.without(3)
     A = statics_problem(robot, scn.gravity_vector, np.asarray(scn.start_pose, dtype=float),
-                        stance).A[0]
+                        stance, four.positions[3]).A[0]
     projector = TensionProjector(control_bounds(robot), 1e-4)
     for want, made in ((0.3, 0.3), (-1.0, CONTROL_TENSION_FLOOR)):
         f = np.array([5.0, 6.0, want, 0.0])
@@ -104,27 +106,23 @@ def test_between_interpolates_each_interval() -> None:
                                atol=1e-15)
 
 
-def test_between_steps_finds_a_motion_that_fails_between_feasible_steps() -> None:
-    """Two feasible steps whose joining segment is infeasible inside, found by a seeded
-    search near the start, fail `between_steps` with the interval named; a segment feasible
-    throughout passes; and steps claiming P = 1 fail where the grasps between are weaker."""
-    scn = build_shaft()
+def test_between_steps_tests_the_motion_between_feasible_steps() -> None:
+    """Two feasible steps either side of a pebble the body would cross between them fail
+    `between_steps` with the interval named; a short feasible segment passes, and fails when
+    its steps claim grasps stronger by more than BETWEEN_DIP than those between them."""
+    pebble = [[-0.02, 0.95], [0.02, 0.95], [0.02, 1.05], [-0.02, 1.05]]
+    scn = build_shaft(extra_walls=[pebble])
     stance = scn.stance(scn.start_stance)
-    start = np.asarray(scn.start_pose, dtype=float)
-    rng = np.random.default_rng(17)
-    a = start + rng.normal(0.0, 1.0, (4000, 3)) * [0.25, 0.25, 0.4]
-    b = start + rng.normal(0.0, 1.0, (4000, 3)) * [0.25, 0.25, 0.4]
-    ok_a, ok_b = check_poses(scn, stance, a).feasible, check_poses(scn, stance, b).feasible
-    mid = check_poses(scn, stance, 0.5 * (a + b)).feasible  # the segments' middles
-    k = np.flatnonzero(ok_a & ok_b & ~mid)
-    assert len(k), "no pair of feasible poses with an infeasible middle near the start"
-    poses = np.stack([a[k[0]], b[k[0]]])
-    lp = check_poses(scn, stance, poses).allocation.log_probs
-    assert between_steps(scn, stance, poses, lp).startswith("between steps 0 and 1"), poses
-    good = np.stack([start, start + np.array([0.01, 0.01, 0.0])])
+    poses = np.array([[-0.25, 1.0, 0.0], [0.25, 1.0, 0.0]])
+    check = check_poses(scn, stance, poses)
+    assert check.feasible.all(), check.reason
+    lp = check.allocation.log_probs
+    assert between_steps(scn, stance, poses, lp) == "between steps 0 and 1: BODY_COLLISION"
+    good = np.array([[-0.25, 1.0, 0.0], [-0.24, 1.01, 0.0]])
     lp = check_poses(scn, stance, good).allocation.log_probs
     assert between_steps(scn, stance, good, lp) == ""
-    assert "weaker" in between_steps(scn, stance, good, np.zeros_like(lp))
+    claimed = lp + 2.0 * BETWEEN_DIP  # steps claiming more than the grasps between hold
+    assert "weaker" in between_steps(scn, stance, good, claimed)
 
 
 def test_progress_cruises_slower() -> None:
@@ -138,20 +136,23 @@ def test_progress_cruises_slower() -> None:
 
 
 def test_inertial_excess_counts_the_tensions_acceleration_needs() -> None:
-    """At rest the excess is the static tensions' own (none inside the bounds); accelerating
-    the body needs A df = diag(m, m, I) a more, and the excess grows with the acceleration."""
-    scn = build_shaft()
-    stance = scn.stance(scn.start_stance).without(3)
+    """At rest a feasible 3-stance has no excess; a step pushed off the line makes the body
+    accelerate there and back, and the tensions that would do it leave the bounds by more the
+    harder the push."""
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    four = scn.stance(scn.start_stance)
     start = np.asarray(scn.start_pose, dtype=float)
-    tip = scn.stance(scn.start_stance).positions[3]
+    j = next(j for j in range(4) if check_poses(scn, four.without(j), start,
+                                                four.positions[j]).feasible[0])
+    stance = four.without(j)
     poses = np.tile(start, (5, 1))
-    tips = np.tile(tip, (5, 1))
+    tips = np.tile(four.positions[j], (5, 1))
     f = check_poses(scn, stance, poses, tips).allocation.tensions
     assert np.all(inertial_excess(scn, stance, poses, f, tips, 0.5) == 0.0)
     excess = []
-    for jump in (0.001, 0.01, 0.1, 1.0):
+    for push in (1e-4, 0.01, 0.1, 1.0):
         moved = poses.copy()
-        moved[2, 2] += jump  # one step turned: the body accelerates there and back
+        moved[2, :2] += push
         excess.append(inertial_excess(scn, stance, moved, f, tips, 0.5).max())
-    assert excess[0] < excess[-1] and excess[-1] > 0.0, excess
+    assert excess[0] == 0.0 and excess[-1] > 1.0, excess
     assert all(x <= y + 1e-12 for x, y in itertools.pairwise(excess)), excess

@@ -14,6 +14,7 @@ import numpy as np
 
 from rb_drake.feasibility import Reason, World, check_poses
 from rb_drake.stance import Stance
+from rb_drake.statics import null_vector, statics_problem
 
 BETWEEN = (0.25, 0.5, 0.75)  # where between two steps `between_steps` tests the motion
 BETWEEN_DIP = 1e-3  # log P a grasp may lose between two steps, below the less of its ends
@@ -27,24 +28,44 @@ def between(values: np.ndarray) -> np.ndarray:
 
 
 def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np.ndarray,
-                  between_tips: np.ndarray | None = None) -> str:
+                  tips: np.ndarray | None = None) -> str:
     """Why the motion between successive steps fails ('' when it does not): at BETWEEN of
-    each interval (poses and free tip linear, the most robust tensions), a configuration
-    must be feasible and each grasp hold with log P at least the less of its two ends' less
-    BETWEEN_DIP (`log_probs`: (N, 4) at the steps)."""
-    if len(poses) < 2:
+    each interval (poses and free tip linear, `tips` (N, 2) at the steps in a 3-stance; the
+    most robust tensions), a configuration must be feasible and each grasp hold with log P at
+    least the less of its two ends' less BETWEEN_DIP (`log_probs`: (N, 4) at the steps); and
+    the null vector of the booms' wrench matrix (its signed minors; in a 3-stance the
+    determinant) must keep its direction from each of these configurations to the next. A
+    direction that turns back means the segment passes where the booms' lines meet in one
+    point, which can lie between the samples (crevasse-s6: conditioning 0.016 at 0.9 of an
+    interval whose samples held 0.12 and more)."""
+    N = len(poses)
+    if N < 2:
         return ""
+    n_between = len(BETWEEN)
     mid = between(poses)
-    check = check_poses(world, stance, mid, between_tips)
+    mid_tips = None if tips is None else between(tips)
+    check = check_poses(world, stance, mid, mid_tips)
     if not check.feasible.all():
         k = int(np.argmin(check.feasible))
-        return (f"between steps {k // len(BETWEEN)} and {k // len(BETWEEN) + 1}: "
+        return (f"between steps {k // n_between} and {k // n_between + 1}: "
                 f"{Reason(int(check.reason[k])).name}")
     att = stance.attached
     ends = np.minimum(log_probs[:-1], log_probs[1:])[:, att]
-    floor = np.repeat(ends, len(BETWEEN), axis=0) - BETWEEN_DIP
+    floor = np.repeat(ends, n_between, axis=0) - BETWEEN_DIP
     low = check.allocation.log_probs[:, att] < floor
     if low.any():
         k = int(np.flatnonzero(low.any(axis=1))[0])
-        return f"a grasp weaker between steps {k // len(BETWEEN)} and {k // len(BETWEEN) + 1}"
+        return f"a grasp weaker between steps {k // n_between} and {k // n_between + 1}"
+    seq = np.concatenate([poses[:-1, None], mid.reshape(N - 1, n_between, 3), poses[1:, None]],
+                         axis=1).reshape(-1, 3)
+    seq_tips = None
+    if tips is not None:
+        seq_tips = np.concatenate([tips[:-1, None], mid_tips.reshape(N - 1, n_between, 2),
+                                   tips[1:, None]], axis=1).reshape(-1, 2)
+    A = statics_problem(world.robot, world.gravity_vector, seq, stance, seq_tips).A
+    n = null_vector(A).reshape(N - 1, n_between + 2, 4)
+    turned = (np.sum(n[:, 1:] * n[:, :-1], axis=-1) <= 0.0).any(axis=1)
+    if turned.any():
+        k = int(np.flatnonzero(turned)[0])
+        return f"between steps {k} and {k + 1}: the booms' lines meet in one point (SINGULAR)"
     return ""

@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
-from planning.between import between, between_steps
+from planning.between import between_steps
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import (
@@ -254,7 +254,6 @@ class PhaseProgram:
         if self.free is not None and (tips is None or np.shape(tips) != (N, 2)):
             raise ValueError(f"a reach phase needs the free tip at each of the {N} steps")
         self.tips = None if tips is None else np.asarray(tips, dtype=float)
-        self.between_tips = None if tips is None else between(self.tips)
         targets = np.where(stance.attached[:, None], stance.positions, 0.0)
         self.targets = np.broadcast_to(targets, (N, 4, 2)).copy()
         if self.free is not None:
@@ -519,7 +518,7 @@ class PhaseProgram:
                 return "boom collides with rock"
         lp = self.stance.log_prob(np.nan_to_num(self.tensions4(it.tensions)),
                                   np.nan_to_num(prob.pull_angles))
-        return between_steps(self.world, self.stance, it.poses, lp, self.between_tips)
+        return between_steps(self.world, self.stance, it.poses, lp, self.tips)
 
     def violations(self, it: Iterate) -> Margins:
         """By how much `it` exceeds each limit the subproblem linearises (0 where within)."""

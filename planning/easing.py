@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from planning.between import between, between_steps
+from planning.between import between_steps
 from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
@@ -178,7 +178,7 @@ def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float]:
             if phase["kind"] == "reach" else None)
     with np.errstate(divide="ignore"):
         lp = np.log(np.array([[1.0 if p is None else p for p in st["p_grasp"]] for st in steps]))
-    failed = between_steps(scn, stance, poses, lp, None if tips is None else between(tips))
+    failed = between_steps(scn, stance, poses, lp, tips)
     return bool(failed), max(0.0, float(phase["motion"]["inertial_excess"]))
 
 

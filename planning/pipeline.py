@@ -21,10 +21,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.baseline import plan_naive
+from planning.between import between_steps
 from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
 from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
+from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.statics import allocate, statics_problem
 
@@ -124,7 +126,11 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             t0 = time.perf_counter()
             result = optimise_body(scn, stance, seed.poses, cfg.dt, cfg.scp)
             clock("scp_body", t0)
-        motions.append(PhaseMotion("body", tuple(stance), None, None, None, seed, result))
+        motion = PhaseMotion("body", tuple(stance), None, None, None, seed, result)
+        crossing = _seed_between(scn, motion)
+        if crossing:
+            return motions, f"body phase {len(motions)} in stance {list(stance)}: {crossing}"
+        motions.append(motion)
         if k == len(fp.steps):
             break
         step = fp.steps[k]
@@ -144,7 +150,8 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         motion = PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor, seed,
                              result)
         after = tuple(step.to_anchor if i == step.boom else a for i, a in enumerate(stance))
-        short = _handover_shortfall(scn, motion, tuple(stance), after)
+        short = _seed_between(scn, motion) or _handover_shortfall(scn, motion, tuple(stance),
+                                                                    after)
         if short:
             return motions, (f"reach phase {len(motions)} (boom {step.boom} "
                              f"{step.from_anchor} -> {step.to_anchor}): {short}")
@@ -152,6 +159,20 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         pose = np.asarray(ends[k], dtype=float)
         found_pose = np.asarray(found[k], dtype=float)
     return motions, ""
+
+
+def _seed_between(scn: Scenario, motion: PhaseMotion) -> str:
+    """'' unless the phase keeps its seed (SCP did not improve it: SCP's own steps pass
+    `between_steps`) and the seed's motion between its steps fails `between_steps`: a seed
+    through a configuration where the booms' lines meet in one point (an OMPL path on
+    crevasse-s6) swings the tensions in execution, and slowing it does not help."""
+    if motion.result is not None and motion.result.improved:
+        return ""
+    stance = scn.stance(motion.stance)
+    tips = motion.seed.tips
+    lp = check_poses(scn, stance, motion.seed.poses, tips).allocation.log_probs
+    failed = between_steps(scn, stance, motion.seed.poses, lp, tips)
+    return f"its seed fails between steps ({failed})" if failed else ""
 
 
 def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | None, ...],

@@ -19,11 +19,11 @@ each end adds EASE_STEPS / 2 time steps.
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from planning.between import between_steps
+from planning.between import BETWEEN_DIP, between_steps
 from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
@@ -97,7 +97,7 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     new = _steps_with_tensions(scn, tuple(phase["stance"]), new_poses, tensions, new_tips, t0,
                                dt)
     new.append(dict(new[-1], t=round(t0 + len(new) * dt, 6)))
-    excess = inertial_excess(scn, stance, new_poses, tensions, new_tips, dt)
+    load = inertial_load(scn, stance, new_poses, tensions, new_tips, dt)
     out = copy.deepcopy(phase)
     out["steps"] = new
     motion = out.get("motion")
@@ -114,19 +114,35 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
         motion["effort"] = [float(sum(v for v in st["tension"] if v is not None)) for st in new]
         motion["eased"] = ease
         motion["slowed"] = slow
-        motion["inertial_excess"] = float(excess.max())
+        motion["inertial_excess"] = float(load.excess.max())
+        motion["inertial_dip"] = float(load.dip.max())
     return out
+
+
+class Inertial(NamedTuple):
+    """What accelerating a phase's configurations costs, per configuration."""
+
+    excess: np.ndarray  # N (summed over booms) by which the tensions leave the bounds
+    dip: np.ndarray     # the largest loss of a grasp's log P to the least tension change
 
 
 def inertial_excess(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
                     tips: np.ndarray | None, dt: float) -> np.ndarray:
+    """`inertial_load(...).excess`."""
+    return inertial_load(scn, stance, poses, tensions, tips, dt).excess
+
+
+def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
+                  tips: np.ndarray | None, dt: float) -> Inertial:
     """Per configuration of a phase executed one every dt from rest to rest, by how much (N,
     summed over booms; 0 where none) the tensions that also accelerate the body, and the free
     limb, as the configurations' second differences say leave the execution's bounds
     [CONTROL_TENSION_FLOOR, boom_tension[1]]. The plan's tensions hold each configuration
     statically; accelerating the body needs the wrench diag(m, m, I) a more, and a free limb
     (its gripper and the tip half of its boom, m_t, at the tip) m_t a_t more at the tip.
-    In a 3-stance the change is unique; in a 4-stance the best member of the family counts."""
+    In a 3-stance the change is unique; in a 4-stance the best member of the family counts.
+    `dip` is each configuration's largest loss of a grasp's log P to the least tension change
+    (what the tension controller adds to the plan's tensions), against the plan's."""
     robot = scn.robot
     P = len(poses)
     q = np.vstack([poses[:1], poses, poses[-1:]])  # at rest before and after
@@ -165,12 +181,17 @@ def inertial_excess(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: 
             ts = np.concatenate([(lo - g) / n, (hi - g) / n], axis=1)
         ts = np.nan_to_num(ts, nan=0.0, posinf=0.0, neginf=0.0)
         out = np.minimum(out, excess(g[:, None, :] + ts[:, :, None] * n[:, None, :]).min(axis=1))
-    return np.where(ok, out, np.inf) if P else out
+    psi = np.nan_to_num(statics_problem(robot, scn.gravity_vector, poses, stance, tips)
+                        .pull_angles)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        loss = (stance.log_prob(f, psi) - stance.log_prob(np.where(att, g, 0.0), psi))[:, att]
+    dip = np.nan_to_num(loss.max(axis=1), nan=np.inf) if P else np.zeros(0)
+    return Inertial(np.where(ok, out, np.inf) if P else out, np.where(ok, dip, np.inf))
 
 
-def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float]:
-    """(whether the motion between the steps fails `between_steps`, the inertial excess):
-    the smaller the better; (False, 0.0) passes both."""
+def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float, float]:
+    """(whether the motion between the steps fails `between_steps`, the inertial excess, the
+    inertial dip beyond BETWEEN_DIP): the smaller the better; (False, 0.0, 0.0) passes."""
     steps = phase["steps"]
     stance = scn.stance(tuple(phase["stance"]))
     poses = np.array([st["pose"] for st in steps], dtype=float)
@@ -179,7 +200,9 @@ def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float]:
     with np.errstate(divide="ignore"):
         lp = np.log(np.array([[1.0 if p is None else p for p in st["p_grasp"]] for st in steps]))
     failed = between_steps(scn, stance, poses, lp, tips)
-    return bool(failed), max(0.0, float(phase["motion"]["inertial_excess"]))
+    motion = phase["motion"]
+    return (bool(failed), max(0.0, float(motion["inertial_excess"])),
+            max(0.0, float(motion["inertial_dip"]) - BETWEEN_DIP))
 
 
 def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
@@ -198,7 +221,7 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
         if "motion" not in phase:
             continue
         t0 = float(phase["steps"][0]["t"])
-        eased, best = None, (True, np.inf)
+        eased, best = None, (True, np.inf, np.inf)
         for slow in SLOW_FACTORS:  # slower where the motion between steps or its inertia fails
             candidate = None
             for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
@@ -210,7 +233,7 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
             score = _motion_score(scn, candidate)
             if eased is None or score < best:
                 eased, best = candidate, score
-            if best == (False, 0.0):
+            if best == (False, 0.0, 0.0):
                 break
         if eased is None:
             continue

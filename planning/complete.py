@@ -41,10 +41,17 @@ import numpy as np
 
 from planning.astar import SearchResult
 from planning.components import INFEASIBLE, Component, StanceComponents
-from planning.lattice import LatticeConfig, pack, poses_of, unpack
+from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility import body_in_rock
-from rb_drake.feasibility_kernel import reach_violation, score_poses, score_rows
+from rb_drake.feasibility_kernel import (
+    _robot_params,
+    lattice_reach_rows,
+    lattice_reached_anchors,
+    reach_violation,
+    score_poses,
+    score_rows,
+)
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
@@ -97,16 +104,18 @@ def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: Lat
     return hit
 
 
+def _lattice_args(scn: Scenario, cfg: LatticeConfig) -> tuple:
+    """The robot and lattice arguments of the compiled move kernels."""
+    return (_robot_params(scn.robot, np.zeros(2)), SPAN, float(cfg.position_step),
+            float(cfg.angle_step), int(cfg.angle_count))
+
+
 def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarray:
     """Rows of component `lat` at which boom `boom` may let go and reaches `anchor`: the poses
-    a transition of that move can use."""
-    rows = np.flatnonzero(lat.release[:, boom])
-    if len(rows):
-        target = scn.anchor_positions[scn.anchor_index[anchor]]
-        reach = reach_violation(scn.robot, lat.poses_at(rows), target[None],
-                                np.array([boom]))[:, 0] == 0.0
-        rows = rows[reach]
-    return rows
+    a transition of that move can use (the reach test of `reach_violation`, compiled)."""
+    target = scn.anchor_positions[scn.anchor_index[anchor]]
+    return lattice_reach_rows(lat.keys, lat.release[:, boom], float(target[0]),
+                              float(target[1]), int(boom), *_lattice_args(scn, lat.lattice))
 
 
 def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
@@ -148,28 +157,28 @@ def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     return LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested)
 
 
+def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
+    """Per boom, the indices of every anchor it reaches from some release pose of component
+    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
+    the component, anchors beyond reach of its bounding box left out first."""
+    pts = scn.anchor_positions
+    lo, hi = lat.box
+    gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts, pts - hi)), axis=1)
+    near = gap <= scn.robot.max_reach + 1e-6
+    near[[scn.anchor_index[a] for a in stance]] = False
+    near = np.flatnonzero(near)
+    if not len(near):
+        return [near] * 4
+    candidate = np.repeat(lat.release.any(axis=0)[:, None], len(near), axis=1)
+    found = lattice_reached_anchors(lat.keys, lat.release, np.ascontiguousarray(pts[near]),
+                                    candidate, *_lattice_args(scn, lat.lattice))
+    return [near[found[j]] for j in range(4)]
+
+
 def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
     """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
     (exact on the lattice), the stance's own anchors excluded."""
-    rows = np.flatnonzero(lat.release[:, boom])
-    if not len(rows):
-        return np.zeros(0, dtype=np.int64)
-    pts = scn.anchor_positions
-    poses = lat.poses_at(rows)
-    centre = poses[:, :2].mean(axis=0)
-    spread = float(np.linalg.norm(poses[:, :2] - centre, axis=1).max())
-    near = np.flatnonzero(np.linalg.norm(pts - centre, axis=1) <= scn.robot.max_reach + spread
-                          + 1e-6)
-    held = {scn.anchor_index[a] for a in stance}
-    near = np.array([k for k in near if k not in held], dtype=np.int64)
-    if not len(near):
-        return near
-    reach = np.zeros(len(near), dtype=bool)
-    for chunk in range(0, len(rows), 4096):  # bounded memory on big components
-        v = reach_violation(scn.robot, poses[chunk:chunk + 4096], pts[near],
-                            np.full(len(near), boom))
-        reach |= (v == 0.0).any(axis=0)
-    return near[reach]
+    return candidate_moves(scn, lat, stance)[boom]
 
 
 def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
@@ -388,8 +397,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
             break
-        for j in range(4):
-            for k in candidate_anchors(scn, lat, stance, j):
+        for j, anchors in enumerate(candidate_moves(scn, lat, stance)):
+            for k in anchors:
                 anchor = scn.anchors[k].id
                 if (stance, j, anchor) in excluded:
                     continue

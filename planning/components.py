@@ -16,7 +16,6 @@ import numpy as np
 from planning.flood import grow_component, reach_box
 from planning.lattice import LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
-from rb_drake.feasibility_kernel import score_rows
 from rb_drake.scenario import Scenario
 
 INFEASIBLE = -1  # component_of / known_component: a pose no component holds
@@ -32,6 +31,7 @@ class Component(NamedTuple):
     release: np.ndarray     # (F, 4) bool: boom j may let go (3-stance, gripper at its anchor)
     release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
     lattice: LatticeConfig
+    box: np.ndarray         # (2, 2) the smallest and largest (x, y) of its poses
 
     @property
     def poses(self) -> np.ndarray:
@@ -81,23 +81,21 @@ class StanceComponents:
     def _grow(self, key: int) -> None:
         """Grow the component of lattice key `key` (or learn that its pose is infeasible)."""
         seed = unpack(np.array([key]), self._cfg.angle_count)[0]
-        idx, r, infeasible = grow_component(self._scn, self._stances, seed, self._box,
-                                            self._cfg, self._ignore)
+        idx, r, release_r, infeasible = grow_component(self._scn, self._stances, seed,
+                                                       self._box, self._cfg, self._ignore)
         bad = pack(infeasible, self._cfg.angle_count)
         if not len(idx):
             self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int32))
             return
         keys = pack(idx, self._cfg.angle_count)
         order = np.argsort(keys)
-        keys, r = keys[order], r[order]
-        poses = poses_of(idx[order], self._cfg)
+        keys, r, release_r = keys[order], r[order], release_r[order]
         F = len(idx)
-        rel = score_rows(self._scn, self._stances, self._tips, poses, np.tile(np.arange(F), 4),
-                         np.repeat(np.arange(1, 5), F), np.repeat(np.arange(1, 5), F),
-                         self._ignore, decide_only=True, collide=0)  # segments as in row 0
-        release = rel.feasible.reshape(4, F).T
-        release_r = np.where(release, rel.robustness.reshape(4, F).T, -np.inf)
-        self.components.append(Component(keys, r, release, release_r, self._cfg))
+        release = ~np.isnan(release_r)
+        release_r = np.where(release, release_r, -np.inf)
+        box = idx[:, :2].min(axis=0), idx[:, :2].max(axis=0)
+        self.components.append(Component(keys, r, release, release_r, self._cfg,
+                                         np.array(box) * self._cfg.position_step))
         self._remember(np.concatenate([keys, bad]), np.concatenate([
             np.full(F, len(self.components) - 1, dtype=np.int32),
             np.full(len(bad), INFEASIBLE, dtype=np.int32)]))

@@ -19,6 +19,8 @@ on-disk cache notices changes to a compiled function's own file only.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from planning.lattice import LatticeConfig
@@ -40,20 +42,44 @@ def reach_box(anchors: np.ndarray, max_reach: float, cfg: LatticeConfig) -> np.n
     return np.array([lo, hi], dtype=np.int64)
 
 
+_BODY_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def body_cache(scn: Scenario, cfg: LatticeConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The body's collision test at every lattice pose a stance of `scn` can hold (0 not yet
+    known, 1 clear, 2 in rock), filled in by the flood fills and shared by every stance (it
+    depends on the pose alone), and the lattice index of its [0, 0] cell. One per rock, robot
+    body and lattice: a search of thousands of stances tests each pose's body once."""
+    per_rock = _BODY_CACHE.setdefault(scn.rock, {})
+    key = (tuple(scn.robot.body_size), cfg)
+    hit = per_rock.get(key)
+    if hit is None:
+        pts = scn.anchor_positions
+        lo = np.floor((pts.min(axis=0) - scn.robot.max_reach) / cfg.position_step) - 1
+        hi = np.ceil((pts.max(axis=0) + scn.robot.max_reach) / cfg.position_step) + 1
+        shape = (*(hi - lo + 1).astype(int), cfg.angle_count)
+        hit = per_rock[key] = (np.zeros(shape, dtype=np.int8), lo.astype(np.int64))
+    return hit
+
+
 def grow_component(scn: Scenario, stances: PackedStances, seed: np.ndarray,
                    box: np.ndarray, cfg: LatticeConfig,
-                   ignore_grasps: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   ignore_grasps: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The feasible lattice poses 26-connected to lattice index `seed` in the 4-stance
-    `stances` (row 0), inside `box` (`reach_box`): their indices (F, 3) and robustness (F,),
-    and the indices of the infeasible poses scored on the way (the component's boundary in
-    the box). Empty when the seed itself is infeasible or outside the box."""
+    `stances` (row 0), inside `box` (`reach_box`): their indices (F, 3), robustness (F,) and
+    release r (F, 4: r of the 3-stance with boom j's gripper still at its anchor, NaN where
+    boom j may not let go), and the indices of the infeasible poses scored on the way (the
+    component's boundary in the box). Empty when the seed itself is infeasible or outside
+    the box."""
     seed = np.asarray(seed, dtype=np.int64).reshape(3)
     n = cfg.angle_count
     if (seed[:2] < box[0]).any() or (seed[:2] > box[1]).any() or not -n // 2 <= seed[2] < n // 2:
-        return np.zeros((0, 3), np.int64), np.zeros(0), seed[None]
+        return np.zeros((0, 3), np.int64), np.zeros(0), np.zeros((0, 4)), seed[None]
     edges, owner, vertices = _packed_rock(scn.rock)
     prm = _robot_params(scn.robot, scn.gravity_vector)
+    body, origin = body_cache(scn, cfg)
     return flood_kernel(seed, np.ascontiguousarray(box), float(cfg.position_step),
                          float(cfg.angle_step), int(n), prm, *stances,
                          np.full((1, 2), np.nan), edges, owner, vertices, bool(ignore_grasps),
-                         True, int(ALL_SEGMENTS))
+                         True, int(ALL_SEGMENTS), body, origin)

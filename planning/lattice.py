@@ -56,13 +56,13 @@ class LatticeConfig:
 
 
 # Lattice indices are packed into one int64 key, so that sets of poses intersect by sorting.
-_SPAN = 1 << 21  # |i|, |k| < 2^20 cells: 20 km at 2 cm
+SPAN = 1 << 21  # |i|, |k| < 2^20 cells: 20 km at 2 cm
 
 
 def pack(idx: np.ndarray, angle_count: int) -> np.ndarray:
     """One sortable int64 per lattice index (i, k, m)."""
     idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3)
-    return ((idx[:, 0] + _SPAN // 2) * _SPAN + (idx[:, 1] + _SPAN // 2)) * angle_count + (
+    return ((idx[:, 0] + SPAN // 2) * SPAN + (idx[:, 1] + SPAN // 2)) * angle_count + (
         idx[:, 2] + angle_count // 2)
 
 
@@ -70,7 +70,7 @@ def unpack(keys: np.ndarray, angle_count: int) -> np.ndarray:
     """Lattice indices (i, k, m) of packed keys: `pack`'s inverse."""
     keys = np.asarray(keys, dtype=np.int64).reshape(-1)
     rest = keys // angle_count
-    return np.column_stack([rest // _SPAN - _SPAN // 2, rest % _SPAN - _SPAN // 2,
+    return np.column_stack([rest // SPAN - SPAN // 2, rest % SPAN - SPAN // 2,
                             keys % angle_count - angle_count // 2])
 
 

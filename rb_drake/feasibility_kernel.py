@@ -167,7 +167,7 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
                       bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
-                      violation)
+                      violation, np.empty((0, 4)), np.empty(0, dtype=np.int8))
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation)
 
 
@@ -672,11 +672,109 @@ def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
 
 
 @njit(cache=True, error_model="numpy")
+def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, ignore_grasps,
+               work, rhs, w, f, lp, B) -> float:
+    """r of the 3-stance with boom j's gripper at its anchor, at a pose feasible in the
+    4-stance whose geometry (L, sh, tg, u, psi, A) is given; NaN where it is infeasible
+    (r itself may be -inf with ignore_grasps).
+    The same operations, in the same order, as `_score_kernel` on that 3-stance's row with
+    decide_only and collide=0 (its boom lengths, shoulder angles, pull angles and segments
+    are the 4-stance's, all passed), so the decision and r are bitwise the same."""
+    gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
+    b0 = -prm[_BODY_MASS] * gx
+    b1 = -prm[_BODY_MASS] * gy
+    b2 = 0.0
+    m_boom = prm[_DENSITY] * L[j]
+    m_grip = prm[_GRIPPER_MASS]
+    tx, ty = tg[j, 0], tg[j, 1]
+    px, py = sh[j, 0], sh[j, 1]
+    mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
+    b0 -= (m_boom + m_grip) * gx
+    b1 -= (m_boom + m_grip) * gy
+    b2 -= (m_boom * ((mx - x) * gy - (my - y) * gx)
+           + m_grip * ((tx - x) * gy - (ty - y) * gx))
+    torque = (m_boom * ((mx - px) * gy - (my - py) * gx)
+              + m_grip * ((tx - px) * gy - (ty - py) * gx))
+    m = 0
+    for i in range(4):
+        if i != j:
+            for r in range(3):
+                work[r, m] = A[r, i]
+            m += 1
+    det = _det3(work)
+    ok = abs(det) > 1e-12
+    rhs[0], rhs[1], rhs[2] = b0, b1, b2
+    _solve3(work, rhs, w)
+    m = 0
+    for i in range(4):
+        if i != j:
+            f[i] = w[m] if ok else math.nan
+            m += 1
+        else:
+            f[i] = math.nan
+    for i in range(4):  # tensions out of bounds fail statics whatever follows
+        if i != j and not (math.isfinite(f[i]) and f_lo - 1e-9 <= f[i] <= f_hi + 1e-9):
+            return math.nan
+    residual = 0.0
+    for r in range(3):
+        acc = 0.0
+        for i in range(4):
+            acc += (A[r, i] if i != j else 0.0) * (f[i] if math.isfinite(f[i]) else 0.0)
+        residual = max(residual, abs(acc - (b0 if r == 0 else b1 if r == 1 else b2)))
+    statics_ok = residual < prm[_STATICS_TOL]
+    r_sum = 0.0
+    for i in range(4):
+        if i != j:
+            fi = f[i] if math.isfinite(f[i]) else 0.0
+            statics_ok = statics_ok and math.isfinite(f[i]) and (
+                f_lo - 1e-9 <= f[i] <= f_hi + 1e-9)
+            if abs(psi[i]) < HALF_PI:
+                sig = sn[i] + (abs(psi[i]) / HALF_PI) * (st[i] - sn[i])
+                lp[i] = log_ndtr((_mean_limit(psi[i], fn[i], ft[i]) - fi) / sig)
+            else:
+                lp[i] = -math.inf
+        else:
+            lp[i] = 0.0
+        r_sum += lp[i]
+    robustness = r_sum if statics_ok else -math.inf
+    if not ignore_grasps:
+        for i in range(4):
+            if i != j and not abs(psi[i]) < HALF_PI:
+                return math.nan
+    if abs(torque) > prm[_TORQUE_MAX]:
+        return math.nan
+    if not statics_ok:
+        return math.nan
+    if not ignore_grasps and robustness < prm[_LOG_P_MIN]:
+        return math.nan
+    m = 0
+    for i in range(4):
+        if i != j:
+            B[0, m] = A[0, i]
+            B[1, m] = A[1, i]
+            B[2, m] = A[2, i] * prm[_MOMENT_SCALE]
+            m += 1
+    above = _singular_value_above(B, m, prm[_MIN_CONDITIONING])
+    if above < 0:
+        above = int(_smallest_singular_value(B, m) >= prm[_MIN_CONDITIONING])
+    if not above:
+        return math.nan
+    return robustness
+
+
+@njit(cache=True, error_model="numpy")
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
                   vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
-                  v_out) -> None:
+                  v_out, release_out, body_known) -> None:
     """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
+
+    `release_out` (R, 4) or (0, 4): with decide_only, for each feasible 4-stance row, the r of
+    the 3-stance with boom j's gripper still at its anchor (NaN where infeasible): what
+    score_rows gives for that row with collide=0, from this row's geometry (`_release_r`).
+    `body_known` (R,) int8 or (0,): with decide_only, whether each row's body is known clear
+    of rock (1), known in it (2) or not known (0, then tested where needed and filled in): the
+    body's test depends on the pose alone, so the flood fill shares it across stances.
 
     With `decide_only` a row stops at its first failing test (kinematics, collisions, then the
     allocation's tests, the conditioning last) and its violation is NaN: feasibility, and the
@@ -885,9 +983,19 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             if code == 0 and not ignore_grasps and robustness < log_p_min:
                 code = _PROBABILITY
             if code == 0 and has_rock:
-                code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
-                                       prm[_CLEARANCE], edges, owner, near_hit, near_ray,
-                                       parity, vertices, collide)
+                segments = collide
+                if body_known.shape[0] and collide & 16:  # the body's test, shared by stances
+                    if body_known[row] == 0:
+                        body_known[row] = 2 if _body_collision(
+                            x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit,
+                            near_ray, parity, vertices) else 1
+                    if body_known[row] == 2:
+                        code = _BODY_COLLISION
+                    segments = collide & ~16
+                if code == 0:
+                    code = _collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
+                                           prm[_CLEARANCE], edges, owner, near_hit, near_ray,
+                                           parity, vertices, segments)
             if code != 0:
                 reason_out[row] = code
                 v_out[row] = math.nan
@@ -915,6 +1023,14 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         reason_out[row] = code
         if decide_only:
             v_out[row] = math.nan
+            if release_out.shape[0]:
+                for j in range(4):
+                    release_out[row, j] = math.nan
+                if code == 0 and free < 0:
+                    for j in range(4):
+                        release_out[row, j] = _release_r(
+                            j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi,
+                            ignore_grasps, work, rhs, w, f, lp, B)
             continue
         # -- feasibility.violation
         v = 0.0
@@ -946,12 +1062,18 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 @njit(cache=True, error_model="numpy")
 def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, f_lateral,
                   sigma_normal, sigma_lateral, attached, tips, edges, owner, vertices,
-                  ignore_grasps, decide_only, collide):  # pragma: no cover - compiled
+                  ignore_grasps, decide_only, collide, body,
+                  body_origin):  # pragma: no cover - compiled
     """The lattice poses 26-connected to `seed` that are feasible in stance row 0, inside
-    `box` (planning.flood.grow_component): (indices, robustness, indices scored infeasible).
-    Waves of poses, each scored in one `_score_kernel` call (decide_only). `decide_only` (True)
-    and `collide` (ALL_SEGMENTS) come in as arguments, not literals, so that `_score_kernel` is
-    called with the types Python calls it with: one compilation serves both."""
+    `box` (planning.flood.grow_component): (indices, robustness, release r (F, 4; NaN where
+    boom j may not let go), indices scored infeasible). Waves of poses, each scored in one
+    `_score_kernel` call (decide_only), which also scores the four release 3-stances of each
+    feasible pose (`_release_r`). `decide_only` (True) and `collide` (ALL_SEGMENTS) come in as
+    arguments, not literals, so that `_score_kernel` is called with the types Python calls it
+    with: one compilation serves both. `body` (I, K, n_phi) int8, lattice index (i, k, m) at
+    [i - body_origin[0], k - body_origin[1], m + n_phi // 2]: the body's collision test of
+    each pose (0 unknown, 1 clear, 2 in rock), read and filled in (`_score_kernel`'s
+    body_known); poses outside it are tested each time."""
     i0, k0, m0 = box[0, 0], box[0, 1], -(n_phi // 2)
     ni, nk = box[1, 0] - i0 + 1, box[1, 1] - k0 + 1
     state = np.zeros((ni, nk, n_phi), dtype=np.int8)  # 0 unseen, 1 queued
@@ -961,6 +1083,7 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
     state[seed[0] - i0, seed[1] - k0, seed[2] - m0] = 1
     out = np.empty((256, 3), dtype=np.int64)
     out_r = np.empty(256)
+    out_rel = np.empty((256, 4))
     n_out = 0
     bad = np.empty((256, 3), dtype=np.int64)
     n_bad = 0
@@ -975,10 +1098,22 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
         zeros = np.zeros(n_wave, dtype=np.int64)
         reason = np.empty(n_wave, dtype=np.int64)
         r = np.empty(n_wave)
+        rel = np.empty((n_wave, 4))
+        known = np.zeros(n_wave, dtype=np.int8)
+        for w in range(n_wave):
+            a = wave[w, 0] - body_origin[0]
+            b = wave[w, 1] - body_origin[1]
+            if 0 <= a < body.shape[0] and 0 <= b < body.shape[1]:
+                known[w] = body[a, b, wave[w, 2] - m0]
         _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                       sigma_lateral, attached, tips, rows, zeros, zeros, edges, owner, vertices,
                       ignore_grasps, decide_only, collide, reason, r, np.empty((n_wave, 4)),
-                      np.empty((n_wave, 4)), np.empty(n_wave))
+                      np.empty((n_wave, 4)), np.empty(n_wave), rel, known)
+        for w in range(n_wave):
+            a = wave[w, 0] - body_origin[0]
+            b = wave[w, 1] - body_origin[1]
+            if known[w] and 0 <= a < body.shape[0] and 0 <= b < body.shape[1]:
+                body[a, b, wave[w, 2] - m0] = known[w]
         n_next = 0
         for w in range(n_wave):
             if reason[w] != 0:
@@ -989,11 +1124,13 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
                 continue
             if n_out == out.shape[0]:
                 out = _grown(out)
+                out_rel = _grown(out_rel)
                 grown_r = np.empty(2 * out_r.shape[0])
                 grown_r[:n_out] = out_r
                 out_r = grown_r
             out[n_out] = wave[w]
             out_r[n_out] = r[w]
+            out_rel[n_out] = rel[w]
             n_out += 1
             for di in range(-1, 2):
                 a = wave[w, 0] + di - i0
@@ -1016,7 +1153,7 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
                         n_next += 1
         wave, nxt = nxt, wave
         n_wave = n_next
-    return out[:n_out].copy(), out_r[:n_out].copy(), bad[:n_bad].copy()
+    return out[:n_out].copy(), out_r[:n_out].copy(), out_rel[:n_out].copy(), bad[:n_bad].copy()
 
 
 @njit(cache=True, error_model="numpy")
@@ -1059,3 +1196,74 @@ def _reach_kernel(poses, targets, booms, params):  # pragma: no cover - compiled
             out[p, k] = (max(0.0, length - hi) + max(0.0, lo - length)
                          + max(0.0, abs(w) - rng))
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The moves of a lattice component (planning.complete): which anchors a boom reaches from the
+# component's release poses, and from which poses. Poses come as packed lattice keys
+# (planning.lattice.pack), decoded here as lattice.poses_of(unpack(...)) does; the reach test is
+# _reach_kernel's, to the bit.
+
+
+@njit(cache=True)
+def _decode(key, span, dx, dphi, n_phi):  # pragma: no cover - compiled
+    rest = key // n_phi
+    return ((rest // span - span // 2) * dx, (rest % span - span // 2) * dx,
+            (key % n_phi - n_phi // 2) * dphi)
+
+
+@njit(cache=True)
+def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
+    """Whether _reach_kernel's violation of boom i to (tx, ty) at pose (x, y, phi) is 0."""
+    sx, sy = params[_SHOULDER + 2 * i], params[_SHOULDER + 2 * i + 1]
+    dx = tx - (x + (c * sx - s * sy))
+    dy = ty - (y + (s * sx + c * sy))
+    length = math.sqrt(dx * dx + dy * dy)
+    w = (math.atan2(dy, dx) - phi - params[_DIRECTION + i] + math.pi) % _TWO_PI - math.pi
+    if w >= math.pi:
+        w -= _TWO_PI
+    return (max(0.0, length - params[_L_HI]) + max(0.0, params[_L_LO] - length)
+            + max(0.0, abs(w) - params[_RANGE])) == 0.0
+
+
+@njit(cache=True)
+def lattice_reach_rows(keys, mask, tx, ty, boom, params, span, dx, dphi,
+                       n_phi):  # pragma: no cover - compiled
+    """Rows r of `keys` with mask[r] whose pose boom `boom` reaches (tx, ty) from, ascending."""
+    out = np.empty(keys.shape[0], dtype=np.int64)
+    n = 0
+    for r in range(keys.shape[0]):
+        if not mask[r]:
+            continue
+        x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
+        if _reaches(x, y, math.cos(phi), math.sin(phi), phi, tx, ty, boom, params):
+            out[n] = r
+            n += 1
+    return out[:n].copy()
+
+
+@njit(cache=True)
+def lattice_reached_anchors(keys, release, targets, candidate, params, span, dx, dphi,
+                            n_phi):  # pragma: no cover - compiled
+    """(4, K) bool: whether boom j reaches targets[k] from some row r of `keys` with
+    release[r, j], for the (j, k) with candidate[j, k] (the others False)."""
+    K = targets.shape[0]
+    found = np.zeros((4, K), dtype=np.bool_)
+    left = 0
+    for j in range(4):
+        for k in range(K):
+            left += candidate[j, k]
+    for r in range(keys.shape[0]):
+        if left == 0:
+            break
+        x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
+        c, s = math.cos(phi), math.sin(phi)
+        for j in range(4):
+            if not release[r, j]:
+                continue
+            for k in range(K):
+                if candidate[j, k] and not found[j, k] and _reaches(
+                        x, y, c, s, phi, targets[k, 0], targets[k, 1], j, params):
+                    found[j, k] = True
+                    left -= 1
+    return found

@@ -739,7 +739,7 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, fn, ft, sn, st, f_lo, f_hi, i
     robustness = r_sum if statics_ok else -math.inf
     if not ignore_grasps:
         for i in range(4):
-            if i != j and not abs(psi[i]) < HALF_PI:
+            if i != j and not abs(psi[i]) < prm[_MAX_PULL]:  # feasibility.pull_within
                 return math.nan
     if abs(torque) > prm[_TORQUE_MAX]:
         return math.nan

@@ -4,9 +4,10 @@ The scenario and robot are rebuilt from the plan file itself. `planning.verify_c
 climb as a whole (start, goal, phase order and joins, stance sequence, time, continuity, the
 robot stored once); here every configuration is checked with the plan's own tensions (not
 re-optimised): kinematic limits, collisions, statics to 1e-6 N, tension bounds, shoulder torque,
-and P >= p_min recomputed from the limit surfaces; every recorded per-step value (each grasp's
-P, P, shoulder torque, summed tension) is recomputed and compared, and p_min, p_path and the
-regrasp count are recomputed. Each problem names its rule (`verify_climb.RULES`), phase and step.
+pull angles below the robot's max_pull_angle_deg, and P >= p_min recomputed from the limit
+surfaces; every recorded per-step value (each grasp's P, P, shoulder torque, summed tension)
+is recomputed and compared, and p_min, p_path and the regrasp count are recomputed.
+Each problem names its rule (`verify_climb.RULES`), phase and step.
 """
 
 from __future__ import annotations
@@ -22,8 +23,7 @@ from planning.ramps import ramp_statics
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
-from rb_drake.feasibility import MIN_CONDITIONING, wrench_conditioning
-from rb_drake.grasp import HALF_PI
+from rb_drake.feasibility import MIN_CONDITIONING, pull_within, wrench_conditioning
 from rb_drake.scenario import ScenarioError, scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
 
@@ -171,8 +171,10 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
         fail("conditioning", f"the booms nearly meet in one point (wrench conditioning "
              f"{kappa:.4f} < {MIN_CONDITIONING})")
     psi = prob.pull_angles[0]
-    if np.any(np.abs(psi[att]) >= HALF_PI):
-        fail("pull-angle", "a grasp is pulled at 90 degrees or more from its normal")
+    if not pull_within(robot, psi[att]).all():
+        worst = float(np.degrees(np.abs(psi[att]).max()))
+        fail("pull-angle", f"a grasp is pulled at {worst:.3f} deg from its normal, not less than "
+             f"max_pull_angle_deg {robot.max_pull_angle_deg}")
     lp = stance.log_prob(fa, np.nan_to_num(psi))
     p_success = float(np.exp(lp[att].sum()))
     if not p_success >= robot.p_min - TOL:

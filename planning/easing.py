@@ -19,33 +19,39 @@ each end adds EASE_STEPS / 2 time steps.
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning.between import BETWEEN_DIP, between_steps
+from planning.ramps import CONTROL_TENSION_FLOOR
+from rb_drake import geometry
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
+from rb_drake.stance import Stance
+from rb_drake.statics import null_vector, statics_problem
 
 EASE_STEPS = 4  # time steps over which a reach's speed grows from (falls to) rest
+SLOW_FACTORS = (1, 2, 3, 4)  # cruise speeds tried, 1 / factor of the planned
 
 
-def _progress(intervals: int, ease: int) -> np.ndarray:
+def _progress(intervals: int, ease: int, slow: int = 1) -> np.ndarray:
     """Positions along a path of `intervals` planned intervals (in intervals), one per time
-    step: the speed grows linearly from 0 over `ease` steps, cruises at one interval per
-    step, and falls linearly to 0 over `ease` steps. `ease` is even, so after the easing the
-    positions land on the planned steps."""
-    half = ease / 2.0
-    cruise = intervals - ease  # intervals covered at full speed
-    n = round(cruise + 2 * ease)
+    step: the speed grows linearly from 0 over `ease` steps, cruises at 1 / `slow` interval
+    per step, and falls linearly to 0 over `ease` steps. `ease` is even, so with `slow` 1 the
+    positions after the easing land on the planned steps."""
+    v = 1.0 / slow
+    cruise = slow * intervals - ease  # time steps at full speed
+    n = cruise + 2 * ease
     s = []
     for i in range(1, n + 1):
         if i <= ease:
-            s.append(i * i / (2.0 * ease))
+            s.append(v * i * i / (2.0 * ease))
         elif i <= ease + cruise:
-            s.append(half + (i - ease))
+            s.append(v * (ease / 2.0 + (i - ease)))
         else:
             r = n - i
-            s.append(intervals - r * r / (2.0 * ease))
+            s.append(intervals - v * r * r / (2.0 * ease))
     return np.array(s)
 
 
@@ -57,10 +63,11 @@ def _interpolate(values: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
-               ease: int = EASE_STEPS) -> dict[str, Any] | None:
-    """The phase re-timed to start and stop gently, its first step at t0 (None when its
-    path is too short to ease or an interpolated configuration is infeasible). The phase's
-    last step is its dwell (a repeat of the one before), kept."""
+               ease: int = EASE_STEPS, slow: int = 1) -> dict[str, Any] | None:
+    """The phase re-timed to start and stop gently, its first step at t0, cruising at 1 /
+    `slow` of its planned speed (None when its path is too short to ease or an interpolated
+    configuration is infeasible). The phase's last step is its dwell (a repeat of the one
+    before), kept. `motion.inertial_excess` records `inertial_excess` of the result."""
     from planning.plan import _steps_with_tensions
 
     steps = phase["steps"]
@@ -72,7 +79,7 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     poses = np.array([s["pose"] for s in path], dtype=float)
     reach = phase["kind"] == "reach"
     tips = np.array([s["free_tip"] for s in path], dtype=float) if reach else None
-    s = np.concatenate([[0.0], _progress(intervals, ease)])
+    s = np.concatenate([[0.0], _progress(intervals, ease, slow)])
     exact = np.abs(s - np.round(s)) < 1e-9
     new_poses = _interpolate(poses, s)
     new_poses[exact] = poses[np.round(s[exact]).astype(int)]
@@ -90,6 +97,7 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     new = _steps_with_tensions(scn, tuple(phase["stance"]), new_poses, tensions, new_tips, t0,
                                dt)
     new.append(dict(new[-1], t=round(t0 + len(new) * dt, 6)))
+    load = inertial_load(scn, stance, new_poses, tensions, new_tips, dt)
     out = copy.deepcopy(phase)
     out["steps"] = new
     motion = out.get("motion")
@@ -105,7 +113,96 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
         motion["seed_effort"] = [float(np.nansum(row)) for row in seed_f]
         motion["effort"] = [float(sum(v for v in st["tension"] if v is not None)) for st in new]
         motion["eased"] = ease
+        motion["slowed"] = slow
+        motion["inertial_excess"] = float(load.excess.max())
+        motion["inertial_dip"] = float(load.dip.max())
     return out
+
+
+class Inertial(NamedTuple):
+    """What accelerating a phase's configurations costs, per configuration."""
+
+    excess: np.ndarray  # N (summed over booms) by which the tensions leave the bounds
+    dip: np.ndarray     # the largest loss of a grasp's log P to the least tension change
+
+
+def inertial_excess(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
+                    tips: np.ndarray | None, dt: float) -> np.ndarray:
+    """`inertial_load(...).excess`."""
+    return inertial_load(scn, stance, poses, tensions, tips, dt).excess
+
+
+def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
+                  tips: np.ndarray | None, dt: float) -> Inertial:
+    """Per configuration of a phase executed one every dt from rest to rest, by how much (N,
+    summed over booms; 0 where none) the tensions that also accelerate the body, and the free
+    limb, as the configurations' second differences say leave the execution's bounds
+    [CONTROL_TENSION_FLOOR, boom_tension[1]]. The plan's tensions hold each configuration
+    statically; accelerating the body needs the wrench diag(m, m, I) a more, and a free limb
+    (its gripper and the tip half of its boom, m_t, at the tip) m_t a_t more at the tip.
+    In a 3-stance the change is unique; in a 4-stance the best member of the family counts.
+    `dip` is each configuration's largest loss of a grasp's log P to the least tension change
+    (what the tension controller adds to the plan's tensions), against the plan's."""
+    robot = scn.robot
+    P = len(poses)
+    q = np.vstack([poses[:1], poses, poses[-1:]])  # at rest before and after
+    acc = (q[2:] - 2.0 * q[1:-1] + q[:-2]) / (dt * dt)
+    m = robot.body_mass
+    w, h = robot.body_size
+    wrench = np.column_stack([m * acc[:, 0], m * acc[:, 1], m * (w * w + h * h) / 12.0 * acc[:, 2]])
+    if tips is not None and stance.free_boom is not None:
+        t = np.vstack([tips[:1], tips, tips[-1:]])
+        a_t = (t[2:] - 2.0 * t[1:-1] + t[:-2]) / (dt * dt)
+        shoulder = geometry.shoulder_positions(robot, poses)[:, stance.free_boom]
+        m_t = robot.gripper_mass + 0.5 * robot.boom_linear_density * np.linalg.norm(
+            tips - shoulder, axis=1)
+        push = m_t[:, None] * a_t
+        wrench[:, :2] += push
+        wrench[:, 2] += geometry.cross2(tips - poses[:, :2], push)
+    A = statics_problem(robot, scn.gravity_vector, poses, stance, tips).A
+    att = stance.attached
+    f = np.where(att, np.nan_to_num(tensions), 0.0)
+    lo, hi = CONTROL_TENSION_FLOOR, robot.boom_tension[1]
+
+    def excess(g: np.ndarray) -> np.ndarray:
+        return np.sum(np.where(att, np.maximum(0.0, lo - g) + np.maximum(0.0, g - hi), 0.0),
+                      axis=-1)
+
+    At = np.swapaxes(A, 1, 2)
+    AAt = A @ At
+    ok = np.abs(np.linalg.det(AAt)) > 1e-14
+    d = (At @ np.linalg.solve(np.where(ok[:, None, None], AAt, np.eye(3)),
+                              wrench[..., None]))[..., 0]  # the least change (unique: 3 booms)
+    g = f + np.where(att, d, 0.0)
+    out = excess(g)
+    if att.all():  # 4 booms: the best member f + d + t n of the family
+        n = null_vector(A)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ts = np.concatenate([(lo - g) / n, (hi - g) / n], axis=1)
+        ts = np.nan_to_num(ts, nan=0.0, posinf=0.0, neginf=0.0)
+        out = np.minimum(out, excess(g[:, None, :] + ts[:, :, None] * n[:, None, :]).min(axis=1))
+    psi = np.nan_to_num(statics_problem(robot, scn.gravity_vector, poses, stance, tips)
+                        .pull_angles)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        loss = (stance.log_prob(f, psi) - stance.log_prob(np.where(att, g, 0.0), psi))[:, att]
+    dip = np.nan_to_num(loss.max(axis=1), nan=np.inf) if P else np.zeros(0)
+    return Inertial(np.where(ok, out, np.inf) if P else out, np.where(ok, dip, np.inf))
+
+
+def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float, float]:
+    """(whether the motion between the steps fails `between_steps`, the inertial excess, the
+    inertial dip beyond BETWEEN_DIP): the smaller the better; (False, 0.0, 0.0) passes."""
+    steps = phase["steps"]
+    stance = scn.stance(tuple(phase["stance"]))
+    poses = np.array([st["pose"] for st in steps], dtype=float)
+    tips = (np.array([st["free_tip"] for st in steps], dtype=float)
+            if phase["kind"] == "reach" else None)
+    with np.errstate(divide="ignore"):
+        lp = np.log(np.array([[1.0 if p is None else p for p in st["p_grasp"]] for st in steps]))
+    failed = between_steps(scn, stance, poses, lp, tips)
+    motion = phase["motion"]
+    return (bool(failed), max(0.0, float(motion["inertial_excess"])),
+            max(0.0, float(motion["inertial_dip"]) - BETWEEN_DIP))
 
 
 def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
@@ -124,10 +221,19 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
         if "motion" not in phase:
             continue
         t0 = float(phase["steps"][0]["t"])
-        eased = None
-        for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
-            eased = ease_phase(scn, phase, dt, t0, e)
-            if eased is not None:
+        eased, best = None, (True, np.inf, np.inf)
+        for slow in SLOW_FACTORS:  # slower where the motion between steps or its inertia fails
+            candidate = None
+            for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
+                candidate = ease_phase(scn, phase, dt, t0, e, slow)
+                if candidate is not None:
+                    break
+            if candidate is None:
+                break
+            score = _motion_score(scn, candidate)
+            if eased is None or score < best:
+                eased, best = candidate, score
+            if best == (False, 0.0, 0.0):
                 break
         if eased is None:
             continue

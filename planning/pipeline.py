@@ -13,6 +13,7 @@ it on footsteps only.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -20,11 +21,14 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.baseline import plan_naive
+from planning.between import between_steps
 from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
 from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
+from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
+from rb_drake.statics import allocate, statics_problem
 
 PLANNERS = ("rbp", "naive")
 
@@ -122,7 +126,11 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             t0 = time.perf_counter()
             result = optimise_body(scn, stance, seed.poses, cfg.dt, cfg.scp)
             clock("scp_body", t0)
-        motions.append(PhaseMotion("body", tuple(stance), None, None, None, seed, result))
+        motion = PhaseMotion("body", tuple(stance), None, None, None, seed, result)
+        crossing = _seed_between(scn, motion)
+        if crossing:
+            return motions, f"body phase {len(motions)} in stance {list(stance)}: {crossing}"
+        motions.append(motion)
         if k == len(fp.steps):
             break
         step = fp.steps[k]
@@ -139,11 +147,56 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             t0 = time.perf_counter()
             result = optimise_reach(scn, three, step.boom, seed.poses, seed.tips, cfg.dt, cfg.scp)
             clock("scp_reach", t0)
-        motions.append(PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor,
-                                   seed, result))
+        motion = PhaseMotion("reach", three, step.boom, step.from_anchor, step.to_anchor, seed,
+                             result)
+        after = tuple(step.to_anchor if i == step.boom else a for i, a in enumerate(stance))
+        short = _seed_between(scn, motion) or _handover_shortfall(scn, motion, tuple(stance),
+                                                                    after)
+        if short:
+            return motions, (f"reach phase {len(motions)} (boom {step.boom} "
+                             f"{step.from_anchor} -> {step.to_anchor}): {short}")
+        motions.append(motion)
         pose = np.asarray(ends[k], dtype=float)
         found_pose = np.asarray(found[k], dtype=float)
     return motions, ""
+
+
+def _seed_between(scn: Scenario, motion: PhaseMotion) -> str:
+    """'' unless the phase keeps its seed (SCP did not improve it: SCP's own steps pass
+    `between_steps`) and the seed's motion between its steps fails `between_steps`: a seed
+    through a configuration where the booms' lines meet in one point (an OMPL path on
+    crevasse-s6) swings the tensions in execution, and slowing it does not help."""
+    if motion.result is not None and motion.result.improved:
+        return ""
+    stance = scn.stance(motion.stance)
+    tips = motion.seed.tips
+    lp = check_poses(scn, stance, motion.seed.poses, tips).allocation.log_probs
+    failed = between_steps(scn, stance, motion.seed.poses, lp, tips)
+    return f"its seed fails between steps ({failed})" if failed else ""
+
+
+def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | None, ...],
+                        after: tuple[str | None, ...]) -> str:
+    """'' when the ends of the release and attach ramps (planning.ramps) hold with p_min:
+    there the reach's first (last) configuration's grasps hold the body, and the freed boom's
+    grasp, unloaded but not yet open (already closed), still counts with its P at zero
+    tension, below 1 where its pull angle is large (the lateral limit against its deviation:
+    rockfall-3 had a ramp end at P 0.9499)."""
+    robot, g = scn.robot, scn.gravity_vector
+    j = reach.free_boom
+    three = scn.stance(reach.stance)
+    tips = reach.seed.tips  # SCP keeps the free tip's path
+    for name, ids, n in (("release", before, 0), ("attach", after, -1)):
+        pose = reach.poses[n]
+        f = allocate(robot, g, pose, three, tips[n]).tensions[0]
+        four = scn.stance(ids)
+        psi = statics_problem(robot, g, pose, four).pull_angles[0]
+        lp = four.log_prob(np.where(four.attached, np.nan_to_num(f), 0.0), np.nan_to_num(psi))
+        p = float(np.exp(lp[four.attached].sum()))
+        if not p >= robot.p_min:
+            return (f"the {name} ramp ends at P = {p:.4f} below p_min {robot.p_min} (boom {j}'s "
+                    f"grasp unloaded at P = {math.exp(lp[j]):.4f})")
+    return ""
 
 
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,

@@ -45,6 +45,11 @@ from rb_drake.statics import StaticsProblem, statics_problem
 
 RAMP_DURATION = 1.0     # s: each release and attach ramp lasts at least this long
 RELEASE_TENSION = 0.05  # N: a gripper opens (or closes) only with its boom's tension below this
+# N: the least tension the execution commands to an anchored boom, below the planner's lower
+# bound boom_tension[0] (0.5 N by default): the margin that lets the controller pull less than
+# the plan where the plan's boom sits on its bound (docs/model.md, "The controller's tension
+# floor"). Twice RELEASE_TENSION, so that a held boom never looks released.
+CONTROL_TENSION_FLOOR = 0.1
 RAMP_STEPS = 2          # steps of a ramp in a plan without a time step (end poses only)
 
 

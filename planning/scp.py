@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 
+from planning.between import between_steps
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import (
@@ -55,6 +56,7 @@ from rb_drake.feasibility import (
     Reason,
     World,
     check_poses,
+    pull_within,
     rock_inside_body,
     wrench_conditioning,
 )
@@ -481,7 +483,8 @@ class PhaseProgram:
 
     def _infeasibility(self, it: Iterate, prob, e: np.ndarray, r: np.ndarray) -> str:
         """Why `it` is not feasible ('' when it is): the tests of `check_poses`, but with the
-        iterate's own tensions, and the robustness floor."""
+        iterate's own tensions, the robustness floor, and the configurations between the
+        steps (`between_steps`)."""
         robot = self.robot
         f_lo, f_hi = robot.boom_tension
         f = it.tensions
@@ -500,6 +503,8 @@ class PhaseProgram:
             return "shoulder angle out of range"
         if np.any(np.abs(prob.shoulder_torque) > robot.shoulder_torque_max):
             return "shoulder torque over the limit"
+        if not pull_within(robot, prob.pull_angles[:, self.stance.attached]).all():
+            return f"a grasp pulled at {robot.max_pull_angle_deg} deg or more from its normal"
         if np.any(wrench_conditioning(robot, prob.A, self.stance.attached) < MIN_CONDITIONING):
             return "booms nearly meet in one point (wrench conditioning)"
         rock = self.world.rock
@@ -511,7 +516,9 @@ class PhaseProgram:
             end = self.targets - ANCHOR_CLEARANCE * geo.u
             if rock.segments_hit(geo.shoulders, end).any():
                 return "boom collides with rock"
-        return ""
+        lp = self.stance.log_prob(np.nan_to_num(self.tensions4(it.tensions)),
+                                  np.nan_to_num(prob.pull_angles))
+        return between_steps(self.world, self.stance, it.poses, lp, self.tips)
 
     def violations(self, it: Iterate) -> Margins:
         """By how much `it` exceeds each limit the subproblem linearises (0 where within)."""

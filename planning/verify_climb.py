@@ -48,7 +48,7 @@ RULES = {
     "tension": "tensions within the robot's tension limits",
     "torque": "the free boom's shoulder torque within its limit",
     "conditioning": "the booms' wrench not degenerate (not all through one point)",
-    "pull-angle": "no grasp pulled at 90 degrees or more from its normal",
+    "pull-angle": "every grasp pulled at less than the robot's max_pull_angle_deg from its normal",
     "probability": "every configuration's P at least p_min",
     "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation",
 }

@@ -13,7 +13,6 @@ import numpy as np
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE, Rock
-from rb_drake.grasp import HALF_PI
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, statics_problem
@@ -52,7 +51,7 @@ REASON_TEXT = {
     Reason.SHOULDER_ANGLE: "shoulder angle out of range",
     Reason.BODY_COLLISION: "body collides with rock",
     Reason.BOOM_COLLISION: "boom collides with rock",
-    Reason.PULL_ANGLE: "grasp pulled at 90 degrees or more from its normal",
+    Reason.PULL_ANGLE: "grasp pulled at max_pull_angle_deg or more from its normal",
     Reason.SHOULDER_TORQUE: "free limb's shoulder torque over the limit",
     Reason.SINGULAR: "the booms nearly meet in one point: the stance cannot resist disturbances",
     Reason.STATICS: "no tensions within bounds balance the load",
@@ -161,8 +160,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     alloc = Allocation(*(_scatter(v, rows, P, -np.inf if name == "robustness" else np.nan)
                          for name, v in zip(Allocation._fields, part, strict=True)))
     if not ignore_grasps:
-        flag(stance.attached & ~(np.abs(np.nan_to_num(part.pull_angles)) < HALF_PI),
-             Reason.PULL_ANGLE, rows)
+        flag(stance.attached & ~pull_within(robot, part.pull_angles), Reason.PULL_ANGLE, rows)
     if stance.free_boom is not None:
         flag(np.abs(part.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE,
              rows, which=stance.free_boom)
@@ -173,6 +171,13 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         flag(part.robustness < robot.log_p_min, Reason.PROBABILITY, rows)
     feasible = reason == Reason.FEASIBLE
     return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle, problem)
+
+
+def pull_within(robot: RobotParams, psi: np.ndarray) -> np.ndarray:
+    """Where a grasp's pull angle passes the planner's limit: |psi| < robot.max_pull_angle
+    (NaN, a free boom's, passes). The one definition of the PULL_ANGLE test, which
+    feasibility_kernel, SCP and the verifier repeat."""
+    return np.abs(np.nan_to_num(psi)) < robot.max_pull_angle
 
 
 def _scatter(values: np.ndarray, rows: np.ndarray, P: int, fill: float) -> np.ndarray:
@@ -237,9 +242,9 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     alloc = check.allocation
     for i in np.flatnonzero(stance.attached):
         psi = np.degrees(alloc.pull_angles[0, i])
-        if not abs(psi) < 90.0:
+        if not abs(psi) < robot.max_pull_angle_deg:
             out.append(f"boom {i}: anchor {stance.ids[i]} pulled at {psi:+.1f} deg from its "
-                       "normal (must be within +-90)")
+                       f"normal (must be within +-{robot.max_pull_angle_deg})")
     j = stance.free_boom
     if j is not None and abs(alloc.shoulder_torque[0]) > robot.shoulder_torque_max:
         out.append(f"boom {j} (free): shoulder torque {alloc.shoulder_torque[0]:.2f} N m over "
@@ -312,7 +317,8 @@ def violation(world: World, stance: Stance, poses: np.ndarray, check: PoseCheck,
         MIN_CONDITIONING)
     if not ignore_grasps:
         psi = np.abs(np.nan_to_num(prob.pull_angles))
-        v += np.sum(np.where(att, np.maximum(0, psi - (HALF_PI - 1e-3)), 0.0), axis=1)
+        v += np.sum(np.where(att, np.maximum(0, psi - (robot.max_pull_angle - 1e-3)), 0.0),
+                    axis=1)
         r = np.where(np.isfinite(alloc.robustness), alloc.robustness, robot.log_p_min - 1.0)
         v += np.where(alloc.statics_ok, np.maximum(0, robot.log_p_min - r), 0.0)
     return np.where(check.feasible, 0.0, np.maximum(v, 1e-6))

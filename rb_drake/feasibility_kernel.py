@@ -72,7 +72,8 @@ _REGULARISATION = 28
 _STATICS_TOL = 29
 _CLEARANCE = 30
 _Z_FLOOR = 31       # Phi^-1(p_min), less a margin: no grasp of a feasible pose has a lower z
-_N_PARAMS = 32
+_MAX_PULL = 32      # robot.max_pull_angle (rad): the PULL_ANGLE test's limit
+_N_PARAMS = 33
 
 ALL_SEGMENTS = 0b11111  # `score_rows(collide=)`: bit i boom i's segment, bit 4 the body
 
@@ -231,6 +232,7 @@ def _pack_robot(robot: RobotParams, g_x: float, g_y: float) -> np.ndarray:
     # z is at least Phi^-1(p_min); the margin keeps the bound from deciding a rounding tie.
     p_min = math.exp(robot.log_p_min)
     p[_Z_FLOOR] = NormalDist().inv_cdf(p_min) - 1e-6 if 0.0 < p_min < 1.0 else -math.inf
+    p[_MAX_PULL] = robot.max_pull_angle
     return p
 
 
@@ -743,7 +745,7 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
     robustness = r_sum if statics_ok else -math.inf
     if not ignore_grasps:
         for i in range(4):
-            if i != j and not abs(psi[i]) < HALF_PI:
+            if i != j and not abs(psi[i]) < prm[_MAX_PULL]:  # feasibility.pull_within
                 return math.nan
     if abs(torque) > prm[_TORQUE_MAX]:
         return math.nan
@@ -992,7 +994,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         # -- the grasp and statics tests (feasibility.check_poses' order)
         if code == 0 and not ignore_grasps:
             for i in range(4):
-                if att[i] and not abs(psi[i]) < HALF_PI:
+                if att[i] and not abs(psi[i]) < prm[_MAX_PULL]:  # feasibility.pull_within
                     code = _PULL_ANGLE
                     break
         if code == 0 and free >= 0 and abs(torque) > prm[_TORQUE_MAX]:
@@ -1064,7 +1066,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             pull = 0.0
             for i in range(4):
                 if att[i]:
-                    pull += max(0.0, abs(psi[i]) - (HALF_PI - 1e-3))
+                    pull += max(0.0, abs(psi[i]) - (prm[_MAX_PULL] - 1e-3))
             v += pull
             r = robustness if math.isfinite(robustness) else log_p_min - 1.0
             if statics_ok:

@@ -41,6 +41,11 @@ class RobotParams:
     boom_linear_density: float = 0.12
     attach_failure: float = 0.01
     p_min: float = 0.95
+    # The planner's limit on a grasp's pull angle |psi| (a grasp must be pulled at less than
+    # this from its normal). The model gives P = 0 from 90 deg on, a cliff: a plan that holds a
+    # grasp at 89.99 deg is executed past 90 deg by the slightest tracking error. The margin
+    # below 90 deg is docs/model.md's "Pull-angle margin".
+    max_pull_angle_deg: float = 88.0
 
     # Derived arrays, for the vectorised kernels.
     @property
@@ -56,6 +61,11 @@ class RobotParams:
     @property
     def shoulder_range(self) -> float:
         return math.radians(self.shoulder_range_deg)
+
+    @property
+    def max_pull_angle(self) -> float:
+        """The planner's pull-angle limit in radians: feasible grasps have |psi| < this."""
+        return math.radians(self.max_pull_angle_deg)
 
     @property
     def max_reach(self) -> float:
@@ -82,6 +92,7 @@ class RobotParams:
             "boom_linear_density": self.boom_linear_density,
             "attach_failure": self.attach_failure,
             "p_min": self.p_min,
+            "max_pull_angle_deg": self.max_pull_angle_deg,
         }
 
     def replace(self, **changes: Any) -> RobotParams:
@@ -161,4 +172,6 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
             changes[key] = _number(key, value, 0.0, 1.0)
         elif key == "p_min":
             changes[key] = _number(key, value, 0.0, 1.0, lo_open=True)
+        elif key == "max_pull_angle_deg":
+            changes[key] = _number(key, value, 0.0, 90.0, lo_open=True)
     return RobotParams(**changes)

@@ -20,6 +20,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import BasicVector, Context, LeafSystem, ValueProducer
 
+from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.plant import ReachBotPlant
 from rb_drake.stance import Stance
@@ -168,6 +169,17 @@ class ControlGains:
         return 2.0 * self.limb_damping_ratio * 2.0 * math.pi * self.limb_frequency_hz
 
 
+def control_bounds(robot: RobotParams) -> tuple[float, float]:
+    """The tensions the controller may command to an anchored boom: the planner's upper bound,
+    and below the planner's lower bound down to CONTROL_TENSION_FLOOR. The most robust
+    allocation puts safe booms on the planner's bound; a controller held to it can only pull
+    more on them, and in a 3-stance cannot make the wrench the pose loop asks for: crevasse
+    seed 6's body turned until the geometry balanced, 18 mm off (docs/model.md, "The
+    controller's tension floor")."""
+    lo, hi = robot.boom_tension
+    return min(lo, CONTROL_TENSION_FLOOR), hi
+
+
 RAMP_WEIGHT = 1.0  # N of wrench error per N of a ramped boom's tension off its feed-forward
 
 
@@ -248,7 +260,7 @@ class TensionController(LeafSystem):
         self._statics = BodyStatics(robot, gravity, shoulder_mass, fixed_boom_mass)
         self._inertia = np.asarray(inertia, dtype=float)
         self._gains = gains
-        self.projector = TensionProjector(robot.boom_tension, gains.tension_weight)
+        self.projector = TensionProjector(control_bounds(robot), gains.tension_weight)
         self._state = self.DeclareVectorInputPort("state", 6)
         self._desired = self.DeclareVectorInputPort("desired_state", 6)
         self._acceleration = self.DeclareVectorInputPort("desired_acceleration", 3)

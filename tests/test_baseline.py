@@ -26,7 +26,7 @@ from rb_drake.scenario import Scenario
 SEED = 4
 SHORT = CaveConfig(length=(3.0, 3.2))
 CONFIG = FootstepConfig(max_expansions=40)
-PROBABILITY_WORDS = ("p_min", "90 degrees")
+PROBABILITY_WORDS = ("p_min", "pull-angle:")  # the grasp rules the naive baseline ignores
 
 
 

@@ -19,6 +19,7 @@ the transition pose, some close, some far.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 import zlib
@@ -359,3 +360,36 @@ def test_reach_violation_matches_geometry(scenarios: dict[str, Scenario], cave: 
                                err_msg=f"{cave}: reach violation differs from geometry.reach")
     assert np.array_equal(got == 0.0, expected == 0.0), f"{cave}: reachability differs"
     assert (expected == 0.0).mean() > 0.01, f"{cave}: too few reachable pairs to compare"
+
+
+def test_pull_angle_limit_decided_alike_at_its_edge(scenarios: dict[str, Scenario]) -> None:
+    """robot.max_pull_angle_deg is the PULL_ANGLE test's limit in both paths: with the limit
+    set 1e-9 rad above and below a pose's largest pull angle, the kernel and check_poses give
+    the same reasons, feasibility and violation, and the pose passes and fails that test."""
+    base = scenarios["demo-crevasse"]
+    stance = base.stance(base.start_stance)
+    poses = _around(_rng("pull edge"), np.asarray(base.start_pose, dtype=float), 400)
+    check = check_poses(base, stance, poses, full=True)
+    psi = np.abs(check.allocation.pull_angles[:, stance.attached]).max(axis=1)
+    # poses whose only failure, if any, comes after the pull-angle test
+    ok = np.isin(check.reason, [Reason.FEASIBLE, Reason.SINGULAR, Reason.STATICS,
+                                Reason.PROBABILITY]) & np.isfinite(psi)
+    picked = np.flatnonzero(ok)[:6]
+    assert len(picked) >= 3, f"only {len(picked)} poses pass the tests before the pull angle"
+    for k in picked:
+        for side in (-1.0, 1.0):
+            limit = psi[k] + side * 1e-9
+            robot = base.robot.replace(max_pull_angle_deg=math.degrees(limit))
+            assert robot.max_pull_angle == pytest.approx(limit, abs=1e-14)
+            scn = dataclasses.replace(base, robot=robot)
+            got = fk.score_poses(scn, stance, poses)
+            want = _reference_check(scn, stance, poses, None, False)
+            label = f"pose {k}, limit {math.degrees(limit):.9f} deg"
+            np.testing.assert_array_equal(got.reason, want.reason, err_msg=f"{label}: reasons")
+            np.testing.assert_array_equal(got.feasible, want.feasible, err_msg=label)
+            _assert_close("violation", label, got.violation, want.violation)
+            if side < 0:
+                assert want.reason[k] == Reason.PULL_ANGLE, f"{label}: not refused"
+                assert got.violation[k] >= 1e-9, f"{label}: no pull-angle violation"
+            else:
+                assert want.reason[k] != Reason.PULL_ANGLE, f"{label}: refused inside the limit"

@@ -154,8 +154,9 @@ def test_eased_motions_start_and_stop_gently(cave_plans) -> None:
         moves = [(np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1), limit)]
         if phase["kind"] == "body":
             moves.append((np.abs(np.diff(points[:, 2])), turn_limit))
-        share = _progress(len(steps) - 1 - ease, ease)[0]
-        assert share == pytest.approx(1.0 / (2 * ease))
+        slow = phase["motion"].get("slowed", 1)
+        share = _progress((len(steps) - 1 - ease) // slow, ease, slow)[0]
+        assert share == pytest.approx(1.0 / (2 * ease * slow))
         for move, lim in moves:
             for n in (0, -1):
                 assert move[n] <= share * lim + 1e-12, (

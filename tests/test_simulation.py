@@ -40,7 +40,7 @@ from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario
 from rb_drake.statics import statics_problem
-from systems.control import BodyStatics
+from systems.control import BodyStatics, control_bounds
 from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
 from systems.montecarlo import (
     FootstepReplanner,
@@ -382,7 +382,7 @@ def test_tracking_error_bounded(good: SimulationRecord, straight: SimulationReco
 
 def test_record_follows_the_plan(good: SimulationRecord) -> None:
     traj = good.plan
-    lo, hi = traj.scenario.robot.boom_tension
+    lo, hi = control_bounds(traj.scenario.robot)  # the controller's floor: 0.1 N
     for s in range(0, len(good.times), 7):
         k = good.phase[s]
         phase = traj.phases[k]

@@ -37,3 +37,32 @@ def test_bench_footsteps_tiny(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
         summary = result["summary"][name]
         assert summary["trials"] == 1, summary
         assert summary["seconds_min"] <= summary["seconds_median"] <= summary["seconds_max"]
+
+
+def test_footstep_ab_runs_both_trees(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """footstep_ab runs a cave in the old and the new tree (here the same tree twice): both
+    sides report the same outcome, and the ratio is the wall times' quotient."""
+    tree = EXPERIMENTS.parent
+    out = tmp_path / "ab.json"
+    run_script("footstep_ab", ["--old", str(tree), "--new", str(tree), "--seeds", "51",
+                               "--thorough", "--time-limit", "60", "--out", str(out)],
+               monkeypatch)
+    result = json.loads(out.read_text())
+    (row,) = result["caves"]
+    assert (row["kind"], row["seed"]) == ("shaft", 51), row
+    for side in ("old", "new"):
+        assert row[side]["stop"] == "noroute", row  # benchmark shaft 51 has no route
+        assert row[side]["wall"] > 0.0 and row[side]["cpu"] > 0.0, row
+    assert row["old"]["expansions"] == row["new"]["expansions"], row
+    assert row["ratio"] == pytest.approx(row["new"]["wall"] / row["old"]["wall"], rel=1e-12)
+    assert result["summary"]["same_outcome"] == 1, result["summary"]
+
+
+def test_footstep_ab_refuses_a_folder_that_is_not_rbp(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "argv", ["footstep_ab", "--old", str(tmp_path), "--seeds", "1",
+                                      "--out", str(tmp_path / "x.json")])
+    with pytest.raises(SystemExit) as done:
+        runpy.run_path(str(EXPERIMENTS / "footstep_ab.py"), run_name="__main__")
+    assert done.value.code == 2
+    assert not (tmp_path / "x.json").exists()

@@ -173,15 +173,20 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     ok = np.flatnonzero(first.feasible)
     if not len(ok):
         return empty
+    # The new 4-stance, and its release set of this boom: the 3-stance with the gripper at the
+    # new anchor as the attach ramp starts, the gripper counted unloaded (the first test
+    # without that grasp is a necessary condition, and it decided the freed boom's segment).
     second = score_rows(scn, stances, tips, poses[ok], np.arange(len(ok)),
                         np.ones(len(ok), np.int64), np.ones(len(ok), np.int64), ignore_grasps,
-                        decide_only=True, collide=0)
-    keep = ok[second.feasible]
+                        decide_only=True, collide=0, release=True)
+    arrive = second.release_r[:, boom]
+    held = second.feasible & ~np.isnan(arrive)
+    keep = ok[held]
     if not len(keep):
         return empty
     src = rows[keep]
-    r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom],
-                          first.robustness[keep], second.robustness[second.feasible]])
+    r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom], arrive[held],
+                          second.robustness[held]])
     return LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested)
 
 

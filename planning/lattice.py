@@ -207,17 +207,13 @@ def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
     rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
     stances, tips = pack_rows(table, rows, [free, *held])
     P = len(idx)
+    # The four release 3-stances are decided where the 4-stance holds (KernelCheck.release_r).
     check = score_rows(scn, stances, tips, poses, np.arange(P), np.zeros(P, np.int64),
-                       np.zeros(P, np.int64), ignore_grasps, decide_only=True)
+                       np.zeros(P, np.int64), ignore_grasps, decide_only=True, release=True)
     ok = check.feasible
     idx, poses, r = idx[ok], poses[ok], check.robustness[ok]
-    F = len(idx)
-    # The four release 3-stances, only where the 4-stance holds.
-    rel = score_rows(scn, stances, tips, poses, np.tile(np.arange(F), 4),
-                     np.repeat(np.arange(1, 5), F), np.repeat(np.arange(1, 5), F),
-                     ignore_grasps, decide_only=True)
-    release = rel.feasible.reshape(4, F).T
-    release_r = np.where(release, rel.robustness.reshape(4, F).T, -np.inf)
+    release = ~np.isnan(check.release_r[ok])
+    release_r = np.where(release, check.release_r[ok], -np.inf)
     component, n = _components(idx)
     keys = pack(idx, cfg.angle_count)
     order = np.argsort(keys)

@@ -91,6 +91,9 @@ class KernelCheck(NamedTuple):
     log_probs: np.ndarray   # (P, 4) log P_i (0 for a free boom)
     tensions: np.ndarray    # (P, 4) allocated; NaN for a free boom and where none exist
     violation: np.ndarray   # (P,) feasibility.violation: 0 where feasible
+    # score_rows(release=True) only: per 4-stance row feasible, r of releasing each boom (the
+    # 3-stance with that gripper at its anchor, the gripper counted unloaded), NaN elsewhere
+    release_r: np.ndarray | None = None
 
 
 class PackedStances(NamedTuple):
@@ -144,7 +147,7 @@ def score_poses(world: World, stance: Stance, poses: np.ndarray,
 def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np.ndarray,
                pose_row: np.ndarray, stance_row: np.ndarray, tip_row: np.ndarray,
                ignore_grasps: bool = False, decide_only: bool = False,
-               collide: int = ALL_SEGMENTS) -> KernelCheck:
+               collide: int = ALL_SEGMENTS, release: bool = False) -> KernelCheck:
     """`score_poses` for R rows at once, each its own configuration: row r is pose
     poses[pose_row[r]] in stance stances[stance_row[r]], with the free gripper of a 3-stance
     at tips[tip_row[r]] (tips: (T, 2); ignored in a 4-stance). Lets one call score several
@@ -152,23 +155,29 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
     which asks only which rows are feasible) each row stops at a failing test: the violation
     is NaN and an infeasible row's reason is one failing test, not always the first.
     `collide` (decide_only only) tests only the segments of its bits for collision: those of
-    the others must be known clear, e.g. decided in another configuration at the same pose."""
+    the others must be known clear, e.g. decided in another configuration at the same pose.
+    `release` (decide_only only): also each feasible 4-stance row's release r (KernelCheck),
+    as the flood fill decides it."""
     if collide != ALL_SEGMENTS and not decide_only:
         raise ValueError("collide leaves out collision tests: only with decide_only")
+    if release and not decide_only:
+        raise ValueError("release sets are decided with decide_only only")
     R = len(pose_row)
     reason = np.empty(R, dtype=np.int64)
     robustness = np.empty(R)
     log_probs = np.empty((R, 4))
     tensions = np.empty((R, 4))
     violation = np.empty(R)
+    release_r = np.full((R if release else 0, 4), np.nan)
     if R:
         edges, owner, vertices = _packed_rock(world.rock)
         _score_kernel(_floats(poses, (-1, 3)), _robot_params(world.robot, world.gravity_vector),
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
                       bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
-                      violation, np.empty((0, 4)), np.empty(0, dtype=np.int8))
-    return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation)
+                      violation, release_r, np.empty(0, dtype=np.int8))
+    return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation,
+                       release_r if release else None)
 
 
 _NO_TIP = np.full((1, 2), np.nan)
@@ -679,7 +688,10 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
     (r itself may be -inf with ignore_grasps).
     The same operations, in the same order, as `_score_kernel` on that 3-stance's row with
     decide_only and collide=0 (its boom lengths, shoulder angles, pull angles and segments
-    are the 4-stance's, all passed), so the decision and r are bitwise the same. `mu`,
+    are the 4-stance's, all passed), so the decision and r are bitwise the same, but for one
+    term: the freed grasp j counts with its P at zero tension (log_ndtr(mu_j / sigma_j)), as
+    at the end of the release ramp (planning.ramps), where it is unloaded but still attached
+    and `rbp check` counts it; the 3-stance alone does not. `mu`,
     `sigma` and `minors` are the 4-stance's allocation's (`_allocate4`): each grasp's mean
     limit and spread, and the signed determinant of A without each column."""
     gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
@@ -722,6 +734,8 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
         for i in range(4):
             if i != j and abs(psi[i]) < HALF_PI and (mu[i] - f[i]) / sigma[i] < prm[_Z_FLOOR]:
                 return math.nan
+        if mu[j] / sigma[j] < prm[_Z_FLOOR]:  # the freed grasp, unloaded (below)
+            return math.nan
     residual = 0.0
     for r in range(3):
         acc = 0.0
@@ -739,8 +753,8 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
                 lp[i] = log_ndtr((mu[i] - fi) / sigma[i])
             else:
                 lp[i] = -math.inf
-        else:
-            lp[i] = 0.0
+        else:  # the freed grasp at zero tension: still attached at the release ramp's end
+            lp[i] = log_ndtr(mu[i] / sigma[i]) if not ignore_grasps else 0.0
         r_sum += lp[i]
     robustness = r_sum if statics_ok else -math.inf
     if not ignore_grasps:

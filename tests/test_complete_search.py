@@ -40,6 +40,8 @@ from planning.transition import transition_stances
 from rb_drake.feasibility import check_poses
 from rb_drake.feasibility_kernel import pack_stances, reach_violation, score_poses, score_rows
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario, scenario_from_dict
+from rb_drake.stance import Stance
+from rb_drake.statics import statics_problem
 
 COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
 
@@ -112,8 +114,14 @@ def test_stance_lattice_is_the_feasible_set_with_release_booms(demo: Scenario) -
     s4 = demo.stance(stance)
     for j in range(4):
         three = s4.without(j)
-        rel = check_poses(demo, three, lat.poses, s4.positions[j]).feasible
+        check = check_poses(demo, three, lat.poses, s4.positions[j])
+        unloaded = unloaded_log_p(demo, s4, lat.poses, j)
+        rel = check.feasible & (check.allocation.robustness + unloaded >= demo.robot.log_p_min)
         assert np.array_equal(lat.release[:, j], rel), f"release set of boom {j} differs"
+        # The release r is the 3-stance's with the unloaded grasp counted (the ramp's end).
+        np.testing.assert_allclose(lat.release_r[rel, j],
+                                   check.allocation.robustness[rel] + unloaded[rel], rtol=1e-9,
+                                   atol=1e-12, err_msg=f"release r of boom {j}")
     # Components: neighbours (26-connectivity) share a label, and labels split nowhere else.
     where = {tuple(i): c for i, c in zip(lat.idx.tolist(), lat.component.tolist(), strict=True)}
     for i, c in where.items():
@@ -167,10 +175,19 @@ def test_grown_components_are_the_lattice_components(cave: str) -> None:
     assert compared >= 6, f"too few components to compare ({compared})"
 
 
+def unloaded_log_p(scn: Scenario, four: Stance, poses: np.ndarray, boom: int) -> np.ndarray:
+    """log P of boom `boom`'s grasp in the 4-stance `four` at zero tension (numpy: the pull
+    angle of statics_problem, Stance.log_prob): what the release ramp's end (or the attach
+    ramp's start) adds to the 3-stance, the gripper unloaded but attached."""
+    psi = np.nan_to_num(statics_problem(scn.robot, scn.gravity_vector, poses, four).pull_angles)
+    return four.log_prob(np.zeros((len(poses), 4)), psi)[:, boom]
+
+
 def all_transition_poses(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
                          cfg: LatticeConfig) -> set[int]:
     """Brute force: every lattice pose of a box over the five anchors' reach at which all four
-    configurations of the move are feasible (kernel, full mode)."""
+    configurations of the move are feasible (kernel, full mode), the two 3-stances with the
+    unloaded grasp on the old and the new anchor counted (the ramps' ends)."""
     s_old, s_three, s_new = transition_stances(scn, stance, boom, anchor)
     five = np.vstack([s_old.positions, s_new.positions[boom][None]])
     booms = np.array([0, 1, 2, 3, boom])
@@ -178,11 +195,15 @@ def all_transition_poses(scn: Scenario, stance: tuple[str, ...], boom: int, anch
     poses = poses_of(idx, cfg)
     ok = reach_violation(scn.robot, poses, five, booms).sum(axis=1) == 0.0
     idx, poses = idx[ok], poses[ok]
-    for stance_k, tip in ((s_old, None), (s_three, s_old.positions[boom]),
-                          (s_three, s_new.positions[boom]), (s_new, None)):
+    for stance_k, tip, four in ((s_old, None, None), (s_three, s_old.positions[boom], s_old),
+                                (s_three, s_new.positions[boom], s_new), (s_new, None, None)):
         if not len(poses):
             break
-        keep = score_poses(scn, stance_k, poses, tip).feasible
+        check = score_poses(scn, stance_k, poses, tip)
+        keep = check.feasible
+        if four is not None and keep.any():
+            keep[keep] = (check.robustness[keep] + unloaded_log_p(scn, four, poses[keep], boom)
+                          >= scn.robot.log_p_min)
         idx, poses = idx[keep], poses[keep]
     return set(pack(idx, cfg.angle_count).tolist())
 
@@ -358,3 +379,19 @@ def test_alternative_poses_hold_the_move(demo: Scenario) -> None:
             assert check.feasible.all(), f"step {k}: alternatives {np.flatnonzero(~check.feasible)}"
             worst = np.minimum(worst, check.allocation.robustness)
         assert np.all(np.diff(worst) <= 1e-9), f"step {k}: not sorted best first"
+
+
+def test_footstep_plan_holds_its_ramps() -> None:
+    """The release ramp ends with the freed grasp unloaded but attached, and its P at zero
+    tension counts (rbp check's rule `release`): the complete search counts it too. On
+    benchmark crevasse seed 18 a release at a pull angle near 88 deg ended at P 0.932 < p_min
+    while the search ignored it; now every configuration of the footstep plan verifies."""
+    from experiments.baseline_comparison import make_cave, plan_cave
+    from planning.check import check_plan
+
+    scn = make_cave("crevasse", 18, (4.5, 5.0))
+    plan = plan_cave(scn, "rbp", 1000, False)
+    assert plan["success"], plan["reason"]
+    assert plan["p_min"] >= scn.robot.p_min - 1e-9, plan["p_min"]
+    problems = check_plan(plan)
+    assert not problems, problems[:3]

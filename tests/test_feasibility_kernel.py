@@ -233,6 +233,9 @@ def test_results_depend_only_on_each_pose(compared: dict[str, list[Compared]]) -
             part = fk.score_poses(c.case.world, stance, c.case.poses[rows], tip,
                                   c.case.ignore_grasps)
             for name, a, b in zip(fk.KernelCheck._fields, part, c.kernel, strict=True):
+                if b is None:  # release_r: only asked for by the lattice search
+                    assert a is None, name
+                    continue
                 np.testing.assert_array_equal(a, b[rows], err_msg=f"{c.case.label}: {name} "
                                               "depends on the other poses of the batch")
 
@@ -299,7 +302,7 @@ def test_rejects_what_check_poses_rejects(scenarios: dict[str, Scenario]) -> Non
     with pytest.raises(ValueError, match="3 or 4 anchors"):
         fk.score_poses(scn, stance.without(0).without(1), pose, stance.positions[0])
     empty = fk.score_poses(scn, stance, np.zeros((0, 3)))
-    assert all(len(a) == 0 for a in empty), "no poses, no results"
+    assert all(len(a) == 0 for a in empty if a is not None), "no poses, no results"
     one = fk.score_poses(scn, stance, pose)
     assert one.feasible.shape == (1,) and one.log_probs.shape == (1, 4), "a (3,) pose is P = 1"
 
@@ -321,6 +324,8 @@ def test_rows_of_several_stances_equal_one_call_per_stance(
     for n, (stance, tip) in enumerate(zip(stances, (None, tips[0], tips[1]), strict=True)):
         want = fk.score_poses(scn, stance, poses, tip)
         for name, a, b in zip(fk.KernelCheck._fields, got, want, strict=True):
+            if a is None and b is None:  # release_r, not asked for
+                continue
             np.testing.assert_array_equal(a[n * P:(n + 1) * P], b,
                                           err_msg=f"stance {n}: {name} differs")
     with pytest.raises(ValueError, match="free-gripper"):

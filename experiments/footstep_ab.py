@@ -28,6 +28,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.baseline_comparison import cave_kind
+from experiments.sweep import quantiles
+
 _CHILD = r"""
 import json, sys, time
 from experiments.baseline_comparison import make_cave
@@ -44,10 +47,6 @@ print(json.dumps({"success": bool(fp.success), "stop": fp.stop, "expansions": fp
                   "regrasps": max(0, len(fp.stances) - 1) if fp.success else None,
                   "wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu}))
 """
-
-
-def cave_of(seed: int) -> str:
-    return ("shaft", "crevasse", "shaft", "rockfall")[(seed - 1) % 4]
 
 
 def run_pair(old: Path, new: Path, kind: str, seed: int, thorough: bool,
@@ -67,13 +66,6 @@ def run_pair(old: Path, new: Path, kind: str, seed: int, thorough: bool,
             raise RuntimeError(f"{side} tree failed on {kind} seed {seed}:\n{stderr[-2000:]}")
         out[side] = json.loads(stdout.strip().splitlines()[-1])
     return out
-
-
-def median(values: list[float]) -> float | None:
-    v = sorted(values)
-    if not v:
-        return None
-    return v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -115,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for n, seed in enumerate(sorted(set(seeds)), 1):
         start = time.perf_counter()
-        row = run_pair(args.old, args.new, cave_of(seed), seed, args.thorough,
+        row = run_pair(args.old, args.new, cave_kind(seed - 1, "mixed"), seed, args.thorough,
                        args.time_limit)
         row["ratio"] = row["new"]["wall"] / max(row["old"]["wall"], 1e-9)
         row["cpu_ratio"] = row["new"]["cpu"] / max(row["old"]["cpu"], 1e-9)
@@ -124,6 +116,9 @@ def main(argv: list[str] | None = None) -> int:
               f"({row['old']['stop'] or 'route'}), new {row['new']['wall']:.2f} s "
               f"({row['new']['stop'] or 'route'}), new/old {row['ratio']:.2f} "
               f"({time.perf_counter() - start:.0f} s)", flush=True)
+    def median(values: list[float]) -> float | None:
+        return quantiles(values)["median"]
+
     summary = {side: {"median_wall": median([r[side]["wall"] for r in rows]),
                       "median_cpu": median([r[side]["cpu"] for r in rows])}
                for side in ("old", "new")}

@@ -39,6 +39,7 @@ import numpy as np
 from planning.astar import Edge, SearchResult, lazy_astar
 from planning.complete import LatticeMemo, complete_search, search_result
 from planning.lattice import LatticeConfig
+from planning.ramps import ramp_ends_hold
 from planning.transition import (
     ReleaseSet,
     Transition,
@@ -52,7 +53,6 @@ from planning.transition import (
 )
 from rb_drake.feasibility_kernel import score_poses, score_rows
 from rb_drake.scenario import Scenario
-from rb_drake.statics import statics_problem
 
 Stance4 = tuple[str, str, str, str]
 
@@ -338,24 +338,6 @@ def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], b
                                                           p4):
             pose, probabilities = polished, p4
     return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)
-
-
-def ramp_ends_hold(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
-                   pose: np.ndarray, probabilities: np.ndarray) -> bool:
-    """Whether the release ramp's end (the 3-stance with the gripper still on its old anchor,
-    unloaded) and the attach ramp's start (on the new anchor, unloaded) hold P >= p_min at a
-    transition pose whose four configurations' P are `probabilities`: each 3-stance's P times
-    the unloaded grasp's P at zero tension (planning.ramps; the complete search's release sets
-    count it, the local polish does not)."""
-    pose = np.asarray(pose, dtype=float)[None]
-    new = tuple(anchor if i == boom else a for i, a in enumerate(stance))
-    for k, four in ((1, scn.stance(stance)), (2, scn.stance(new))):
-        psi = np.nan_to_num(statics_problem(scn.robot, scn.gravity_vector, pose,
-                                            four).pull_angles)
-        unloaded = float(np.exp(four.log_prob(np.zeros((1, 4)), psi)[0, boom]))
-        if not probabilities[k] * unloaded >= scn.robot.p_min:
-            return False
-    return True
 
 
 def _plan_complete(scn: Scenario, cfg: FootstepConfig,

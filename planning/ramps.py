@@ -64,6 +64,24 @@ def ramp_statics(scn: Scenario, pose: np.ndarray, stance: Stance, boom: int,
     return four, b, float(share * three.shoulder_torque[0])
 
 
+def ramp_ends_hold(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
+                   pose: np.ndarray, probabilities: np.ndarray) -> bool:
+    """Whether the release ramp's end (the 3-stance with the gripper still on its old anchor,
+    unloaded) and the attach ramp's start (on the new anchor, unloaded) hold P >= p_min at a
+    transition pose whose four configurations' P are `probabilities`: each 3-stance's P times
+    the unloaded grasp's P at zero tension (the complete search's release sets count it, the
+    local polish of planning.footsteps does not)."""
+    pose = np.asarray(pose, dtype=float)[None]
+    new = tuple(anchor if i == boom else a for i, a in enumerate(stance))
+    for k, four in ((1, scn.stance(stance)), (2, scn.stance(new))):
+        psi = np.nan_to_num(statics_problem(scn.robot, scn.gravity_vector, pose,
+                                            four).pull_angles)
+        unloaded = float(np.exp(four.log_prob(np.zeros((1, 4)), psi)[0, boom]))
+        if not probabilities[k] * unloaded >= scn.robot.p_min:
+            return False
+    return True
+
+
 def ramp_probabilities(scn: Scenario, stance_ids: list, step: dict[str, Any]) -> None:
     """Set a 4-stance step's p_grasp and p_success from its tensions (as `rbp check`)."""
     stance = scn.stance(tuple(stance_ids))

@@ -517,6 +517,35 @@ def _slope(t, fp, n, mu, sigma, dz, reg, curvature) -> tuple[float, float]:
 
 
 @njit(cache=True, error_model="numpy")
+def _without_column(A: np.ndarray, c: int, work: np.ndarray) -> None:
+    """work = A with column c left out (the other three, in order): a 3-stance's matrix."""
+    m = 0
+    for j in range(4):
+        if j != c:
+            for r in range(3):
+                work[r, m] = A[r, j]
+            m += 1
+
+
+@njit(cache=True, error_model="numpy")
+def _limb_load(x, y, L, sh, tg, j, prm, b):
+    """geometry.limb_load: the cantilevered free limb j (its boom from the shoulder sh[j] to the
+    gripper at tg[j]) added to the body's load b (in place); returns its shoulder torque."""
+    gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
+    m_boom = prm[_DENSITY] * L[j]
+    m_grip = prm[_GRIPPER_MASS]
+    tx, ty = tg[j, 0], tg[j, 1]
+    px, py = sh[j, 0], sh[j, 1]
+    mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
+    b[0] -= (m_boom + m_grip) * gx
+    b[1] -= (m_boom + m_grip) * gy
+    b[2] -= (m_boom * ((mx - x) * gy - (my - y) * gx)
+             + m_grip * ((tx - x) * gy - (ty - y) * gx))
+    return (m_boom * ((mx - px) * gy - (my - py) * gx)
+            + m_grip * ((tx - px) * gy - (ty - py) * gx))
+
+
+@njit(cache=True, error_model="numpy")
 def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, work, rhs,
                w, z_floor) -> tuple[bool, bool, bool]:
     """statics.allocate for four attached booms: the most robust member of the family
@@ -525,12 +554,7 @@ def _allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp, minors, vec, w
     `short` when no member within the bounds gives every grasp z >= z_floor, so that none
     can be robust enough (then f is not computed; z_floor = -inf never stops it)."""
     for c in range(4):  # null vector by signed 3x3 minors
-        m = 0
-        for j in range(4):
-            if j != c:
-                for r in range(3):
-                    work[r, m] = A[r, j]
-                m += 1
+        _without_column(A, c, work)
         minors[c] = _det3(work) * (1.0 if c % 2 == 0 else -1.0)
     n_norm = math.sqrt(minors[0] * minors[0] + minors[1] * minors[1] + minors[2] * minors[2]
                        + minors[3] * minors[3])
@@ -682,7 +706,7 @@ def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
 
 @njit(cache=True, error_model="numpy")
 def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi,
-               ignore_grasps, work, rhs, w, f, lp, B) -> float:
+               ignore_grasps, work, rhs, w, f, lp, B, b3) -> float:
     """r of the 3-stance with boom j's gripper at its anchor, at a pose feasible in the
     4-stance whose geometry (L, sh, tg, u, psi, A) is given; NaN where it is infeasible
     (r itself may be -inf with ignore_grasps).
@@ -694,31 +718,15 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
     and `rbp check` counts it; the 3-stance alone does not. `mu`,
     `sigma` and `minors` are the 4-stance's allocation's (`_allocate4`): each grasp's mean
     limit and spread, and the signed determinant of A without each column."""
-    gx, gy = prm[_GRAVITY], prm[_GRAVITY + 1]
-    b0 = -prm[_BODY_MASS] * gx
-    b1 = -prm[_BODY_MASS] * gy
-    b2 = 0.0
-    m_boom = prm[_DENSITY] * L[j]
-    m_grip = prm[_GRIPPER_MASS]
-    tx, ty = tg[j, 0], tg[j, 1]
-    px, py = sh[j, 0], sh[j, 1]
-    mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
-    b0 -= (m_boom + m_grip) * gx
-    b1 -= (m_boom + m_grip) * gy
-    b2 -= (m_boom * ((mx - x) * gy - (my - y) * gx)
-           + m_grip * ((tx - x) * gy - (ty - y) * gx))
-    torque = (m_boom * ((mx - px) * gy - (my - py) * gx)
-              + m_grip * ((tx - px) * gy - (ty - py) * gx))
+    b3[0] = -prm[_BODY_MASS] * prm[_GRAVITY]
+    b3[1] = -prm[_BODY_MASS] * prm[_GRAVITY + 1]
+    b3[2] = 0.0
+    torque = _limb_load(x, y, L, sh, tg, j, prm, b3)
     if abs(torque) > prm[_TORQUE_MAX]:  # the cheap tests first
         return math.nan
-    m = 0
-    for i in range(4):
-        if i != j:
-            for r in range(3):
-                work[r, m] = A[r, i]
-            m += 1
+    _without_column(A, j, work)
     ok = abs(minors[j]) > 1e-12  # |_det3(work)|: the minor is it, signed
-    rhs[0], rhs[1], rhs[2] = b0, b1, b2
+    rhs[0], rhs[1], rhs[2] = b3[0], b3[1], b3[2]
     _solve3(work, rhs, w)
     m = 0
     for i in range(4):
@@ -741,7 +749,7 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
         acc = 0.0
         for i in range(4):
             acc += (A[r, i] if i != j else 0.0) * (f[i] if math.isfinite(f[i]) else 0.0)
-        residual = max(residual, abs(acc - (b0 if r == 0 else b1 if r == 1 else b2)))
+        residual = max(residual, abs(acc - b3[r]))
     statics_ok = residual < prm[_STATICS_TOL]
     r_sum = 0.0
     for i in range(4):
@@ -828,6 +836,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     psi = np.empty(4)
     A = np.empty((3, 4))
     b = np.empty(3)
+    b3 = np.empty(3)  # a release 3-stance's load (_release_r)
     f = np.empty(4)
     fp = np.empty(4)
     minors = np.empty(4)
@@ -892,18 +901,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
         b[1] = -prm[_BODY_MASS] * gy
         b[2] = 0.0
         torque = 0.0
-        if free >= 0:  # the cantilevered free limb (geometry.limb_load)
-            m_boom = prm[_DENSITY] * L[free]
-            m_grip = prm[_GRIPPER_MASS]
-            tx, ty = tg[free, 0], tg[free, 1]
-            px, py = sh[free, 0], sh[free, 1]
-            mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
-            b[0] -= (m_boom + m_grip) * gx
-            b[1] -= (m_boom + m_grip) * gy
-            b[2] -= (m_boom * ((mx - x) * gy - (my - y) * gx)
-                     + m_grip * ((tx - x) * gy - (ty - y) * gx))
-            torque = (m_boom * ((mx - px) * gy - (my - py) * gx)
-                      + m_grip * ((tx - px) * gy - (ty - py) * gx))
+        if free >= 0:  # the cantilevered free limb
+            torque = _limb_load(x, y, L, sh, tg, free, prm, b)
         # -- kinematic limits
         code = 0
         for i in range(4):
@@ -926,12 +925,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             continue
         # -- force allocation (statics.allocate, statics._finish)
         if free >= 0:
-            m = 0
-            for i in range(4):
-                if att[i]:
-                    for r in range(3):
-                        work[r, m] = A[r, i]
-                    m += 1
+            _without_column(A, free, work)
             det = _det3(work)
             ok = abs(det) > 1e-12
             for r in range(3):
@@ -1063,7 +1057,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 for j in range(4):
                     release_out[row, j] = _release_r(
                         j, x, y, L, sh, tg, u, psi, A, prm, vec[1], vec[2], minors, f_lo, f_hi,
-                        ignore_grasps, work, rhs, w, f, lp, B)
+                        ignore_grasps, work, rhs, w, f, lp, B, b3)
             continue
         # -- feasibility.violation
         v = 0.0

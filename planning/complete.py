@@ -45,12 +45,13 @@ from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
+    _packed_rock,
     _robot_params,
+    lattice_move_kernel,
     lattice_reach_rows,
     lattice_reached_anchors,
     reach_violation,
     score_poses,
-    score_rows,
 )
 from rb_drake.scenario import Scenario
 
@@ -153,41 +154,27 @@ def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
 def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
                        ignore_grasps: bool, rows: np.ndarray, tested: int) -> LatticeTransition:
     """The move decided by the kernel on `rows` of `lat` (`lattice_transition`)."""
+    if not len(rows):
+        return LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
     table = anchor_table(scn)
     free = len(table.row)
-    empty = LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
-    if not len(rows):
-        return empty
     held = [table.row[a] for a in stance]
     three = [free if i == boom else held[i] for i in range(4)]
     new = [table.row[anchor] if i == boom else held[i] for i in range(4)]
     stances, tips = pack_rows(table, [three, new], [table.row[anchor], free])
-    poses = lat.poses_at(rows)
-    n = len(rows)
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
     # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
-    # these poses; the new 4-stance's segments are all decided by then.
-    first = score_rows(scn, stances, tips, poses, np.arange(n), np.zeros(n, np.int64),
-                       np.zeros(n, np.int64), ignore_grasps, decide_only=True,
-                       collide=1 << boom)
-    ok = np.flatnonzero(first.feasible)
-    if not len(ok):
-        return empty
-    # The new 4-stance, and its release set of this boom: the 3-stance with the gripper at the
-    # new anchor as the attach ramp starts, the gripper counted unloaded (the first test
-    # without that grasp is a necessary condition, and it decided the freed boom's segment).
-    second = score_rows(scn, stances, tips, poses[ok], np.arange(len(ok)),
-                        np.ones(len(ok), np.int64), np.ones(len(ok), np.int64), ignore_grasps,
-                        decide_only=True, collide=0, release=True)
-    arrive = second.release_r[:, boom]
-    held = second.feasible & ~np.isnan(arrive)
-    keep = ok[held]
-    if not len(keep):
-        return empty
-    src = rows[keep]
-    r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom], arrive[held],
-                          second.robustness[held]])
-    return LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested)
+    # these poses; the new 4-stance's segments are all decided by then. The new 4-stance's
+    # release set of this boom is the 3-stance with the gripper at the new anchor as the
+    # attach ramp starts, the gripper counted unloaded (the first test, without that grasp,
+    # is a necessary condition of it, and it decided the freed boom's segment).
+    kept, arrive, r_new = lattice_move_kernel(
+        lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom), SPAN,
+        float(lat.lattice.position_step), float(lat.lattice.angle_step),
+        int(lat.lattice.angle_count), _robot_params(scn.robot, scn.gravity_vector), *stances,
+        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom))
+    r4 = np.column_stack([lat.robustness[kept], lat.release_r[kept, boom], arrive, r_new])
+    return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
 
 
 def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:

@@ -1297,3 +1297,69 @@ def lattice_reached_anchors(keys, release, targets, candidate, params, span, dx,
                     found[j, k] = True
                     left -= 1
     return found
+
+
+@njit(cache=True, error_model="numpy")
+def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions, normals,
+                        f_normal, f_lateral, sigma_normal, sigma_lateral, attached, tips, edges,
+                        owner, vertices, ignore_grasps, decide_only,
+                        collide):  # pragma: no cover - compiled
+    """A move's two new configurations at rows `rows` of a component (keys: its lattice keys),
+    in one call (planning.complete's scored transitions): stance row 0 is the 3-stance with
+    the freed boom's gripper at the new anchor tips[0], tested for the segments of `collide`
+    (the freed boom's: the others are the old 4-stance's, clear); where it holds, stance row 1,
+    the new 4-stance, with its release r (`_release_r`). Returns the rows where both hold,
+    the new 4-stance's release r of `boom` there (the attach ramp's start) and its r: what
+    `score_rows` gives for the same rows (decide_only), in two calls."""
+    n = rows.shape[0]
+    poses = np.empty((n, 3))
+    for q in range(n):
+        x, y, phi = _decode(keys[rows[q]], span, dx, dphi, n_phi)
+        poses[q, 0] = x
+        poses[q, 1] = y
+        poses[q, 2] = phi
+    zeros = np.zeros(n, dtype=np.int64)
+    reason = np.empty(n, dtype=np.int64)
+    _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                  sigma_lateral, attached, tips, np.arange(n), zeros, zeros, edges, owner,
+                  vertices, ignore_grasps, decide_only, collide, reason, np.empty(n),
+                  np.empty((n, 4)), np.empty((n, 4)), np.empty(n), np.empty((0, 4)),
+                  np.empty(0, dtype=np.int8))
+    m = 0
+    for q in range(n):
+        if reason[q] == 0:
+            m += 1
+    ok = np.empty(m, dtype=np.int64)
+    second = np.empty((m, 3))
+    m = 0
+    for q in range(n):
+        if reason[q] == 0:
+            ok[m] = q
+            second[m] = poses[q]
+            m += 1
+    if m == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0), np.empty(0)
+    ones = np.ones(m, dtype=np.int64)
+    reason2 = np.empty(m, dtype=np.int64)
+    r2 = np.empty(m)
+    rel = np.empty((m, 4))
+    _score_kernel(second, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                  sigma_lateral, attached, tips, np.arange(m), ones, ones, edges, owner,
+                  vertices, ignore_grasps, decide_only, collide * 0, reason2, r2,
+                  np.empty((m, 4)), np.empty((m, 4)), np.empty(m), rel,
+                  np.empty(0, dtype=np.int8))
+    k = 0
+    for q in range(m):
+        if reason2[q] == 0 and not math.isnan(rel[q, boom]):
+            k += 1
+    kept = np.empty(k, dtype=np.int64)
+    arrive = np.empty(k)
+    r_new = np.empty(k)
+    k = 0
+    for q in range(m):
+        if reason2[q] == 0 and not math.isnan(rel[q, boom]):
+            kept[k] = rows[ok[q]]
+            arrive[k] = rel[q, boom]
+            r_new[k] = r2[q]
+            k += 1
+    return kept, arrive, r_new

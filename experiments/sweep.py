@@ -161,13 +161,20 @@ class ProgressDisplay:
             self.bar.close()
 
 
+def _share_cores(threads: int) -> None:
+    """A pool worker's share of the cores for the complete search's compiled kernels
+    (`feasibility_kernel.kernel_threads`): workers do not oversubscribe the machine."""
+    os.environ.setdefault("RBP_THREADS", str(threads))
+
+
 def _local(trials: list[Trial], workers: int) -> Iterator[dict[str, Any]]:
     if workers == 1:  # in this process: no start-up cost, and a debugger sees the trial
         for t in trials:
             yield run_trial(t)
         return
     # spawn, not fork: the parent may hold pydrake and OMPL state that is unsafe to fork
-    pool = multiprocessing.get_context("spawn").Pool(workers)
+    pool = multiprocessing.get_context("spawn").Pool(
+        workers, initializer=_share_cores, initargs=(max(1, (os.cpu_count() or 1) // workers),))
     try:
         yield from pool.imap_unordered(run_trial, trials, chunksize=1)
         pool.close()

@@ -47,6 +47,7 @@ from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
     _packed_rock,
     _robot_params,
+    kernel_threads,
     lattice_move_kernel,
     lattice_reach_rows,
     lattice_reached_anchors,
@@ -115,7 +116,7 @@ def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarr
     """Rows of component `lat` at which boom `boom` may let go and reaches `anchor`: the poses
     a transition of that move can use (the reach test of `reach_violation`, compiled)."""
     target = scn.anchor_positions[scn.anchor_index[anchor]]
-    return lattice_reach_rows(lat.keys, lat.release[:, boom], float(target[0]),
+    return lattice_reach_rows(lat.keys, lat.boom_release_rows(boom), float(target[0]),
                               float(target[1]), int(boom), *_lattice_args(scn, lat.lattice))
 
 
@@ -172,7 +173,8 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
         lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom), SPAN,
         float(lat.lattice.position_step), float(lat.lattice.angle_step),
         int(lat.lattice.angle_count), _robot_params(scn.robot, scn.gravity_vector), *stances,
-        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom))
+        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom),
+        kernel_threads())
     r4 = np.column_stack([lat.robustness[kept], lat.release_r[kept, boom], arrive, r_new])
     return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
 
@@ -189,9 +191,9 @@ def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.nda
     near = np.flatnonzero(near)
     if not len(near):
         return [near] * 4
-    candidate = np.repeat(lat.release.any(axis=0)[:, None], len(near), axis=1)
-    found = lattice_reached_anchors(lat.keys, lat.release, np.ascontiguousarray(pts[near]),
-                                    candidate, *_lattice_args(scn, lat.lattice))
+    found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
+                                    np.ascontiguousarray(pts[near]),
+                                    *_lattice_args(scn, lat.lattice))
     return [near[found[j]] for j in range(4)]
 
 

@@ -32,6 +32,14 @@ class Component(NamedTuple):
     release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
     lattice: LatticeConfig
     box: np.ndarray         # (2, 2) the smallest and largest (x, y) of its poses
+    # the rows at which boom j may let go, ascending: release_rows[release_starts[j]:
+    # release_starts[j + 1]] (about one pose-boom pair in ten: moves are sought there only)
+    release_rows: np.ndarray
+    release_starts: np.ndarray
+
+    def boom_release_rows(self, boom: int) -> np.ndarray:
+        """The rows at which boom `boom` may let go, ascending."""
+        return self.release_rows[self.release_starts[boom]:self.release_starts[boom + 1]]
 
     @property
     def poses(self) -> np.ndarray:
@@ -94,8 +102,10 @@ class StanceComponents:
         release = ~np.isnan(release_r)
         release_r = np.where(release, release_r, -np.inf)
         box = idx[:, :2].min(axis=0), idx[:, :2].max(axis=0)
-        self.components.append(Component(keys, r, release, release_r, self._cfg,
-                                         np.array(box) * self._cfg.position_step))
+        by_boom = [np.flatnonzero(release[:, j]) for j in range(4)]
+        self.components.append(Component(
+            keys, r, release, release_r, self._cfg, np.array(box) * self._cfg.position_step,
+            np.concatenate(by_boom), np.cumsum([0] + [len(b) for b in by_boom])))
         self._remember(np.concatenate([keys, bad]), np.concatenate([
             np.full(F, len(self.components) - 1, dtype=np.int32),
             np.full(len(bad), INFEASIBLE, dtype=np.int32)]))

@@ -30,6 +30,7 @@ from rb_drake.feasibility_kernel import (
     _packed_rock,
     _robot_params,
     flood_kernel,
+    kernel_threads,
 )
 from rb_drake.scenario import Scenario
 
@@ -82,4 +83,4 @@ def grow_component(scn: Scenario, stances: PackedStances, seed: np.ndarray,
     return flood_kernel(seed, np.ascontiguousarray(box), float(cfg.position_step),
                          float(cfg.angle_step), int(n), prm, *stances,
                          np.full((1, 2), np.nan), edges, owner, vertices, bool(ignore_grasps),
-                         True, int(ALL_SEGMENTS), body, origin)
+                         True, int(ALL_SEGMENTS), body, origin, kernel_threads())

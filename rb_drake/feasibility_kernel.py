@@ -26,13 +26,15 @@ never hold stale ones; the Reason codes below are checked against `feasibility.R
 from __future__ import annotations
 
 import math
+import os
 import weakref
 from functools import lru_cache
 from statistics import NormalDist
 from typing import NamedTuple
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from rb_drake.collision import ANCHOR_CLEARANCE, Rock
 from rb_drake.feasibility import MIN_CONDITIONING, World
@@ -175,7 +177,7 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
                       bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
-                      violation, release_r, np.empty(0, dtype=np.int8))
+                      violation, release_r, np.empty(0, dtype=np.int8), 15)
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation,
                        release_r if release else None)
 
@@ -794,11 +796,12 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
                   vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
-                  v_out, release_out, body_known) -> None:
+                  v_out, release_out, body_known, release_booms) -> None:
     """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
 
     `release_out` (R, 4) or (0, 4): with decide_only, for each feasible 4-stance row, the r of
-    the 3-stance with boom j's gripper still at its anchor (NaN where infeasible): what
+    the 3-stance with boom j's gripper still at its anchor, for the booms j of the bits of
+    `release_booms` (NaN where infeasible, and for the other booms): what
     score_rows gives for that row with collide=0, from this row's geometry (`_release_r`).
     `body_known` (R,) int8 or (0,): with decide_only, whether each row's body is known clear
     of rock (1), known in it (2) or not known (0, then tested where needed and filled in): the
@@ -1055,6 +1058,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             v_out[row] = math.nan
             if release_out.shape[0] and code == 0 and free < 0:
                 for j in range(4):
+                    if not release_booms & (1 << j):
+                        continue
                     release_out[row, j] = _release_r(
                         j, x, y, L, sh, tg, u, psi, A, prm, vec[1], vec[2], minors, f_lo, f_hi,
                         ignore_grasps, work, rhs, w, f, lp, B, b3)
@@ -1083,14 +1088,74 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 
 
 # ---------------------------------------------------------------------------------------------
+# Rows scored on several threads (the complete search's flood fills and moves)
+
+MIN_ROWS_PER_THREAD = 32  # fewer: one thread scores them (a parallel launch costs ~10 us)
+
+
+def kernel_threads() -> int:
+    """Threads the complete search's compiled flood fills and moves use: RBP_THREADS if set,
+    else numba's count (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker
+    pool sets 1 per worker (`experiments.sweep`). Results are the same, row for row, on any
+    number of threads."""
+    value = os.environ.get("RBP_THREADS", "").strip()
+    threads = int(value) if value else numba.config.NUMBA_NUM_THREADS
+    return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _score_interleaved(threads, poses, prm, positions, normals, f_normal, f_lateral,
+                       sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
+                       tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
+                       reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
+                       release_booms) -> None:  # pragma: no cover - compiled
+    """`_score_kernel` with thread t scoring rows t, t + threads, t + 2 threads, ...: the
+    same outputs, row for row (each row is scored on its own), and feasible and infeasible
+    rows, which differ fivefold in cost, shared evenly. An empty `release_out` or
+    `body_known` stays empty."""
+    has_release = release_out.shape[0] > 0
+    has_body = body_known.shape[0] > 0
+    for t in prange(threads):
+        _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                      sigma_lateral, attached, tips, pose_row[t::threads],
+                      stance_row[t::threads], tip_row[t::threads], edges, owner, vertices,
+                      ignore_grasps, decide_only, collide, reason_out[t::threads],
+                      r_out[t::threads], lp_out[t::threads], f_out[t::threads],
+                      v_out[t::threads],
+                      release_out[t::threads] if has_release else release_out[:0],
+                      body_known[t::threads] if has_body else body_known[:0], release_booms)
+
+
+@njit(cache=True, error_model="numpy")
+def _score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
+                   vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out,
+                   f_out, v_out, release_out, body_known,
+                   release_booms) -> None:  # pragma: no cover - compiled
+    """`_score_kernel`, on up to `threads` threads where the rows are many enough."""
+    use = min(threads, pose_row.shape[0] // MIN_ROWS_PER_THREAD)
+    if use > 1:
+        _score_interleaved(use, poses, prm, positions, normals, f_normal, f_lateral,
+                           sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
+                           tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
+                           reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
+                           release_booms)
+    else:
+        _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                      sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
+                      owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                      lp_out, f_out, v_out, release_out, body_known, release_booms)
+
+
+# ---------------------------------------------------------------------------------------------
 # The flood fill of the complete search's components (planning.flood)
 
 
 @njit(cache=True, error_model="numpy")
 def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, f_lateral,
                   sigma_normal, sigma_lateral, attached, tips, edges, owner, vertices,
-                  ignore_grasps, decide_only, collide, body,
-                  body_origin):  # pragma: no cover - compiled
+                  ignore_grasps, decide_only, collide, body, body_origin,
+                  threads):  # pragma: no cover - compiled
     """The lattice poses 26-connected to `seed` that are feasible in stance row 0, inside
     `box` (planning.flood.grow_component): (indices, robustness, release r (F, 4; NaN where
     boom j may not let go), indices scored infeasible). Waves of poses, each scored in one
@@ -1132,10 +1197,11 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
             b = wave[w, 1] - body_origin[1]
             if 0 <= a < body.shape[0] and 0 <= b < body.shape[1]:
                 known[w] = body[a, b, wave[w, 2] - m0]
-        _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                      sigma_lateral, attached, tips, rows, zeros, zeros, edges, owner, vertices,
-                      ignore_grasps, decide_only, collide, reason, r, np.empty((n_wave, 4)),
-                      np.empty((n_wave, 4)), np.empty(n_wave), rel, known)
+        _score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral,
+                       sigma_normal, sigma_lateral, attached, tips, rows, zeros, zeros, edges,
+                       owner, vertices, ignore_grasps, decide_only, collide, reason, r,
+                       np.empty((n_wave, 4)), np.empty((n_wave, 4)), np.empty(n_wave), rel,
+                       known, 15)
         for w in range(n_wave):
             a = wave[w, 0] - body_origin[0]
             b = wave[w, 1] - body_origin[1]
@@ -1257,14 +1323,14 @@ def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lattice_reach_rows(keys, mask, tx, ty, boom, params, span, dx, dphi,
+def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi,
                        n_phi):  # pragma: no cover - compiled
-    """Rows r of `keys` with mask[r] whose pose boom `boom` reaches (tx, ty) from, ascending."""
-    out = np.empty(keys.shape[0], dtype=np.int64)
+    """Those of `rows` (rows of `keys`, ascending) whose pose boom `boom` reaches (tx, ty)
+    from, ascending."""
+    out = np.empty(rows.shape[0], dtype=np.int64)
     n = 0
-    for r in range(keys.shape[0]):
-        if not mask[r]:
-            continue
+    for q in range(rows.shape[0]):
+        r = rows[q]
         x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
         if _reaches(x, y, math.cos(phi), math.sin(phi), phi, tx, ty, boom, params):
             out[n] = r
@@ -1273,27 +1339,22 @@ def lattice_reach_rows(keys, mask, tx, ty, boom, params, span, dx, dphi,
 
 
 @njit(cache=True)
-def lattice_reached_anchors(keys, release, targets, candidate, params, span, dx, dphi,
+def lattice_reached_anchors(keys, release_rows, starts, targets, params, span, dx, dphi,
                             n_phi):  # pragma: no cover - compiled
-    """(4, K) bool: whether boom j reaches targets[k] from some row r of `keys` with
-    release[r, j], for the (j, k) with candidate[j, k] (the others False)."""
+    """(4, K) bool: whether boom j reaches targets[k] from some row of `keys` at which it may
+    let go: release_rows[starts[j]:starts[j + 1]] (boom j's release rows, concatenated)."""
     K = targets.shape[0]
     found = np.zeros((4, K), dtype=np.bool_)
-    left = 0
     for j in range(4):
-        for k in range(K):
-            left += candidate[j, k]
-    for r in range(keys.shape[0]):
-        if left == 0:
-            break
-        x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
-        c, s = math.cos(phi), math.sin(phi)
-        for j in range(4):
-            if not release[r, j]:
-                continue
+        left = K
+        for q in range(starts[j], starts[j + 1]):
+            if left == 0:
+                break
+            x, y, phi = _decode(keys[release_rows[q]], span, dx, dphi, n_phi)
+            c, s = math.cos(phi), math.sin(phi)
             for k in range(K):
-                if candidate[j, k] and not found[j, k] and _reaches(
-                        x, y, c, s, phi, targets[k, 0], targets[k, 1], j, params):
+                if not found[j, k] and _reaches(x, y, c, s, phi, targets[k, 0], targets[k, 1],
+                                                j, params):
                     found[j, k] = True
                     left -= 1
     return found
@@ -1302,13 +1363,13 @@ def lattice_reached_anchors(keys, release, targets, candidate, params, span, dx,
 @njit(cache=True, error_model="numpy")
 def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions, normals,
                         f_normal, f_lateral, sigma_normal, sigma_lateral, attached, tips, edges,
-                        owner, vertices, ignore_grasps, decide_only,
-                        collide):  # pragma: no cover - compiled
+                        owner, vertices, ignore_grasps, decide_only, collide,
+                        threads):  # pragma: no cover - compiled
     """A move's two new configurations at rows `rows` of a component (keys: its lattice keys),
     in one call (planning.complete's scored transitions): stance row 0 is the 3-stance with
     the freed boom's gripper at the new anchor tips[0], tested for the segments of `collide`
     (the freed boom's: the others are the old 4-stance's, clear); where it holds, stance row 1,
-    the new 4-stance, with its release r (`_release_r`). Returns the rows where both hold,
+    the new 4-stance, with its release r of `boom` (`_release_r`). Returns the rows where both hold,
     the new 4-stance's release r of `boom` there (the attach ramp's start) and its r: what
     `score_rows` gives for the same rows (decide_only), in two calls."""
     n = rows.shape[0]
@@ -1320,11 +1381,11 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
         poses[q, 2] = phi
     zeros = np.zeros(n, dtype=np.int64)
     reason = np.empty(n, dtype=np.int64)
-    _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                  sigma_lateral, attached, tips, np.arange(n), zeros, zeros, edges, owner,
-                  vertices, ignore_grasps, decide_only, collide, reason, np.empty(n),
+    _score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                   sigma_lateral, attached, tips, np.arange(n), zeros, zeros, edges, owner,
+                   vertices, ignore_grasps, decide_only, collide, reason, np.empty(n),
                   np.empty((n, 4)), np.empty((n, 4)), np.empty(n), np.empty((0, 4)),
-                  np.empty(0, dtype=np.int8))
+                  np.empty(0, dtype=np.int8), 0)
     m = 0
     for q in range(n):
         if reason[q] == 0:
@@ -1343,11 +1404,11 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
     reason2 = np.empty(m, dtype=np.int64)
     r2 = np.empty(m)
     rel = np.empty((m, 4))
-    _score_kernel(second, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                  sigma_lateral, attached, tips, np.arange(m), ones, ones, edges, owner,
-                  vertices, ignore_grasps, decide_only, collide * 0, reason2, r2,
+    _score_threads(threads, second, prm, positions, normals, f_normal, f_lateral,
+                   sigma_normal, sigma_lateral, attached, tips, np.arange(m), ones, ones, edges,
+                   owner, vertices, ignore_grasps, decide_only, collide * 0, reason2, r2,
                   np.empty((m, 4)), np.empty((m, 4)), np.empty(m), rel,
-                  np.empty(0, dtype=np.int8))
+                  np.empty(0, dtype=np.int8), 1 << boom)
     k = 0
     for q in range(m):
         if reason2[q] == 0 and not math.isnan(rel[q, boom]):

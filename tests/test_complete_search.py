@@ -37,6 +37,7 @@ from planning.lattice import (
 )
 from planning.plan import build_plan
 from planning.transition import transition_stances
+from rb_drake import feasibility_kernel as fk
 from rb_drake.feasibility import check_poses
 from rb_drake.feasibility_kernel import pack_stances, reach_violation, score_poses, score_rows
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario, scenario_from_dict
@@ -358,6 +359,42 @@ def test_same_plan_twice(demo: Scenario) -> None:
     assert a.success and a.stances == b.stances
     for s, t in zip(a.steps, b.steps, strict=True):
         assert np.array_equal(s.pose, t.pose)
+
+
+def test_rows_scored_on_threads_equal_one_thread(demo: Scenario) -> None:
+    """The flood fills and moves score rows on several threads, interleaved: every output, row
+    for row and bit for bit, is the one-thread kernel's (release sets and body tests too)."""
+    stance = tuple(demo.start_stance)
+    idx = reachable_lattice(demo.robot, demo.stance(stance).positions, np.arange(4), COARSE)
+    poses = poses_of(idx, COARSE)[:997]  # an odd count: threads get unequal shares
+    P = len(poses)
+    packed = pack_stances(demo.stance(stance))
+    prm = fk._robot_params(demo.robot, demo.gravity_vector)
+    rows, zeros = np.arange(P), np.zeros(P, np.int64)
+
+    def scored(threads: int) -> list[np.ndarray]:
+        out = [np.empty(P, np.int64), np.empty(P), np.empty((P, 4)), np.empty((P, 4)),
+               np.empty(P), np.full((P, 4), np.nan), np.zeros(P, np.int8)]
+        fk._score_threads(threads, poses, prm, *packed, np.full((1, 2), np.nan), rows, zeros,
+                          zeros, *fk._packed_rock(demo.rock), False, True,
+                          int(fk.ALL_SEGMENTS), *out, 15)
+        return out
+
+    one, three = scored(1), scored(3)
+    assert (one[0] == 0).sum() > 20, "too few feasible rows to compare"
+    for a, b in zip(one, three, strict=True):
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), "threads changed a row"
+
+
+def test_search_on_threads_equals_one_thread(demo: Scenario, monkeypatch) -> None:
+    """RBP_THREADS changes how fast the complete search runs, not what it finds."""
+    found = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("RBP_THREADS", threads)
+        result = complete_search(demo, max_expansions=40)
+        found[threads] = ([v for v, _ in result.expanded], result.transitions_tested,
+                          [p.tolist() for p in result.poses])
+    assert found["1"] == found["2"]
 
 
 def test_alternative_poses_hold_the_move(demo: Scenario) -> None:

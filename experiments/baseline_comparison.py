@@ -83,22 +83,26 @@ def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = O
     return FootstepConfig(max_expansions=max_expansions)
 
 
-def plan_cave(scn, planner: str, max_expansions: int, motion: bool, memo=None,
+def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
               oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
     """The plan dictionary: the whole pipeline with `motion`, else the footstep stage only
-    (the naive baseline always stops after its footsteps). `memo` (a FootstepMemo) shares what
-    one complete search decided with the next on the same cave (the oracle after rbp)."""
+    (the naive baseline always stops after its footsteps). Its timing also holds the
+    footstep search's CPU seconds (`footstep_cpu`, every thread) and the threads its
+    compiled kernels used."""
     from planning.footsteps import plan_footsteps
     from planning.pipeline import PipelineConfig, plan_climb
     from planning.plan import build_plan
+    from rb_drake.feasibility_kernel import kernel_threads
 
     config = PipelineConfig(footstep=footstep_config(planner, max_expansions, oracle_seconds))
     name = "naive" if planner == "naive" else "rbp"
     if (motion and planner != "oracle") or planner == "naive":  # the oracle labels footsteps
         return plan_climb(scn, name, config)
-    start = time.perf_counter()
-    fp = plan_footsteps(scn, config.footstep, memo=memo)
+    start, cpu = time.perf_counter(), time.process_time()
+    fp = plan_footsteps(scn, config.footstep)
     return build_plan(scn, fp, name, {"footstep": fp.seconds,
+                                      "footstep_cpu": time.process_time() - cpu,
+                                      "threads": kernel_threads(),
                                       "total": time.perf_counter() - start})
 
 
@@ -152,17 +156,10 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
                 "timing": {"cave": time.perf_counter() - start}}
     out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
     timing = {"cave": time.perf_counter() - start}
-    from planning.footsteps import FootstepMemo
-
-    memo = FootstepMemo()  # the oracle replays rbp's search from what it decided
-    for planner in planners:
-        plan = plan_cave(scn, planner, max_expansions, motion,
-                         memo if planner in ("rbp", "oracle") else None, oracle_seconds)
+    for planner in planners:  # each from scratch: its time is what `rbp plan` costs
+        plan = plan_cave(scn, planner, max_expansions, motion, oracle_seconds)
         out[planner] = plan_record(plan)
         timing[planner] = plan["timing"]
-        if planner == "oracle" and "rbp" in timing:  # it reused rbp's work: count it
-            timing[planner] = {**plan["timing"], "footstep": plan["timing"]["footstep"]
-                               + timing["rbp"]["footstep"]}
     out["timing"] = timing
     return out
 
@@ -334,6 +331,32 @@ def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
     return fig
 
 
+def labelled_sweep(args: argparse.Namespace, planners: list[str]) -> list[dict[str, Any]]:
+    """The trials' records, every planner in one record per cave. The oracle runs after the
+    others, one cave at a time in this process, so that its compiled kernels have every core
+    (`kernel_threads`): the others run one per worker, a core each, as they cannot use more.
+    Its records (trials named oracle-...) join the others'."""
+    others = [p for p in planners if p != "oracle"]
+    records = sweep(climb_trials(args, others, motion=args.motion), args) if others else []
+    if "oracle" not in planners:
+        return records
+    alone = argparse.Namespace(**{**vars(args), "workers": 1})
+    labels = sweep(climb_trials(args, ["oracle"], motion=False, prefix="oracle-",
+                                oracle_seconds=args.oracle_time), alone)
+    if not records:
+        return [{**o, "name": o["name"].removeprefix("oracle-")} for o in labels]
+    merged = []
+    for r, o in zip(records, labels, strict=True):
+        r = dict(r)
+        if r["error"] is None and o["error"] is not None:
+            r["error"] = o["error"]
+        elif r["error"] is None:
+            r["result"] = {**r["result"], "oracle": o["result"]["oracle"]}
+            r["timing"] = {**r["timing"], "oracle": o["timing"]["oracle"]}
+        merged.append(r)
+    return merged
+
+
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
@@ -360,8 +383,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     from rb_drake.files import atomic_save_figure
 
-    records = sweep(climb_trials(args, planners, motion=args.motion,
-                                 oracle_seconds=args.oracle_time), args)
+    records = labelled_sweep(args, planners)
     done = ok_records(records)
     summary = {p: planner_summary(done, p) for p in planners}
     for p, s in summary.items():

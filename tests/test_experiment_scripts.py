@@ -51,7 +51,9 @@ def test_baseline_comparison(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
     result = run_experiment("baseline_comparison", ["--trials", "2", *TINY, "--oracle-time",
                                                     "20"], out, monkeypatch)
     assert_png(out / "baseline.png")
-    assert len(list((out / "trials").glob("*.json"))) == 2, "one record per trial"
+    names = sorted(f.stem for f in (out / "trials").glob("*.json"))
+    assert len(names) == 4 and sum(n.startswith("oracle-") for n in names) == 2, (
+        f"one record per cave and one per cave for the oracle, which runs alone: {names}")
     assert [t["kind"] for t in result["trials"]] == ["shaft", "crevasse"], "kinds alternate"
     oracle = result["oracle"]
     assert sum(oracle["labels"].values()) == 2, oracle

@@ -40,7 +40,7 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.components import INFEASIBLE, UNKNOWN, Component, StanceComponents
+from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
 from rb_drake.feasibility import body_in_rock
@@ -108,8 +108,11 @@ def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: Lat
 
 def _lattice_args(scn: Scenario, cfg: LatticeConfig) -> tuple:
     """The robot and lattice arguments of the compiled move kernels."""
-    return (_robot_params(scn.robot, np.zeros(2)), SPAN, float(cfg.position_step),
+    return (_robot_params(scn.robot, _NO_GRAVITY), SPAN, float(cfg.position_step),
             float(cfg.angle_step), int(cfg.angle_count))
+
+
+_NO_GRAVITY = np.zeros(2)  # the reach tests' robot parameters need none
 
 
 def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarray:
@@ -175,8 +178,20 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
         int(lat.lattice.angle_count), _robot_params(scn.robot, scn.gravity_vector), *stances,
         tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom),
         kernel_threads())
-    r4 = np.column_stack([lat.robustness[kept], lat.release_r[kept, boom], arrive, r_new])
+    r4 = np.empty((len(kept), 4))
+    r4[:, 0], r4[:, 1], r4[:, 2], r4[:, 3] = (lat.robustness[kept], lat.release_r[kept, boom],
+                                              arrive, r_new)
     return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
+
+
+def _adds_nothing(known: StanceComponents, lat: Component, rows: np.ndarray, child: tuple,
+                  closed: Collection[Vertex]) -> bool:
+    """Whether every pose a move could use (`rows` of `lat`) enters an expanded vertex of the
+    child stance or is known infeasible there: the move adds nothing to the search."""
+    labels = known.known_component(lat.keys[rows])
+    if (labels == UNKNOWN).any():
+        return False
+    return all((child, int(c)) in closed for c in np.unique(labels[labels >= 0]))
 
 
 def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
@@ -354,9 +369,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 lat = memo.components[stance].components[comp]
                 rows = move_rows(scn, lat, j, anchor)
                 known = memo.components.get(child)
-                if known is not None and all(
-                        c == INFEASIBLE or (c >= 0 and (child, int(c)) in closed)
-                        for c in np.unique(known.known_component(lat.keys[rows]))):
+                if known is not None and _adds_nothing(known, lat, rows, child, closed):
                     continue  # every pose it could use enters an expanded vertex: nothing new
                 tr = memo.transitions[key] = lattice_transition(
                     scn, lat, stance, j, anchor, ignore_grasps, rows, known)

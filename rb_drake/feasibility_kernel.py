@@ -206,17 +206,21 @@ def _indices(a: np.ndarray) -> np.ndarray:
 
 def _robot_params(robot: RobotParams, gravity: np.ndarray) -> np.ndarray:
     """The robot, gravity and the feasibility constants as one float array (layout above);
-    the last one is kept, as a planner asks for the same robot thousands of times."""
+    the last few are kept by the robot's identity, as a planner asks for the same robot
+    thousands of times, with its gravity (scoring) and without (the lattice's reach tests)."""
     g_x, g_y = float(gravity[0]), float(gravity[1])
-    last = _LAST_PARAMS[0]
-    if last is not None and last[0] is robot and last[1] == g_x and last[2] == g_y:
-        return last[3]
+    key = (id(robot), g_x, g_y)
+    hit = _LAST_PARAMS.get(key)
+    if hit is not None and hit[0] is robot:
+        return hit[1]
     params = _pack_robot(robot, g_x, g_y)
-    _LAST_PARAMS[0] = (robot, g_x, g_y, params)
+    if len(_LAST_PARAMS) >= 8:
+        _LAST_PARAMS.clear()
+    _LAST_PARAMS[key] = (robot, params)
     return params
 
 
-_LAST_PARAMS: list[tuple[RobotParams, float, float, np.ndarray] | None] = [None]
+_LAST_PARAMS: dict[tuple[int, float, float], tuple[RobotParams, np.ndarray]] = {}
 
 
 @lru_cache(maxsize=16)

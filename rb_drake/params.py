@@ -7,6 +7,7 @@ in files (the `*_deg` names), because people write degrees.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -67,7 +68,7 @@ class RobotParams:
         """The planner's pull-angle limit in radians: feasible grasps have |psi| < this."""
         return math.radians(self.max_pull_angle_deg)
 
-    @property
+    @functools.cached_property
     def max_reach(self) -> float:
         """The farthest an anchor can be from the body centre: longest boom plus shoulder offset."""
         return self.boom_length[1] + float(np.max(np.linalg.norm(self.shoulder_array, axis=1)))

@@ -177,7 +177,7 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
                       *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
                       _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
                       bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
-                      violation, release_r, np.empty(0, dtype=np.int8), 15)
+                      violation, release_r, np.empty(0, dtype=np.int8), 15, 0, 1)
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation,
                        release_r if release else None)
 
@@ -800,7 +800,7 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
 def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
                   vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
-                  v_out, release_out, body_known, release_booms) -> None:
+                  v_out, release_out, body_known, release_booms, first, stride) -> None:
     """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
 
     `release_out` (R, 4) or (0, 4): with decide_only, for each feasible 4-stance row, the r of
@@ -810,6 +810,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     `body_known` (R,) int8 or (0,): with decide_only, whether each row's body is known clear
     of rock (1), known in it (2) or not known (0, then tested where needed and filled in): the
     body's test depends on the pose alone, so the flood fill shares it across stances.
+    Rows `first`, `first + stride`, ... are scored (0 and 1: all; `_score_interleaved` gives
+    each thread its share), the others' outputs left as they are.
 
     With `decide_only` a row stops at its first failing test (kinematics, collisions, then the
     allocation's tests, the conditioning last) and its violation is NaN: feasibility, and the
@@ -855,7 +857,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     B = np.empty((3, 4))
     cx = np.empty(4)
     cy = np.empty(4)
-    for row in range(pose_row.shape[0]):
+    for row in range(first, pose_row.shape[0], stride):
         if release_out.shape[0]:
             for j in range(4):
                 release_out[row, j] = math.nan
@@ -1114,20 +1116,14 @@ def _score_interleaved(threads, poses, prm, positions, normals, f_normal, f_late
                        reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
                        release_booms) -> None:  # pragma: no cover - compiled
     """`_score_kernel` with thread t scoring rows t, t + threads, t + 2 threads, ...: the
-    same outputs, row for row (each row is scored on its own), and feasible and infeasible
-    rows, which differ fivefold in cost, shared evenly. An empty `release_out` or
-    `body_known` stays empty."""
-    has_release = release_out.shape[0] > 0
-    has_body = body_known.shape[0] > 0
+    same outputs, row for row (each row is scored on its own and writes its own entries),
+    and feasible and infeasible rows, which differ fivefold in cost, shared evenly."""
     for t in prange(threads):
         _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                      sigma_lateral, attached, tips, pose_row[t::threads],
-                      stance_row[t::threads], tip_row[t::threads], edges, owner, vertices,
-                      ignore_grasps, decide_only, collide, reason_out[t::threads],
-                      r_out[t::threads], lp_out[t::threads], f_out[t::threads],
-                      v_out[t::threads],
-                      release_out[t::threads] if has_release else release_out[:0],
-                      body_known[t::threads] if has_body else body_known[:0], release_booms)
+                      sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
+                      owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                      lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(t),
+                      threads)
 
 
 @njit(cache=True, error_model="numpy")
@@ -1148,7 +1144,8 @@ def _score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral,
         _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                       sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
                       owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
-                      lp_out, f_out, v_out, release_out, body_known, release_booms)
+                      lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(0),
+                      np.int64(1))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1205,7 +1202,7 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
                        sigma_normal, sigma_lateral, attached, tips, rows, zeros, zeros, edges,
                        owner, vertices, ignore_grasps, decide_only, collide, reason, r,
                        np.empty((n_wave, 4)), np.empty((n_wave, 4)), np.empty(n_wave), rel,
-                       known, 15)
+                       known, np.int64(15))
         for w in range(n_wave):
             a = wave[w, 0] - body_origin[0]
             b = wave[w, 1] - body_origin[1]
@@ -1389,7 +1386,7 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
                    sigma_lateral, attached, tips, np.arange(n), zeros, zeros, edges, owner,
                    vertices, ignore_grasps, decide_only, collide, reason, np.empty(n),
                   np.empty((n, 4)), np.empty((n, 4)), np.empty(n), np.empty((0, 4)),
-                  np.empty(0, dtype=np.int8), 0)
+                  np.empty(0, dtype=np.int8), np.int64(0))
     m = 0
     for q in range(n):
         if reason[q] == 0:
@@ -1412,7 +1409,7 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
                    sigma_normal, sigma_lateral, attached, tips, np.arange(m), ones, ones, edges,
                    owner, vertices, ignore_grasps, decide_only, collide * 0, reason2, r2,
                   np.empty((m, 4)), np.empty((m, 4)), np.empty(m), rel,
-                  np.empty(0, dtype=np.int8), 1 << boom)
+                  np.empty(0, dtype=np.int8), np.int64(1) << boom)
     k = 0
     for q in range(m):
         if reason2[q] == 0 and not math.isnan(rel[q, boom]):

@@ -106,10 +106,14 @@ def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: Lat
     return hit
 
 
+def _lattice_grid(cfg: LatticeConfig) -> tuple:
+    """The lattice arguments of the compiled kernels that decode keys: span, dx, dphi, n."""
+    return SPAN, float(cfg.position_step), float(cfg.angle_step), int(cfg.angle_count)
+
+
 def _lattice_args(scn: Scenario, cfg: LatticeConfig) -> tuple:
-    """The robot and lattice arguments of the compiled move kernels."""
-    return (_robot_params(scn.robot, _NO_GRAVITY), SPAN, float(cfg.position_step),
-            float(cfg.angle_step), int(cfg.angle_count))
+    """The robot and lattice arguments of the compiled reach kernels."""
+    return (_robot_params(scn.robot, _NO_GRAVITY), *_lattice_grid(cfg))
 
 
 _NO_GRAVITY = np.zeros(2)  # the reach tests' robot parameters need none
@@ -173,9 +177,8 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     # attach ramp starts, the gripper counted unloaded (the first test, without that grasp,
     # is a necessary condition of it, and it decided the freed boom's segment).
     kept, arrive, r_new = lattice_move_kernel(
-        lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom), SPAN,
-        float(lat.lattice.position_step), float(lat.lattice.angle_step),
-        int(lat.lattice.angle_count), _robot_params(scn.robot, scn.gravity_vector), *stances,
+        lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom),
+        *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector), *stances,
         tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom),
         kernel_threads())
     r4 = np.empty((len(kept), 4))

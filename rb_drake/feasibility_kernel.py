@@ -1096,14 +1096,14 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 # ---------------------------------------------------------------------------------------------
 # Rows scored on several threads (the complete search's flood fills and moves)
 
-MIN_ROWS_PER_THREAD = 32  # fewer: one thread scores them (a parallel launch costs ~10 us)
+MIN_ROWS_PER_THREAD = 32  # fewer: one thread scores them (a launch and join cost a few us)
 
 
 def kernel_threads() -> int:
     """Threads the complete search's compiled flood fills and moves use: RBP_THREADS if set,
     else numba's count (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker
-    pool sets 1 per worker (`experiments.sweep`). Results are the same, row for row, on any
-    number of threads."""
+    pool gives each worker its share of the cores (`experiments.sweep`). Results are the
+    same, row for row, on any number of threads."""
     value = os.environ.get("RBP_THREADS", "").strip()
     threads = int(value) if value else numba.config.NUMBA_NUM_THREADS
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
@@ -1407,7 +1407,7 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
     rel = np.empty((m, 4))
     _score_threads(threads, second, prm, positions, normals, f_normal, f_lateral,
                    sigma_normal, sigma_lateral, attached, tips, np.arange(m), ones, ones, edges,
-                   owner, vertices, ignore_grasps, decide_only, collide * 0, reason2, r2,
+                   owner, vertices, ignore_grasps, decide_only, np.int64(0), reason2, r2,
                   np.empty((m, 4)), np.empty((m, 4)), np.empty(m), rel,
                   np.empty(0, dtype=np.int8), np.int64(1) << boom)
     k = 0

@@ -950,6 +950,14 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                 if abs(theta[i]) > rng + 1e-12:
                     code = _SHOULDER_ANGLE
                     break
+        if decide_only and code == 0:  # the grasp tests that need no tensions, first
+            if not ignore_grasps:
+                for i in range(4):
+                    if att[i] and not abs(psi[i]) < prm[_MAX_PULL]:  # as below
+                        code = _PULL_ANGLE
+                        break
+            if code == 0 and free >= 0 and abs(torque) > prm[_TORQUE_MAX]:
+                code = _SHOULDER_TORQUE
         # -- collisions (only where they decide the reason; with decide_only after the
         # allocation's tests, which reject more poses for less)
         if code == 0 and has_rock and not decide_only:

@@ -14,8 +14,9 @@ from typing import NamedTuple
 import numpy as np
 
 from planning.flood import grow_component, reach_box
-from planning.lattice import LatticeConfig, pack, poses_of, unpack
+from planning.lattice import SPAN, LatticeConfig, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
+from rb_drake.feasibility_kernel import component_arrays
 from rb_drake.scenario import Scenario
 
 INFEASIBLE = -1  # component_of / known_component: a pose no component holds
@@ -88,26 +89,19 @@ class StanceComponents:
 
     def _grow(self, key: int) -> None:
         """Grow the component of lattice key `key` (or learn that its pose is infeasible)."""
-        seed = unpack(np.array([key]), self._cfg.angle_count)[0]
+        n = self._cfg.angle_count
+        seed = unpack(np.array([key]), n)[0]
         idx, r, release_r, infeasible = grow_component(self._scn, self._stances, seed,
                                                        self._box, self._cfg, self._ignore)
-        bad = pack(infeasible, self._cfg.angle_count)
-        if not len(idx):
+        keys, r, release, release_r, rows, starts, box, bad = component_arrays(
+            idx, r, release_r, infeasible, SPAN, n)
+        if not len(keys):
             self._remember(bad, np.full(len(bad), INFEASIBLE, dtype=np.int32))
             return
-        keys = pack(idx, self._cfg.angle_count)
-        order = np.argsort(keys)
-        keys, r, release_r = keys[order], r[order], release_r[order]
-        F = len(idx)
-        release = ~np.isnan(release_r)
-        release_r = np.where(release, release_r, -np.inf)
-        box = idx[:, :2].min(axis=0), idx[:, :2].max(axis=0)
-        by_boom = [np.flatnonzero(release[:, j]) for j in range(4)]
-        self.components.append(Component(
-            keys, r, release, release_r, self._cfg, np.array(box) * self._cfg.position_step,
-            np.concatenate(by_boom), np.cumsum([0] + [len(b) for b in by_boom])))
+        self.components.append(Component(keys, r, release, release_r, self._cfg,
+                                         box * self._cfg.position_step, rows, starts))
         self._remember(np.concatenate([keys, bad]), np.concatenate([
-            np.full(F, len(self.components) - 1, dtype=np.int32),
+            np.full(len(keys), len(self.components) - 1, dtype=np.int32),
             np.full(len(bad), INFEASIBLE, dtype=np.int32)]))
 
     def _remember(self, keys: np.ndarray, labels: np.ndarray) -> None:

@@ -837,8 +837,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     `body_known` (R,) int8 or (0,): with decide_only, whether each row's body is known clear
     of rock (1), known in it (2) or not known (0, then tested where needed and filled in): the
     body's test depends on the pose alone, so the flood fill shares it across stances.
-    Rows `first`, `first + stride`, ... are scored (0 and 1: all; `_score_interleaved` gives
-    each thread its share), the others' outputs left as they are.
+    Rows of chunks `first`, `first + stride`, ... of ROW_CHUNK rows are scored (0 and 1: all;
+    `_score_interleaved` gives each thread its share), the others' outputs left as they are.
 
     With `decide_only` a row stops at its first failing test (kinematics, collisions, then the
     allocation's tests, the conditioning last) and its violation is NaN: feasibility, and the
@@ -884,7 +884,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     B = np.empty((3, 4))
     cx = np.empty(4)
     cy = np.empty(4)
-    for row in range(first, pose_row.shape[0], stride):
+    for row in range(pose_row.shape[0]):
+        if (row // ROW_CHUNK) % stride != first:  # another thread's (_score_interleaved)
+            continue
         if release_out.shape[0]:
             for j in range(4):
                 release_out[row, j] = math.nan
@@ -1129,6 +1131,9 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 # ---------------------------------------------------------------------------------------------
 # Rows scored on several threads (the complete search's flood fills and moves)
 
+# Threads take rows in chunks this long: interleaved row by row, two threads wrote to the same
+# cache lines of every output (a flood fill ran 6 % slower on two threads).
+ROW_CHUNK = 16
 MIN_ROWS_PER_THREAD = 32  # fewer: one thread scores them (a launch and join cost a few us)
 
 
@@ -1148,9 +1153,10 @@ def _score_interleaved(threads, poses, prm, positions, normals, f_normal, f_late
                        tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
                        reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
                        release_booms) -> None:  # pragma: no cover - compiled
-    """`_score_kernel` with thread t scoring rows t, t + threads, t + 2 threads, ...: the
-    same outputs, row for row (each row is scored on its own and writes its own entries),
-    and feasible and infeasible rows, which differ fivefold in cost, shared evenly."""
+    """`_score_kernel` with thread t scoring chunks t, t + threads, t + 2 threads, ... of
+    ROW_CHUNK rows: the same outputs, row for row (each row is scored on its own and writes its
+    own entries), and feasible and infeasible rows, which differ fivefold in cost, shared
+    evenly."""
     for t in prange(threads):
         _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                       sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
@@ -1281,6 +1287,59 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
         wave, nxt = nxt, wave
         n_wave = n_next
     return out[:n_out].copy(), out_r[:n_out].copy(), out_rel[:n_out].copy(), bad[:n_bad].copy()
+
+
+@njit(cache=True)
+def component_arrays(idx, r, release_r, bad, span, n_phi):  # pragma: no cover - compiled
+    """A flood fill's output as planning.components keeps it: the component's lattice keys
+    (planning.lattice.pack) ascending, with its r, whether each boom may let go and that
+    3-stance's r (-inf where it may not) in the same order; the rows at which boom j may let
+    go, ascending, concatenated (boom j's from starts[j] to starts[j + 1]); the smallest and
+    largest lattice (i, k); and the keys of the infeasible poses scored."""
+    F = idx.shape[0]
+    keys = np.empty(F, dtype=np.int64)
+    for q in range(F):
+        keys[q] = _pack(idx[q, 0], idx[q, 1], idx[q, 2], span, n_phi)
+    order = np.argsort(keys)  # keys are distinct: one order, whatever the sort
+    keys = keys[order]
+    r_out = np.empty(F)
+    release = np.empty((F, 4), dtype=np.bool_)
+    rel_out = np.empty((F, 4))
+    counts = np.zeros(4, dtype=np.int64)
+    box = np.empty((2, 2), dtype=np.int64)
+    box[0, 0] = box[0, 1] = np.iinfo(np.int64).max
+    box[1, 0] = box[1, 1] = np.iinfo(np.int64).min
+    for q in range(F):
+        o = order[q]
+        r_out[q] = r[o]
+        for j in range(4):
+            ok = not math.isnan(release_r[o, j])
+            release[q, j] = ok
+            rel_out[q, j] = release_r[o, j] if ok else -math.inf
+            counts[j] += ok
+        for d in range(2):
+            box[0, d] = min(box[0, d], idx[o, d])
+            box[1, d] = max(box[1, d], idx[o, d])
+    starts = np.zeros(5, dtype=np.int64)
+    for j in range(4):
+        starts[j + 1] = starts[j] + counts[j]
+    rows = np.empty(starts[4], dtype=np.int64)
+    fill = starts[:4].copy()
+    for j in range(4):
+        for q in range(F):
+            if release[q, j]:
+                rows[fill[j]] = q
+                fill[j] += 1
+    bad_keys = np.empty(bad.shape[0], dtype=np.int64)
+    for q in range(bad.shape[0]):
+        bad_keys[q] = _pack(bad[q, 0], bad[q, 1], bad[q, 2], span, n_phi)
+    return keys, r_out, release, rel_out, rows, starts, box, bad_keys
+
+
+@njit(cache=True)
+def _pack(i, k, m, span, n_phi):  # pragma: no cover - compiled
+    """planning.lattice.pack of one index."""
+    return ((i + span // 2) * span + (k + span // 2)) * n_phi + (m + n_phi // 2)
 
 
 @njit(cache=True, error_model="numpy")

@@ -29,6 +29,7 @@ configurations' r), polished afterwards on the found path as the sampled search 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import heapq
 import itertools
 import math
@@ -47,6 +48,7 @@ from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
     _packed_rock,
     _robot_params,
+    held_kernel_threads,
     kernel_threads,
     lattice_move_kernel,
     lattice_reach_rows,
@@ -281,6 +283,16 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     return False
 
 
+def _threads_held(search: Callable[..., CompleteResult]) -> Callable[..., CompleteResult]:
+    """The search with `kernel_threads()` read once, not at every fill and move."""
+    @functools.wraps(search)
+    def held(*args, **kwargs) -> CompleteResult:
+        with held_kernel_threads():
+            return search(*args, **kwargs)
+    return held
+
+
+@_threads_held
 def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     heuristic_weight: float = 300.0, max_expansions: int | None = None,
                     time_limit: float | None = None,

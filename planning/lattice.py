@@ -22,6 +22,7 @@ those components equal to.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -46,7 +47,7 @@ class LatticeConfig:
     def angle_step(self) -> float:
         return math.radians(self.angle_step_deg)
 
-    @property
+    @functools.cached_property  # asked for at every move of a search
     def angle_count(self) -> int:
         """Orientation indices -n/2 .. n/2 - 1 cover the whole circle."""
         n = round(360.0 / self.angle_step_deg)

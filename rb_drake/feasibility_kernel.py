@@ -28,6 +28,8 @@ from __future__ import annotations
 import math
 import os
 import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from statistics import NormalDist
 from typing import NamedTuple
@@ -1141,10 +1143,27 @@ def kernel_threads() -> int:
     """Threads the complete search's compiled flood fills and moves use: RBP_THREADS if set,
     else numba's count (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker
     pool gives each worker its share of the cores (`experiments.sweep`). Results are the
-    same, row for row, on any number of threads."""
+    same, row for row, on any number of threads. Inside `held_kernel_threads`, the count read
+    as the block began."""
+    if _HELD_THREADS:
+        return _HELD_THREADS[-1]
     value = os.environ.get("RBP_THREADS", "").strip()
     threads = int(value) if value else numba.config.NUMBA_NUM_THREADS
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+_HELD_THREADS: list[int] = []
+
+
+@contextmanager
+def held_kernel_threads() -> Iterator[int]:
+    """`kernel_threads()` read once and held for a block: a search asks for it thousands of
+    times, and reading the environment each time cost 1 % of a proof."""
+    _HELD_THREADS.append(kernel_threads())
+    try:
+        yield _HELD_THREADS[-1]
+    finally:
+        _HELD_THREADS.pop()
 
 
 @njit(cache=True, parallel=True, error_model="numpy")

@@ -122,11 +122,13 @@ _NO_GRAVITY = np.zeros(2)  # the reach tests' robot parameters need none
 
 
 def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarray:
-    """Rows of component `lat` at which boom `boom` may let go and reaches `anchor`: the poses
-    a transition of that move can use (the reach test of `reach_violation`, compiled)."""
+    """Rows of component `lat` at which boom `boom` may let go and reaches `anchor` (the reach
+    test of `reach_violation`), its segment to `anchor` clear of rock (the kernel's test of
+    it): the poses a transition of that move can use, decided in one compiled pass."""
     target = scn.anchor_positions[scn.anchor_index[anchor]]
     return lattice_reach_rows(lat.keys, lat.boom_release_rows(boom), float(target[0]),
-                              float(target[1]), int(boom), *_lattice_args(scn, lat.lattice))
+                              float(target[1]), int(boom), *_lattice_args(scn, lat.lattice),
+                              _packed_rock(scn.rock)[0])
 
 
 def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,

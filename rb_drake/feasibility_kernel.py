@@ -1435,19 +1435,57 @@ def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi,
-                       n_phi):  # pragma: no cover - compiled
+def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
+                       edges):  # pragma: no cover - compiled
     """Those of `rows` (rows of `keys`, ascending) whose pose boom `boom` reaches (tx, ty)
-    from, ascending."""
+    from, its segment to there clear of the rock's `edges` (`_score_kernel`'s test of that
+    segment, to the bit: half of a move's poses fail it, and no other test is cheaper),
+    ascending."""
     out = np.empty(rows.shape[0], dtype=np.int64)
     n = 0
+    sx, sy = params[_SHOULDER + 2 * boom], params[_SHOULDER + 2 * boom + 1]
+    lo_x = lo_y = math.inf
+    hi_x = hi_y = -math.inf
     for q in range(rows.shape[0]):
         r = rows[q]
         x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
-        if _reaches(x, y, math.cos(phi), math.sin(phi), phi, tx, ty, boom, params):
+        c, s = math.cos(phi), math.sin(phi)
+        if _reaches(x, y, c, s, phi, tx, ty, boom, params):
             out[n] = r
             n += 1
-    return out[:n].copy()
+            px, py = x + (c * sx - s * sy), y + (s * sx + c * sy)
+            lo_x, hi_x = min(lo_x, px), max(hi_x, px)
+            lo_y, hi_y = min(lo_y, py), max(hi_y, py)
+    if n == 0 or edges.shape[0] == 0:
+        return out[:n].copy()
+    # Edges that can meet a segment from some shoulder to the target (collision.Rock culls
+    # the same way): the others cannot change a result.
+    lo_x, hi_x = min(lo_x, tx), max(hi_x, tx)
+    lo_y, hi_y = min(lo_y, ty), max(hi_y, ty)
+    near = np.empty(edges.shape[0], dtype=np.int64)
+    m = 0
+    for e in range(edges.shape[0]):
+        if (max(edges[e, 0], edges[e, 2]) >= lo_x and min(edges[e, 0], edges[e, 2]) <= hi_x
+                and max(edges[e, 1], edges[e, 3]) >= lo_y
+                and min(edges[e, 1], edges[e, 3]) <= hi_y):
+            near[m] = e
+            m += 1
+    near = near[:m]
+    clearance = params[_CLEARANCE]
+    kept = 0
+    for q in range(n):
+        x, y, phi = _decode(keys[out[q]], span, dx, dphi, n_phi)
+        c, s = math.cos(phi), math.sin(phi)
+        px, py = x + (c * sx - s * sy), y + (s * sx + c * sy)
+        ddx, ddy = tx - px, ty - py
+        length = math.sqrt(ddx * ddx + ddy * ddy)
+        ux, uy = ddx / length, ddy / length
+        ux = ux if math.isfinite(ux) else 0.0
+        uy = uy if math.isfinite(uy) else 0.0
+        if not _segment_hits(px, py, tx - clearance * ux, ty - clearance * uy, edges, near):
+            out[kept] = out[q]
+            kept += 1
+    return out[:kept].copy()
 
 
 @njit(cache=True)

@@ -1136,7 +1136,7 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
 # Threads take rows in chunks this long: interleaved row by row, two threads wrote to the same
 # cache lines of every output (a flood fill ran 6 % slower on two threads).
 ROW_CHUNK = 16
-MIN_ROWS_PER_THREAD = 32  # fewer: one thread scores them (a launch and join cost a few us)
+MIN_ROWS_PER_THREAD = 12  # fewer: one thread scores them (a launch and join cost a few us)
 
 
 def kernel_threads() -> int:

@@ -3,7 +3,9 @@
 These machines differ in speed by up to 4.5x from one day to the next and are shared, so a
 change is measured as a ratio, the old code beside the new: for each benchmark cave, the old
 tree's search and the new tree's search run at the same time, one process each (one per core
-of a 2-core machine), so that both meet the same load. Each side reports its footstep seconds
+of a 2-core machine), so that both meet the same load; with `--all-cores`, one after the other,
+each with every core, as the oracle runs (the order alternates from cave to cave, so that a
+drift in the machine's speed falls on both). Each side reports its footstep seconds
 (wall and CPU), stop reason, expansions and regrasps; the summary gives the median per-cave
 ratio new / old and each side's medians.
 
@@ -50,22 +52,33 @@ print(json.dumps({"success": bool(fp.success), "stop": fp.stop, "expansions": fp
 
 
 def run_pair(old: Path, new: Path, kind: str, seed: int, thorough: bool,
-             limit: float) -> dict[str, Any]:
-    """The cave searched by both trees at the same time."""
-    procs = {}
-    for side, tree in (("old", old), ("new", new)):
-        env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_NUM_THREADS": "1"}
+             limit: float, all_cores: bool = False, new_first: bool = False) -> dict[str, Any]:
+    """The cave searched by both trees at the same time, one core each; with `all_cores`, one
+    tree after the other, each with every core (as the oracle runs), `new_first` or not."""
+    sides = [("old", old), ("new", new)]
+    if all_cores and new_first:
+        sides.reverse()
+    procs, out = {}, {"kind": kind, "seed": seed}
+    for side, tree in sides:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        if not all_cores:
+            env["NUMBA_NUM_THREADS"] = "1"
         procs[side] = subprocess.Popen(
             [sys.executable, "-c", _CHILD, kind, str(seed), "1" if thorough else "0",
              str(limit)], cwd=tree, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
             text=True)
-    out: dict[str, Any] = {"kind": kind, "seed": seed}
+        if all_cores:  # wait for it before the other starts
+            out[side] = _result(side, procs.pop(side), kind, seed)
     for side, proc in procs.items():
-        stdout, stderr = proc.communicate()
-        if proc.returncode != 0:
-            raise RuntimeError(f"{side} tree failed on {kind} seed {seed}:\n{stderr[-2000:]}")
-        out[side] = json.loads(stdout.strip().splitlines()[-1])
+        out[side] = _result(side, proc, kind, seed)
     return out
+
+
+def _result(side: str, proc: subprocess.Popen, kind: str, seed: int) -> dict[str, Any]:
+    stdout, stderr = proc.communicate()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{side} tree failed on {kind} seed {seed}:\n{stderr[-2000:]}")
+    return json.loads(stdout.strip().splitlines()[-1])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -84,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--thorough", action="store_true",
                         help="the oracle (no expansion budget), else the default search")
     parser.add_argument("--time-limit", type=float, default=900.0)
+    parser.add_argument("--all-cores", action="store_true",
+                        help="one tree after the other, each with every core (the oracle's "
+                             "setting; the order alternates from cave to cave), not both at "
+                             "once on a core each")
     parser.add_argument("--out", type=Path, required=True, help="results JSON")
     args = parser.parse_args(argv)
     for tree in (args.old, args.new):
@@ -108,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     for n, seed in enumerate(sorted(set(seeds)), 1):
         start = time.perf_counter()
         row = run_pair(args.old, args.new, cave_kind(seed - 1, "mixed"), seed, args.thorough,
-                       args.time_limit)
+                       args.time_limit, args.all_cores, new_first=n % 2 == 0)
         row["ratio"] = row["new"]["wall"] / max(row["old"]["wall"], 1e-9)
         row["cpu_ratio"] = row["new"]["cpu"] / max(row["old"]["cpu"], 1e-9)
         rows.append(row)
@@ -132,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     from rb_drake.files import atomic_write_text
 
     atomic_write_text(args.out, json.dumps({"old": str(args.old), "new": str(args.new),
-                                            "thorough": args.thorough, "caves": rows,
+                                            "thorough": args.thorough,
+                                            "all_cores": args.all_cores, "caves": rows,
                                             "summary": summary}, indent=1))
     return 0
 

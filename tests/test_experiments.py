@@ -39,15 +39,19 @@ def test_bench_footsteps_tiny(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
         assert summary["seconds_min"] <= summary["seconds_median"] <= summary["seconds_max"]
 
 
-def test_footstep_ab_runs_both_trees(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """footstep_ab runs a cave in the old and the new tree (here the same tree twice): both
-    sides report the same outcome, and the ratio is the wall times' quotient."""
+@pytest.mark.parametrize("mode", [[], ["--all-cores"]])
+def test_footstep_ab_runs_both_trees(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                     mode: list[str]) -> None:
+    """footstep_ab runs a cave in the old and the new tree (here the same tree twice), at
+    once or one after the other: both sides report the same outcome, and the ratio is the
+    wall times' quotient."""
     tree = EXPERIMENTS.parent
     out = tmp_path / "ab.json"
     run_script("footstep_ab", ["--old", str(tree), "--new", str(tree), "--seeds", "51",
-                               "--thorough", "--time-limit", "60", "--out", str(out)],
+                               "--thorough", "--time-limit", "60", "--out", str(out), *mode],
                monkeypatch)
     result = json.loads(out.read_text())
+    assert result["all_cores"] == bool(mode), result
     (row,) = result["caves"]
     assert (row["kind"], row["seed"]) == ("shaft", 51), row
     for side in ("old", "new"):

@@ -742,8 +742,8 @@ def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
 # inline="always": numba, not LLVM, inlines it; a call passing its many arrays costs as much
 # as its arithmetic (the flood fill scores a feasible pose 20 % faster)
 @njit(cache=True, error_model="numpy", inline="always")
-def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi,
-               ignore_grasps, work, rhs, w, f, lp, B, b3) -> float:
+def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, f_lo, f_hi, ignore_grasps, rhs,
+               w, f, lp, B, b3) -> float:
     """r of the 3-stance with boom j's gripper at its anchor, at a pose feasible in the
     4-stance whose geometry (L, sh, tg, u, psi, A) is given; NaN where it is infeasible
     (r itself may be -inf with ignore_grasps).
@@ -752,9 +752,9 @@ def _release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, minors, f_lo, f_hi
     are the 4-stance's, all passed), so the decision and r are bitwise the same, but for one
     term: the freed grasp j counts with its P at zero tension (log_ndtr(mu_j / sigma_j)), as
     at the end of the release ramp (planning.ramps), where it is unloaded but still attached
-    and `rbp check` counts it; the 3-stance alone does not. `mu`,
-    `sigma` and `minors` are the 4-stance's allocation's (`_allocate4`): each grasp's mean
-    limit and spread, and the signed determinant of A without each column."""
+    and `rbp check` counts it; the 3-stance alone does not. `mu`
+    and `sigma` are the 4-stance's allocation's (`_allocate4`): each grasp's mean limit and
+    spread."""
     b3[0] = -prm[_BODY_MASS] * prm[_GRAVITY]
     b3[1] = -prm[_BODY_MASS] * prm[_GRAVITY + 1]
     b3[2] = 0.0
@@ -1104,8 +1104,8 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
                     if not release_booms & (1 << j):
                         continue
                     release_out[row, j] = _release_r(
-                        j, x, y, L, sh, tg, u, psi, A, prm, vec[1], vec[2], minors, f_lo, f_hi,
-                        ignore_grasps, work, rhs, w, f, lp, B, b3)
+                        j, x, y, L, sh, tg, u, psi, A, prm, vec[1], vec[2], f_lo, f_hi,
+                        ignore_grasps, rhs, w, f, lp, B, b3)
             continue
         # -- feasibility.violation
         v = 0.0

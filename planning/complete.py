@@ -11,7 +11,8 @@ Resolution-complete. Every transition and every body motion is decided on the po
   4-stance S'. It enters the component of S' that holds q. Every such pose is tested, so
   whenever a lattice pose holds a transition, the edge is found;
 - the moves of a vertex are every anchor that boom j reaches (boom length and shoulder range,
-  exactly) from some release pose of C: none is dropped;
+  exactly) from some release pose of C with its segment there clear of rock: none that a
+  pose could hold is dropped;
 - the start is joined to the components of its stance whose lattice poses next to the start
   pose are linked to it by a feasible straight segment; a vertex is a goal when C holds a
   lattice pose within the goal tolerance.
@@ -51,6 +52,7 @@ from rb_drake.feasibility_kernel import (
     held_kernel_threads,
     kernel_threads,
     lattice_move_kernel,
+    lattice_move_table,
     lattice_reach_rows,
     lattice_reached_anchors,
     reach_violation,
@@ -219,6 +221,30 @@ def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.nda
     return [near[found[j]] for j in range(4)]
 
 
+def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[int, np.ndarray]]]:
+    """Per boom, every move of component `lat` that some pose can use: (anchor index, its
+    `move_rows`) for each anchor that the boom reaches from a release pose with its segment
+    there clear of rock, in one compiled pass over the component (`lattice_move_table`). The
+    anchors of `candidate_moves` whose every such segment meets rock are left out: no pose
+    holds their move (the 3-stance with the gripper at the new anchor tests that segment)."""
+    pts = scn.anchor_positions
+    lo, hi = lat.box
+    gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts, pts - hi)), axis=1)
+    near = gap <= scn.robot.max_reach + 1e-6
+    near[[scn.anchor_index[a] for a in stance]] = False
+    near = np.flatnonzero(near)
+    if not len(near):
+        return [[] for _ in range(4)]
+    rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,
+                                       np.ascontiguousarray(pts[near]),
+                                       *_lattice_args(scn, lat.lattice),
+                                       _packed_rock(scn.rock)[0])
+    K = len(near)
+    return [[(int(near[k]), rows[offsets[j * K + k]:offsets[j * K + k + 1]])
+             for k in range(K) if offsets[j * K + k + 1] > offsets[j * K + k]]
+            for j in range(4)]
+
+
 def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
     """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
     (exact on the lattice), the stance's own anchors excluded."""
@@ -378,13 +404,13 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     while open_list:
         _, _, g, kind, payload = heapq.heappop(open_list)
         if kind == 1:
-            (stance, comp), j, anchor = payload
+            move, rows = payload
+            (stance, comp), j, anchor = move
             child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
                 lat = memo.components[stance].components[comp]
-                rows = move_rows(scn, lat, j, anchor)
                 known = memo.components.get(child)
                 if known is not None and _adds_nothing(known, lat, rows, child, closed):
                     continue  # every pose it could use enters an expanded vertex: nothing new
@@ -396,7 +422,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             graph.add_edge((stance, comp), child, boom=j, anchor=anchor)
             # The child's lattice (and so which of its components the move enters) waits until
             # the child is popped: most children are never expanded.
-            heapq.heappush(open_list, edge_entry(g - c_attach, payload, tr,
+            heapq.heappush(open_list, edge_entry(g - c_attach, move, tr,
                                                  np.arange(len(tr.keys)), child, None))
             continue
         (child, comp), move, pose, p4, tr, g_parent, alternatives = payload
@@ -452,14 +478,14 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
             break
-        for j, anchors in enumerate(candidate_moves(scn, lat, stance)):
-            for k in anchors:
+        for j, moves in enumerate(move_table(scn, lat, stance)):
+            for k, rows in moves:
                 anchor = scn.anchors[k].id
                 if (stance, j, anchor) in excluded:
                     continue
                 child = tuple(anchor if i == j else a for i, a in enumerate(stance))
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
-                                           g + c_attach, 1, (vertex, j, anchor)))
+                                           g + c_attach, 1, ((vertex, j, anchor), rows)))
     if stop == "noroute":
         reason = (f"no route at resolution {cfg.position_step * 100:g} cm / "
                   f"{cfg.angle_step_deg:g} deg: all {expansions} (stance, component) vertices "

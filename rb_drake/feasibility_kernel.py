@@ -1510,6 +1510,106 @@ def lattice_reached_anchors(keys, release_rows, starts, targets, params, span, d
     return found
 
 
+@njit(cache=True)
+def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dphi, n_phi,
+                       edges):  # pragma: no cover - compiled
+    """Every move of a component in one pass: for boom j and target k, the rows of boom j's
+    release rows (release_rows[starts[j]:starts[j + 1]], ascending) from which it reaches
+    targets[k] with its segment there clear of `edges`: `lattice_reach_rows` of each (j, k),
+    row for row and to the bit (the same tests, in the same arithmetic). Returns (rows,
+    offsets): the rows of (j, k) are rows[offsets[j * K + k]:offsets[j * K + k + 1]]. Each
+    pose is decoded once for all targets, where one call per move decoded it per target."""
+    K = targets.shape[0]
+    offsets = np.zeros(4 * K + 1, dtype=np.int64)
+    out = np.empty(0, dtype=np.int64)
+    n_out = 0
+    clearance = params[_CLEARANCE]
+    for j in range(4):
+        sx, sy = params[_SHOULDER + 2 * j], params[_SHOULDER + 2 * j + 1]
+        first, last = starts[j], starts[j + 1]
+        # (target, row, shoulder) of every reaching pair, rows ascending within a target
+        cap = 64
+        pair_k = np.empty(cap, dtype=np.int64)
+        pair_r = np.empty(cap, dtype=np.int64)
+        pair_p = np.empty((cap, 2))
+        n_pair = 0
+        count = np.zeros(K, dtype=np.int64)
+        for q in range(first, last):
+            r = release_rows[q]
+            x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
+            c, s = math.cos(phi), math.sin(phi)
+            for k in range(K):
+                if _reaches(x, y, c, s, phi, targets[k, 0], targets[k, 1], j, params):
+                    if n_pair == cap:
+                        cap *= 2
+                        grown_k = np.empty(cap, dtype=np.int64)
+                        grown_r = np.empty(cap, dtype=np.int64)
+                        grown_p = np.empty((cap, 2))
+                        grown_k[:n_pair] = pair_k[:n_pair]
+                        grown_r[:n_pair] = pair_r[:n_pair]
+                        grown_p[:n_pair] = pair_p[:n_pair]
+                        pair_k, pair_r, pair_p = grown_k, grown_r, grown_p
+                    pair_k[n_pair] = k
+                    pair_r[n_pair] = r
+                    pair_p[n_pair, 0] = x + (c * sx - s * sy)
+                    pair_p[n_pair, 1] = y + (s * sx + c * sy)
+                    n_pair += 1
+                    count[k] += 1
+        # grouped by target, rows ascending (a stable counting sort)
+        at = np.zeros(K + 1, dtype=np.int64)
+        for k in range(K):
+            at[k + 1] = at[k] + count[k]
+        order = np.empty(n_pair, dtype=np.int64)
+        fill = at[:K].copy()
+        for p in range(n_pair):
+            order[fill[pair_k[p]]] = p
+            fill[pair_k[p]] += 1
+        if out.shape[0] < n_out + n_pair:
+            grown = np.empty(max(2 * out.shape[0], n_out + n_pair), dtype=np.int64)
+            grown[:n_out] = out[:n_out]
+            out = grown
+        for k in range(K):
+            offsets[j * K + k] = n_out
+            if count[k] == 0:
+                continue
+            tx, ty = targets[k, 0], targets[k, 1]
+            if edges.shape[0] == 0:
+                for p in order[at[k]:at[k + 1]]:
+                    out[n_out] = pair_r[p]
+                    n_out += 1
+                continue
+            lo_x = lo_y = math.inf
+            hi_x = hi_y = -math.inf
+            for p in order[at[k]:at[k + 1]]:
+                lo_x, hi_x = min(lo_x, pair_p[p, 0]), max(hi_x, pair_p[p, 0])
+                lo_y, hi_y = min(lo_y, pair_p[p, 1]), max(hi_y, pair_p[p, 1])
+            lo_x, hi_x = min(lo_x, tx), max(hi_x, tx)
+            lo_y, hi_y = min(lo_y, ty), max(hi_y, ty)
+            near = np.empty(edges.shape[0], dtype=np.int64)
+            m = 0
+            for e in range(edges.shape[0]):
+                if (max(edges[e, 0], edges[e, 2]) >= lo_x
+                        and min(edges[e, 0], edges[e, 2]) <= hi_x
+                        and max(edges[e, 1], edges[e, 3]) >= lo_y
+                        and min(edges[e, 1], edges[e, 3]) <= hi_y):
+                    near[m] = e
+                    m += 1
+            near = near[:m]
+            for p in order[at[k]:at[k + 1]]:
+                px, py = pair_p[p, 0], pair_p[p, 1]
+                ddx, ddy = tx - px, ty - py
+                length = math.sqrt(ddx * ddx + ddy * ddy)
+                ux, uy = ddx / length, ddy / length
+                ux = ux if math.isfinite(ux) else 0.0
+                uy = uy if math.isfinite(uy) else 0.0
+                if not _segment_hits(px, py, tx - clearance * ux, ty - clearance * uy, edges,
+                                     near):
+                    out[n_out] = pair_r[p]
+                    n_out += 1
+    offsets[4 * K] = n_out
+    return out[:n_out].copy(), offsets
+
+
 @njit(cache=True, error_model="numpy")
 def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions, normals,
                         f_normal, f_lateral, sigma_normal, sigma_lateral, attached, tips, edges,

@@ -24,6 +24,8 @@ from planning.complete import (
     complete_search,
     goal_is_holdable,
     lattice_transition,
+    move_rows,
+    move_table,
     start_components,
 )
 from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
@@ -294,6 +296,38 @@ def test_every_reachable_anchor_is_a_candidate(demo: Scenario) -> None:
                                 np.full(len(demo.anchors), j))
             want = set(np.flatnonzero((v == 0.0).any(axis=0)).tolist()) - held
             assert got == want, f"boom {j}: missing {want - got}, extra {got - want}"
+
+
+@pytest.mark.parametrize("kind, seed", [("rockfall", 12), ("crevasse", 46)])
+def test_move_table_is_every_move_rows(kind: str, seed: int) -> None:
+    """The one-pass move table of a vertex holds, for every candidate anchor, exactly the rows
+    `move_rows` finds for that move (to the bit: the same tests), and leaves out only anchors
+    none of whose segments is clear."""
+    from experiments.baseline_comparison import make_cave
+
+    scn = make_cave(kind, seed, (4.5, 5.0))
+    memo = LatticeMemo()
+    complete_search(scn, max_expansions=15, memo=memo)
+    moves = left_out = 0
+    for stance, known in memo.components.items():
+        for comp in known.components:
+            table = move_table(scn, comp, stance)
+            for j in range(4):
+                got = dict(table[j])
+                cand = candidate_anchors(scn, comp, stance, j).tolist()
+                assert set(got) <= set(cand), f"boom {j}: anchors beyond reach in the table"
+                for k in cand:
+                    want = move_rows(scn, comp, j, scn.anchors[k].id)
+                    if len(want):
+                        assert k in got, f"{stance} boom {j} -> anchor {k}: move left out"
+                        np.testing.assert_array_equal(got[k], want)
+                        moves += 1
+                    else:
+                        assert k not in got, f"{stance} boom {j} -> anchor {k}: blocked kept"
+                        left_out += 1
+    assert moves >= 50, f"only {moves} moves compared"
+    if kind == "rockfall":
+        assert left_out > 0, "no move blocked by rock: the segment test was not exercised"
 
 
 def test_start_is_joined_to_the_lattice(demo: Scenario) -> None:

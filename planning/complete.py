@@ -135,16 +135,19 @@ def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarr
 
 def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
                        ignore_grasps: bool = False, rows: np.ndarray | None = None,
-                       arrival: StanceComponents | None = None) -> LatticeTransition:
+                       arrival: StanceComponents | None = None,
+                       labels: np.ndarray | None = None) -> LatticeTransition:
     """Decide boom `boom`'s move to `anchor` from component `lat` of `stance` on every lattice
     pose (see the module doc); `rows`: `move_rows`, if known. `arrival`: the new stance's
     components found so far, if any: a pose they already decide (in a component, or scored
-    infeasible) is looked up, not scored again (the same answer: module doc)."""
+    infeasible) is looked up, not scored again (the same answer: module doc); `labels`:
+    `arrival.known_component` of the rows' keys, if known."""
     rows = move_rows(scn, lat, boom, anchor) if rows is None else rows
     tested = len(rows)
     if arrival is None or not tested:
         return _scored_transition(scn, lat, stance, boom, anchor, ignore_grasps, rows, tested)
-    labels = arrival.known_component(lat.keys[rows])
+    if labels is None:
+        labels = arrival.known_component(lat.keys[rows])
     parts = [_scored_transition(scn, lat, stance, boom, anchor, ignore_grasps,
                                 rows[labels == UNKNOWN], tested)]
     for c in np.unique(labels[labels >= 0]):
@@ -178,26 +181,25 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     stances, tips = pack_rows(table, [three, new], [table.row[anchor], free])
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
     # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
-    # these poses; the new 4-stance's segments are all decided by then. The new 4-stance's
+    # these poses, and that one is clear at every row of `move_rows` (the kernel's own test of
+    # it), so neither configuration tests a segment again. The new 4-stance's
     # release set of this boom is the 3-stance with the gripper at the new anchor as the
     # attach ramp starts, the gripper counted unloaded (the first test, without that grasp,
     # is a necessary condition of it, and it decided the freed boom's segment).
     kept, arrive, r_new = lattice_move_kernel(
         lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom),
         *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector), *stances,
-        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, int(1 << boom),
-        kernel_threads())
+        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
     r4 = np.empty((len(kept), 4))
     r4[:, 0], r4[:, 1], r4[:, 2], r4[:, 3] = (lat.robustness[kept], lat.release_r[kept, boom],
                                               arrive, r_new)
     return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
 
 
-def _adds_nothing(known: StanceComponents, lat: Component, rows: np.ndarray, child: tuple,
-                  closed: Collection[Vertex]) -> bool:
-    """Whether every pose a move could use (`rows` of `lat`) enters an expanded vertex of the
-    child stance or is known infeasible there: the move adds nothing to the search."""
-    labels = known.known_component(lat.keys[rows])
+def _adds_nothing(labels: np.ndarray, child: tuple, closed: Collection[Vertex]) -> bool:
+    """Whether every pose a move could use (`labels`: what the child stance's components know
+    of each, `known_component`) enters an expanded vertex of the child stance or is known
+    infeasible there: the move adds nothing to the search."""
     if (labels == UNKNOWN).any():
         return False
     return all((child, int(c)) in closed for c in np.unique(labels[labels >= 0]))
@@ -412,10 +414,11 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             if tr is None:
                 lat = memo.components[stance].components[comp]
                 known = memo.components.get(child)
-                if known is not None and _adds_nothing(known, lat, rows, child, closed):
+                labels = None if known is None else known.known_component(lat.keys[rows])
+                if labels is not None and _adds_nothing(labels, child, closed):
                     continue  # every pose it could use enters an expanded vertex: nothing new
                 tr = memo.transitions[key] = lattice_transition(
-                    scn, lat, stance, j, anchor, ignore_grasps, rows, known)
+                    scn, lat, stance, j, anchor, ignore_grasps, rows, known, labels)
                 tested += 1
             if not len(tr.keys):
                 continue

@@ -1534,12 +1534,39 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
         pair_p = np.empty((cap, 2))
         n_pair = 0
         count = np.zeros(K, dtype=np.int64)
+        L_lo, L_hi, rng = params[_L_LO], params[_L_HI], params[_RANGE]
+        direction = params[_DIRECTION + j]
+        # Clear-cut cases decided without the square root or atan2, by margins (1e-9) far
+        # beyond their rounding; the rest by _reaches' own arithmetic, so the answer is its.
+        far2 = (L_hi * (1.0 + 1e-9)) ** 2
+        near2 = (L_lo * (1.0 - 1e-9)) ** 2
+        cos_rng = math.cos(rng) if rng < math.pi else -2.0
         for q in range(first, last):
             r = release_rows[q]
             x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
             c, s = math.cos(phi), math.sin(phi)
+            px, py = x + (c * sx - s * sy), y + (s * sx + c * sy)
+            cu, su = math.cos(phi + direction), math.sin(phi + direction)
             for k in range(K):
-                if _reaches(x, y, c, s, phi, targets[k, 0], targets[k, 1], j, params):
+                # _reaches' test, the shoulder computed once per pose
+                ddx, ddy = targets[k, 0] - px, targets[k, 1] - py
+                d2 = ddx * ddx + ddy * ddy
+                if d2 > far2 or d2 < near2:
+                    continue
+                length = math.sqrt(d2)
+                if length > L_hi or length < L_lo:
+                    continue
+                cos_w = (ddx * cu + ddy * su) / length
+                if cos_w < cos_rng - 1e-9:
+                    continue
+                if cos_w <= cos_rng + 1e-9:  # near the shoulder's limit: atan2 decides
+                    w = (math.atan2(ddy, ddx) - phi - direction + math.pi) % _TWO_PI - math.pi
+                    if w >= math.pi:
+                        w -= _TWO_PI
+                    inside = abs(w) <= rng
+                else:
+                    inside = True
+                if inside:
                     if n_pair == cap:
                         cap *= 2
                         grown_k = np.empty(cap, dtype=np.int64)
@@ -1551,8 +1578,8 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
                         pair_k, pair_r, pair_p = grown_k, grown_r, grown_p
                     pair_k[n_pair] = k
                     pair_r[n_pair] = r
-                    pair_p[n_pair, 0] = x + (c * sx - s * sy)
-                    pair_p[n_pair, 1] = y + (s * sx + c * sy)
+                    pair_p[n_pair, 0] = px
+                    pair_p[n_pair, 1] = py
                     n_pair += 1
                     count[k] += 1
         # grouped by target, rows ascending (a stable counting sort)

@@ -400,3 +400,55 @@ def test_pull_angle_limit_decided_alike_at_its_edge(scenarios: dict[str, Scenari
                 assert got.violation[k] >= 1e-9, f"{label}: no pull-angle violation"
             else:
                 assert want.reason[k] != Reason.PULL_ANGLE, f"{label}: refused inside the limit"
+
+
+def test_move_table_decides_reach_as_reach_rows_at_its_edges(
+        scenarios: dict[str, Scenario]) -> None:
+    """lattice_move_table decides clear-cut reach without the square root or atan2: targets
+    placed at the boom's length limits and at the shoulder's angle limits (and 1e-12 either
+    side) from lattice poses must be answered as lattice_reach_rows answers them, pose by
+    pose, and some must fall on each side."""
+    from planning.lattice import SPAN, LatticeConfig, pack
+
+    scn = scenarios["demo-crevasse"]
+    cfg = LatticeConfig()
+    params = fk._robot_params(scn.robot, np.zeros(2))
+    rng = _rng("move table edges")
+    idx = np.column_stack([rng.integers(-40, 40, 300), rng.integers(-40, 40, 300),
+                           rng.integers(-cfg.angle_count // 2, cfg.angle_count // 2, 300)])
+    keys = np.unique(pack(idx, cfg.angle_count))
+    poses = np.column_stack([(keys // cfg.angle_count) // SPAN - SPAN // 2,
+                             (keys // cfg.angle_count) % SPAN - SPAN // 2,
+                             keys % cfg.angle_count - cfg.angle_count // 2]) * np.array(
+        [cfg.position_step, cfg.position_step, cfg.angle_step])
+    robot = scn.robot
+    for boom in range(4):
+        # targets from the first pose's shoulder: at each length limit and each angle limit
+        x, y, phi = poses[0]
+        sx, sy = robot.shoulder_array[boom]
+        px, py = x + math.cos(phi) * sx - math.sin(phi) * sy, y + math.sin(phi) * sx + math.cos(
+            phi) * sy
+        targets = []
+        lo, hi = robot.boom_length
+        for length in (lo, hi, 0.5 * (lo + hi)):
+            for angle in (-robot.shoulder_range, robot.shoulder_range, 0.0):
+                for nudge in (-1e-12, 0.0, 1e-12):
+                    a = phi + robot.shoulder_directions[boom] + angle + nudge
+                    ell = length + nudge
+                    targets.append((px + ell * math.cos(a), py + ell * math.sin(a)))
+        targets = np.array(targets)
+        rows = np.arange(len(keys))
+        starts = np.array([0, 0, 0, 0, 0])
+        starts[boom + 1:] = len(keys)
+        grid = (SPAN, float(cfg.position_step), float(cfg.angle_step), int(cfg.angle_count))
+        got, offsets = fk.lattice_move_table(keys, rows, starts, targets, params, *grid,
+                                             np.zeros((0, 4)))
+        reached = 0
+        for k, (tx, ty) in enumerate(targets):
+            want = fk.lattice_reach_rows(keys, rows, float(tx), float(ty), boom, params, *grid,
+                                         np.zeros((0, 4)))
+            K = len(targets)
+            mine = got[offsets[boom * K + k]:offsets[boom * K + k + 1]]
+            np.testing.assert_array_equal(mine, want, err_msg=f"boom {boom}, target {k}")
+            reached += 0 in want
+        assert 0 < reached < len(targets), f"boom {boom}: edge targets all on one side"

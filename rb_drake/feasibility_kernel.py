@@ -862,6 +862,12 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
     # Every segment tested for collision lies within this distance of its pose's centre (a
     # boom is tested only once its length is within bounds).
     reach = max(shoulder_reach + L_hi, math.sqrt(half_w * half_w + half_h * half_h)) + 1.0
+    dir_cos = np.empty(4)
+    dir_sin = np.empty(4)
+    for i in range(4):
+        dir_cos[i], dir_sin[i] = math.cos(prm[_DIRECTION + i]), math.sin(prm[_DIRECTION + i])
+    # the shoulder test's limit as a cosine (-2: every direction is within a range of pi)
+    cos_range = math.cos(rng + 1e-12) if rng + 1e-12 < math.pi else -2.0
     near_hit, near_ray = _near_edges(poses, edges, reach)
     parity = np.zeros(vertices.shape[0], dtype=np.int64)
     # Per-pose scratch.
@@ -917,14 +923,26 @@ def _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_nor
             dx, dy = tg[i, 0] - sh[i, 0], tg[i, 1] - sh[i, 1]
             L[i] = math.sqrt(dx * dx + dy * dy)
             u[i, 0], u[i, 1] = dx / L[i], dy / L[i]
-            theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[_DIRECTION + i])
             if decide_only:  # a boom out of reach decides the row: the rest is not needed
                 if L[i] < L_lo or L[i] > L_hi:
                     reach_code = _BOOM_LENGTH
-                elif abs(theta[i]) > rng + 1e-12:
-                    reach_code = _SHOULDER_ANGLE
-                if reach_code:
                     break
+                # The shoulder angle's cosine, clear of the limit's by 1e-9 (far beyond its
+                # rounding), decides without atan2; near the limit, atan2 as below.
+                cos_w = (dx * (c * dir_cos[i] - s * dir_sin[i])
+                         + dy * (s * dir_cos[i] + c * dir_sin[i])) / L[i]
+                if cos_w > cos_range + 1e-9:
+                    theta[i] = 0.0  # within range: its value is not needed with decide_only
+                elif cos_w < cos_range - 1e-9:
+                    reach_code = _SHOULDER_ANGLE
+                    break
+                else:
+                    theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[_DIRECTION + i])
+                    if abs(theta[i]) > rng + 1e-12:
+                        reach_code = _SHOULDER_ANGLE
+                        break
+            else:
+                theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[_DIRECTION + i])
             if att[i]:
                 nx, ny = normals[sk, i, 0], normals[sk, i, 1]
                 vx, vy = -u[i, 0], -u[i, 1]

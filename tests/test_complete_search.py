@@ -104,6 +104,34 @@ def test_decide_only_keeps_feasibility_and_values(demo: Scenario) -> None:
     assert np.array_equal(full.tensions[f], fast.tensions[f])
 
 
+def test_decide_only_shoulder_range_at_its_edge(demo: Scenario) -> None:
+    """decide_only decides the shoulder-angle test by its cosine where that is clear-cut: with
+    the range set 1e-10 rad above and below a pose's largest shoulder angle, it still agrees
+    with the full mode on every pose, and the pose passes, then fails, that test."""
+    from rb_drake import geometry
+
+    stance = demo.stance(demo.start_stance)
+    idx = reachable_lattice(demo.robot, stance.positions, np.arange(4), COARSE)
+    poses = poses_of(idx, COARSE)
+    theta = np.abs(geometry.boom_geometry(demo.robot, poses, stance.positions).shoulder_angle)
+    packed = pack_stances(stance)
+    z = np.zeros(len(poses), np.int64)
+    full0 = score_poses(demo, stance, poses)
+    picked = np.flatnonzero(full0.feasible)[:: max(1, full0.feasible.sum() // 4)][:4]
+    assert len(picked) >= 2, "need feasible poses to move the limit to"
+    for k in picked:
+        for side in (-1.0, 1.0):
+            limit = float(theta[k].max()) + side * 1e-10
+            scn = dataclasses.replace(demo, robot=demo.robot.replace(
+                shoulder_range_deg=math.degrees(limit)))
+            full = score_poses(scn, stance, poses)
+            fast = score_rows(scn, packed, np.full((1, 2), np.nan), poses,
+                              np.arange(len(poses)), z, z, decide_only=True)
+            label = f"pose {k}, range {limit!r} rad"
+            assert np.array_equal(full.feasible, fast.feasible), f"{label}: feasibility"
+            assert fast.feasible[k] == (side > 0), f"{label}: pose {k} decided wrongly"
+
+
 def test_stance_lattice_is_the_feasible_set_with_release_booms(demo: Scenario) -> None:
     """stance_lattice holds exactly the reachable poses check_poses (the numpy reference) finds
     feasible, each boom's release flag is the 3-stance's check, and the components are the

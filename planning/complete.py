@@ -44,7 +44,7 @@ import numpy as np
 from planning.astar import SearchResult
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
-from planning.transition import anchor_table, pack_rows
+from planning.transition import anchor_table
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
     _packed_rock,
@@ -176,9 +176,9 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     table = anchor_table(scn)
     free = len(table.row)
     held = [table.row[a] for a in stance]
-    three = [free if i == boom else held[i] for i in range(4)]
-    new = [table.row[anchor] if i == boom else held[i] for i in range(4)]
-    stances, tips = pack_rows(table, [three, new], [table.row[anchor], free])
+    stance_rows = np.array([held, held], dtype=np.int64)
+    stance_rows[0, boom] = free  # the 3-stance, its gripper at the new anchor (tip 0)
+    stance_rows[1, boom] = table.row[anchor]  # the new 4-stance
     # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
     # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
     # these poses, and that one is clear at every row of `move_rows` (the kernel's own test of
@@ -188,8 +188,10 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     # is a necessary condition of it, and it decided the freed boom's segment).
     kept, arrive, r_new = lattice_move_kernel(
         lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom),
-        *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector), *stances,
-        tips, *_packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
+        *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector),
+        table.positions, table.normals, table.f_normal, table.f_lateral, table.sigma_normal,
+        table.sigma_lateral, stance_rows, np.array([table.row[anchor], free], dtype=np.int64),
+        *_packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
     r4 = np.empty((len(kept), 4))
     r4[:, 0], r4[:, 1], r4[:, 2], r4[:, 3] = (lat.robustness[kept], lat.release_r[kept, boom],
                                               arrive, r_new)

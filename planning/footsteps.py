@@ -46,12 +46,16 @@ from planning.transition import (
     TransitionConfig,
     anchor_table,
     find_transition,
-    pack_rows,
     polish_transition,
     reachable_anchors,
     release_poses,
 )
-from rb_drake.feasibility_kernel import score_poses, score_rows
+from rb_drake.feasibility_kernel import (
+    _packed_rock,
+    _robot_params,
+    score_poses,
+    transition_boom_costs,
+)
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
@@ -134,26 +138,21 @@ def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.r
 
 def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
                pose: np.ndarray) -> np.ndarray:
-    """Per boom, the worst -log P_i over the transition's four configurations at `pose`."""
+    """Per boom, the worst -log P_i over the transition's four configurations at `pose`: old
+    4-stance, 3-stance with the gripper at its old and at its new anchor, new 4-stance (a
+    free boom's entry counts 0), in one compiled call (`transition_boom_costs`)."""
     table = anchor_table(scn)
     free = len(table.row)
     held = [table.row[a] for a in old]
     target = table.row[new_anchor]
-    three = [free if i == boom else held[i] for i in range(4)]
-    new = [target if i == boom else held[i] for i in range(4)]
-    # One compiled call of four rows: old 4-stance, 3-stance with the gripper at its old and at
-    # its new anchor, new 4-stance.
-    stances, tips = pack_rows(table, [held, three, new], [held[boom], target])
-    lp = score_rows(scn, stances, tips, np.asarray(pose, dtype=float).reshape(1, 3),
-                    np.zeros(4, np.int64), np.array([0, 1, 1, 2]),
-                    np.array([0, 0, 1, 0])).log_probs
-    # nan_to_num's values (a free boom's NaN as 0, -inf as the largest float), at a third of
-    # its cost: it took as long as the scoring
-    lp[np.isnan(lp)] = 0.0
-    return np.minimum(np.maximum(0.0, -lp.min(axis=0)), _LARGEST)
-
-
-_LARGEST = np.finfo(float).max
+    rows = np.array([held, held, held], dtype=np.int64)
+    rows[1, boom] = free
+    rows[2, boom] = target
+    return transition_boom_costs(
+        np.ascontiguousarray(pose, dtype=float).reshape(3),
+        _robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
+        table.f_normal, table.f_lateral, table.sigma_normal, table.sigma_lateral, rows,
+        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock))
 
 
 def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:

@@ -1656,9 +1656,81 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
 
 
 @njit(cache=True, error_model="numpy")
-def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions, normals,
-                        f_normal, f_lateral, sigma_normal, sigma_lateral, attached, tips, edges,
-                        owner, vertices, ignore_grasps, decide_only, collide,
+def _gathered(rows, tips, table_positions, table_normals, table_f_normal, table_f_lateral,
+              table_sigma_normal, table_sigma_lateral):  # pragma: no cover - compiled
+    """Kernel stances (PackedStances' arrays) of `rows` (S, 4) anchor-table indices (the
+    table's last row leaves a boom free) and tip points of `tips` (T,) table indices:
+    `planning.transition.pack_rows`, compiled."""
+    free = table_positions.shape[0] - 1
+    S = rows.shape[0]
+    positions = np.empty((S, 4, 2))
+    normals = np.empty((S, 4, 2))
+    f_normal = np.empty((S, 4))
+    f_lateral = np.empty((S, 4))
+    sigma_normal = np.empty((S, 4))
+    sigma_lateral = np.empty((S, 4))
+    attached = np.empty((S, 4), dtype=np.bool_)
+    for q in range(S):
+        for i in range(4):
+            a = rows[q, i]
+            positions[q, i, 0], positions[q, i, 1] = table_positions[a, 0], table_positions[a, 1]
+            normals[q, i, 0], normals[q, i, 1] = table_normals[a, 0], table_normals[a, 1]
+            f_normal[q, i], f_lateral[q, i] = table_f_normal[a], table_f_lateral[a]
+            sigma_normal[q, i], sigma_lateral[q, i] = table_sigma_normal[a], table_sigma_lateral[a]
+            attached[q, i] = a != free
+    tip_points = np.empty((tips.shape[0], 2))
+    for q in range(tips.shape[0]):
+        tip_points[q, 0] = table_positions[tips[q], 0]
+        tip_points[q, 1] = table_positions[tips[q], 1]
+    return (positions, normals, f_normal, f_lateral, sigma_normal, sigma_lateral, attached,
+            tip_points)
+
+
+@njit(cache=True, error_model="numpy")
+def transition_boom_costs(pose, prm, table_positions, table_normals, table_f_normal,
+                          table_f_lateral, table_sigma_normal, table_sigma_lateral, rows, tips,
+                          edges, owner, vertices):  # pragma: no cover - compiled
+    """Per boom, the worst -log P_i over a transition's four configurations at `pose` (3,):
+    `rows` (3, 4) anchor-table indices of the old 4-stance, the 3-stance and the new 4-stance
+    (the table's last row leaves a boom free), `tips` (2,) the free gripper's table rows (at
+    the old anchor, at the new). `planning.footsteps.boom_costs`, the stances gathered from
+    the table here and scored by `_score_kernel` as `score_rows` scores them (full mode):
+    the same numbers, without a dozen numpy calls around one compiled one."""
+    (positions, normals, f_normal, f_lateral, sigma_normal, sigma_lateral, attached,
+     tip_points) = _gathered(rows, tips, table_positions, table_normals, table_f_normal,
+                             table_f_lateral, table_sigma_normal, table_sigma_lateral)
+    poses = np.empty((1, 3))
+    poses[0, 0], poses[0, 1], poses[0, 2] = pose[0], pose[1], pose[2]
+    stance_row = np.array([0, 1, 1, 2])
+    tip_row = np.array([0, 0, 1, 0])
+    lp = np.empty((4, 4))
+    _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                  sigma_lateral, attached, tip_points, np.zeros(4, dtype=np.int64), stance_row,
+                  tip_row, edges, owner, vertices, False, False, ALL_SEGMENTS,
+                  np.empty(4, dtype=np.int64), np.empty(4), lp, np.empty((4, 4)), np.empty(4),
+                  np.empty((0, 4)), np.empty(0, dtype=np.int8), 15, 0, 1)
+    costs = np.empty(4)
+    for i in range(4):  # nan_to_num's values: a free boom's NaN as 0, -inf as the largest
+        worst = math.inf
+        for q in range(4):
+            v = lp[q, i]
+            if math.isnan(v):
+                v = 0.0
+            elif v == -math.inf:
+                v = -_LARGEST_FLOAT
+            worst = min(worst, v)
+        costs[i] = max(0.0, -worst)
+    return costs
+
+
+_LARGEST_FLOAT = np.finfo(np.float64).max
+
+
+@njit(cache=True, error_model="numpy")
+def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, table_positions,
+                        table_normals, table_f_normal, table_f_lateral, table_sigma_normal,
+                        table_sigma_lateral, stance_rows, tip_rows, edges, owner, vertices,
+                        ignore_grasps, decide_only, collide,
                         threads):  # pragma: no cover - compiled
     """A move's two new configurations at rows `rows` of a component (keys: its lattice keys),
     in one call (planning.complete's scored transitions): stance row 0 is the 3-stance with
@@ -1666,7 +1738,11 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, positions,
     (the freed boom's: the others are the old 4-stance's, clear); where it holds, stance row 1,
     the new 4-stance, with its release r of `boom` (`_release_r`). Returns the rows where both hold,
     the new 4-stance's release r of `boom` there (the attach ramp's start) and its r: what
-    `score_rows` gives for the same rows (decide_only), in two calls."""
+    `score_rows` gives for the same rows (decide_only), in two calls. The two stances come as
+    anchor-table rows (`stance_rows` (2, 4), `tip_rows` (2,): `_gathered`)."""
+    (positions, normals, f_normal, f_lateral, sigma_normal, sigma_lateral, attached,
+     tips) = _gathered(stance_rows, tip_rows, table_positions, table_normals, table_f_normal,
+                       table_f_lateral, table_sigma_normal, table_sigma_lateral)
     n = rows.shape[0]
     poses = np.empty((n, 3))
     for q in range(n):

@@ -333,3 +333,36 @@ def test_reachable_anchors_include_feasible_transitions_demo(
             f"boom {j}: {a} (feasible at {tr.pose}) not among reachable "
             f"{[demo.anchors[k].id for k in idx]}")
         assert not held & set(idx.tolist()), f"boom {j}: held anchors reachable"
+
+
+def test_boom_costs_are_the_four_configurations_worst_log_p() -> None:
+    """boom_costs (one compiled call) gives, bit for bit, what scoring the transition's four
+    configurations with score_rows gives: per boom the worst -log P, a free boom's entry 0 and
+    an impossible grasp (-inf) the largest float, on feasible and infeasible poses alike."""
+    from experiments.baseline_comparison import make_cave
+    from planning.footsteps import boom_costs
+    from planning.transition import anchor_table, pack_rows
+    from rb_drake.feasibility_kernel import score_rows
+
+    scn = make_cave("rockfall", 12, (4.5, 5.0))
+    table = anchor_table(scn)
+    rng = np.random.default_rng(7)
+    ids = [a.id for a in scn.anchors]
+    kinds = {"finite": 0, "infinite": 0}
+    for _ in range(300):
+        stance = tuple(rng.choice(ids, 4, replace=False))
+        anchor = str(rng.choice([a for a in ids if a not in stance]))
+        boom = int(rng.integers(4))
+        centre = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
+        pose = np.r_[centre + rng.normal(0.0, 0.1, 2), rng.normal(0.0, 0.3)]
+        held = [table.row[a] for a in stance]
+        three, new = list(held), list(held)
+        three[boom], new[boom] = len(table.row), table.row[anchor]
+        stances, tips = pack_rows(table, [held, three, new], [held[boom], table.row[anchor]])
+        lp = score_rows(scn, stances, tips, pose.reshape(1, 3), np.zeros(4, np.int64),
+                        np.array([0, 1, 1, 2]), np.array([0, 0, 1, 0])).log_probs
+        want = np.maximum(0.0, -np.nan_to_num(lp, nan=0.0).min(axis=0))
+        got = boom_costs(scn, stance, boom, anchor, pose)
+        np.testing.assert_array_equal(got, want, err_msg=f"{stance} boom {boom} -> {anchor}")
+        kinds["finite" if np.all(want < 1e300) else "infinite"] += 1
+    assert min(kinds.values()) >= 20, f"too few of one kind of pose: {kinds}"

@@ -51,6 +51,7 @@ from planning.transition import (
     release_poses,
 )
 from rb_drake.feasibility_kernel import (
+    ALL_SEGMENTS,
     _packed_rock,
     _robot_params,
     score_poses,
@@ -152,7 +153,8 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
         np.ascontiguousarray(pose, dtype=float).reshape(3),
         _robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
         table.f_normal, table.f_lateral, table.sigma_normal, table.sigma_lateral, rows,
-        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock))
+        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock), False, False,
+        ALL_SEGMENTS)
 
 
 def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:

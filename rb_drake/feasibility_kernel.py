@@ -1689,13 +1689,16 @@ def _gathered(rows, tips, table_positions, table_normals, table_f_normal, table_
 @njit(cache=True, error_model="numpy")
 def transition_boom_costs(pose, prm, table_positions, table_normals, table_f_normal,
                           table_f_lateral, table_sigma_normal, table_sigma_lateral, rows, tips,
-                          edges, owner, vertices):  # pragma: no cover - compiled
+                          edges, owner, vertices, ignore_grasps, decide_only,
+                          collide):  # pragma: no cover - compiled
     """Per boom, the worst -log P_i over a transition's four configurations at `pose` (3,):
     `rows` (3, 4) anchor-table indices of the old 4-stance, the 3-stance and the new 4-stance
     (the table's last row leaves a boom free), `tips` (2,) the free gripper's table rows (at
     the old anchor, at the new). `planning.footsteps.boom_costs`, the stances gathered from
     the table here and scored by `_score_kernel` as `score_rows` scores them (full mode):
-    the same numbers, without a dozen numpy calls around one compiled one."""
+    the same numbers, without a dozen numpy calls around one compiled one. `ignore_grasps`
+    and `decide_only` (False) and `collide` (ALL_SEGMENTS) come in as arguments, not
+    literals, so that `_score_kernel` is called with the types Python calls it with."""
     (positions, normals, f_normal, f_lateral, sigma_normal, sigma_lateral, attached,
      tip_points) = _gathered(rows, tips, table_positions, table_normals, table_f_normal,
                              table_f_lateral, table_sigma_normal, table_sigma_lateral)
@@ -1706,9 +1709,10 @@ def transition_boom_costs(pose, prm, table_positions, table_normals, table_f_nor
     lp = np.empty((4, 4))
     _score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                   sigma_lateral, attached, tip_points, np.zeros(4, dtype=np.int64), stance_row,
-                  tip_row, edges, owner, vertices, False, False, ALL_SEGMENTS,
+                  tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
                   np.empty(4, dtype=np.int64), np.empty(4), lp, np.empty((4, 4)), np.empty(4),
-                  np.empty((0, 4)), np.empty(0, dtype=np.int8), 15, 0, 1)
+                  np.empty((0, 4)), np.empty(0, dtype=np.int8), np.int64(15), np.int64(0),
+                  np.int64(1))
     costs = np.empty(4)
     for i in range(4):  # nan_to_num's values: a free boom's NaN as 0, -inf as the largest
         worst = math.inf

@@ -101,6 +101,36 @@ def _smooth(times: np.ndarray, values: np.ndarray, rest: bool) -> PiecewisePolyn
     return PiecewisePolynomial.CubicShapePreserving(times, values.T, rest)
 
 
+def _continuous_acceleration_rates(times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Velocities (K, n) at the knots of values (K, n): zero where the body rests (a knot equal
+    to its neighbour, as a dwell or a ramp has it, and at both ends), elsewhere the slopes of
+    the cubic spline with continuous second derivatives through each run of knots between
+    two rests, at rest at the run's ends. A shape-preserving ("pchip") estimate sets a slope
+    to zero wherever a coordinate turns, so the acceleration jumps at that knot, and the
+    controller's feed-forward with it: where a body phase turned from rotating to
+    translating, a grasp at P 0.969 at both neighbouring steps fell to 0.952 between them
+    (crevasse-s6), a loss p_path, a product over the steps, cannot see. Within a run the
+    acceleration is continuous, and its peaks are about half pchip's on the calibration
+    plans; the path stays within 5 mm and 0.3 deg of pchip's."""
+    K = len(times)
+    rates = np.zeros_like(values, dtype=float)
+    still = np.all(np.abs(np.diff(values, axis=0)) <= 1e-12, axis=1)
+    rest = np.zeros(K, dtype=bool)
+    rest[[0, -1]] = True
+    rest[1:] |= still
+    rest[:-1] |= still
+    ends = np.flatnonzero(rest)
+    zero = np.zeros((values.shape[1], 1))
+    for i, j in itertools.pairwise(ends):
+        if j - i < 2:
+            continue
+        spline = PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
+            times[i:j + 1], values[i:j + 1].T, zero, zero).derivative(1)
+        for n in range(i + 1, j):
+            rates[n] = spline.value(times[n]).ravel()
+    return rates
+
+
 def _ramp_count(steps: list[dict[str, Any]], reverse: bool) -> int:
     """How many steps at the start (end) of a phase are ramp steps."""
     n = 0
@@ -143,9 +173,9 @@ class PlanTrajectory:
 
     Phase k runs over [start_k, start_{k+1}). The body pose passes through every step of the
     plan, but with a continuous velocity, unlike a first-order hold: one cubic Hermite spline
-    through all steps, its velocities shape-preserving estimates ("pchip",
-    `PiecewisePolynomial.CubicShapePreserving`, at rest at the start and the end) where the
-    plan gives none. A velocity step (at every step of a linear interpolation, and at phase
+    through all steps, its velocities, where the plan gives none, the slopes of the spline
+    with continuous acceleration through the steps (`_continuous_acceleration_rates`, at rest at the
+    start and the end). A velocity step (at every step of a linear interpolation, and at phase
     boundaries of plans whose phases do not end at rest) is answered by the PD with a jolt of
     the tensions that collapses grasp probabilities for nothing; the spline's acceleration
     feeds the controller forward. A phase of several steps (a full trajectory)
@@ -193,9 +223,9 @@ class PlanTrajectory:
         if resample is None or len(times) < 3:
             self.pose = _hold(times, poses)
         else:
-            estimate = _smooth(times, poses, True).derivative(1)
+            estimate = _continuous_acceleration_rates(times, poses)
             for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
-                rates[n] = estimate.value(times[n]).ravel()
+                rates[n] = estimate[n]
             self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
         if resample is not None:
             self.phases = [self._refine_tensions(p) for p in self.phases]

@@ -282,6 +282,43 @@ def test_the_last_motion_of_a_trajectory_phase_uses_its_dwell(good_plan: dict[st
     assert ours < 0.6 * theirs, f"braking {ours} m/s^2, stopping at the dwell {theirs}"
 
 
+def test_a_turning_body_path_has_a_continuous_acceleration(good_plan: dict[str, Any]) -> None:
+    """A phase whose body first turns, then translates: the executed path passes through every
+    step, its acceleration is continuous at the steps where the motion turns (a shape-preserving
+    spline's jumps there, by a feed-forward that moved 1 N onto a weak grasp in crevasse-s6),
+    and it rests at the dwell that ends the phase."""
+    scn = plan_scenario(good_plan)
+    first = good_plan["phases"][0]
+    stance = tuple(first["stance"])
+    a = np.array(first["steps"][0]["pose"])
+    dt = 0.5
+    # rotate by 0.06 rad over three steps, then translate 3 cm over three, then dwell
+    path = [a + np.array([0.0, 0.0, 0.02 * k]) for k in range(4)]
+    path += [path[-1] + np.array([0.01 * k, 0.0, 0.0]) for k in range(1, 4)]
+    steps = [configuration(scn, stance, q, None, k * dt)[0] for k, q in enumerate(path)]
+    steps.append(dict(steps[-1], t=len(path) * dt))
+    plan = copy.deepcopy(good_plan)
+    plan["phases"] = [dict(first, steps=steps)]
+    traj = PlanTrajectory(plan, scn)
+    times = np.array([s["t"] for s in steps])
+    poses = np.array([s["pose"] for s in steps])
+    for t, q in zip(times[:-2], poses[:-2], strict=True):
+        np.testing.assert_allclose(traj.pose.value(t).ravel(), q, atol=1e-12, err_msg=f"t={t}")
+    eps = 1e-7
+    pchip = PiecewisePolynomial.CubicShapePreserving(times, poses.T, True).derivative(2)
+    pchip_jump = 0.0
+    for t in times[1:4]:  # the rotation's steps and the turn to translating
+        left = traj.acceleration.value(t - eps).ravel()
+        right = traj.acceleration.value(t + eps).ravel()
+        np.testing.assert_allclose(left, right, atol=1e-4, err_msg=f"acceleration jumps at {t}")
+        pchip_jump = max(pchip_jump, float(np.abs(pchip.value(t - eps).ravel()
+                                                  - pchip.value(t + eps).ravel()).max()))
+    assert pchip_jump > 0.01, f"the case does not turn sharply (pchip's jump {pchip_jump})"
+    end = times[-1]
+    for t in np.linspace(times[-2] + DWELL_MOTION * (end - times[-2]), end, 4):
+        np.testing.assert_allclose(traj.velocity.value(t).ravel(), 0.0, atol=1e-12)
+
+
 def test_rest_to_rest_timing() -> None:
     t, s, ds = rest_to_rest(2.0, 7.0, 0.05)
     assert t[0] == 2.0 and t[-1] == 7.0 and np.all(np.diff(t) <= 0.05 + 1e-12)

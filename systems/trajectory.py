@@ -204,7 +204,7 @@ class PlanTrajectory:
         self.phases: list[PhaseTrajectory] = []
         knots_t: list[np.ndarray] = []
         knots_q: list[np.ndarray] = []
-        knots_v: list[np.ndarray] = []  # NaN: to be estimated (shape-preserving)
+        knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
         previous_end = None
         for k, phase in enumerate(plan["phases"]):
             traj, t, q, v = self._phase(k, phase, scn, previous_end, resample)

@@ -207,16 +207,23 @@ def _adds_nothing(labels: np.ndarray, child: tuple, closed: Collection[Vertex]) 
     return all((child, c) in closed for c in set(labels[labels >= 0].tolist()))
 
 
-def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
-    """Per boom, the indices of every anchor it reaches from some release pose of component
-    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
-    the component, anchors beyond reach of its bounding box left out first."""
+def _near_anchors(scn: Scenario, lat: Component, stance: tuple) -> np.ndarray:
+    """Indices of the anchors within reach (boom length plus shoulder offset) of component
+    `lat`'s bounding box, the stance's own anchors excluded: no other can be a move's."""
     pts = scn.anchor_positions
     lo, hi = lat.box
     gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts, pts - hi)), axis=1)
     near = gap <= scn.robot.max_reach + 1e-6
     near[[scn.anchor_index[a] for a in stance]] = False
-    near = np.flatnonzero(near)
+    return np.flatnonzero(near)
+
+
+def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
+    """Per boom, the indices of every anchor it reaches from some release pose of component
+    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
+    the component, anchors beyond reach of its bounding box left out first."""
+    pts = scn.anchor_positions
+    near = _near_anchors(scn, lat, stance)
     if not len(near):
         return [near] * 4
     found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
@@ -232,11 +239,7 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     anchors of `candidate_moves` whose every such segment meets rock are left out: no pose
     holds their move (the 3-stance with the gripper at the new anchor tests that segment)."""
     pts = scn.anchor_positions
-    lo, hi = lat.box
-    gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts, pts - hi)), axis=1)
-    near = gap <= scn.robot.max_reach + 1e-6
-    near[[scn.anchor_index[a] for a in stance]] = False
-    near = np.flatnonzero(near)
+    near = _near_anchors(scn, lat, stance)
     if not len(near):
         return [[] for _ in range(4)]
     rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,

@@ -1453,33 +1453,17 @@ def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
-                       edges):  # pragma: no cover - compiled
-    """Those of `rows` (rows of `keys`, ascending) whose pose boom `boom` reaches (tx, ty)
-    from, its segment to there clear of the rock's `edges` (`_score_kernel`'s test of that
-    segment, to the bit: half of a move's poses fail it, and no other test is cheaper),
-    ascending."""
-    out = np.empty(rows.shape[0], dtype=np.int64)
-    n = 0
-    sx, sy = params[_SHOULDER + 2 * boom], params[_SHOULDER + 2 * boom + 1]
-    lo_x = lo_y = math.inf
-    hi_x = hi_y = -math.inf
+def _keep_clear(rows, shoulders, tx, ty, edges, clearance, out, n_out):  # pragma: no cover
+    """Append to out[n_out:] those of `rows` whose boom, from its shoulder (`shoulders`, one
+    (x, y) per row) to (tx, ty), is clear of the rock's `edges` (`_score_kernel`'s test of
+    that segment, to the bit); returns the new n_out. Edges apart from the box of every
+    shoulder and the target are left out first (collision.Rock culls the same way): they
+    cannot change a result."""
+    lo_x = hi_x = tx
+    lo_y = hi_y = ty
     for q in range(rows.shape[0]):
-        r = rows[q]
-        x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
-        c, s = math.cos(phi), math.sin(phi)
-        if _reaches(x, y, c, s, phi, tx, ty, boom, params):
-            out[n] = r
-            n += 1
-            px, py = x + (c * sx - s * sy), y + (s * sx + c * sy)
-            lo_x, hi_x = min(lo_x, px), max(hi_x, px)
-            lo_y, hi_y = min(lo_y, py), max(hi_y, py)
-    if n == 0 or edges.shape[0] == 0:
-        return out[:n].copy()
-    # Edges that can meet a segment from some shoulder to the target (collision.Rock culls
-    # the same way): the others cannot change a result.
-    lo_x, hi_x = min(lo_x, tx), max(hi_x, tx)
-    lo_y, hi_y = min(lo_y, ty), max(hi_y, ty)
+        lo_x, hi_x = min(lo_x, shoulders[q, 0]), max(hi_x, shoulders[q, 0])
+        lo_y, hi_y = min(lo_y, shoulders[q, 1]), max(hi_y, shoulders[q, 1])
     near = np.empty(edges.shape[0], dtype=np.int64)
     m = 0
     for e in range(edges.shape[0]):
@@ -1489,20 +1473,40 @@ def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
             near[m] = e
             m += 1
     near = near[:m]
-    clearance = params[_CLEARANCE]
-    kept = 0
-    for q in range(n):
-        x, y, phi = _decode(keys[out[q]], span, dx, dphi, n_phi)
-        c, s = math.cos(phi), math.sin(phi)
-        px, py = x + (c * sx - s * sy), y + (s * sx + c * sy)
+    for q in range(rows.shape[0]):
+        px, py = shoulders[q, 0], shoulders[q, 1]
         ddx, ddy = tx - px, ty - py
         length = math.sqrt(ddx * ddx + ddy * ddy)
         ux, uy = ddx / length, ddy / length
         ux = ux if math.isfinite(ux) else 0.0
         uy = uy if math.isfinite(uy) else 0.0
         if not _segment_hits(px, py, tx - clearance * ux, ty - clearance * uy, edges, near):
-            out[kept] = out[q]
-            kept += 1
+            out[n_out] = rows[q]
+            n_out += 1
+    return n_out
+
+
+@njit(cache=True)
+def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
+                       edges):  # pragma: no cover - compiled
+    """Those of `rows` (rows of `keys`, ascending) whose pose boom `boom` reaches (tx, ty)
+    from, its segment to there clear of the rock's `edges` (`_score_kernel`'s test of that
+    segment, to the bit: half of a move's poses fail it, and no other test is cheaper),
+    ascending."""
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    shoulders = np.empty((rows.shape[0], 2))
+    n = 0
+    sx, sy = params[_SHOULDER + 2 * boom], params[_SHOULDER + 2 * boom + 1]
+    for q in range(rows.shape[0]):
+        r = rows[q]
+        x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
+        c, s = math.cos(phi), math.sin(phi)
+        if _reaches(x, y, c, s, phi, tx, ty, boom, params):
+            out[n] = r
+            shoulders[n, 0], shoulders[n, 1] = x + (c * sx - s * sy), y + (s * sx + c * sy)
+            n += 1
+    kept = _keep_clear(out[:n].copy(), shoulders[:n], tx, ty, edges, params[_CLEARANCE], out,
+                       0)
     return out[:kept].copy()
 
 
@@ -1542,8 +1546,15 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
     out = np.empty(0, dtype=np.int64)
     n_out = 0
     clearance = params[_CLEARANCE]
+    L_lo, L_hi, rng = params[_L_LO], params[_L_HI], params[_RANGE]
+    # Clear-cut cases decided without the square root or atan2, by margins (1e-9) far beyond
+    # their rounding; the rest by _reaches' own arithmetic, so the answer is its.
+    far2 = (L_hi * (1.0 + 1e-9)) ** 2
+    near2 = (L_lo * (1.0 - 1e-9)) ** 2
+    cos_rng = math.cos(rng) if rng < math.pi else -2.0
     for j in range(4):
         sx, sy = params[_SHOULDER + 2 * j], params[_SHOULDER + 2 * j + 1]
+        direction = params[_DIRECTION + j]
         first, last = starts[j], starts[j + 1]
         # (target, row, shoulder) of every reaching pair, rows ascending within a target
         cap = 64
@@ -1552,13 +1563,6 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
         pair_p = np.empty((cap, 2))
         n_pair = 0
         count = np.zeros(K, dtype=np.int64)
-        L_lo, L_hi, rng = params[_L_LO], params[_L_HI], params[_RANGE]
-        direction = params[_DIRECTION + j]
-        # Clear-cut cases decided without the square root or atan2, by margins (1e-9) far
-        # beyond their rounding; the rest by _reaches' own arithmetic, so the answer is its.
-        far2 = (L_hi * (1.0 + 1e-9)) ** 2
-        near2 = (L_lo * (1.0 - 1e-9)) ** 2
-        cos_rng = math.cos(rng) if rng < math.pi else -2.0
         for q in range(first, last):
             r = release_rows[q]
             x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
@@ -1617,40 +1621,9 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
             offsets[j * K + k] = n_out
             if count[k] == 0:
                 continue
-            tx, ty = targets[k, 0], targets[k, 1]
-            if edges.shape[0] == 0:
-                for p in order[at[k]:at[k + 1]]:
-                    out[n_out] = pair_r[p]
-                    n_out += 1
-                continue
-            lo_x = lo_y = math.inf
-            hi_x = hi_y = -math.inf
-            for p in order[at[k]:at[k + 1]]:
-                lo_x, hi_x = min(lo_x, pair_p[p, 0]), max(hi_x, pair_p[p, 0])
-                lo_y, hi_y = min(lo_y, pair_p[p, 1]), max(hi_y, pair_p[p, 1])
-            lo_x, hi_x = min(lo_x, tx), max(hi_x, tx)
-            lo_y, hi_y = min(lo_y, ty), max(hi_y, ty)
-            near = np.empty(edges.shape[0], dtype=np.int64)
-            m = 0
-            for e in range(edges.shape[0]):
-                if (max(edges[e, 0], edges[e, 2]) >= lo_x
-                        and min(edges[e, 0], edges[e, 2]) <= hi_x
-                        and max(edges[e, 1], edges[e, 3]) >= lo_y
-                        and min(edges[e, 1], edges[e, 3]) <= hi_y):
-                    near[m] = e
-                    m += 1
-            near = near[:m]
-            for p in order[at[k]:at[k + 1]]:
-                px, py = pair_p[p, 0], pair_p[p, 1]
-                ddx, ddy = tx - px, ty - py
-                length = math.sqrt(ddx * ddx + ddy * ddy)
-                ux, uy = ddx / length, ddy / length
-                ux = ux if math.isfinite(ux) else 0.0
-                uy = uy if math.isfinite(uy) else 0.0
-                if not _segment_hits(px, py, tx - clearance * ux, ty - clearance * uy, edges,
-                                     near):
-                    out[n_out] = pair_r[p]
-                    n_out += 1
+            group = order[at[k]:at[k + 1]]
+            n_out = _keep_clear(pair_r[group], pair_p[group], targets[k, 0], targets[k, 1],
+                                edges, clearance, out, n_out)
     offsets[4 * K] = n_out
     return out[:n_out].copy(), offsets
 

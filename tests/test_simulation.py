@@ -249,6 +249,26 @@ def test_booms_make_the_wanted_wrench(good_plan: dict[str, Any], sim: ClimbSimul
                                        err_msg=f"phases[{k}] step {n}: acceleration")
 
 
+def _one_phase_through(good_plan: dict[str, Any], scn: Scenario, path: list[np.ndarray],
+                       dt: float) -> tuple[PlanTrajectory, np.ndarray, np.ndarray]:
+    """A plan of one trajectory phase in good_plan's first stance through the poses of `path`,
+    `dt` apart, ending in a dwell (the last step repeated, as planning.plan writes them): its
+    trajectory, step times and poses, after checking that the pose passes through every step
+    before the last motion."""
+    first = good_plan["phases"][0]
+    stance = tuple(first["stance"])
+    steps = [configuration(scn, stance, q, None, k * dt)[0] for k, q in enumerate(path)]
+    steps.append(dict(steps[-1], t=len(path) * dt))
+    plan = copy.deepcopy(good_plan)
+    plan["phases"] = [dict(first, steps=steps)]
+    traj = PlanTrajectory(plan, scn)
+    times = np.array([s["t"] for s in steps])
+    poses = np.array([s["pose"] for s in steps])
+    for t, q in zip(times[:-2], poses[:-2], strict=True):
+        np.testing.assert_allclose(traj.pose.value(t).ravel(), q, atol=1e-12, err_msg=f"t={t}")
+    return traj, times, poses
+
+
 def test_the_last_motion_of_a_trajectory_phase_uses_its_dwell(good_plan: dict[str, Any]) -> None:
     """A phase of several steps ending in a dwell (the last step repeated, as planning.plan
     writes them): the pose passes through every earlier step, reaches the last configuration
@@ -257,18 +277,9 @@ def test_the_last_motion_of_a_trajectory_phase_uses_its_dwell(good_plan: dict[st
     scn = plan_scenario(good_plan)
     first = good_plan["phases"][0]
     a, b = (np.array(first["steps"][n]["pose"]) for n in (0, -1))
-    stance = tuple(first["stance"])
     dt, n = 0.5, 6
-    steps = [configuration(scn, stance, a + (b - a) * (k / n) ** 0.5, None, k * dt)[0]
-             for k in range(n + 1)]  # fast at first, slowing: moving at the last knot
-    steps.append(dict(steps[-1], t=(n + 1) * dt))
-    plan = copy.deepcopy(good_plan)
-    plan["phases"] = [dict(first, steps=steps)]
-    traj = PlanTrajectory(plan, scn)
-    times = np.array([s["t"] for s in steps])
-    poses = np.array([s["pose"] for s in steps])
-    for t, q in zip(times[:-2], poses[:-2], strict=True):
-        np.testing.assert_allclose(traj.pose.value(t).ravel(), q, atol=1e-12, err_msg=f"t={t}")
+    path = [a + (b - a) * (k / n) ** 0.5 for k in range(n + 1)]  # slowing: moving at the end
+    traj, times, poses = _one_phase_through(good_plan, scn, path, dt)
     end = times[-1]
     arrival = times[-2] + DWELL_MOTION * (end - times[-2])
     for t in np.linspace(arrival, end, 5):
@@ -288,22 +299,12 @@ def test_a_turning_body_path_has_a_continuous_acceleration(good_plan: dict[str, 
     spline's jumps there, by a feed-forward that moved 1 N onto a weak grasp in crevasse-s6),
     and it rests at the dwell that ends the phase."""
     scn = plan_scenario(good_plan)
-    first = good_plan["phases"][0]
-    stance = tuple(first["stance"])
-    a = np.array(first["steps"][0]["pose"])
+    a = np.array(good_plan["phases"][0]["steps"][0]["pose"])
     dt = 0.5
     # rotate by 0.06 rad over three steps, then translate 3 cm over three, then dwell
     path = [a + np.array([0.0, 0.0, 0.02 * k]) for k in range(4)]
     path += [path[-1] + np.array([0.01 * k, 0.0, 0.0]) for k in range(1, 4)]
-    steps = [configuration(scn, stance, q, None, k * dt)[0] for k, q in enumerate(path)]
-    steps.append(dict(steps[-1], t=len(path) * dt))
-    plan = copy.deepcopy(good_plan)
-    plan["phases"] = [dict(first, steps=steps)]
-    traj = PlanTrajectory(plan, scn)
-    times = np.array([s["t"] for s in steps])
-    poses = np.array([s["pose"] for s in steps])
-    for t, q in zip(times[:-2], poses[:-2], strict=True):
-        np.testing.assert_allclose(traj.pose.value(t).ravel(), q, atol=1e-12, err_msg=f"t={t}")
+    traj, times, poses = _one_phase_through(good_plan, scn, path, dt)
     eps = 1e-7
     pchip = PiecewisePolynomial.CubicShapePreserving(times, poses.T, True).derivative(2)
     pchip_jump = 0.0

@@ -13,14 +13,13 @@ for either planner, so that plans are scored by the same model.
 from __future__ import annotations
 
 import json
-from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from planning.easing import ease_motions
-from planning.footsteps import FootstepPlan
+from planning.plan_schema import schema, validate  # noqa: F401 (re-exported)
 from planning.probability import Configuration, PathProbability, path_probability
 from planning.ramps import add_ramps
 from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
@@ -28,6 +27,9 @@ from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import Scenario
 from rb_drake.statics import statics_problem
+
+if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write a plan
+    from planning.footsteps import FootstepPlan
 
 FORMAT = "reachbot-plan/1"
 BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
@@ -227,17 +229,6 @@ def plan_configurations(plan: dict[str, Any]):
     for phase in plan["phases"]:
         for step in phase["steps"]:
             yield Configuration(phase["stance"], step["p_grasp"], step["p_success"])
-
-
-def schema() -> dict[str, Any]:
-    return json.loads(resources.files("planning").joinpath("plan_schema.json").read_text())
-
-
-def validate(plan: dict[str, Any]) -> None:
-    """Raise jsonschema.ValidationError when `plan` does not follow the schema."""
-    import jsonschema
-
-    jsonschema.validate(plan, schema())
 
 
 def write_plan(plan: dict[str, Any], path: str | Path) -> Path:

@@ -412,8 +412,8 @@ def judge(fault: Fault) -> Verdict:
     import jsonschema
 
     from planning.check import verify_plan
-    from planning.plan import validate
     from planning.plan_file import PlanFileError, parse_plan_text
+    from planning.plan_schema import validate
     from rb_drake.scenario import ScenarioError
 
     try:

@@ -67,9 +67,7 @@ def _find_bad(value: Any, path: str) -> tuple[str, _Bad] | None:
 def read_plan_file(path: str | Path) -> dict[str, Any]:
     """A plan file parsed and validated against the schema; raises PlanFileError with the field
     ("(file)" when it cannot be read or is not JSON) and the reason."""
-    import jsonschema
-
-    from planning.plan import validate
+    from planning.plan_schema import fast_verdict, schema
 
     path = Path(path)
     try:
@@ -80,8 +78,12 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
         raise PlanFileError("(file)", "is a directory, not a plan file") from None
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
         raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
+    if fast_verdict(plan):
+        return plan
+    import jsonschema  # the reference validator, for the path and message of what is wrong
+
     try:
-        validate(plan)
+        jsonschema.validate(plan, schema())
     except jsonschema.ValidationError as e:
         field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
         raise PlanFileError(field, e.message) from None

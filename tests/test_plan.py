@@ -455,3 +455,56 @@ def test_cli_plan_without_route_writes_failed_plan(tmp_path: Path,
     validate(plan)
     assert plan["success"] is False and plan["reason"], plan["reason"]
     assert (tmp_path / "far.png").is_file()
+
+
+def _paths(node: Any, path: tuple = ()):
+    """Every (container path, key) in a plan, for mutation."""
+    items = node.items() if isinstance(node, dict) else enumerate(node)
+    for key, value in items:
+        yield path, key
+        if isinstance(value, dict | list):
+            yield from _paths(value, (*path, key))
+
+
+def _mutants(plan: dict[str, Any], count: int, seed: int = 0):
+    """Plans with one change each: a value deleted, retyped, pushed out of range, a key added."""
+    rng = np.random.default_rng(seed)
+    paths = list(_paths(plan))
+    replacements = [None, "x", -1, -1.5, 1.5, 2, 7.0, True, [], {}, [0.5] * 3, [0.5] * 4,
+                    "rbp", "reach", "body", "naive"]
+    for n in range(count):
+        mutant = copy.deepcopy(plan)
+        path, key = paths[rng.integers(len(paths))]
+        parent = mutant
+        for k in path:
+            parent = parent[k]
+        if n % 5 == 0 and isinstance(parent, dict):
+            del parent[key]
+        elif n % 5 == 1 and isinstance(parent, dict):
+            parent["unknown_key"] = 1.0
+        else:
+            parent[key] = copy.deepcopy(replacements[rng.integers(len(replacements))])
+        yield f"{path}[{key!r}]", mutant
+
+
+def test_compiled_schema_gives_jsonschemas_verdicts(plan: dict[str, Any]) -> None:
+    """The fast validator (fastjsonschema, draft 7) accepts and refuses what the reference
+    validator (jsonschema, draft 2020-12) does, on 600 plans with one change each."""
+    from planning.plan_schema import fast_verdict
+
+    reference = jsonschema.Draft202012Validator(schema())
+    assert fast_verdict(plan) and reference.is_valid(plan), "the unchanged plan must validate"
+    refused = 0
+    for where, mutant in _mutants(plan, 600):
+        want = reference.is_valid(mutant)
+        assert fast_verdict(mutant) == want, (
+            f"change at {where}: jsonschema says valid={want}, fastjsonschema the opposite")
+        refused += not want
+    assert refused >= 200, f"only {refused} of 600 mutants invalid: the mutations are too mild"
+
+
+def test_validate_names_the_field_of_a_refused_plan(fresh: dict[str, Any]) -> None:
+    fresh["phases"][1]["steps"][0]["p_success"] = 1.5
+    with pytest.raises(jsonschema.ValidationError, match="1.5") as e:
+        validate(fresh)
+    assert list(e.value.absolute_path) == ["phases", 1, "steps", 0, "p_success"], e.value.path

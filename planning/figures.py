@@ -6,7 +6,6 @@ import math
 import textwrap
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
@@ -23,7 +22,8 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
     n = max(1, len(picks))
     cols = min(4, n)
     rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols, 4.4 * rows), squeeze=False)
+    fig = draw.new_figure(figsize=(4.0 * cols, 4.4 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     path = np.array([s["pose"][:2] for p in plan["phases"] for s in p["steps"]]) if body else None
     for ax in axes.flat[n:]:
         ax.axis("off")
@@ -85,7 +85,8 @@ def phase_figure(plan: dict[str, Any], k: int):
                              for f in motion["seed_tension"]])
     p = np.array([s["p_success"] for s in phase["steps"]])
     p_seed = np.array(motion["seed_p_success"])
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True)
+    fig = draw.new_figure(figsize=(6.4, 5.6))
+    top, bottom = fig.subplots(2, 1, sharex=True)
     for i in range(4):
         if np.all(np.isnan(tension[:, i])):
             continue
@@ -130,7 +131,8 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
         raise ValueError("the plan has no configurations to animate")
     frames = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1,
                                                        min(max_frames, len(frames))).astype(int))]
-    fig, ax = plt.subplots(figsize=(6, 6))
+    fig = draw.new_figure(figsize=(6, 6))
+    ax = fig.subplots()
 
     def draw_frame(n: int):
         ax.clear()
@@ -162,7 +164,6 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
                 f.write(src.read())
 
     atomic_write(path, write)
-    plt.close(fig)
 
 
 STOP_REASONS = {
@@ -187,7 +188,8 @@ def search_figure(scn: Scenario, fp):
     robot drawn in it) and the goal; the legend says why the search stopped."""
     explored = list(fp.explored or [])
     frontier = list(fp.frontier or [])
-    fig, ax = plt.subplots(figsize=(7.5, 8.0))
+    fig = draw.new_figure(figsize=(7.5, 8.0))
+    ax = fig.subplots()
     draw.draw_cave(ax, scn, glyphs=False)
     if explored:
         poses = np.array([e.pose[:2] for e in explored])

@@ -1,5 +1,3 @@
-import sys
+from rbp.cli import entry
 
-from rbp.cli import main
-
-sys.exit(main())
+entry()

@@ -156,3 +156,39 @@ def test_plan_without_pictures_loads_no_matplotlib(tmp_path: Path, stuck_shaft: 
                           capture_output=True, text=True, check=False)
     assert proc.stdout.strip().splitlines()[-1] == "1 False", proc.stdout + proc.stderr
     assert out.is_file() and not (tmp_path / "p.png").exists()
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "MPLBACKEND": "Agg", "LCM_DEFAULT_URL": "memq://",
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+
+
+def test_a_closed_output_pipe_stops_quietly_with_status_3(tmp_path: Path) -> None:
+    """`rbp ... | head` closes the pipe early: status 3 and no traceback or bogus 'error:'
+    (unbuffered, so that the first print meets the closed pipe)."""
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "rbp", "scenario", "list"],
+                            cwd=tmp_path, env=_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader goes away before the first line
+    status = proc.wait(timeout=120)
+    stderr = proc.stderr.read().decode()
+    proc.stderr.close()
+    assert status == cli.EXIT_INTERRUPTED, f"exit {status}, want 3\n{stderr}"
+    assert "Traceback" not in stderr and "error" not in stderr, stderr
+
+
+def test_check_does_not_load_the_footstep_planner(tmp_path: Path) -> None:
+    """Reading and verifying a plan needs neither the search (numba, networkx) nor jsonschema
+    (a valid plan passes the compiled schema); importing them cost rbp check 0.4 s."""
+    out = tmp_path / "p.json"
+    proc = run_rbp("plan", "demo-crevasse", "-o", str(out), "--footsteps-only", "--no-pictures",
+                   cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    code = ("import sys; from rbp.cli import main; "
+            f"status = main(['check', {str(out)!r}]); "
+            "print(status, *(m in sys.modules for m in ('numba', 'networkx', 'jsonschema')))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(),
+                          capture_output=True, text=True, check=False)
+    assert proc.stdout.strip().splitlines()[-1] == "0 False False False", (
+        "rbp check loaded the footstep planner or jsonschema (status, numba, networkx, "
+        f"jsonschema):\n{proc.stdout}{proc.stderr}")

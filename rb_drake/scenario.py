@@ -328,6 +328,10 @@ def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
     return scenario_from_dict(data, str(path), check_start=check_start)
 
 
+# libyaml's loader when PyYAML was built with it: 3 ms for a bundled cave instead of 22 ms.
+SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def read_yaml_file(path: str | Path, error: type[ScenarioError] = ScenarioError) -> Any:
     """The YAML document of a file; a missing or unreadable file or bad YAML raises `error`
     (ScenarioError or a subclass) naming the file and, for bad YAML, the line and column."""
@@ -343,7 +347,7 @@ def read_yaml_file(path: str | Path, error: type[ScenarioError] = ScenarioError)
         raise error(source, "(file)", f"not UTF-8 text (byte {e.start}): is this the "
                     "right file?") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=SAFE_LOADER)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"

@@ -3,9 +3,11 @@
 Runs `rbp plan CAVE` as a user would (a subprocess: interpreter start-up, imports, planning,
 writing, pictures), with and without pictures, then `rbp check` of the plan it wrote, and
 reports each run's wall time as a ratio to the plan's own planning time (`timing.total` in the
-plan file) of the same run. With `--before DIR` the same runs of another source tree (an older
-checkout, e.g. `git worktree add DIR COMMIT`) are interleaved with these, so that a shared
-machine's load falls on both alike. A benchmark, not a test: the numbers depend on the machine.
+plan file) of the same run. `import floor` is a fresh interpreter that imports only the libraries
+planning needs (FLOOR_IMPORTS) and exits: no start-up of `rbp plan` can be shorter. With
+`--before DIR` the same runs of another source tree (an older checkout, e.g.
+`git worktree add DIR COMMIT`) are interleaved with these, so that a shared machine's load falls
+on both alike. A benchmark, not a test: the numbers depend on the machine.
 
     python -m experiments.cli_overhead --cave demo-shaft --repeats 3 --out out/cli_overhead
 """
@@ -20,6 +22,9 @@ import sys
 import time
 from pathlib import Path
 from statistics import median
+
+FLOOR_IMPORTS = ("numpy", "scipy.special", "scipy.sparse", "scipy.ndimage", "numba", "networkx",
+                 "pydrake.solvers", "ompl", "yaml")
 
 
 def timed(cmd: list[str], cwd: Path, tree: str | None) -> tuple[float,
@@ -48,6 +53,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     if args.before:
         variants.insert(0, ("before: plan", str(Path(args.before).resolve()), []))
     rows = []
+    # The third-party libraries `rbp plan` cannot plan without, imported and nothing else: the
+    # floor under any start-up of a fresh process (os._exit: no teardown either).
+    floor = [sys.executable, "-c", f"import {', '.join(FLOOR_IMPORTS)}, os; os._exit(0)"]
     for k in range(args.repeats):
         for n, (name, tree, extra) in enumerate(variants):
             plan_file = out / f"plan-{k}-{n}.json"
@@ -65,6 +73,12 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
             check = "before: check" if tree else "check"
             rows.append({"run": check, "repeat": k, "wall": check_wall, "planning": planning,
                          "ratio": check_wall / planning})
+        wall, proc = timed(floor, out, None)
+        if proc.returncode != 0:
+            print(proc.stdout, proc.stderr, file=sys.stderr)
+            return 1
+        rows.append({"run": "import floor", "repeat": k, "wall": wall, "planning": planning,
+                     "ratio": wall / planning})
     for r in rows:
         print(f"{r['run']:22s} #{r['repeat']}: wall {r['wall']:6.2f} s, planning "
               f"{r['planning']:6.2f} s, outside planning {r['wall'] - r['planning']:5.2f} s, "

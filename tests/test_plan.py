@@ -505,6 +505,6 @@ def test_compiled_schema_gives_jsonschemas_verdicts(plan: dict[str, Any]) -> Non
 
 def test_validate_names_the_field_of_a_refused_plan(fresh: dict[str, Any]) -> None:
     fresh["phases"][1]["steps"][0]["p_success"] = 1.5
-    with pytest.raises(jsonschema.ValidationError, match="1.5") as e:
+    with pytest.raises(jsonschema.ValidationError, match=r"1\.5") as e:
         validate(fresh)
     assert list(e.value.absolute_path) == ["phases", 1, "steps", 0, "p_success"], e.value.path

@@ -67,7 +67,7 @@ def _find_bad(value: Any, path: str) -> tuple[str, _Bad] | None:
 def read_plan_file(path: str | Path) -> dict[str, Any]:
     """A plan file parsed and validated against the schema; raises PlanFileError with the field
     ("(file)" when it cannot be read or is not JSON) and the reason."""
-    from planning.plan_schema import fast_verdict, schema
+    from planning.plan_schema import schema_error
 
     path = Path(path)
     try:
@@ -78,15 +78,10 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
         raise PlanFileError("(file)", "is a directory, not a plan file") from None
     except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
         raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
-    if fast_verdict(plan):
-        return plan
-    import jsonschema  # the reference validator, for the path and message of what is wrong
-
-    try:
-        jsonschema.validate(plan, schema())
-    except jsonschema.ValidationError as e:
-        field = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise PlanFileError(field, e.message) from None
+    error = schema_error(plan)
+    if error is not None:
+        field = "/".join(str(p) for p in error.absolute_path) or "(top level)"
+        raise PlanFileError(field, error.message)
     return plan
 
 

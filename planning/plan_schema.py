@@ -42,10 +42,22 @@ def fast_verdict(plan: Any) -> bool:
     return True
 
 
-def validate(plan: dict[str, Any]) -> None:
-    """Raise jsonschema.ValidationError when `plan` does not follow the schema."""
+def schema_error(plan: Any) -> Any:
+    """None when `plan` follows the schema, else jsonschema's ValidationError (its path and
+    message); jsonschema is imported only for a plan the compiled validator refuses."""
     if fast_verdict(plan):
-        return
+        return None
     import jsonschema
 
-    jsonschema.validate(plan, schema())
+    try:
+        jsonschema.validate(plan, schema())
+    except jsonschema.ValidationError as e:
+        return e
+    return None
+
+
+def validate(plan: dict[str, Any]) -> None:
+    """Raise jsonschema.ValidationError when `plan` does not follow the schema."""
+    error = schema_error(plan)
+    if error is not None:
+        raise error

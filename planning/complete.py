@@ -22,8 +22,8 @@ What is not decided here: poses between lattice points, and the free gripper's p
 anchor to the next (the pipeline plans it, and searches again without a move whose motion
 fails), as in the paper's two limiting configurations.
 
-Cost and heuristic are `planning.footsteps`' (an upper bound on -log p_path; distance to the
-goal, weighted). An edge's pose is its most robust lattice pose (the worst of its four
+Cost and heuristic are `planning.search_cost`'s (an upper bound on -log p_path; a lower bound
+on the cost to go, weighted). An edge's pose is its most robust lattice pose (the worst of its four
 configurations' r), polished afterwards on the found path as the sampled search does.
 """
 
@@ -44,6 +44,7 @@ import numpy as np
 from planning.astar import SearchResult
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
+from planning.search_cost import DistanceHeuristic, boom_costs
 from planning.transition import anchor_table
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
@@ -340,8 +341,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
 
     `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit.
     `progress(expansions, transitions tested, nearest goal distance)` after each expansion."""
-    from planning.footsteps import boom_costs, goal_distance
-
     cfg = lattice or LatticeConfig()
     memo = memo if memo is not None else LatticeMemo()
     if memo.config is None:
@@ -349,10 +348,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     elif memo.config != cfg:
         raise ValueError(f"a memo of lattice {memo.config} cannot serve lattice {cfg}")
     t0 = time.perf_counter()
-    robot = scn.robot
-    c_attach = max(-math.log(1.0 - robot.attach_failure) if robot.attach_failure < 1 else 1e3,
-                   1e-9)
-    max_step = 2.0 * robot.max_reach / 4.0
+    lower_bound = DistanceHeuristic(scn)
+    c_attach = lower_bound.c_attach
     goal = np.asarray(scn.goal_position, dtype=float)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
@@ -361,16 +358,10 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     graph = nx.DiGraph()
     tested = 0
 
-    distances: dict[tuple, float] = {}
+    distance = lower_bound.distance
 
-    def distance(stance: tuple) -> float:
-        d = distances.get(stance)
-        if d is None:
-            d = distances[stance] = goal_distance(scn, stance)
-        return d
-
-    def heuristic(stance: tuple) -> float:
-        return heuristic_weight * c_attach * distance(stance) / max_step
+    def heuristic(stance: tuple) -> float:  # the weighted bound, in the order it always had
+        return heuristic_weight * c_attach * distance(stance) / lower_bound.max_step
 
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "

@@ -5,19 +5,11 @@ exists when `find_transition` finds a pose holding all four configurations of th
 graph is explored lazily (`planning.astar`): candidate anchors come from reach alone, and a
 transition is searched only when A* pops it.
 
-Cost. The plan's success probability is p_path = prod_holdings min_t P_i(t) * (1 - p_att)^regrasps
-(planning.probability). An edge costs -log(1 - p_att) plus, for each boom, the worst -log P_i over
-the four configurations at the transition pose; summed along a path this bounds -log p_path
-from above (over the configurations the footstep plan knows), so minimising it favours both few
-regrasps and robust grasps.
-
-Heuristic. A regrasp moves one of four anchors by at most 2 (L_max + |s|), so the anchors'
-centroid advances at most `max_step` per regrasp: h = -log(1 - p_att) * distance / max_step
-never overestimates. Real steps advance the centroid by a few centimetres to a few decimetres,
-so that bound is weak and exact A* (weight 1) explores every short detour. Multiplying it by
-`heuristic_weight` (default 300: progress toward the goal dominates, the paper's
-distance-driven search) bounds the suboptimality (cost <= weight * optimum) and makes the
-search goal-directed; the cost still decides between equally promising stances.
+Cost and heuristic are `planning.search_cost`'s: an edge costs the regrasp's attach cost plus
+each boom's worst -log P over the move's configurations (an upper bound on -log p_path), and the
+heuristic, a lower bound on the cost to go, is multiplied by `heuristic_weight` (default 300:
+progress toward the goal dominates, the paper's distance-driven search; cost <= weight *
+optimum).
 
 Polish. Inside the search a transition is accepted at its first feasible pose. Once a path is
 found, each of its transition poses gets a local search for robustness
@@ -40,23 +32,23 @@ from planning.astar import Edge, SearchResult, lazy_astar
 from planning.complete import LatticeMemo, complete_search, search_result
 from planning.lattice import LatticeConfig
 from planning.ramps import ramp_ends_hold
+from planning.search_cost import (
+    DistanceHeuristic,
+    attach_cost,
+    boom_costs,
+    centroid_distance,
+    goal_distance,
+)
 from planning.transition import (
     ReleaseSet,
     Transition,
     TransitionConfig,
-    anchor_table,
     find_transition,
     polish_transition,
     reachable_anchors,
     release_poses,
 )
-from rb_drake.feasibility_kernel import (
-    ALL_SEGMENTS,
-    _packed_rock,
-    _robot_params,
-    score_poses,
-    transition_boom_costs,
-)
+from rb_drake.feasibility_kernel import score_poses
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
@@ -137,42 +129,6 @@ def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.r
     return np.random.default_rng([seed, key])
 
 
-def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
-               pose: np.ndarray) -> np.ndarray:
-    """Per boom, the worst -log P_i over the transition's four configurations at `pose`: old
-    4-stance, 3-stance with the gripper at its old and at its new anchor, new 4-stance (a
-    free boom's entry counts 0), in one compiled call (`transition_boom_costs`)."""
-    table = anchor_table(scn)
-    free = len(table.row)
-    held = [table.row[a] for a in old]
-    target = table.row[new_anchor]
-    rows = np.array([held, held, held], dtype=np.int64)
-    rows[1, boom] = free
-    rows[2, boom] = target
-    return transition_boom_costs(
-        np.ascontiguousarray(pose, dtype=float).reshape(3),
-        _robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
-        table.f_normal, table.f_lateral, table.sigma_normal, table.sigma_lateral, rows,
-        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock), False, False,
-        ALL_SEGMENTS)
-
-
-def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
-    c = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
-    return float(np.linalg.norm(c - np.asarray(scn.goal_position)))
-
-
-def goal_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
-    """How far a stance is from one that can hold the goal pose: the centroid's distance beyond
-    the goal tolerance, plus each anchor's distance beyond reach of the goal (a lagging boom
-    must step before the goal can be held, however close the centroid is)."""
-    pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
-    goal = np.asarray(scn.goal_position)
-    radius = scn.robot.max_reach + scn.goal_tolerance
-    lag = np.maximum(0.0, np.linalg.norm(pts - goal, axis=1) - radius).sum()
-    return max(0.0, centroid_distance(scn, stance) - scn.goal_tolerance) + float(lag)
-
-
 def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generator,
                  samples: int, ignore_grasps: bool = False) -> np.ndarray | None:
     """The most robust sampled pose within the goal tolerance that is feasible in `stance`."""
@@ -250,10 +206,8 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                                transitions_tested=first.transitions_tested
                                + second.transitions_tested)
     t0 = time.perf_counter()
-    c_attach = -math.log(1.0 - scn.robot.attach_failure) if scn.robot.attach_failure < 1 else 1e3
-    c_attach = max(c_attach, 1e-9)
-    robot = scn.robot
-    max_step = 2.0 * robot.max_reach / 4.0
+    c_attach = attach_cost(scn.robot)
+    distance_heuristic = DistanceHeuristic(scn)
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cache, releases = memo.transitions, memo.releases
@@ -288,7 +242,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         return Edge(cost, tr.pose)
 
     def heuristic(node: Stance4) -> float:
-        return c_attach * goal_distance(scn, node) / max_step
+        return distance_heuristic(node)
 
     def is_goal(node: Stance4, pose: np.ndarray):
         return goal_pose_in(scn, node, goal_rng, cfg.goal_samples)

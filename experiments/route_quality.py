@@ -1,0 +1,197 @@
+"""Route quality of the footstep search on the benchmark caves: cost, regrasps, p_path, time.
+
+For each cave of the benchmark (`baseline_comparison`'s: kinds alternating shaft, crevasse,
+shaft, rockfall; seed = trial + 1; 4.5 to 5 m, unless told otherwise) and each named search
+variant, the footstep stage alone: whether it found a route, how it stopped, the route's
+search cost (`planning.search_cost`), its regrasps, p_path and p_grasps at the footstep stage,
+the bound it proved, expansions and seconds. `--compare OLD.json` then prints, cave by cave
+and in summary, how the variants of this run differ from another run's (another tree's, say:
+run the script in each tree, then compare).
+
+    python -m experiments.route_quality --variants default --out out/rq-new.json
+    python -m experiments.route_quality --variants default,oracle --trials 100 --workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import multiprocessing
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from experiments.baseline_comparison import cave_kind, make_cave
+
+VARIANTS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "sampled": {"search": "sampled"},
+    "w30": {"heuristic_weight": 30.0},
+    "w3": {"heuristic_weight": 3.0},
+    "oracle": {"max_expansions": None, "time_limit": 600.0},
+}
+
+
+def footstep_config(variant: str, time_limit: float | None):
+    from planning.footsteps import FootstepConfig
+
+    fields = {f.name for f in dataclasses.fields(FootstepConfig)}
+    settings = {k: v for k, v in VARIANTS[variant].items() if k in fields}
+    if time_limit is not None and "time_limit" in settings:
+        settings["time_limit"] = time_limit
+    return FootstepConfig(**settings)
+
+
+def run_cave(job: tuple[str, int, tuple[float, float], list[str], float | None]
+             ) -> dict[str, Any]:
+    from planning.footsteps import plan_footsteps
+    from planning.plan import build_plan
+    try:
+        from planning.search_cost import edge_cost
+    except ImportError:  # a tree from before planning.search_cost, for --compare
+        from planning.footsteps import boom_costs
+
+        def edge_cost(scn, old, boom, anchor, pose):
+            c = -math.log(1.0 - scn.robot.attach_failure)
+            return max(c, 1e-9) + float(boom_costs(scn, old, boom, anchor, pose).sum())
+
+    kind, seed, length, variants, limit = job
+    scn = make_cave(kind, seed, length)
+    out: dict[str, Any] = {"kind": kind, "seed": seed}
+    for variant in variants:
+        config = footstep_config(variant, limit)
+        t0 = time.perf_counter()
+        fp = plan_footsteps(scn, config)
+        seconds = time.perf_counter() - t0
+        plan = build_plan(scn, fp, "rbp")
+        cost = None
+        if fp.success:
+            cost = sum(edge_cost(scn, a, s.boom, s.to_anchor,
+                                 s.found_pose if s.found_pose is not None else s.pose)
+                       for a, s in zip(fp.stances[:-1], fp.steps, strict=True))
+        search = plan.get("search", {})
+        out[variant] = {"success": bool(fp.success), "stop": fp.stop,
+                        "regrasps": len(fp.steps) if fp.success else None,
+                        "cost": cost, "p_path": plan.get("p_path"),
+                        "p_grasps": plan.get("p_grasps"),
+                        "bound": search.get("bound"), "lower_bound": search.get("lower_bound"),
+                        "expansions": int(fp.expansions), "seconds": seconds,
+                        "stances": [list(s) for s in fp.stances] if fp.success else None}
+    return out
+
+
+def median(values: list[float]) -> float | None:
+    v = sorted(x for x in values if x is not None and math.isfinite(x))
+    if not v:
+        return None
+    n = len(v)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    routed = [c for c in caves if any(c[v]["success"] for v in variants)]
+    for v in variants:
+        ok = [c[v] for c in caves if c[v]["success"]]
+        out[v] = {"routes": len(ok), "caves": len(caves),
+                  "stops": {s: sum(c[v]["stop"] == s for c in caves)
+                            for s in sorted({c[v]["stop"] for c in caves})},
+                  "median_regrasps": median([r["regrasps"] for r in ok]),
+                  "median_p_path": median([r["p_path"] for r in ok]),
+                  "p_grasps_over_0.90": sum((r["p_grasps"] or 0) > 0.90 for r in ok),
+                  "p_grasps_over_0.95": sum((r["p_grasps"] or 0) > 0.95 for r in ok),
+                  "median_seconds_route": median([r["seconds"] for r in ok]),
+                  "median_seconds_all": median([c[v]["seconds"] for c in caves]),
+                  "total_seconds": sum(c[v]["seconds"] for c in caves)}
+    if len(variants) > 1:
+        ref = variants[-1]
+        for v in variants[:-1]:
+            within = [c for c in routed if c[v]["success"] and c[ref]["success"]
+                      and c[v]["cost"] <= 1.05 * c[ref]["cost"] + 1e-12]
+            out[v][f"within_5pct_of_{ref}"] = len(within)
+    out["caves_with_a_route"] = len(routed)
+    return out
+
+
+def compare(new: dict[str, Any], old: dict[str, Any]) -> None:
+    """Cave by cave, each variant present in both runs: same answer? same route? time ratio."""
+    old_caves = {(c["kind"], c["seed"]): c for c in old["caves"]}
+    for v in new["variants"]:
+        if v not in old["variants"]:
+            continue
+        same_route = diff = 0
+        ratios = []
+        for c in new["caves"]:
+            o = old_caves.get((c["kind"], c["seed"]))
+            if o is None:
+                continue
+            a, b = c[v], o[v]
+            if a["success"] == b["success"] and a["stances"] == b["stances"] and \
+                    a["stop"] == b["stop"]:
+                same_route += 1
+            else:
+                diff += 1
+                print(f"  {v} {c['kind']} {c['seed']}: new {a['stop'] or 'route'} "
+                      f"{a['regrasps']} regrasps cost {a['cost']} / old {b['stop'] or 'route'} "
+                      f"{b['regrasps']} regrasps cost {b['cost']}")
+            if b["seconds"] > 0:
+                ratios.append(a["seconds"] / b["seconds"])
+        print(f"{v}: {same_route} caves the same, {diff} different; median time new/old "
+              f"{median(ratios):.3f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m experiments.route_quality",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials", type=int, default=100, help="caves (default 100)")
+    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
+    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
+    parser.add_argument("--variants", default="default",
+                        help=f"comma-separated, of {', '.join(VARIANTS)}")
+    parser.add_argument("--time-limit", type=float, default=None,
+                        help="s per search, for variants that have a time limit")
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--out", default="out/route_quality.json")
+    parser.add_argument("--compare", default=None, help="another run's json")
+    args = parser.parse_args(argv)
+    variants = args.variants.split(",")
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        parser.error(f"--variants: unknown {bad}; choose from {list(VARIANTS)}")
+    jobs = [(cave_kind(i, args.kind), args.first_seed + i, tuple(args.length), variants,
+             args.time_limit) for i in range(args.trials)]
+    if args.workers > 1:  # a search per core
+        os.environ.setdefault("RBP_THREADS", "1")
+    caves: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+        for k, cave in enumerate(pool.imap(run_cave, jobs), 1):
+            caves.append(cave)
+            line = " ".join(f"{v}:{cave[v]['stop'] or cave[v]['regrasps']}" for v in variants)
+            print(f"[{k}/{len(jobs)}] {cave['kind']} {cave['seed']}: {line}", file=sys.stderr)
+    result = {"variants": variants, "machine": {"node": platform.node(),
+                                                "processor": platform.processor(),
+                                                "cpus": os.cpu_count()},
+              "args": {k: v for k, v in vars(args).items() if k != "compare"},
+              "wall_seconds": time.perf_counter() - t0,
+              "summary": summary(caves, variants), "caves": caves}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=1) + "\n")
+    tmp.replace(out)
+    print(json.dumps(result["summary"], indent=1))
+    print(f"wrote {out}")
+    if args.compare:
+        compare(result, json.loads(Path(args.compare).read_text()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,161 @@
+"""The footstep search's cost and heuristic: what an edge costs, and a lower bound on the rest.
+
+Cost. The plan's success probability is p_path = prod_holdings min_t P_i(t) * (1 - p_att)^regrasps
+(planning.probability). An edge (a regrasp) costs -log(1 - p_att) plus, for each boom, the worst
+-log P_i over the move's four configurations at its transition pose (`boom_costs`); summed along
+a path this bounds -log p_path from above (over the configurations the footstep plan knows), so
+minimising it favours both few regrasps and robust grasps.
+
+Heuristic. `DistanceHeuristic`: a regrasp moves one of four anchors by at most 2 (L_max + |s|),
+so the anchors' centroid advances at most `max_step` per regrasp, and
+h = -log(1 - p_att) * goal_distance / max_step never overestimates. The searches multiply it by
+their `heuristic_weight`.
+
+Both searches (`planning.footsteps`' sampled one and `planning.complete`) take their cost and
+heuristic from here, so a new heuristic is written once.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from planning.transition import anchor_table
+from rb_drake.feasibility_kernel import (
+    ALL_SEGMENTS,
+    _packed_rock,
+    _robot_params,
+    transition_boom_costs,
+)
+from rb_drake.params import RobotParams
+from rb_drake.scenario import Scenario
+
+
+def attach_cost(robot: RobotParams) -> float:
+    """-log(1 - p_att): what every regrasp costs before its grasps (at least 1e-9, so that the
+    heuristic stays informative when attaching never fails)."""
+    c = -math.log(1.0 - robot.attach_failure) if robot.attach_failure < 1 else 1e3
+    return max(c, 1e-9)
+
+
+def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
+               pose: np.ndarray) -> np.ndarray:
+    """Per boom, the worst -log P_i over the transition's four configurations at `pose`: old
+    4-stance, 3-stance with the gripper at its old and at its new anchor, new 4-stance (a
+    free boom's entry counts 0), in one compiled call (`transition_boom_costs`)."""
+    table = anchor_table(scn)
+    free = len(table.row)
+    held = [table.row[a] for a in old]
+    target = table.row[new_anchor]
+    rows = np.array([held, held, held], dtype=np.int64)
+    rows[1, boom] = free
+    rows[2, boom] = target
+    return transition_boom_costs(
+        np.ascontiguousarray(pose, dtype=float).reshape(3),
+        _robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
+        table.f_normal, table.f_lateral, table.sigma_normal, table.sigma_lateral, rows,
+        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock), False, False,
+        ALL_SEGMENTS)
+
+
+def edge_cost(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
+              pose: np.ndarray) -> float:
+    """An edge's cost: the regrasp's attach cost plus `boom_costs` at its transition pose."""
+    return attach_cost(scn.robot) + float(boom_costs(scn, old, boom, new_anchor, pose).sum())
+
+
+def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
+    c = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
+    return float(np.linalg.norm(c - np.asarray(scn.goal_position)))
+
+
+def goal_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
+    """How far a stance is from one that can hold the goal pose: the centroid's distance beyond
+    the goal tolerance, plus each anchor's distance beyond reach of the goal (a lagging boom
+    must step before the goal can be held, however close the centroid is)."""
+    pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
+    goal = np.asarray(scn.goal_position)
+    radius = scn.robot.max_reach + scn.goal_tolerance
+    lag = np.maximum(0.0, np.linalg.norm(pts - goal, axis=1) - radius).sum()
+    return max(0.0, centroid_distance(scn, stance) - scn.goal_tolerance) + float(lag)
+
+
+class DistanceHeuristic:
+    """h(stance) = -log(1 - p_att) * goal_distance / max_step, memoised per stance (module
+    doc): a lower bound on the cost to go (unweighted)."""
+
+    def __init__(self, scn: Scenario) -> None:
+        self.scn = scn
+        self.c_attach = attach_cost(scn.robot)
+        self.max_step = 2.0 * scn.robot.max_reach / 4.0
+        self._distances: dict[tuple, float] = {}
+
+    def distance(self, stance: tuple[str, ...]) -> float:
+        d = self._distances.get(stance)
+        if d is None:
+            d = self._distances[stance] = goal_distance(self.scn, stance)
+        return d
+
+    def __call__(self, stance: tuple[str, ...]) -> float:
+        return self.c_attach * self.distance(stance) / self.max_step
+
+
+def boom_hop_length(robot: RobotParams) -> float:
+    """The farthest one regrasp can move boom j's gripper: the old and the new anchor are both
+    reached from shoulder j at the transition pose, at most L_max away, along directions within
+    the shoulder range of one axis, so at most 2 * range apart; the chord of two such vectors is
+    at most L_max * max(1, 2 sin(min(2 range, pi) / 2))."""
+    spread = min(2.0 * robot.shoulder_range, math.pi)
+    return robot.boom_length[1] * max(1.0, 2.0 * math.sin(spread / 2.0))
+
+
+class RegraspHeuristic:
+    """A lower bound on the cost to go from the regrasps each boom still needs.
+
+    Relaxed graph, one per boom j: its vertices are the anchors, an edge joins two anchors at
+    most `boom_hop_length` apart (every move of boom j is one of them), and its targets are the
+    anchors within L_max + |shoulder j| + goal tolerance of the goal (where boom j's anchor must
+    be in a stance that holds a pose within the goal tolerance). hops_j(a), the fewest edges
+    from a to a target (breadth-first from the targets), is at most the regrasps boom j still
+    needs, and every regrasp costs at least -log(1 - p_att), so
+
+        h(stance) = -log(1 - p_att) * sum_j hops_j(a_j)
+
+    never overestimates. It is consistent too: a regrasp changes one boom's hops by at most 1
+    and costs at least -log(1 - p_att); an anchor with no path to a target gets h = inf (no
+    route passes a stance holding it). The tables are computed once per scenario."""
+
+    def __init__(self, scn: Scenario) -> None:
+        self.scn = scn
+        self.c_attach = attach_cost(scn.robot)
+        robot = scn.robot
+        pts = scn.anchor_positions
+        goal = np.asarray(scn.goal_position, dtype=float)
+        hop = boom_hop_length(robot) * (1.0 + 1e-9) + 1e-9
+        diff = pts[:, None, :] - pts[None, :, :]
+        adjacent = np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
+        to_goal = np.linalg.norm(pts - goal, axis=1)
+        shoulders = np.linalg.norm(robot.shoulder_array, axis=1)
+        self.hops = np.full((4, len(pts)), np.inf)
+        for j in range(4):
+            radius = robot.boom_length[1] + shoulders[j] + scn.goal_tolerance
+            frontier = to_goal <= radius * (1.0 + 1e-9) + 1e-9
+            level = 0
+            while frontier.any():
+                self.hops[j, frontier] = level
+                level += 1
+                frontier = adjacent[frontier].any(axis=0) & np.isinf(self.hops[j])
+        self._row = scn.anchor_index
+        self._cache: dict[tuple, float] = {}
+
+    def regrasps(self, stance: tuple[str, ...]) -> float:
+        """sum_j hops_j(a_j): the fewest regrasps the relaxed graphs allow (inf: none)."""
+        h = self._cache.get(stance)
+        if h is None:
+            h = self._cache[stance] = float(sum(self.hops[j, self._row[a]]
+                                                for j, a in enumerate(stance)))
+        return h
+
+    def __call__(self, stance: tuple[str, ...]) -> float:
+        return self.c_attach * self.regrasps(stance)

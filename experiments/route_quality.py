@@ -9,7 +9,7 @@ and in summary, how the variants of this run differ from another run's (another 
 run the script in each tree, then compare).
 
     python -m experiments.route_quality --variants default --out out/rq-new.json
-    python -m experiments.route_quality --variants default,oracle --trials 100 --workers 2
+    python -m experiments.route_quality --variants first,default,oracle --trials 100 --workers 2
 """
 
 from __future__ import annotations
@@ -28,22 +28,37 @@ from typing import Any
 
 from experiments.baseline_comparison import cave_kind, make_cave
 
-VARIANTS: dict[str, dict[str, Any]] = {
-    "default": {},
-    "sampled": {"search": "sampled"},
-    "w30": {"heuristic_weight": 30.0},
-    "w3": {"heuristic_weight": 3.0},
-    "oracle": {"max_expansions": None, "time_limit": 600.0},
-}
+VARIANTS = ("default", "first", "sampled", "w30", "w3", "anytime-f1", "anytime-f4", "oracle",
+            "oracle-a*")
 
 
 def footstep_config(variant: str, time_limit: float | None):
+    """The footstep configuration of a named variant: "default" (today's `rbp plan`), "first"
+    (the first route of the complete search, weight 300: the default before the anytime
+    search), "sampled", "w30" / "w3" (lower weights, first route), "anytime-fK" (the first
+    route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
+    proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
+    start)."""
+    from planning.complete import AnytimeConfig
     from planning.footsteps import FootstepConfig
 
+    limit = 600.0 if time_limit is None else time_limit
+    exhaustive = AnytimeConfig(improve_seconds=None)
+    settings: dict[str, Any] = {
+        "default": {},
+        "first": {"anytime": None},
+        "sampled": {"search": "sampled"},
+        "w30": {"heuristic_weight": 30.0, "anytime": None},
+        "w3": {"heuristic_weight": 3.0, "anytime": None},
+        "anytime-f1": {"anytime": AnytimeConfig(improve_seconds=0.25, improve_factor=1.0)},
+        "anytime-f4": {"anytime": AnytimeConfig(improve_seconds=0.25, improve_factor=4.0)},
+        "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},
+        "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
+                      "heuristic_weight": 1.0},
+    }[variant]
     fields = {f.name for f in dataclasses.fields(FootstepConfig)}
-    settings = {k: v for k, v in VARIANTS[variant].items() if k in fields}
-    if time_limit is not None and "time_limit" in settings:
-        settings["time_limit"] = time_limit
+    if "anytime" not in fields:  # a tree from before the anytime search
+        settings.pop("anytime", None)
     return FootstepConfig(**settings)
 
 
@@ -150,12 +165,14 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=100, help="caves (default 100)")
     parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--seeds", default=None,
+                        help="comma-separated seeds of the benchmark to run, instead of --trials")
     parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
     parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
     parser.add_argument("--variants", default="default",
                         help=f"comma-separated, of {', '.join(VARIANTS)}")
     parser.add_argument("--time-limit", type=float, default=None,
-                        help="s per search, for variants that have a time limit")
+                        help="s per search of the oracle variants (default 600)")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default="out/route_quality.json")
     parser.add_argument("--compare", default=None, help="another run's json")
@@ -164,8 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         parser.error(f"--variants: unknown {bad}; choose from {list(VARIANTS)}")
+    indices = (range(args.trials) if args.seeds is None
+               else [int(v) - args.first_seed for v in args.seeds.split(",")])
     jobs = [(cave_kind(i, args.kind), args.first_seed + i, tuple(args.length), variants,
-             args.time_limit) for i in range(args.trials)]
+             args.time_limit) for i in indices]
     if args.workers > 1:  # a search per core
         os.environ.setdefault("RBP_THREADS", "1")
     caves: list[dict[str, Any]] = []

@@ -44,7 +44,7 @@ import numpy as np
 from planning.astar import SearchResult
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
-from planning.search_cost import DistanceHeuristic, boom_costs
+from planning.search_cost import DistanceHeuristic, RegraspHeuristic, boom_costs
 from planning.transition import anchor_table
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
@@ -85,6 +85,27 @@ class LatticeTransition(NamedTuple):
     tested: int           # lattice poses tested
 
 
+@dataclasses.dataclass(frozen=True)
+class AnytimeConfig:
+    """After the first route, the search goes on for better ones (planning.complete's doc):
+    each route found lowers the ordering weight to the next of `weights` (a weight <= 1 orders
+    by the admissible bound itself: A*), and everything that cannot beat the best route is
+    pruned. It stops when the best cost is within `target_bound` of the proven lower bound
+    (1: optimal), when nothing is left that could beat it (optimal), or `improve_time` after the
+    first route."""
+
+    weights: tuple[float, ...] = (10.0, 3.0, 1.0)
+    target_bound: float = 1.0
+    improve_seconds: float | None = 1.0  # None: no limit but the search's own
+    improve_factor: float = 2.0
+
+    def improve_time(self, first: float) -> float:
+        """Seconds to look for better routes once the first took `first` seconds."""
+        if self.improve_seconds is None:
+            return math.inf
+        return max(self.improve_seconds, self.improve_factor * first)
+
+
 class CompleteResult(NamedTuple):
     success: bool
     stop: str                      # "", "budget", "noroute", "nostart"
@@ -101,6 +122,12 @@ class CompleteResult(NamedTuple):
     # per edge, its most robust lattice poses in the component entered, best first (the
     # first is `poses`'): others for the pipeline where the gripper's path fails at the first
     alternatives: list[np.ndarray] | None = None
+    cost: float = math.nan         # the route's cost (planning.search_cost)
+    lower_bound: float = math.nan  # the optimal cost is at least this (anytime search)
+    first_cost: float = math.nan   # the first route's cost (anytime search)
+    # (seconds, best cost, lower bound, expansions) each time either improved (anytime search)
+    history: list[tuple[float, float, float, int]] | None = None
+    quality: str = ""              # "optimal", "bounded" (cost <= bound * optimum), "" (first)
 
 
 def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
@@ -199,13 +226,19 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
 
 
-def _adds_nothing(labels: np.ndarray, child: tuple, closed: Collection[Vertex]) -> bool:
+def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
+                  g: float = math.inf) -> bool:
     """Whether every pose a move could use (`labels`: what the child stance's components know
-    of each, `known_component`) enters an expanded vertex of the child stance or is known
-    infeasible there: the move adds nothing to the search."""
+    of each, `known_component`) enters a vertex of the child stance expanded at a cost of at
+    most `g` (the least the move's child can cost), or is known infeasible there: the move adds
+    nothing to the search."""
     if (labels == UNKNOWN).any():
         return False
-    return all((child, c) in closed for c in set(labels[labels >= 0].tolist()))
+    for c in set(labels[labels >= 0].tolist()):
+        done = closed.get((child, c))
+        if done is None or done > g + 1e-12:
+            return False
+    return True
 
 
 def _near_anchors(scn: Scenario, lat: Component, stance: tuple) -> np.ndarray:
@@ -336,11 +369,17 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                     memo: LatticeMemo | None = None,
                     progress: Callable[..., None] | None = None,
-                    ignore_grasps: bool = False) -> CompleteResult:
+                    ignore_grasps: bool = False,
+                    anytime: AnytimeConfig | None = None) -> CompleteResult:
     """A* over (stance, component) vertices on the pose lattice (module doc).
 
+    `anytime`: after the first route, look for better ones (`AnytimeConfig`); the result then
+    carries the best cost, the proven lower bound and their history. A `heuristic_weight` of
+    at most 1 orders by the admissible bound: the first route is then optimal.
+
     `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit.
-    `progress(expansions, transitions tested, nearest goal distance)` after each expansion."""
+    `progress(expansions, transitions tested, nearest goal distance)` after each expansion,
+    and with `bound=` (cost over the proven lower bound) whenever an anytime search improves."""
     cfg = lattice or LatticeConfig()
     memo = memo if memo is not None else LatticeMemo()
     if memo.config is None:
@@ -360,9 +399,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
 
     distance = lower_bound.distance
 
-    def heuristic(stance: tuple) -> float:  # the weighted bound, in the order it always had
-        return heuristic_weight * c_attach * distance(stance) / lower_bound.max_step
-
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
                               "tolerance can hold a stance (the body meets rock, or some boom "
@@ -373,21 +409,72 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                               f"{cfg.angle_step_deg:g} deg", [], [], [], None, 0, 0, [], [],
                               graph)
     tie = itertools.count()
-    # Entries: (f, tie, g, kind, payload). kind 0: a stance reached by an evaluated move,
-    # payload ((stance, component or None while unknown), move, pose, P4, transition,
-    # parent's g); kind 1: a move to evaluate, payload (parent vertex, boom, anchor).
+    # The admissible, consistent bound (planning.search_cost): it prunes stances from which no
+    # route can reach the goal, and, once a route is known, everything that cannot beat it;
+    # min over the open list of g + bound(stance) is a lower bound on the optimal cost (every
+    # vertex found again at a lower g is expanded again, so some vertex of an optimal route is
+    # always open with its optimal g).
+    bound = RegraspHeuristic(scn)
+    weight = heuristic_weight
+    exact = heuristic_weight <= 1.0  # A*: ordered by the admissible bound itself
+    # Until the first route, each vertex is expanded once, as the first-route search always
+    # did; an entry that would lower an expanded vertex's cost then waits in `deferred` (ARA*'s
+    # INCONS list) and rejoins the open list with the first route, from which on vertices are
+    # expanded again when reached more cheaply: so the lower bound below stays valid.
+    reopen = exact
+    deferred: list = []
+
+    def redundant(vertex: Vertex, g: float, entry: tuple) -> bool:
+        """Whether `entry`, reaching `vertex` at `g`, adds nothing to the search now."""
+        done = closed.get(vertex)
+        if done is None:
+            return False
+        if done <= g + 1e-12:
+            return True
+        if reopen:
+            return False
+        if anytime is not None:
+            deferred.append(entry)
+        return True
+
+    def heuristic(stance: tuple) -> float:
+        if exact:
+            return bound(stance)
+        # the weighted distance, in the order it always had
+        return weight * c_attach * distance(stance) / lower_bound.max_step
+
+    # Entries: (f, tie, g, kind, child stance, payload). kind 0: a stance reached by an
+    # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
+    # transition, parent's g, alternatives, edge cost); kind 1: a move to evaluate, payload
+    # ((parent vertex, boom, anchor), rows), g the parent's g plus the least an edge costs.
     open_list: list = []
     start_pose = np.asarray(scn.start_pose, dtype=float)
-    for comp in joined:
-        heapq.heappush(open_list, (heuristic(start), next(tie), 0.0, 0,
-                                   ((start, comp), None, start_pose, None, None, 0.0,
-                                     None)))
+    if math.isfinite(bound(start)):
+        for comp in joined:
+            heapq.heappush(open_list, (heuristic(start), next(tie), 0.0, 0, start,
+                                       ((start, comp), None, start_pose, None, None, 0.0,
+                                        None, 0.0)))
     closed: dict[Vertex, float] = {}
     parent: dict[Vertex, tuple] = {}
     expanded: list[tuple[Vertex, np.ndarray]] = []
     expansions = 0
     nearest = math.inf
     stop, reason = "noroute", ""
+    best: CompleteResult | None = None  # the cheapest route so far
+    best_cost = math.inf
+    history: list[tuple[float, float, float, int]] = []  # (s, cost, lower bound, expansions)
+    t_first = math.inf
+    schedule = list(anytime.weights) if anytime is not None else []
+
+    proven = [0.0]  # the highest lower bound found so far (each one is valid)
+
+    def lower() -> float:
+        """min over the open list of g + bound (and the best cost): the optimum is no lower."""
+        lo = best_cost
+        for entry in itertools.chain(open_list, deferred):
+            lo = min(lo, entry[2] + bound(entry[4]))
+        proven[0] = max(proven[0], lo)
+        return proven[0]
 
     def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
                    child: Stance4, comp: int | None) -> tuple:
@@ -396,24 +483,54 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
         poses = poses_of(unpack(tr.keys[order], cfg.angle_count), cfg)
         pose = poses[0]
-        g_child = g_parent + c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
-        return (g_child + heuristic(child), next(tie), g_child, 0,
-                ((child, comp), move, pose, np.exp(tr.r4[order[0]]), tr, g_parent, poses))
+        cost = c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
+        g_child = g_parent + cost
+        data = graph.edges[move[0], child]
+        data["cost"] = min(data.get("cost", math.inf), cost)
+        return (g_child + heuristic(child), next(tie), g_child, 0, child,
+                ((child, comp), move, pose, np.exp(tr.r4[order[0]]), tr, g_parent, poses,
+                 cost))
+
+    def beaten(g: float, stance: tuple) -> bool:
+        """Whether nothing through `stance` at `g` can beat the best route (or reach the goal)."""
+        return g + bound(stance) >= best_cost * (1.0 - 1e-12)
+
+    def finished(g_goal: float, vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
+        path, poses, probs, others, cost = [vertex], [], [], [], 0.0
+        while parent[path[-1]][0] is not None:
+            (pv, _j, _a), pz, pp, alt, c = parent[path[-1]]
+            poses.append(pz)
+            probs.append(pp)
+            others.append(alt)
+            path.append(pv)
+            cost += c
+        return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1], goal_pose,
+                              expansions, tested, expanded, [], graph, others[::-1],
+                              cost=cost)
 
     while open_list:
-        _, _, g, kind, payload = heapq.heappop(open_list)
+        popped = heapq.heappop(open_list)
+        _, _, g, kind, child_stance, payload = popped
+        if beaten(g, child_stance):
+            continue
         if kind == 1:
             move, rows = payload
             (stance, comp), j, anchor = move
-            child: Stance4 = tuple(anchor if i == j else a for i, a in enumerate(stance))
+            child: Stance4 = child_stance
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
                 lat = memo.components[stance].components[comp]
                 known = memo.components.get(child)
                 labels = None if known is None else known.known_component(lat.keys[rows])
-                if labels is not None and _adds_nothing(labels, child, closed):
-                    continue  # every pose it could use enters an expanded vertex: nothing new
+                if labels is not None and _adds_nothing(labels, child, closed,
+                                                         g if reopen else math.inf):
+                    # every pose it could use enters an expanded vertex: nothing new (or, until
+                    # the first route, nothing new now: it waits if it might lower their cost)
+                    if not reopen and anytime is not None and \
+                            not _adds_nothing(labels, child, closed, g):
+                        deferred.append(popped)
+                    continue
                 tr = memo.transitions[key] = lattice_transition(
                     scn, lat, stance, j, anchor, ignore_grasps, rows, known, labels)
                 tested += 1
@@ -425,7 +542,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             heapq.heappush(open_list, edge_entry(g - c_attach, move, tr,
                                                  np.arange(len(tr.keys)), child, None))
             continue
-        (child, comp), move, pose, p4, tr, g_parent, alternatives = payload
+        (child, comp), move, pose, p4, tr, g_parent, alternatives, cost = payload
         if comp is None:  # entered through a move: split among the child's components
             comps = _stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             if (comps < 0).any():  # the kernel is deterministic: never expected
@@ -433,17 +550,21 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             hit = np.unique(comps)
             if len(hit) > 1 or (child, int(hit[0])) in closed:
                 for c2 in hit:
-                    if (child, int(c2)) not in closed:
-                        heapq.heappush(open_list, edge_entry(
-                            g_parent, move, tr, np.flatnonzero(comps == c2), child, int(c2)))
+                    target = (child, int(c2))
+                    if target in closed and ((not reopen and anytime is None)
+                                             or closed[target] <= g_parent + c_attach + 1e-12):
+                        continue  # expanded once and for all, or no entry can lower its cost
+                    entry = edge_entry(g_parent, move, tr, np.flatnonzero(comps == c2), child,
+                                       int(c2))
+                    if not redundant(target, entry[2], entry):
+                        heapq.heappush(open_list, entry)
                 continue
             comp = int(hit[0])
         vertex = (child, comp)
-        par = move
-        if vertex in closed:
+        if redundant(vertex, g, popped):
             continue
         closed[vertex] = g
-        parent[vertex] = (par, pose, p4, alternatives)
+        parent[vertex] = (move, pose, p4, alternatives, cost)
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex
@@ -458,25 +579,44 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                      if box_gap <= scn.goal_tolerance else ())
         if len(near_goal):
             goal_pose = lat.poses_at(near_goal[[int(np.argmax(lat.robustness[near_goal]))]])[0]
-            path, poses, probs, others = [vertex], [], [], []
-            while parent[path[-1]][0] is not None:
-                (pv, _j, _a), pz, pp, alt = parent[path[-1]]
-                poses.append(pz)
-                probs.append(pp)
-                others.append(alt)
-                path.append(pv)
-            return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1],
-                                  goal_pose, expansions, tested, expanded,
-                                  _frontier(open_list, closed), graph, others[::-1])
-        if max_expansions is not None and expansions >= max_expansions:
+            found = finished(g, vertex, goal_pose)
+            if anytime is None:
+                return found._replace(frontier=_frontier(open_list, closed))
+            if found.cost < best_cost:
+                best, best_cost = found, found.cost
+                now = time.perf_counter() - t0
+                t_first = min(t_first, now)
+                history.append((now, best_cost, lower(), expansions))
+                if progress is not None:
+                    progress(expansions, tested, nearest, bound=best_cost / history[-1][2])
+                if best_cost <= anytime.target_bound * history[-1][2]:
+                    break
+                # Better routes next: vertices reached more cheaply are expanded again, and the
+                # weight is lowered (the last: A* on the admissible bound).
+                if not reopen:
+                    reopen = True
+                    open_list.extend(deferred)
+                    deferred.clear()
+                    heapq.heapify(open_list)
+                if schedule:
+                    weight = schedule.pop(0)
+                    exact = weight <= 1.0
+                    open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
+                    heapq.heapify(open_list)
+            continue  # a goal's successors cannot be cheaper routes
+        if max_expansions is not None and expansions >= max_expansions and best is None:
             stop = "budget"
             reason = (f"gave up after {expansions} expansions without reaching the goal "
                       f"(max_expansions {max_expansions})")
             break
-        if time_limit is not None and time.perf_counter() - t0 > time_limit:
+        elapsed = time.perf_counter() - t0
+        if time_limit is not None and elapsed > time_limit:
             stop = "budget"
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
+            break
+        if best is not None and anytime.improve_time is not None and \
+                elapsed - t_first > anytime.improve_time(t_first):
             break
         for j, moves in enumerate(move_table(scn, lat, stance)):
             for k, rows in moves:
@@ -484,8 +624,20 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 if (stance, j, anchor) in excluded:
                     continue
                 child = tuple(anchor if i == j else a for i, a in enumerate(stance))
-                heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
-                                           g + c_attach, 1, ((vertex, j, anchor), rows)))
+                if not beaten(g + c_attach, child):
+                    heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
+                                               g + c_attach, 1, child,
+                                               ((vertex, j, anchor), rows)))
+    if best is not None:
+        lo = lower() if open_list else best_cost
+        now = time.perf_counter() - t0
+        if not history or history[-1][1:3] != (best_cost, lo):
+            history.append((now, best_cost, lo, expansions))
+        quality = "optimal" if best_cost <= lo * (1.0 + 1e-12) else "bounded"
+        return best._replace(expansions=expansions, transitions_tested=tested,
+                             expanded=expanded, frontier=_frontier(open_list, closed),
+                             lower_bound=lo, first_cost=history[0][1], history=history,
+                             quality=quality)
     if stop == "noroute":
         reason = (f"no route at resolution {cfg.position_step * 100:g} cm / "
                   f"{cfg.angle_step_deg:g} deg: all {expansions} (stance, component) vertices "
@@ -501,7 +653,7 @@ def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
     out, seen = [], set()
     for entry in open_list:
         if entry[3] == 0:
-            vertex, _, pose = entry[4][:3]
+            vertex, _, pose = entry[5][:3]
             if vertex not in closed and vertex not in seen:
                 seen.add(vertex)
                 out.append((vertex, pose))

@@ -29,7 +29,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
-from planning.complete import LatticeMemo, complete_search, search_result
+from planning.complete import AnytimeConfig, LatticeMemo, complete_search, search_result
 from planning.lattice import LatticeConfig
 from planning.ramps import ramp_ends_hold
 from planning.search_cost import (
@@ -68,7 +68,10 @@ class FootstepConfig:
     search: str = "complete"
     sampled_expansions: int = 150
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
-    heuristic_weight: float = 300.0
+    heuristic_weight: float = 300.0  # <= 1: A* on the admissible bound (optimal routes)
+    # complete search only: after the first route, better ones while time remains, with a
+    # proven bound on how far the best is from the optimum (planning.complete.AnytimeConfig)
+    anytime: AnytimeConfig | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
     time_limit: float | None = None    # s; None: no limit
@@ -112,6 +115,14 @@ class FootstepPlan(NamedTuple):
     explored: list[Explored] | None = None  # expanded stances, in expansion order
     frontier: list[Explored] | None = None  # stances reached but never expanded
     memo: FootstepMemo | None = None  # what the search decided, for a search again
+    # The route's search cost (planning.search_cost), and with an anytime search: the proven
+    # lower bound on the optimal cost, the first route's cost, (s, cost, lower bound,
+    # expansions) at each improvement, and "optimal" or "bounded".
+    cost: float = math.nan
+    lower_bound: float = math.nan
+    first_cost: float = math.nan
+    history: list[tuple[float, float, float, int]] | None = None
+    quality: str = ""
 
 
 class Explored(NamedTuple):
@@ -310,7 +321,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     start_pose = np.asarray(scn.start_pose, dtype=float)
     result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
                              cfg.time_limit, exclude, memo.lattice, progress,
-                             cfg.transition.ignore_grasps)
+                             cfg.transition.ignore_grasps, cfg.anytime)
     search = search_result(result)
     explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))
                 for k, (v, p) in enumerate(result.expanded)]
@@ -337,7 +348,9 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                                    probabilities, alternatives))
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
-                        time.perf_counter() - t0, search, None, "", explored, frontier, memo)
+                        time.perf_counter() - t0, search, None, "", explored, frontier, memo,
+                        result.cost, result.lower_bound, result.first_cost, result.history,
+                        result.quality)
 
 
 def explored_stances(scn: Scenario, result: SearchResult,

@@ -13,6 +13,7 @@ for either planner, so that plans are scored by the same model.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -62,8 +63,17 @@ def search_record(fp: FootstepPlan) -> dict[str, Any]:
     """How the footstep search ended: `stop` is "" (a route), "budget", "exhausted" (an
     incomplete search ran out of stances: no proof), "noroute" (the complete search proved that
     no route exists at its resolution) or "nostart" (the start pose joins no lattice pose)."""
-    return {"stop": fp.stop, "expansions": int(fp.expansions),
-            "transitions_tested": int(fp.transitions_tested)}
+    record: dict[str, Any] = {"stop": fp.stop, "expansions": int(fp.expansions),
+                              "transitions_tested": int(fp.transitions_tested)}
+    if fp.success and math.isfinite(fp.cost):
+        record["cost"] = float(fp.cost)
+    if fp.success and math.isfinite(fp.lower_bound):  # an anytime search's proven bound
+        record.update(lower_bound=float(fp.lower_bound), first_cost=float(fp.first_cost),
+                      bound=float(fp.cost / fp.lower_bound) if fp.lower_bound > 0 else None,
+                      quality=fp.quality,
+                      history=[{"seconds": float(t), "cost": float(c), "lower_bound": float(lo),
+                                "expansions": int(n)} for t, c, lo, n in fp.history or []])
+    return record
 
 
 def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,

@@ -32,14 +32,21 @@ class SearchProgress:
                             bar_format="{desc}: {n_fmt}/{total_fmt} stances expanded"
                                        "{postfix} [{elapsed}]")
         self.shown = 0.0
+        self.route_bound: float | None = None
 
-    def search(self, expansions: int, tested: int, nearest: float | None = None) -> None:
-        """plan_footsteps' progress callback; `nearest` (m from the goal), when a search
-        reports it, is shown too."""
+    def search(self, expansions: int, tested: int, nearest: float | None = None,
+               bound: float | None = None) -> None:
+        """plan_footsteps' progress callback; `nearest` (m from the goal) and, once an anytime
+        search has a route, `bound` (its cost over the proven lower bound), when a search
+        reports them, are shown too."""
         if self.bar is not None:
             self.bar.n = expansions  # a repeated search (the pipeline's retries) starts again
+            if bound is not None:
+                self.route_bound = bound
             text = f"{tested} transitions tested"
-            if nearest is not None:
+            if self.route_bound is not None:
+                text += f", route within {self.route_bound:.2f}x of the best"
+            elif nearest is not None:
                 text += f", nearest {nearest:.2f} m from the goal"
             self.bar.set_postfix_str(text, refresh=False)
             now = time.monotonic()

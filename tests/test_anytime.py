@@ -1,0 +1,103 @@
+"""The anytime footstep search and its admissible bound (planning.search_cost, planning.complete).
+
+On the demo cave with a coarse lattice (5 cm x 5 deg: the code is the same at any resolution):
+the regrasp bound is consistent on every edge the search evaluated (so it never overestimates
+the cost to go), A* on it returns Dijkstra's optimal cost, and the anytime search's answers
+bracket that optimum: lower bound <= optimum <= cost, improving monotonically.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from planning.complete import AnytimeConfig, complete_search
+from planning.footsteps import FootstepConfig, plan_footsteps
+from planning.lattice import LatticeConfig
+from planning.plan import build_plan, validate
+from planning.search_cost import RegraspHeuristic, boom_hop_length, edge_cost
+from rb_drake.scenario import Scenario, bundled_caves, load_scenario
+
+COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
+EXHAUSTIVE = AnytimeConfig(improve_seconds=None)  # on until the optimum is proved
+
+
+@pytest.fixture(scope="module")
+def demo() -> Scenario:
+    return load_scenario(bundled_caves()["demo-shaft"])
+
+
+@pytest.fixture(scope="module")
+def optimal(demo: Scenario):
+    """A* on the admissible bound (weight 1), to the proof of optimality."""
+    return complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+
+
+def test_hop_length_is_the_chord_of_the_shoulder_range(demo: Scenario) -> None:
+    robot = demo.robot  # +-45 deg about the axis: two full-length booms 90 deg apart
+    assert boom_hop_length(robot) == pytest.approx(math.sqrt(2) * robot.boom_length[1], 1e-12)
+
+
+def test_bound_is_consistent_on_every_evaluated_edge(demo: Scenario, optimal) -> None:
+    bound = RegraspHeuristic(demo)
+    edges = [(u, v, c) for u, v, c in optimal.graph.edges(data="cost") if c is not None]
+    assert len(edges) >= 20, f"only {len(edges)} edges evaluated: the check would be vacuous"
+    worst = max(bound(u[0]) - c - bound(v) for u, v, c in edges)
+    assert worst <= 1e-12, f"h(u) exceeds cost(u, v) + h(v) by {worst:.3g} on some edge"
+    goal_stance = optimal.path[-1][0]
+    assert bound(goal_stance) == 0.0, "the bound of the goal stance must be 0"
+    assert math.isfinite(bound(tuple(demo.start_stance)))
+
+
+def test_edge_costs_are_the_route_cost(demo: Scenario, optimal) -> None:
+    stances = [v[0] for v in optimal.path]
+    total = 0.0
+    for a, b, pose in zip(stances[:-1], stances[1:], optimal.poses, strict=True):
+        j = next(i for i in range(4) if a[i] != b[i])
+        total += edge_cost(demo, a, j, b[j], np.asarray(pose))
+    assert total == pytest.approx(optimal.cost, rel=1e-9), "route cost != sum of edge costs"
+
+
+def test_astar_on_the_bound_equals_dijkstra(demo: Scenario, optimal, monkeypatch) -> None:
+    assert optimal.success and optimal.quality == "optimal"
+    monkeypatch.setattr(RegraspHeuristic, "__call__", lambda self, stance: 0.0)
+    dijkstra = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    assert dijkstra.quality == "optimal"
+    assert optimal.cost == pytest.approx(dijkstra.cost, rel=1e-9), (
+        f"A* on the bound found cost {optimal.cost:.6f}, Dijkstra {dijkstra.cost:.6f}: the "
+        "bound overestimates somewhere")
+    assert optimal.expansions <= dijkstra.expansions
+
+
+def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
+    found = complete_search(demo, COARSE, heuristic_weight=300.0, anytime=EXHAUSTIVE)
+    assert found.success and found.quality == "optimal"
+    assert found.cost == pytest.approx(optimal.cost, rel=1e-9)
+    history = found.history
+    assert history and history[0][1] == found.first_cost
+    costs = [h[1] for h in history]
+    lows = [h[2] for h in history]
+    assert all(b <= a for a, b in zip(costs, costs[1:], strict=False)), costs
+    assert all(b >= a for a, b in zip(lows, lows[1:], strict=False)), lows
+    assert max(lows) <= optimal.cost * (1 + 1e-9), "a lower bound above the optimum"
+
+
+def test_target_bound_stops_within_it(demo: Scenario, optimal) -> None:
+    found = complete_search(demo, COARSE, heuristic_weight=300.0,
+                            anytime=AnytimeConfig(improve_seconds=None, target_bound=1.5))
+    assert found.success
+    assert found.cost <= 1.5 * found.lower_bound * (1 + 1e-12)
+    assert found.lower_bound <= optimal.cost * (1 + 1e-9) <= found.cost * (1 + 2e-9)
+
+
+def test_plan_file_records_cost_and_bound(demo: Scenario) -> None:
+    fp = plan_footsteps(demo, FootstepConfig(lattice=COARSE, anytime=EXHAUSTIVE,
+                                             polish_rounds=0))
+    plan = build_plan(demo, fp, "rbp")
+    validate(plan)
+    search = plan["search"]
+    assert search["quality"] == "optimal" and search["bound"] == pytest.approx(1.0, abs=1e-9)
+    assert search["lower_bound"] <= search["cost"] * (1 + 1e-12) <= search["first_cost"] + 1e-12
+    assert search["history"], "no improvement history recorded"

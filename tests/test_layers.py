@@ -11,6 +11,7 @@ layers; these tests keep it true.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import networkx as nx
@@ -161,3 +162,13 @@ def test_tolerated_cycle_is_still_there(graph: nx.DiGraph) -> None:
     assert _CYCLE_BEING_REMOVED in cycles, (
         f"the cycle {sorted(_CYCLE_BEING_REMOVED)} is gone: delete _CYCLE_BEING_REMOVED from "
         "tests/test_layers.py")
+
+
+def test_architecture_names_existing_paths() -> None:
+    """Every file or folder of the project that docs/architecture.md names exists."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    tops = "|".join(["tests", "docs", "lcmtypes", *LAYERS])
+    named = set(re.findall(rf"`((?:{tops})/[\w./-]*)`", text))
+    assert len(named) > 30, sorted(named)  # not vacuous
+    missing = sorted(p for p in named if not (ROOT / p).exists())
+    assert not missing, f"docs/architecture.md names paths that do not exist: {missing}"

@@ -30,12 +30,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.baseline_comparison import cave_kind
+from experiments.common import cave_kind
 from experiments.sweep import quantiles
 
 _CHILD = r"""
 import json, sys, time
-from experiments.baseline_comparison import make_cave
+try:
+    from experiments.common import make_cave
+except ImportError:  # an old tree, from before experiments/common.py
+    from experiments.baseline_comparison import make_cave
 from planning.footsteps import FootstepConfig, plan_footsteps
 kind, seed, thorough, limit = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1", float(sys.argv[4])
 warm = make_cave("shaft", 5, (4.5, 5.0))

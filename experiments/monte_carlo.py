@@ -17,7 +17,7 @@ import argparse
 import itertools
 from typing import Any
 
-from experiments.baseline_comparison import (
+from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
     climb_trials,

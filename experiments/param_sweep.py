@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from experiments.baseline_comparison import (
+from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
     climb_trials,

@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.baseline_comparison import cave_kind, make_cave
+from experiments.common import cave_kind, make_cave
 
 VARIANTS = ("default", "first", "sampled", "w30", "w3", "anytime-f1", "anytime-f4", "oracle",
             "oracle-a*")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.baseline_comparison import make_cave, plan_cave, plan_record
+from experiments.common import make_cave, plan_cave, plan_record
 from experiments.sweep import machine_info, write_results
 
 

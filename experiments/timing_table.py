@@ -16,7 +16,7 @@ import argparse
 import json
 from typing import Any
 
-from experiments.baseline_comparison import (
+from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
     climb_trials,

@@ -24,6 +24,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.between import BETWEEN_DIP, between_steps
+from planning.plan_steps import steps_with_tensions
 from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
@@ -68,8 +69,6 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     `slow` of its planned speed (None when its path is too short to ease or an interpolated
     configuration is infeasible). The phase's last step is its dwell (a repeat of the one
     before), kept. `motion.inertial_excess` records `inertial_excess` of the result."""
-    from planning.plan import _steps_with_tensions
-
     steps = phase["steps"]
     path = steps[:-1]  # the dwell is added again below
     intervals = len(path) - 1
@@ -94,8 +93,8 @@ def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
     tensions = check.allocation.tensions.copy()
     planned = np.array([[np.nan if v is None else v for v in st["tension"]] for st in path])
     tensions[exact] = planned[np.round(s[exact]).astype(int)]
-    new = _steps_with_tensions(scn, tuple(phase["stance"]), new_poses, tensions, new_tips, t0,
-                               dt)
+    new = steps_with_tensions(scn, tuple(phase["stance"]), new_poses, tensions, new_tips, t0,
+                              dt)
     new.append(dict(new[-1], t=round(t0 + len(new) * dt, 6)))
     load = inertial_load(scn, stance, new_poses, tensions, new_tips, dt)
     out = copy.deepcopy(phase)

@@ -21,13 +21,13 @@ import numpy as np
 
 from planning.easing import ease_motions
 from planning.plan_schema import schema, validate  # noqa: F401 (re-exported)
+from planning.plan_steps import steps_with_tensions
 from planning.probability import Configuration, PathProbability, path_probability
 from planning.ramps import add_ramps
 from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
 from rb_drake.feasibility import check_poses
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import Scenario
-from rb_drake.statics import statics_problem
 
 if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write a plan
     from planning.footsteps import FootstepPlan
@@ -125,32 +125,6 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
     return plan
 
 
-def _steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], poses: np.ndarray,
-                         tensions: np.ndarray, tips: np.ndarray | None, t0: float,
-                         dt: float) -> list[dict[str, Any]]:
-    """Configurations with given tensions, one every dt from t0; probabilities as `rbp check`
-    recomputes them (one vectorised statics evaluation for the whole phase)."""
-    stance = scn.stance(stance_ids)
-    prob = statics_problem(scn.robot, scn.gravity_vector, poses, stance, tips)
-    att = stance.attached
-    f = np.where(att, tensions, 0.0)
-    lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles))
-    steps = []
-    for k in range(len(poses)):
-        step: dict[str, Any] = {
-            "t": round(float(t0 + k * dt), 6),
-            "pose": [float(v) for v in poses[k]],
-            "tension": [float(f[k, i]) if att[i] else None for i in range(4)],
-            "p_grasp": [float(np.exp(lp[k, i])) if att[i] else None for i in range(4)],
-            "p_success": float(np.exp(lp[k, att].sum())),
-        }
-        if tips is not None:
-            step["free_tip"] = [float(v) for v in tips[k]]
-            step["shoulder_torque"] = float(prob.shoulder_torque[k])
-        steps.append(step)
-    return steps
-
-
 def step_limits(step: float, turn_step: float) -> dict[str, float]:
     """The plan's limits between successive trajectory steps for seeds `step` apart (m) and
     `turn_step` (rad): SCP may stretch a seed's steps, up to STEP_STRETCH times."""
@@ -191,7 +165,7 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
             poses = m.seed.poses
             check = check_poses(scn, scn.stance(m.stance), poses, m.seed.tips, full=True)
             tensions = seed_tensions = check.allocation.tensions
-        steps = _steps_with_tensions(scn, m.stance, poses, tensions, m.seed.tips, t, dt)
+        steps = steps_with_tensions(scn, m.stance, poses, tensions, m.seed.tips, t, dt)
         t += len(poses) * dt
         # Each phase ends with a dwell of dt in its last configuration (the gripper engaging or
         # letting go): the next phase starts when it ends, and an execution that switches

@@ -16,6 +16,8 @@ import threading
 from pathlib import Path
 from typing import NoReturn
 
+from rbp.commands.common import UserError, load_scenario_spec, read_plan
+
 EXIT_OK = 0           # done: a plan was found and written, a plan verified, ...
 EXIT_FAILED = 1       # ran, but no route / planning failed / the plan does not verify
 EXIT_USAGE = 2        # bad input (one line naming the file, field and reason), or unwritable output
@@ -29,24 +31,6 @@ EXIT_STATUSES = """exit status:
      output that cannot be written
   3  interrupted (Ctrl-C: one line on stderr; or the reader of the output closed it, as
      `| head` does): no output file is left half-written"""
-
-
-class UserError(Exception):
-    """A mistake in the user's input: printed as one line, exit status 2."""
-
-
-def _load(spec: str, check_start: bool = True):
-    """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`)."""
-    from rb_drake.scenario import bundled_caves, load_scenario
-
-    caves = bundled_caves()
-    if not Path(spec).exists() and spec in caves:
-        return load_scenario(caves[spec], check_start=check_start)
-    if not Path(spec).exists() and spec == "rig":  # the lab rig's frame (systems.rig)
-        from systems.rig import RIG_SCENARIO
-
-        return load_scenario(RIG_SCENARIO, check_start=check_start)
-    return load_scenario(spec, check_start=check_start)
 
 
 def cmd_scenario_generate(args: argparse.Namespace) -> int:
@@ -77,7 +61,7 @@ def cmd_scenario_check(args: argparse.Namespace) -> int:
 
     from rb_drake.feasibility import check_poses
 
-    scn = _load(args.scenario)
+    scn = load_scenario_spec(args.scenario)
     check = check_poses(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
     alloc = check.allocation
     print(f"{scn.source}: ok: {scn.name}")
@@ -97,7 +81,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rb_drake.draw import scenario_figure
     from rb_drake.files import atomic_save_figure
 
-    scn = _load(args.scenario, check_start=False)
+    scn = load_scenario_spec(args.scenario, check_start=False)
     fig = scenario_figure(scn)
     atomic_save_figure(fig, args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
@@ -122,7 +106,7 @@ def _summary(plan: dict) -> str:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
-    from rbp.plan_cli import SearchRecord, plan_setup, provenance, run_planner, write_pictures
+    from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
     scn, planner, cfg, motion = plan_setup(args)
     record = SearchRecord()
@@ -153,41 +137,6 @@ def _print_motion(plan: dict) -> None:
           f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
           f"the {len(inner)} whose seed's minimum is not at a fixed end; seeds "
           f"{t['seed_body'] + t['seed_reach']:.2f} s, SCP {t['scp_body'] + t['scp_reach']:.2f} s")
-
-
-def read_plan(path: Path) -> dict:
-    """A plan file, parsed and validated against the schema, NaN and Infinity refused; a user's
-    mistake is a UserError naming the file, the field and the reason (shared by check, simulate
-    and rig-run)."""
-    from planning.plan_file import PlanFileError, read_plan_file
-
-    try:
-        return read_plan_file(path)
-    except PlanFileError as e:
-        raise UserError(f"{path}: {e}") from None
-
-
-def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
-    """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
-    verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
-    since is not verified again; `verify=False` (--no-verify) skips the check, loudly."""
-    from planning.check import check_plan
-    from planning.plan_file import has_valid_stamp
-
-    if not verify:
-        print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
-              "is executed as it is", file=sys.stderr)
-        return False
-    if has_valid_stamp(plan):
-        return False
-    problems = check_plan(plan, str(path))
-    for p in problems[:20]:
-        print(f"error: {path}: {p}", file=sys.stderr)
-    if problems:
-        more = f" ({len(problems) - 20} more not shown)" if len(problems) > 20 else ""
-        print(f"error: {path}: the plan fails verification ({len(problems)} problems{more}); "
-              f"refused (rbp check {path} lists them all)", file=sys.stderr)
-    return bool(problems)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -222,7 +171,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure, atomic_write_text
 
     out = Path(args.out)
-    scn = _load(args.scenario)
+    scn = load_scenario_spec(args.scenario)
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
     alloc = check.allocation
@@ -245,7 +194,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig
         from planning.plan import write_plan
-        from rbp.plan_cli import provenance, run_planner, write_pictures
+        from rbp.commands.plan import provenance, run_planner, write_pictures
 
         cfg = PipelineConfig(footstep=FootstepConfig(seed=0, max_expansions=400))
         plan = run_planner(scn, "rbp", cfg)
@@ -353,8 +302,8 @@ def build_parser() -> argparse.ArgumentParser:
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
     from experiments.cli import add_experiment_command
-    from systems.rig_cli import add_rig_commands
-    from systems.sim_cli import add_simulate_command
+    from rbp.commands.rig import add_rig_commands
+    from rbp.commands.simulate import add_simulate_command
 
     add_simulate_command(sub)
     add_rig_commands(sub)

@@ -8,6 +8,7 @@ bracket that optimum: lower bound <= optimum <= cost, improving monotonically.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -79,8 +80,8 @@ def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
     assert history and history[0][1] == found.first_cost
     costs = [h[1] for h in history]
     lows = [h[2] for h in history]
-    assert all(b <= a for a, b in zip(costs, costs[1:], strict=False)), costs
-    assert all(b >= a for a, b in zip(lows, lows[1:], strict=False)), lows
+    assert all(b <= a for a, b in itertools.pairwise(costs)), costs
+    assert all(b >= a for a, b in itertools.pairwise(lows)), lows
     assert max(lows) <= optimal.cost * (1 + 1e-9), "a lower bound above the optimum"
 
 

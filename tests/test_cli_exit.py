@@ -16,7 +16,8 @@ import yaml
 from cli_helpers import ROOT, run_rbp
 from conftest import SHAFT
 
-from rbp import cli, plan_cli
+from rbp import cli
+from rbp.commands import plan as plan_cli
 
 
 def leftovers(folder: Path) -> list[str]:

@@ -331,7 +331,7 @@ def test_move_table_is_every_move_rows(kind: str, seed: int) -> None:
     """The one-pass move table of a vertex holds, for every candidate anchor, exactly the rows
     `move_rows` finds for that move (to the bit: the same tests), and leaves out only anchors
     none of whose segments is clear."""
-    from experiments.baseline_comparison import make_cave
+    from experiments.common import make_cave
 
     scn = make_cave(kind, seed, (4.5, 5.0))
     memo = LatticeMemo()
@@ -485,7 +485,7 @@ def test_footstep_plan_holds_its_ramps() -> None:
     tension counts (rbp check's rule `release`): the complete search counts it too. On
     benchmark crevasse seed 18 a release at a pull angle near 88 deg ended at P 0.932 < p_min
     while the search ignored it; now every configuration of the footstep plan verifies."""
-    from experiments.baseline_comparison import make_cave, plan_cave
+    from experiments.common import make_cave, plan_cave
     from planning.check import check_plan
 
     scn = make_cave("crevasse", 18, (4.5, 5.0))

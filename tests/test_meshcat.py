@@ -264,7 +264,7 @@ def test_html_replay_renders_in_chromium(meshcat, plan: dict[str, Any], record: 
     """`rbp simulate --html` writes a self-contained replay; headless Chromium draws the shaft
     filling the window's height and the robot on its path."""
     import systems.meshcat_view
-    from systems.sim_cli import add_simulate_command, cmd_simulate
+    from rbp.commands.simulate import add_simulate_command, cmd_simulate
 
     monkeypatch.setattr(systems.meshcat_view, "start_meshcat", lambda: meshcat)
     plan_file = tmp_path / "plan.json"

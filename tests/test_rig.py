@@ -23,10 +23,10 @@ import pytest
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
-from rbp.cli import UserError
+from rbp.commands.common import UserError
+from rbp.commands.rig import add_rig_commands, cmd_rig_replay, cmd_rig_report, cmd_rig_run
 from systems.reachbot_lcm import rig_command_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, fit_pose, load_rig_scenario, rig_plan
-from systems.rig_cli import add_rig_commands, cmd_rig_replay, cmd_rig_report, cmd_rig_run
 from systems.rig_interface import (
     GraspMonitor,
     RigLcmConfig,
@@ -396,7 +396,7 @@ def test_a_stamped_plan_is_not_verified_again(plan: dict[str, Any], tmp_path: Pa
                                               monkeypatch: pytest.MonkeyPatch) -> None:
     import planning.check
     from planning.plan_file import stamp
-    from rbp.cli import refuse_wrong_plan
+    from rbp.commands.common import refuse_wrong_plan
 
     def no_check(*_args, **_kwargs):
         raise AssertionError("a plan with a valid stamp was verified again")

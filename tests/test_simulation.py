@@ -1,5 +1,5 @@
 """The plan as a Drake diagram (systems.diagram), stochastic execution and Monte Carlo
-(systems.montecarlo) and `rbp simulate` (systems.sim_cli).
+(systems.montecarlo) and `rbp simulate` (rbp.commands.simulate).
 
 The plans are written here, not planned (the footstep planner's output changes with its
 tuning, and a whole cave takes ~10 s to plan and ~15 s to simulate): on a short generated shaft,
@@ -40,6 +40,7 @@ from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario
 from rb_drake.statics import statics_problem
+from rbp.commands.simulate import add_simulate_command, cmd_simulate
 from systems.control import BodyStatics, control_bounds
 from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
 from systems.montecarlo import (
@@ -53,7 +54,6 @@ from systems.montecarlo import (
     trial_draws,
     wilson_interval,
 )
-from systems.sim_cli import add_simulate_command, cmd_simulate
 from systems.trajectory import (
     DWELL_MOTION,
     FREE_LIMB_SIZE,
@@ -777,7 +777,7 @@ def test_cli_writes_json(good_plan: dict[str, Any], tmp_path: Path,
 ])
 def test_cli_user_errors_name_file_and_field(tmp_path: Path, good_plan: dict[str, Any],
                                              content: str | None, field: str) -> None:
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
 
     path = tmp_path / "plan.json"
     if content == "FAILED":
@@ -823,7 +823,7 @@ def test_cli_refuses_a_wrong_plan_before_simulating(
 
 
 def test_cli_rejects_negative_trials(tmp_path: Path) -> None:
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
 
     with pytest.raises(UserError, match="--trials"):
         cmd_simulate(_args(str(tmp_path / "plan.json"), "--trials", "-1"))

@@ -339,7 +339,7 @@ def test_boom_costs_are_the_four_configurations_worst_log_p() -> None:
     """boom_costs (one compiled call) gives, bit for bit, what scoring the transition's four
     configurations with score_rows gives: per boom the worst -log P, a free boom's entry 0 and
     an impossible grasp (-inf) the largest float, on feasible and infeasible poses alike."""
-    from experiments.baseline_comparison import make_cave
+    from experiments.common import make_cave
     from planning.search_cost import boom_costs
     from planning.transition import anchor_table, pack_rows
     from rb_drake.feasibility_kernel import score_rows

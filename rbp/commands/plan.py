@@ -33,7 +33,7 @@ def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
     from planning.config_io import load_config
     from planning.pipeline import PipelineConfig
-    from rbp.cli import UserError, _load
+    from rbp.commands.common import UserError, load_scenario_spec
 
     cfg = PipelineConfig()
     planner, motion = args.planner or "rbp", not args.footsteps_only
@@ -48,7 +48,7 @@ def plan_setup(args: argparse.Namespace):
         raise UserError("scenario: (argument): give a scenario file or bundled cave name, or "
                         "--from-plan PLAN")
     else:
-        scn = _load(args.scenario)
+        scn = load_scenario_spec(args.scenario)
     if args.config:
         cfg = load_config(args.config, PipelineConfig, base=cfg)
     flags: dict[str, Any] = {}
@@ -90,7 +90,7 @@ def _from_plan(path: Path):
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
     from rb_drake.scenario import scenario_from_dict
-    from rbp.cli import UserError, read_plan
+    from rbp.commands.common import UserError, read_plan
 
     plan = read_plan(path)
     recorded = plan.get("provenance")
@@ -156,7 +156,7 @@ def write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str |
     footstep search failed, Fig. 6 of phase `phase`, and the animation."""
     from planning.figures import animate_plan, phase_figure, search_figure, snapshots_figure
     from rb_drake.files import atomic_save_figure
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
 
     with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
     if phase is not None and phase not in with_motion:

@@ -44,7 +44,7 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
 
 def _load_plan(path: Path, verify: bool = True) -> dict[str, Any] | None:
     """The plan to simulate; None when it fails verification (the problems are printed)."""
-    from rbp.cli import UserError, read_plan, refuse_wrong_plan
+    from rbp.commands.common import UserError, read_plan, refuse_wrong_plan
 
     plan = read_plan(path)
     if not plan["success"]:
@@ -70,7 +70,7 @@ def _progress(label: str):
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
 
     if args.trials < 0:
         raise UserError(f"--trials: must be 0 or more, got {args.trials}")

@@ -1,7 +1,7 @@
 """`rbp rig-run`, `rbp rig-replay` and `rbp rig-report`: a plan's body phase on the rig.
 
 Heavy modules are imported inside the handlers, so `rbp --help` stays instant. A user's mistake
-raises `rbp.cli.UserError` with one line: the file, the field and the reason.
+raises `rbp.commands.common.UserError` with one line: the file, the field and the reason.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def _summary(record, stance_ids) -> list[str]:
 
 
 def cmd_rig_run(args: argparse.Namespace) -> int:
-    from rbp.cli import UserError, read_plan, refuse_wrong_plan
+    from rbp.commands.common import UserError, read_plan, refuse_wrong_plan
     from systems.rig import RigSimConfig
     from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
@@ -87,7 +87,7 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
 
 
 def _replay(log_path: str):
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
     from systems.rig_interface import RigInputError, replay_log
 
     path = Path(log_path)
@@ -114,7 +114,7 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
 
 def cmd_rig_report(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure
-    from rbp.cli import UserError
+    from rbp.commands.common import UserError
     from systems.rig_interface import RigLcmConfig, report_figure
 
     log = _replay(args.log)

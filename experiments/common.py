@@ -1,0 +1,220 @@
+"""What the sweep experiments share: the benchmark's randomised caves, the footstep planners
+they compare, one climb trial (a cave and each planner on it), the caves' command-line flags,
+and the summaries of the planners' records.
+
+`baseline_comparison` (Fig. 4), `timing_table`, `seed_vs_scp`, `monte_carlo`, `param_sweep`,
+`snapshots` and `footstep_ab` use these; an experiment script imports from here and from
+`experiments.sweep`, never from another experiment script.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from experiments.sweep import Trial, check_sweep_arguments, quantiles
+
+MIXED = ("shaft", "crevasse", "shaft", "rockfall")  # shafts and passages, alternating
+THRESHOLDS = (0.90, 0.95)
+MARS_G = 3.71  # m/s^2, the generator's default gravity magnitude
+
+
+def make_cave(kind: str, seed: int, length: tuple[float, float], anchor_density: float = 3.0,
+              gravity: float = MARS_G, p_min: float = 0.95, gripper_scale: float = 1.0):
+    """A generated cave; `gripper_scale` multiplies every anchor's limit surface (its normal
+    and lateral limits: the generator draws them from the scaled range with the same random
+    numbers, so the cave's shape and anchor sites do not change)."""
+    from rb_drake.generate import CaveConfig, generate_cave
+    from rb_drake.params import RobotParams
+
+    base = CaveConfig()
+    config = CaveConfig(length=(float(length[0]), float(length[1])),
+                        anchor_density=anchor_density, gravity=(0.0, -float(gravity)),
+                        limit_normal=(gripper_scale * base.limit_normal[0],
+                                      gripper_scale * base.limit_normal[1]))
+    return generate_cave(kind, seed, config, RobotParams(p_min=p_min))
+
+
+CAVE_PARAMS = ("kind", "seed", "length", "anchor_density", "gravity", "p_min", "gripper_scale")
+
+
+def trial_cave(params: dict[str, Any]):
+    """The cave of a climb trial's parameters."""
+    return make_cave(**{k: v for k, v in params.items() if k in CAVE_PARAMS})
+
+
+# The trial function of `climb_trials`, as a sweep records it in every trial file (OUT/trials/)
+# and compares it to resume a sweep: it keeps the name it had before `climb_trial` moved here
+# (`experiments.baseline_comparison` re-exports it), so that existing results folders resume.
+CLIMB_TRIAL = "experiments.baseline_comparison:climb_trial"
+
+
+# The footstep planners an experiment can compare: rbp (the default, complete search with its
+# expansion budget), rbp-sampled (the sampling search of commit 36a65ef, for before/after
+# ratios in one run), oracle (the complete search without an expansion budget, stopped only
+# by --oracle-time: it labels each cave route / noroute / undecided) and the naive baseline;
+# also rbp-hybrid (sampled for 150 expansions, then complete: the default before this one).
+PLANNERS = ("rbp", "rbp-sampled", "oracle", "naive")
+OTHER_PLANNERS = ("rbp-hybrid",)
+ORACLE_SECONDS = 600.0
+
+
+def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = ORACLE_SECONDS):
+    from planning.footsteps import FootstepConfig
+
+    if planner == "rbp-sampled":
+        return FootstepConfig(search="sampled", max_expansions=max_expansions)
+    if planner == "rbp-hybrid":
+        return FootstepConfig(search="hybrid", max_expansions=max_expansions)
+    if planner == "oracle":
+        return FootstepConfig(max_expansions=None, time_limit=oracle_seconds)
+    return FootstepConfig(max_expansions=max_expansions)
+
+
+def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
+              oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
+    """The plan dictionary: the whole pipeline with `motion`, else the footstep stage only
+    (the naive baseline always stops after its footsteps). Its timing also holds the
+    footstep search's CPU seconds (`footstep_cpu`, every thread) and the threads its
+    compiled kernels used."""
+    from planning.footsteps import plan_footsteps
+    from planning.pipeline import PipelineConfig, plan_climb
+    from planning.plan import build_plan
+    from rb_drake.feasibility_kernel import kernel_threads
+
+    config = PipelineConfig(footstep=footstep_config(planner, max_expansions, oracle_seconds))
+    name = "naive" if planner == "naive" else "rbp"
+    if (motion and planner != "oracle") or planner == "naive":  # the oracle labels footsteps
+        return plan_climb(scn, name, config)
+    start, cpu = time.perf_counter(), time.process_time()
+    fp = plan_footsteps(scn, config.footstep)
+    return build_plan(scn, fp, name, {"footstep": fp.seconds,
+                                      "footstep_cpu": time.process_time() - cpu,
+                                      "threads": kernel_threads(),
+                                      "total": time.perf_counter() - start})
+
+
+
+def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
+    """What the experiments keep of a plan (its timing goes to the trial's `timing`), and
+    whether `rbp check`'s verifier finds it sound (`verified`; a failed plan is not)."""
+    from planning.check import check_plan
+    from planning.pipeline import motion_summary
+
+    kinds = [p["kind"] for p in plan["phases"]]
+    record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
+              "stop": plan.get("search", {}).get("stop"),
+              "p_grasps": plan.get("p_grasps"), "p_min": plan["p_min"],
+              "regrasps": plan["regrasps"],
+              "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
+              "verified": bool(plan["success"]) and not check_plan(plan)}
+    rows = motion_summary(plan)
+    if rows:
+        record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
+                                               "seed_mean", "mean", "seed_min_at_end", "room",
+                                               "improved", "status")}
+                            for r in rows]
+    return record
+
+
+def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
+                planners: list[str], motion: bool = False, anchor_density: float = 3.0,
+                gravity: float = MARS_G, p_min: float = 0.95,
+                gripper_scale: float = 1.0,
+                oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
+    """One cave, each planner on it: {planner: plan_record, "cave": ..., "timing": ...}.
+
+    A cave the generator cannot give a feasible start stance (a weak gripper scale, say)
+    counts as a failure of every planner, with the generator's reason."""
+    start = time.perf_counter()
+    try:
+        scn = make_cave(kind, seed, tuple(length), anchor_density, gravity, p_min,
+                        gripper_scale)
+    except RuntimeError as e:
+        failed = {"success": False, "reason": f"no cave: {e}", "p_path": None,
+                  "p_grasps": None, "p_min": None,
+                  "regrasps": 0, "phases": {"body": 0, "reach": 0}}
+        return {"cave": None, **{p: dict(failed) for p in planners},
+                "timing": {"cave": time.perf_counter() - start}}
+    out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
+    timing = {"cave": time.perf_counter() - start}
+    for planner in planners:  # each from scratch: its time is what `rbp plan` costs
+        plan = plan_cave(scn, planner, max_expansions, motion, oracle_seconds)
+        out[planner] = plan_record(plan)
+        timing[planner] = plan["timing"]
+    out["timing"] = timing
+    return out
+
+
+def cave_kind(i: int, kind: str) -> str:
+    return MIXED[i % len(MIXED)] if kind == "mixed" else kind
+
+
+def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 1000) -> None:
+    """The flags of the caves and of the planners' cap."""
+    parser.add_argument("--kind", default="mixed",
+                        choices=("mixed", "shaft", "crevasse", "rockfall"),
+                        help="cave kind (default mixed: shaft, crevasse, shaft, rockfall, ...)")
+    parser.add_argument("--first-seed", type=int, default=1,
+                        help="seed of the first cave; trial i uses seed first + i (default 1)")
+    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0),
+                        metavar=("MIN", "MAX"),
+                        help="shaft height or passage length range in m (default 4.5 5.0)")
+    parser.add_argument("--max-expansions", type=int, default=max_expansions,
+                        help="RBP gives up after expanding this many stances "
+                             f"(default {max_expansions})")
+
+
+def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    check_sweep_arguments(parser, args)
+    from rb_drake.generate import length_problem
+
+    if (problem := length_problem(*args.length)) is not None:
+        parser.error(f"--length: {problem}")
+    if args.max_expansions < 1:
+        parser.error(f"--max-expansions: must be 1 or more, got {args.max_expansions}")
+
+
+def climb_trials(args: argparse.Namespace, planners: list[str], motion: bool,
+                 prefix: str = "", **cave: Any) -> list[Trial]:
+    """`args.trials` climb trials: cave i of the kind sequence with seed first + i."""
+    trials = []
+    for i in range(args.trials):
+        kind, seed = cave_kind(i, args.kind), args.first_seed + i
+        params = {"kind": kind, "seed": seed, "length": list(args.length),
+                  "max_expansions": args.max_expansions, "planners": planners,
+                  "motion": motion, **cave}
+        trials.append(Trial(f"{prefix}{i:03d}-{kind}-s{seed}", CLIMB_TRIAL, params))
+    return trials
+
+
+
+def path_probabilities(records: list[dict[str, Any]], planner: str,
+                       key: str = "p_path") -> list[float]:
+    """p_path (or `key`, "p_grasps") per trial, 0 for a failed plan."""
+    return [r["result"][planner][key] if r["result"][planner]["success"] else 0.0
+            for r in records]
+
+
+def stage_times(records: list[dict[str, Any]], planner: str, stage: str) -> list[float]:
+    """Seconds the planner spent in `stage` (plan["timing"]), per trial that planned a cave."""
+    return [r["timing"][planner][stage] for r in records if planner in r["timing"]]
+
+
+def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, Any]:
+    p = path_probabilities(records, planner)
+    p_grasps = path_probabilities(records, planner, "p_grasps")
+    rows = [r["result"][planner] for r in records]
+    ok = [row for row in rows if row["success"]]
+    by_kind: dict[str, dict[str, int]] = {}
+    for r, row in zip(records, rows, strict=True):
+        counts = by_kind.setdefault(r["params"]["kind"], {"trials": 0, "successes": 0})
+        counts["trials"] += 1
+        counts["successes"] += bool(row["success"])
+    return {"trials": len(rows), "successes": len(ok),
+            "verified": sum(bool(row.get("verified")) for row in ok),
+            **{f"p_path_over_{t:.2f}": sum(v > t for v in p) for t in THRESHOLDS},
+            **{f"p_grasps_over_{t:.2f}": sum(v > t for v in p_grasps) for t in THRESHOLDS},
+            "p_path": quantiles(p), "p_path_successes": quantiles([r["p_path"] for r in ok]),
+            "regrasps_successes": quantiles([r["regrasps"] for r in ok]), "by_kind": by_kind}

@@ -1,0 +1,64 @@
+"""What the `rbp` commands share: the user's-mistake exception, reading a scenario argument,
+reading a plan file, and refusing a plan that fails verification.
+
+Only the standard library is imported at the top, so `rbp --help` stays instant; `rbp.cli` and
+every module of `rbp.commands` import from here (never from `rbp.cli`, which imports them).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+class UserError(Exception):
+    """A mistake in the user's input: printed as one line, exit status 2."""
+
+
+def load_scenario_spec(spec: str, check_start: bool = True):
+    """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`)."""
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    caves = bundled_caves()
+    if not Path(spec).exists() and spec in caves:
+        return load_scenario(caves[spec], check_start=check_start)
+    if not Path(spec).exists() and spec == "rig":  # the lab rig's frame (systems.rig)
+        from systems.rig import RIG_SCENARIO
+
+        return load_scenario(RIG_SCENARIO, check_start=check_start)
+    return load_scenario(spec, check_start=check_start)
+
+
+def read_plan(path: Path) -> dict:
+    """A plan file, parsed and validated against the schema, NaN and Infinity refused; a user's
+    mistake is a UserError naming the file, the field and the reason (shared by check, simulate
+    and rig-run)."""
+    from planning.plan_file import PlanFileError, read_plan_file
+
+    try:
+        return read_plan_file(path)
+    except PlanFileError as e:
+        raise UserError(f"{path}: {e}") from None
+
+
+def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
+    """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
+    verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
+    since is not verified again; `verify=False` (--no-verify) skips the check, loudly."""
+    from planning.check import check_plan
+    from planning.plan_file import has_valid_stamp
+
+    if not verify:
+        print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
+              "is executed as it is", file=sys.stderr)
+        return False
+    if has_valid_stamp(plan):
+        return False
+    problems = check_plan(plan, str(path))
+    for p in problems[:20]:
+        print(f"error: {path}: {p}", file=sys.stderr)
+    if problems:
+        more = f" ({len(problems) - 20} more not shown)" if len(problems) > 20 else ""
+        print(f"error: {path}: the plan fails verification ({len(problems)} problems{more}); "
+              f"refused (rbp check {path} lists them all)", file=sys.stderr)
+    return bool(problems)

@@ -43,15 +43,15 @@ def footstep_config(variant: str, time_limit: float | None):
     from planning.footsteps import FootstepConfig
 
     limit = 600.0 if time_limit is None else time_limit
-    exhaustive = AnytimeConfig(improve_seconds=None)
+    exhaustive = AnytimeConfig(improve_factor=None)
     settings: dict[str, Any] = {
         "default": {},
         "first": {"anytime": None},
         "sampled": {"search": "sampled"},
         "w30": {"heuristic_weight": 30.0, "anytime": None},
         "w3": {"heuristic_weight": 3.0, "anytime": None},
-        "anytime-f1": {"anytime": AnytimeConfig(improve_seconds=0.25, improve_factor=1.0)},
-        "anytime-f4": {"anytime": AnytimeConfig(improve_seconds=0.25, improve_factor=4.0)},
+        "anytime-f1": {"anytime": AnytimeConfig(improve_factor=1.0)},
+        "anytime-f4": {"anytime": AnytimeConfig(improve_factor=4.0)},
         "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},
         "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
                       "heuristic_weight": 1.0},

@@ -87,23 +87,26 @@ class LatticeTransition(NamedTuple):
 
 @dataclasses.dataclass(frozen=True)
 class AnytimeConfig:
-    """After the first route, the search goes on for better ones (planning.complete's doc):
-    each route found lowers the ordering weight to the next of `weights` (a weight <= 1 orders
-    by the admissible bound itself: A*), and everything that cannot beat the best route is
-    pruned. It stops when the best cost is within `target_bound` of the proven lower bound
-    (1: optimal), when nothing is left that could beat it (optimal), or `improve_time` after the
-    first route."""
+    """After the first route, the search goes on for better ones (docs/model.md): each route
+    found lowers the ordering weight to the next of `weights` (a weight <= 1 orders by the
+    admissible bound itself: A*), and everything that cannot beat the best route is pruned. It
+    stops when the best cost is within `target_bound` of the proven lower bound (1: optimal),
+    when nothing is left that could beat it (optimal), or when its improvement budget is spent.
+
+    The budget is work, not time, so that the same cave gives the same plan on any machine
+    and under any load: `improve_factor` times the first route's expansions (at least
+    `improve_min`); None: no limit but the search's own (`rbp plan --thorough`)."""
 
     weights: tuple[float, ...] = (10.0, 3.0, 1.0)
     target_bound: float = 1.0
-    improve_seconds: float | None = 1.0  # None: no limit but the search's own
-    improve_factor: float = 2.0
+    improve_factor: float | None = 2.0
+    improve_min: int = 50
 
-    def improve_time(self, first: float) -> float:
-        """Seconds to look for better routes once the first took `first` seconds."""
-        if self.improve_seconds is None:
+    def improve_expansions(self, first: int) -> float:
+        """Expansions to look for better routes once the first took `first` expansions."""
+        if self.improve_factor is None:
             return math.inf
-        return max(self.improve_seconds, self.improve_factor * first)
+        return max(float(self.improve_min), self.improve_factor * first)
 
 
 class CompleteResult(NamedTuple):
@@ -463,7 +466,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     best: CompleteResult | None = None  # the cheapest route so far
     best_cost = math.inf
     history: list[tuple[float, float, float, int]] = []  # (s, cost, lower bound, expansions)
-    t_first = math.inf
+    first_expansions = -1
     schedule = list(anytime.weights) if anytime is not None else []
 
     proven = [0.0]  # the highest lower bound found so far (each one is valid)
@@ -585,7 +588,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             if found.cost < best_cost:
                 best, best_cost = found, found.cost
                 now = time.perf_counter() - t0
-                t_first = min(t_first, now)
+                if first_expansions < 0:
+                    first_expansions = expansions
                 history.append((now, best_cost, lower(), expansions))
                 if progress is not None:
                     progress(expansions, tested, nearest, bound=best_cost / history[-1][2])
@@ -615,8 +619,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
             break
-        if best is not None and anytime.improve_time is not None and \
-                elapsed - t_first > anytime.improve_time(t_first):
+        if best is not None and \
+                expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
         for j, moves in enumerate(move_table(scn, lat, stance)):
             for k, rows in moves:

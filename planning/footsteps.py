@@ -6,10 +6,11 @@ graph is explored lazily (`planning.astar`): candidate anchors come from reach a
 transition is searched only when A* pops it.
 
 Cost and heuristic are `planning.search_cost`'s: an edge costs the regrasp's attach cost plus
-each boom's worst -log P over the move's configurations (an upper bound on -log p_path), and the
-heuristic, a lower bound on the cost to go, is multiplied by `heuristic_weight` (default 300:
-progress toward the goal dominates, the paper's distance-driven search; cost <= weight *
-optimum).
+each boom's worst -log P over the move's configurations, and the goal-distance heuristic is
+multiplied by `heuristic_weight` (default 300: progress toward the goal dominates, the paper's
+distance-driven search) to find a first route fast. The complete search then goes on for better
+routes (`FootstepConfig.anytime`), with an admissible bound that proves how far the best one
+is from the optimum (docs/model.md, "Route cost, its lower bound and the anytime search").
 
 Polish. Inside the search a transition is accepted at its first feasible pose. Once a path is
 found, each of its transition poses gets a local search for robustness
@@ -69,9 +70,10 @@ class FootstepConfig:
     sampled_expansions: int = 150
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     heuristic_weight: float = 300.0  # <= 1: A* on the admissible bound (optimal routes)
-    # complete search only: after the first route, better ones while time remains, with a
-    # proven bound on how far the best is from the optimum (planning.complete.AnytimeConfig)
-    anytime: AnytimeConfig | None = None
+    # complete search only: after the first route, better ones for twice its expansions, with
+    # a proven bound on how far the best is from the optimum (planning.complete.AnytimeConfig;
+    # None: the first route, as before)
+    anytime: AnytimeConfig | None = dataclasses.field(default_factory=AnytimeConfig)
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
     time_limit: float | None = None    # s; None: no limit

@@ -101,7 +101,19 @@ def _summary(plan: dict) -> str:
         return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s")
     grasps = f" (grasps alone {plan['p_grasps']:.4f})" if plan.get("p_grasps") is not None else ""
     return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}{grasps}, "
-            f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s")
+            f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s"
+            + _route_quality(plan.get("search") or {}))
+
+
+def _route_quality(search: dict) -> str:
+    """How far the route is from the best one, as the anytime search proved it."""
+    if search.get("quality") == "optimal":
+        return f"; route optimal (search cost {search['cost']:.4f})"
+    if search.get("bound") is not None:
+        return (f"; route cost {search['cost']:.4f}, within {search['bound']:.2f}x of the "
+                f"optimum (proven lower bound {search['lower_bound']:.4f}; first route "
+                f"{search['first_cost']:.4f})")
+    return ""
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -250,9 +262,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "when none does), sampled (the search before the complete one) or "
                            "hybrid (sampling for 150 expansions, then the complete search)")
     plan.add_argument("--thorough", action="store_true",
-                      help="the oracle: the complete search without an expansion budget, so it "
-                           "ends with a route or a proof that none exists (bound it with "
-                           "--time-limit)")
+                      help="the oracle: the complete search without an expansion budget, on "
+                           "to the optimal route (the lowest search cost, proved) or a proof "
+                           "that none exists; with --time-limit, the best route found and how "
+                           "far from the optimum it is proved to be")
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,

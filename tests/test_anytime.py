@@ -22,7 +22,7 @@ from planning.search_cost import RegraspHeuristic, boom_hop_length, edge_cost
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 
 COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
-EXHAUSTIVE = AnytimeConfig(improve_seconds=None)  # on until the optimum is proved
+EXHAUSTIVE = AnytimeConfig(improve_factor=None)  # on until the optimum is proved
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
 
 def test_target_bound_stops_within_it(demo: Scenario, optimal) -> None:
     found = complete_search(demo, COARSE, heuristic_weight=300.0,
-                            anytime=AnytimeConfig(improve_seconds=None, target_bound=1.5))
+                            anytime=AnytimeConfig(improve_factor=None, target_bound=1.5))
     assert found.success
     assert found.cost <= 1.5 * found.lower_bound * (1 + 1e-12)
     assert found.lower_bound <= optimal.cost * (1 + 1e-9) <= found.cost * (1 + 2e-9)

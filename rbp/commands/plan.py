@@ -31,6 +31,7 @@ def rbp_version() -> str:
 
 def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
+    from planning.complete import AnytimeConfig
     from planning.config_io import load_config
     from planning.pipeline import PipelineConfig
     from rbp.commands.common import UserError, load_scenario_spec
@@ -58,8 +59,9 @@ def plan_setup(args: argparse.Namespace):
         flags["max_expansions"] = args.max_expansions
     if args.search is not None:
         flags["search"] = args.search
-    if args.thorough:  # the oracle: complete, no expansion budget
+    if args.thorough:  # the oracle: complete, no expansion budget, on to the proven optimum
         flags["search"], flags["max_expansions"] = "complete", None
+        flags["anytime"] = AnytimeConfig(improve_factor=None)
     if args.time_limit is not None:
         flags["time_limit"] = args.time_limit
     if flags:

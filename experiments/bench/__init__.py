@@ -115,16 +115,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_bench_command(subparsers: Any) -> argparse.ArgumentParser:
-    """Register `bench` on the `rbp` sub-command parsers."""
-    p = subparsers.add_parser("bench", help="benchmark rbp against the alternatives a user "
-                              "would write (cvxpy, SLSQP, IPOPT, the naive planner)",
-                              description=__doc__.split("\n\n")[0])
-    add_arguments(p)
-    p.set_defaults(func=run)
-    return p
-
-
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_arguments(parser)

@@ -45,12 +45,13 @@ from scipy.special import ndtri
 
 from rb_drake import grasp
 from systems.diagram import ClimbSimulator, SimulationRecord
+from systems.holdings import StrengthDraws
 from systems.monitors import Cause
 from systems.replanning import FootstepReplanner as FootstepReplanner  # re-exported
 from systems.replanning import Replanner, ReplanRequest, still_holds
 from systems.replanning import configuration as configuration  # re-exported
 from systems.replanning import retry_replanner as retry_replanner  # re-exported
-from systems.trajectory import PlanTrajectory, StrengthDraws
+from systems.trajectory import PlanTrajectory
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
 

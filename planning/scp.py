@@ -37,67 +37,37 @@ limit tightened by the violation (a second-order correction), and the curvature 
 model adapts: relaxed after steps that beat the prediction, restored after poor ones. r_floor
 is log(p_min), raised to the seed's weakest step by default, so the result is never less
 robust than the seed where it matters; a result that is not better is replaced by the seed.
+
+The convex subproblem is `planning.scp_program`, the linearisation `planning.scp_linearise`;
+this module holds the exact merit and feasibility, the trust-region loop and the entry points.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
 
 from planning.between import between_steps
+from planning.scp_linearise import Iterate
+from planning.scp_linearise import Linearisation as Linearisation  # re-exported
+from planning.scp_program import Margins, ScpConfig, Subproblem, SubproblemProgram
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import (
     MIN_CONDITIONING,
     Reason,
-    World,
     check_poses,
     pull_within,
     rock_inside_body,
     wrench_conditioning,
 )
-from rb_drake.grasp import (
-    HALF_PI,
-    log_ndtr_derivatives,
-    mean_limit_derivative,
-    sigma_limit_derivative,
-)
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
-from rb_drake.statics import allocate, null_vector, statics_problem
+from rb_drake.statics import allocate, null_vector
 
 BOUND_TOL = 1e-9  # N, m, rad: slack on limits when checking an iterate exactly
-
-
-@dataclasses.dataclass(frozen=True)
-class ScpConfig:
-    """Weights of the merit, trust-region schedule and solver of the SCP (see module doc)."""
-
-    solver: str = "clarabel"          # or "osqp"
-    max_iterations: int = 25
-    robustness_weight: float = 1.0    # kappa, per unit of log-probability
-    dynamics_weight: float = 0.05     # alpha, per N^2 of dynamics residual
-    smoothness_weight: float = 0.05   # beta, per m (or rad) of the largest pose increment
-    radius_pose: float = 0.05         # m, initial trust radius on x, y
-    radius_angle: float = 0.1         # rad, on phi
-    radius_velocity: float = np.inf   # m/s, rad/s; none by default: velocities enter only the
-    #                                   dynamics penalty, which the model holds exactly
-    radius_tension: float = 5.0       # N
-    radius_min: float = 1e-3          # trust radii stay within [min, max] x the initial ones
-    radius_max: float = 8.0
-    grow: float = 2.0
-    shrink: float = 0.5
-    accept_ratio: float = 0.1         # accept when actual gain >= this x predicted gain
-    grow_ratio: float = 0.75          # grow the radii when actual >= this x predicted
-    shrink_ratio: float = 0.25        # shrink them when actual < this x predicted (or rejected)
-    curvature_floor: float = 1e-5     # damped Newton: least curvature of the log Phi model
-    curvature_scale_min: float = 0.125  # the model's curvature adapts within [this, 1] x exact
-    tolerance: float = 1e-4           # converged when the predicted gain is below this
-    keep_seed_floor: bool = True      # r_floor = max(log p_min, the seed's least r_k)
 
 
 class IterationRecord(NamedTuple):
@@ -135,41 +105,6 @@ class ScpResult(NamedTuple):
         return np.nansum(self.seed_tensions, axis=1)
 
 
-class Iterate(NamedTuple):
-    poses: np.ndarray       # (N, 3)
-    velocities: np.ndarray  # (N, 3)
-    tensions: np.ndarray    # (N, n) of the attached booms (`PhaseProgram.att`), in order
-
-
-class Linearisation(NamedTuple):
-    """Values and pose/tension derivatives at an iterate; per boom arrays are (N, 4), their
-    pose derivatives (N, 4, 3). Grasp quantities are 0 for a free boom."""
-
-    length: np.ndarray
-    length_dq: np.ndarray
-    shoulder_angle: np.ndarray
-    shoulder_angle_dq: np.ndarray
-    pull_angle: np.ndarray
-    pull_angle_dq: np.ndarray
-    moment_arm: np.ndarray          # (R s_i) x u_i
-    moment_arm_dq: np.ndarray
-    mu: np.ndarray
-    mu_dq: np.ndarray
-    sigma: np.ndarray
-    sigma_dq: np.ndarray
-    z: np.ndarray
-    z_dq: np.ndarray
-    z_df: np.ndarray                # (N, 4) = -1/sigma
-    log_prob: np.ndarray            # log Phi(z)
-    slope: np.ndarray               # d log Phi / dz
-    curvature: np.ndarray           # -d2 log Phi / dz2 > 0
-    wrench: np.ndarray              # (N, 3) statics residual e = A f - b
-    wrench_dq: np.ndarray           # (N, 3, 3)
-    wrench_df: np.ndarray           # (N, 3, n) = A of the attached booms
-    torque: np.ndarray              # (N,) free limb's shoulder torque (0 in a body phase)
-    torque_dq: np.ndarray           # (N, 3)
-
-
 class Evaluation(NamedTuple):
     merit: float
     robustness: np.ndarray   # (N,) r_k
@@ -178,293 +113,9 @@ class Evaluation(NamedTuple):
     reason: str
 
 
-class Margins(NamedTuple):
-    """How far the subproblem tightens each linearised limit (a second-order correction: the
-    violation the previous trial point showed); per step (N,) or per step and boom."""
-
-    floor: np.ndarray        # (N,) robustness floor
-    tension_lo: np.ndarray   # (N, n)
-    tension_hi: np.ndarray   # (N, n)
-    length_lo: np.ndarray    # (N, 4)
-    length_hi: np.ndarray    # (N, 4)
-    angle: np.ndarray        # (N, 4) |shoulder angle| limit
-    torque: np.ndarray       # (N,) |shoulder torque| limit
-
-    def scaled(self, factor: float) -> Margins:
-        return Margins(*(factor * m for m in self))
-
-
-class Subproblem(NamedTuple):
-    iterate: Iterate | None
-    predicted_gain: float
-    status: str               # "ok", "infeasible", "failed: ..."
-    infeasible: list[str]
-
-
-def _perp(v: np.ndarray) -> np.ndarray:
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
-
-
-def _cross_g(X: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Column-wise planar cross product X x g for X (..., 2, k)."""
-    return X[..., 0, :] * g[1] - X[..., 1, :] * g[0]
-
-
-class _Pattern:
-    """A sparse matrix with a fixed pattern: values come in the order of (rows, cols)."""
-
-    def __init__(self, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]):
-        order = sp.csc_matrix((np.arange(1.0, len(rows) + 1.0), (rows, cols)), shape=shape)
-        self.matrix = order
-        self.perm = order.data.astype(int) - 1
-        self.rows, self.cols = np.asarray(rows), np.asarray(cols)
-
-    def with_values(self, values: np.ndarray) -> sp.csc_matrix:
-        self.matrix.data = np.ascontiguousarray(values[self.perm], dtype=float)
-        return self.matrix
-
-    def row_range(self, values: np.ndarray, lo: np.ndarray,
-                  hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The least and greatest value of each row of the matrix over the box [lo, hi]."""
-        pos, neg = np.maximum(values, 0.0), np.minimum(values, 0.0)
-        n = self.matrix.shape[0]
-        least = np.bincount(self.rows, pos * lo[self.cols] + neg * hi[self.cols], minlength=n)
-        most = np.bincount(self.rows, pos * hi[self.cols] + neg * lo[self.cols], minlength=n)
-        return least, most
-
-
-class PhaseProgram:
+class PhaseProgram(SubproblemProgram):
     """The SCP of one phase: the convex subproblem (a Drake MathematicalProgram built once),
     the linearisation, the exact merit and the trust-region loop."""
-
-    def __init__(self, world: World, stance: Stance, steps: int, dt: float,
-                 config: ScpConfig | None = None, tips: np.ndarray | None = None):
-        from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver, SolverOptions
-
-        cfg = config or ScpConfig()
-        self.config, self.world, self.stance = cfg, world, stance
-        self.robot = robot = world.robot
-        self.gravity = np.asarray(world.gravity_vector, dtype=float)
-        self.N, self.dt = N, dt = int(steps), float(dt)
-        if N < 2 or dt <= 0.0:
-            raise ValueError(f"need at least 2 steps and dt > 0, got N={N}, dt={dt}")
-        self.att = np.flatnonzero(stance.attached)
-        self.free = stance.free_boom
-        n = len(self.att)
-        if self.free is not None and (tips is None or np.shape(tips) != (N, 2)):
-            raise ValueError(f"a reach phase needs the free tip at each of the {N} steps")
-        self.tips = None if tips is None else np.asarray(tips, dtype=float)
-        targets = np.where(stance.attached[:, None], stance.positions, 0.0)
-        self.targets = np.broadcast_to(targets, (N, 4, 2)).copy()
-        if self.free is not None:
-            self.targets[:, self.free] = self.tips
-        w, h = robot.body_size
-        m = robot.body_mass
-        self.inertia = np.array([m, m, m * (w * w + h * h) / 12.0])
-        self.floor = robot.log_p_min
-        self.curvature_scale = 1.0
-        self.radii = np.array([cfg.radius_pose, cfg.radius_pose, cfg.radius_angle])
-
-        prog = MathematicalProgram()
-        self.q = prog.NewContinuousVariables(N, 3, "pose")
-        self.v = prog.NewContinuousVariables(N, 3, "velocity")
-        self.f = prog.NewContinuousVariables(N, n, "tension")
-        self.w = prog.NewContinuousVariables(3, "largest_increment")
-        qf = np.concatenate([self.q.ravel(), self.f.ravel()])
-        nq, nf = 3 * N, n * N
-        k3 = np.arange(N)
-
-        def named(binding, name):
-            binding.evaluator().set_description(name)
-            return binding
-
-        # statics, linearised: G_k q_k + A_k f_k = G_k qbar_k + A_k fbar_k - e_k  (3N rows)
-        r, c = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
-        rows_g = (3 * k3[:, None, None] + r).ravel()
-        cols_g = (3 * k3[:, None, None] + c).ravel()
-        r, c = np.meshgrid(np.arange(3), np.arange(n), indexing="ij")
-        rows_a = (3 * k3[:, None, None] + r).ravel()
-        cols_a = (nq + n * k3[:, None, None] + c).ravel()
-        self._statics_pattern = _Pattern(np.concatenate([rows_g, rows_a]),
-                                         np.concatenate([cols_g, cols_a]), (3 * N, nq + nf))
-        self.statics = named(prog.AddLinearEqualityConstraint(
-            self._statics_pattern.matrix, np.zeros(3 * N), qf), "statics")
-        # step k's pose and tensions within qf: the margins z_k depend on these only
-        self._step_index = np.concatenate(
-            [3 * k3[:, None] + np.arange(3), nq + n * k3[:, None] + np.arange(n)], axis=1)
-        # robustness floor, linearised: r_k + sum_i slope_i dz_i >= floor  (N rows)
-        self._floor_pattern = _Pattern(np.repeat(k3, 3 + n), self._step_index.ravel(),
-                                       (N, nq + nf))
-        self.robust_floor = named(prog.AddLinearConstraint(
-            self._floor_pattern.matrix, np.full(N, -np.inf), np.zeros(N), qf),
-            "robustness_floor")
-        # kinematic limits, linearised in the pose: boom length and shoulder angle (4N rows)
-        kb, bb, cb = np.meshgrid(k3, np.arange(4), np.arange(3), indexing="ij")
-        self._kin_pattern = _Pattern((4 * kb + bb).ravel(), (3 * kb + cb).ravel(), (4 * N, nq))
-        self.lengths = named(prog.AddLinearConstraint(
-            self._kin_pattern.matrix, np.zeros(4 * N), np.zeros(4 * N), self.q.ravel()),
-            "boom_length")
-        self.angles = named(prog.AddLinearConstraint(
-            self._kin_pattern.matrix, np.zeros(4 * N), np.zeros(4 * N), self.q.ravel()),
-            "shoulder_angle")
-        self.torque = None
-        if self.free is not None:
-            self._torque_pattern = _Pattern(np.repeat(k3, 3), np.arange(nq), (N, nq))
-            self.torque = named(prog.AddLinearConstraint(
-                self._torque_pattern.matrix, np.zeros(N), np.zeros(N), self.q.ravel()),
-                "shoulder_torque")
-        # smoothness epigraph: |q_{k+1,c} - q_{k,c}| <= w_c
-        diff = sp.kron(sp.eye(N - 1, N, 1) - sp.eye(N - 1, N), sp.eye(3))
-        pick = sp.kron(np.ones((N - 1, 1)), sp.eye(3))
-        A_s = sp.vstack([sp.hstack([diff, -pick]), sp.hstack([diff, pick])]).tocsc()
-        M = 3 * (N - 1)
-        named(prog.AddLinearConstraint(
-            A_s, np.concatenate([np.full(M, -np.inf), np.zeros(M)]),
-            np.concatenate([np.zeros(M), np.full(M, np.inf)]),
-            np.concatenate([self.q.ravel(), self.w])), "smoothness")
-        # trust regions (intersected with the fixed boundary states and the tension bounds)
-        self.box_q = named(prog.AddBoundingBoxConstraint(
-            np.zeros(nq), np.zeros(nq), self.q.ravel()), "trust_region_pose")
-        lo_v = np.full((N, 3), -np.inf)
-        lo_v[[0, -1]] = 0.0
-        self.box_v = named(prog.AddBoundingBoxConstraint(
-            lo_v.ravel(), -lo_v.ravel(), self.v.ravel()), "trust_region_velocity")
-        self.box_f = named(prog.AddBoundingBoxConstraint(
-            np.zeros(nf), np.zeros(nf), self.f.ravel()), "trust_region_tension")
-        # costs (the negated merit model): the Newton model of log Phi in the margins (dense
-        # (3+n)-blocks per step, updated), the dynamics penalty (constant: with the statics
-        # linearised the wrench term vanishes) and the smoothness terms
-        self.robust_cost = named(prog.AddQuadraticCost(
-            np.eye(nq + nf), np.zeros(nq + nf), 0.0, qf, is_convex=True), "robustness_model")
-        self._dyn_matrix = self._dynamics_matrix()
-        named(prog.AddQuadraticCost(
-            cfg.dynamics_weight * (self._dyn_matrix.T @ self._dyn_matrix).toarray(),
-            np.zeros(6 * N), 0.0, np.concatenate([self.q.ravel(), self.v.ravel()]),
-            is_convex=True), "dynamics_penalty")
-        named(prog.AddLinearCost(np.full(3, cfg.smoothness_weight), 0.0, self.w), "smoothness")
-        self.prog = prog
-
-        self.options = SolverOptions()
-        if cfg.solver == "clarabel":
-            self.solver = ClarabelSolver()
-            for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
-                self.options.SetOption(self.solver.solver_id(), key, 1e-9)
-        elif cfg.solver == "osqp":
-            self.solver = OsqpSolver()
-            for key, val in (("eps_abs", 1e-5), ("eps_rel", 1e-5), ("max_iter", 20000),
-                             ("polishing", 1)):
-                self.options.SetOption(self.solver.solver_id(), key, val)
-            for var in self.f.ravel():  # tensions in units of 10 N: ADMM needs similar scales
-                prog.SetVariableScaling(var, 10.0)
-        else:
-            raise ValueError(f"solver must be 'clarabel' or 'osqp', got {cfg.solver!r}")
-        if not self.solver.available() or not self.solver.AreProgramAttributesSatisfied(prog):
-            raise RuntimeError(f"{cfg.solver} cannot solve the SCP subproblem here")
-
-    # ------------------------------------------------------------------ model pieces
-
-    def _dynamics_matrix(self) -> sp.csc_matrix:
-        """D_lin = Dmat [q; v] with the wrench term dropped, rows (step k, 6): the kinematic
-        defect (M/dt)((q_{k+1} - q_k)/dt - (v_k + v_{k+1})/2), then (M/dt)(v_{k+1} - v_k)."""
-        N, dt = self.N, self.dt
-        D = np.zeros((N - 1, 6, 2, N, 3))         # (step, row, [q|v], knot, coordinate)
-        k, c = np.arange(N - 1)[:, None], np.arange(3)[None, :]
-        scale = self.inertia / dt
-        D[k, c, 0, k + 1, c] = scale / dt
-        D[k, c, 0, k, c] = -scale / dt
-        D[k, c, 1, k + 1, c] = D[k, c, 1, k, c] = -0.5 * scale
-        D[k, 3 + c, 1, k + 1, c] = scale
-        D[k, 3 + c, 1, k, c] = -scale
-        return sp.csc_matrix(D.reshape(6 * (N - 1), 6 * N))
-
-    def dynamics_residual(self, it: Iterate, wrench: np.ndarray) -> np.ndarray:
-        """D_k (N-1, 6): (M/dt) velocity defect, then Newton-Euler defect minus the wrench."""
-        x = np.concatenate([it.poses.ravel(), it.velocities.ravel()])
-        D = (self._dyn_matrix @ x).reshape(self.N - 1, 6)
-        D[:, 3:] -= 0.5 * (wrench[:-1] + wrench[1:])
-        return D
-
-    def statics_at(self, poses: np.ndarray):
-        return statics_problem(self.robot, self.gravity, poses, self.stance, self.tips)
-
-    def tensions4(self, tensions: np.ndarray) -> np.ndarray:
-        out = np.full((tensions.shape[0], 4), np.nan)
-        out[:, self.att] = tensions
-        return out
-
-    def linearise(self, it: Iterate) -> Linearisation:
-        """Every linearised quantity of the subproblem at `it` (analytic derivatives)."""
-        robot, st, g = self.robot, self.stance, self.gravity
-        q = it.poses
-        N = q.shape[0]
-        r = geometry.shoulder_offsets(robot, q)                      # (N, 4, 2)
-        d = self.targets - (q[:, None, :2] + r)
-        L = np.linalg.norm(d, axis=-1)
-        u = d / L[..., None]
-        beta = np.arctan2(d[..., 1], d[..., 0])
-        theta = geometry.wrap_angle(beta - q[:, 2, None] - robot.shoulder_directions)
-        dd = np.zeros((N, 4, 2, 3))                                  # d d_i / d q
-        dd[..., 0, 0] = -1.0
-        dd[..., 1, 1] = -1.0
-        dd[..., :, 2] = -_perp(r)
-        L_dq = np.einsum("nbk,nbkj->nbj", u, dd)
-        beta_dq = (d[..., 0, None] * dd[..., 1, :] - d[..., 1, None] * dd[..., 0, :]) / (
-            L[..., None] ** 2)
-        theta_dq = beta_dq - np.array([0.0, 0.0, 1.0])
-        u_dq = _perp(u)[..., :, None] * beta_dq[..., None, :]       # (N, 4, 2, 3)
-        arm = geometry.cross2(r, u)
-        arm_dq = np.sum(r * u, axis=-1)[..., None] * theta_dq        # d(r x u) = (r.u) d theta
-
-        att = st.attached
-        normals = np.where(att[:, None], st.normals, 1.0)
-        psi = np.where(att, geometry.pull_angles(u, normals), 0.0)
-        psi_dq = np.where(att[:, None], beta_dq, 0.0)                # the normal is fixed
-        fn, ft = np.where(att, st.f_normal, 1.0), np.where(att, st.f_lateral, 1.0)
-        sn, sl = np.where(att, st.sigma_normal, 1.0), np.where(att, st.sigma_lateral, 1.0)
-        psi_v = np.where(np.abs(psi) < HALF_PI, psi, 0.0)
-        mu = np.where(att, st.mean_limit(psi_v), 1.0)
-        sigma = np.where(att, st.sigma(psi_v), 1.0)
-        mu_dq = mean_limit_derivative(psi_v, fn, ft)[..., None] * psi_dq
-        sigma_dq = sigma_limit_derivative(psi_v, sn, sl)[..., None] * psi_dq
-        f4 = np.zeros((N, 4))
-        f4[:, self.att] = it.tensions
-        z = np.where(att, (mu - f4) / sigma, 0.0)
-        z_dq = np.where(att[:, None], (mu_dq - z[..., None] * sigma_dq) / sigma[..., None], 0.0)
-        z_df = np.where(att, -1.0 / sigma, 0.0)
-        lp, lam, d2 = log_ndtr_derivatives(z)
-        lp = np.where(att, np.where(np.abs(psi) < HALF_PI, lp, -np.inf), 0.0)
-
-        # statics residual e = A f - b = sum_i f_i [u_i; arm_i] + M g + [W_limb; tau_limb]
-        A = np.concatenate([u, arm[..., None]], axis=-1).transpose(0, 2, 1)   # (N, 3, 4)
-        A_dq = np.concatenate([u_dq, arm_dq[..., None, :]], axis=-2)         # (N, 4, 3, 3)
-        e = np.einsum("nrb,nb->nr", A, f4)
-        e[:, :2] += robot.body_mass * g
-        e_dq = np.einsum("nbrj,nb->nrj", A_dq, f4)
-        torque = np.zeros(N)
-        torque_dq = np.zeros((N, 3))
-        if self.free is not None:
-            j = self.free
-            load = geometry.limb_load(robot, q, j, self.tips, g)
-            e[:, :2] += load.force
-            e[:, 2] += load.moment
-            torque = load.shoulder_torque
-            P = -dd[:, j]                                            # d p_j / d q (N, 2, 3)
-            C = np.zeros((N, 2, 3))
-            C[:, 0, 0] = C[:, 1, 1] = 1.0
-            rho, mg = robot.boom_linear_density, robot.gripper_mass
-            ell, ell_dq = L[:, j], L_dq[:, j]
-            m_b = rho * ell
-            shoulder = q[:, :2] + r[:, j]
-            mid_c = 0.5 * (shoulder + self.tips) - q[:, :2]
-            e_dq[:, :2, :] += rho * g[None, :, None] * ell_dq[:, None, :]
-            e_dq[:, 2, :] += (rho * ell_dq * geometry.cross2(mid_c, g)[:, None]
-                              + m_b[:, None] * _cross_g(0.5 * P - C, g) - mg * _cross_g(C, g))
-            arm_tip = geometry.cross2(self.tips - shoulder, g)
-            torque_dq = (0.5 * rho * ell_dq * arm_tip[:, None]
-                         - (0.5 * m_b + mg)[:, None] * _cross_g(P, g))
-        return Linearisation(
-            L, L_dq, theta, theta_dq, psi, psi_dq, arm, arm_dq, mu, mu_dq, sigma, sigma_dq,
-            z, z_dq, z_df, lp, lam, -d2, e, e_dq, A[:, :, self.att], torque, torque_dq)
 
     def evaluate(self, it: Iterate) -> Evaluation:
         """The exact merit (log_ndtr) and feasibility of an iterate."""
@@ -534,138 +185,6 @@ class PhaseProgram:
                        pos(it.tensions - f_hi, 0.0), pos(L_lo - L, 0.0), pos(L - L_hi, 0.0),
                        pos(np.abs(theta) - robot.shoulder_range, 0.0),
                        pos(np.abs(prob.shoulder_torque) - robot.shoulder_torque_max, 0.0))
-
-    def no_margins(self) -> Margins:
-        N, n = self.N, len(self.att)
-        return Margins(np.zeros(N), np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 4)),
-                       np.zeros((N, 4)), np.zeros((N, 4)), np.zeros(N))
-
-    def linear_dynamics(self, lin: Linearisation, it: Iterate, x: Iterate) -> np.ndarray:
-        """The dynamics residual linearised at `it`, evaluated at `x` (N-1, 6)."""
-        dq, df = x.poses - it.poses, x.tensions - it.tensions
-        e = lin.wrench + np.einsum("nrj,nj->nr", lin.wrench_dq, dq) + np.einsum(
-            "nrb,nb->nr", lin.wrench_df, df)
-        return self.dynamics_residual(x, e)
-
-    def model_merit(self, lin: Linearisation, it: Iterate, x: Iterate) -> float:
-        """The convex model of the merit built at `it`, evaluated at `x`."""
-        cfg = self.config
-        a = self.att
-        dz = (np.einsum("nbj,nj->nb", lin.z_dq[:, a], x.poses - it.poses)
-              + lin.z_df[:, a] * (x.tensions - it.tensions))
-        H = np.maximum(self.curvature_scale * lin.curvature[:, a], cfg.curvature_floor)
-        robust = np.sum(lin.log_prob[:, a] + lin.slope[:, a] * dz - 0.5 * H * dz * dz)
-        D = self.linear_dynamics(lin, it, x)
-        increments = np.abs(np.diff(x.poses, axis=0)).max(axis=0)
-        return float(cfg.robustness_weight * robust - 0.5 * cfg.dynamics_weight * np.sum(D * D)
-                     - cfg.smoothness_weight * increments.sum())
-
-    # ------------------------------------------------------------------ the subproblem
-
-    def update(self, lin: Linearisation, it: Iterate, scale: float, floor: np.ndarray,
-               margins: Margins | None = None) -> None:
-        """Write the linearisation at `it` and the trust radii (x `scale`) into the program,
-        with the limits tightened by `margins` (a second-order correction).
-
-        Inequality rows that cannot become active anywhere in the trust region get infinite
-        bounds, which the solver interfaces drop: the subproblem is the same, only smaller."""
-        cfg, robot, N = self.config, self.robot, self.N
-        a = self.att
-        m = margins if margins is not None else self.no_margins()
-        q0, f0 = it.poses, it.tensions
-        # trust regions; the boundary states stay where the seed put them
-        rq = scale * self.radii
-        lo_q, hi_q = q0 - rq, q0 + rq
-        lo_q[[0, -1]] = hi_q[[0, -1]] = q0[[0, -1]]
-        self.box_q.evaluator().set_bounds(lo_q.ravel(), hi_q.ravel())
-        if np.isfinite(cfg.radius_velocity):
-            v0 = it.velocities
-            rv = scale * cfg.radius_velocity
-            lo_v, hi_v = v0 - rv, v0 + rv
-            lo_v[[0, -1]] = hi_v[[0, -1]] = 0.0
-            self.box_v.evaluator().set_bounds(lo_v.ravel(), hi_v.ravel())
-        f_lo, f_hi = robot.boom_tension
-        rf = scale * cfg.radius_tension
-        lo_f = np.maximum(np.minimum(np.maximum(f0 - rf, f_lo), f0), f_lo + m.tension_lo)
-        hi_f = np.maximum(np.minimum(np.maximum(np.minimum(f0 + rf, f_hi), f0),
-                                     f_hi - m.tension_hi), lo_f)
-        self.box_f.evaluator().set_bounds(lo_f.ravel(), hi_f.ravel())
-        box_lo = np.concatenate([lo_q.ravel(), lo_f.ravel()])
-        box_hi = np.concatenate([hi_q.ravel(), hi_f.ravel()])
-
-        def set_rows(binding, pattern, values, lb, ub):
-            bottom, top = pattern.row_range(values, box_lo, box_hi)
-            binding.evaluator().UpdateCoefficients(pattern.with_values(values),
-                                                   np.where(bottom >= lb, -np.inf, lb),
-                                                   np.where(top <= ub, np.inf, ub))
-
-        G, Af = lin.wrench_dq, lin.wrench_df
-        self.statics.evaluator().UpdateCoefficients(
-            self._statics_pattern.with_values(np.concatenate([G.ravel(), Af.ravel()])),
-            (np.einsum("nrj,nj->nr", G, q0) + np.einsum("nrb,nb->nr", Af, f0)
-             - lin.wrench).ravel())
-        # margins per step over (q_k, f_k): dz_i = J_i dx_k
-        n = len(a)
-        J = np.zeros((N, n, 3 + n))
-        J[:, :, :3] = lin.z_dq[:, a]
-        J[:, np.arange(n), 3 + np.arange(n)] = lin.z_df[:, a]
-        x0 = np.concatenate([q0, f0], axis=1)
-        lam = lin.slope[:, a]
-        grad = np.einsum("na,naj->nj", lam, J)                  # d r_k / d x_k (model)
-        r0 = lin.log_prob[:, a].sum(axis=1)
-        lb = floor + m.floor - r0 + np.einsum("nj,nj->n", grad, x0)
-        set_rows(self.robust_floor, self._floor_pattern, grad.ravel(), lb, np.full(N, np.inf))
-        kappa = cfg.robustness_weight
-        H = kappa * np.maximum(self.curvature_scale * lin.curvature[:, a], cfg.curvature_floor)
-        blocks = np.einsum("nai,na,naj->nij", J, H, J)
-        Q = np.zeros((len(box_lo), len(box_lo)))
-        idx = self._step_index
-        Q[idx[:, :, None], idx[:, None, :]] = blocks
-        b = np.zeros(len(box_lo))
-        b[idx] = -kappa * grad - np.einsum("nij,nj->ni", blocks, x0)
-        self.robust_cost.evaluator().UpdateCoefficients(Q, b, 0.0, is_convex=True)
-        lo, hi = robot.boom_length
-        base = np.einsum("nbj,nj->nb", lin.length_dq, q0) - lin.length
-        set_rows(self.lengths, self._kin_pattern, lin.length_dq.ravel(),
-                 (lo + m.length_lo + base).ravel(), (hi - m.length_hi + base).ravel())
-        base = np.einsum("nbj,nj->nb", lin.shoulder_angle_dq, q0) - lin.shoulder_angle
-        rng = robot.shoulder_range - m.angle
-        set_rows(self.angles, self._kin_pattern, lin.shoulder_angle_dq.ravel(),
-                 (base - rng).ravel(), (base + rng).ravel())
-        if self.torque is not None:
-            base = np.einsum("nj,nj->n", lin.torque_dq, q0) - lin.torque
-            tmax = robot.shoulder_torque_max - m.torque
-            set_rows(self.torque, self._torque_pattern, lin.torque_dq.ravel(), base - tmax,
-                     base + tmax)
-
-    def solve_subproblem(self, lin: Linearisation, it: Iterate, scale: float,
-                         floor: np.ndarray, margins: Margins | None = None) -> Subproblem:
-        """Solve the convex model at `it` within the trust region scaled by `scale`."""
-        from pydrake.solvers import SolutionResult
-
-        self.update(lin, it, scale, floor, margins)
-        guess = np.zeros(self.prog.num_vars())
-        for var, value in ((self.q, it.poses), (self.v, it.velocities), (self.f, it.tensions),
-                           (self.w, np.abs(np.diff(it.poses, axis=0)).max(axis=0))):
-            self.prog.SetDecisionVariableValueInVector(var, value, guess)
-        result = self.solver.Solve(self.prog, guess, self.options)
-        status = result.get_solution_result()
-        if status in (SolutionResult.kInfeasibleConstraints,
-                      SolutionResult.kInfeasibleOrUnbounded):
-            # The solver's point is meaningless here; the current iterate (zero step, inside
-            # every trust region) shows which linearised constraints cannot be met.
-            result.set_x_val(guess)
-            names = list(result.GetInfeasibleConstraintNames(self.prog, 1e-9))
-            return Subproblem(None, 0.0, "infeasible", names)
-        x = Iterate(result.GetSolution(self.q), result.GetSolution(self.v),
-                    result.GetSolution(self.f).reshape(self.N, -1))
-        x.poses[[0, -1]] = it.poses[[0, -1]]  # fixed: exactly, not to the solver's tolerance
-        x.velocities[[0, -1]] = 0.0
-        if not result.is_success() and not (
-                status == SolutionResult.kIterationLimit and np.isfinite(x.poses).all()):
-            return Subproblem(None, 0.0, f"failed: {status}", [])
-        predicted = self.model_merit(lin, it, x) - self.model_merit(lin, it, it)
-        return Subproblem(x, predicted, "ok", [])
 
     def restore(self, x: Iterate) -> Iterate | None:
         """The tensions corrected (minimum norm, then along the null space to stay within

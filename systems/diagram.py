@@ -69,8 +69,10 @@ from rb_drake.params import NUM_BOOMS
 from rb_drake.plant import ARM_MASS, BODY_THICKNESS, ReachBotPlant, build_plant
 from rb_drake.scenario import Scenario
 from systems.control import BoomForces, ControlGains, LimbController, TensionController
+from systems.holdings import StrengthDraws
 from systems.monitors import AnchorLoadMonitor, Cause, Failure, GraspFailures, GraspMonitor
-from systems.trajectory import PlanSource, PlanTrajectory, StrengthDraws
+from systems.plan_source import PlanSource
+from systems.trajectory import PlanTrajectory
 
 SAMPLE_PERIOD = 0.02  # s: loggers and the failure check run at this period, on the same grid
 PLANT_TIME_STEP = 1e-2  # s, the full (discrete) plant's period

@@ -20,7 +20,8 @@ from rb_drake import geometry, grasp
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.plant import ReachBotPlant
 from rb_drake.stance import Stance
-from systems.trajectory import FREE_LIMB_SIZE, StrengthDraws
+from systems.holdings import StrengthDraws
+from systems.trajectory import FREE_LIMB_SIZE
 
 GRASP_FIELDS = ("pull_angle", "force", "probability")  # the monitor's output, 4 values each
 SLACK_FORCE = 1e-3  # N: below this a grasp's pull angle is its boom's (its pull has no direction)

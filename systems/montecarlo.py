@@ -30,13 +30,11 @@ state; the trial continues on it (simulated once per distinct failure state, wit
 rest where it failed), holdings that carry on keep their drawn strengths, new ones draw afresh.
 `retry_replanner` re-grasps the same anchor and resumes the plan (cheap);
 `FootstepReplanner` moves the free boom to another anchor and runs the footstep planner from
-there (10-60 s per call on a whole cave).
+there (10-60 s per call on a whole cave); both are in `systems.replanning`.
 """
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import math
 from collections import Counter
 from collections.abc import Callable
@@ -45,17 +43,17 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
-from planning.plan import score_plan
-from planning.ramps import add_ramps
 from rb_drake import grasp
-from rb_drake.feasibility import check_poses
-from rb_drake.scenario import Scenario
 from systems.diagram import ClimbSimulator, SimulationRecord
+from systems.holdings import StrengthDraws
 from systems.monitors import Cause
-from systems.trajectory import PlanTrajectory, StrengthDraws
+from systems.replanning import FootstepReplanner as FootstepReplanner  # re-exported
+from systems.replanning import Replanner, ReplanRequest, still_holds
+from systems.replanning import configuration as configuration  # re-exported
+from systems.replanning import retry_replanner as retry_replanner  # re-exported
+from systems.trajectory import PlanTrajectory
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
-RETRY_DURATION = 2.0     # s, to re-grasp the same anchor
 
 
 def wilson_interval(successes: int, trials: int, z: float = Z95) -> tuple[float, float]:
@@ -189,171 +187,6 @@ def trial_draws(record: SimulationRecord, quantiles: np.ndarray,
     """One trial's draws laid out for `GraspFailures` (the in-diagram run)."""
     return StrengthDraws.for_trial(record.plan, quantiles, attach_draws,
                                    record.plan.scenario.robot.attach_failure)
-
-
-# ---------------------------------------------------------------------------------------------
-# Replanning
-
-
-class ReplanRequest(NamedTuple):
-    """The state after a grasp failed in a 4-stance: the body at `pose` in the 3-stance
-    `stance` (the failed boom free, its gripper at `anchor`)."""
-
-    scenario: Scenario
-    plan: dict[str, Any]   # the plan being executed
-    phase: int             # index of the phase that failed, in that plan
-    time: float            # s, in that plan's time
-    pose: np.ndarray       # (3,)
-    stance: tuple[str | None, ...]
-    boom: int
-    anchor: str
-    cause: str
-
-
-Replanner = Callable[[ReplanRequest], dict[str, Any] | None]
-"""A new plan (`reachbot-plan/1` phases, times from 0) starting at the request's pose and
-3-stance, or None when it finds none."""
-
-
-def still_holds(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarray,
-                boom: int, anchor: str) -> bool:
-    """Whether the 3-stance left after `boom` failed holds the body at `pose`, the free limb
-    approximated as cantilevered with its gripper at the failed anchor."""
-    if sum(a is not None for a in stance) != 3:
-        return False
-    tip = np.array(scn.anchors[scn.anchor_index[anchor]].position)
-    return bool(check_poses(scn, scn.stance(stance), np.asarray(pose), tip).feasible[0])
-
-
-def configuration(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarray,
-                  free_tip: np.ndarray | None, t: float) -> tuple[dict[str, Any], bool]:
-    """A plan step at `pose` with the robust allocation (as planning.plan writes them), and
-    whether the configuration is feasible."""
-    s = scn.stance(stance)
-    check = check_poses(scn, s, np.asarray(pose, dtype=float), free_tip, full=True)
-    alloc = check.allocation
-    step: dict[str, Any] = {
-        "t": float(t), "pose": [float(v) for v in pose],
-        "tension": [float(f) if s.attached[i] and np.isfinite(f) else None
-                    for i, f in enumerate(alloc.tensions[0])],
-        "p_grasp": [float(np.exp(v)) if s.attached[i] else None
-                    for i, v in enumerate(alloc.log_probs[0])],
-        "p_success": float(np.exp(alloc.robustness[0])),
-    }
-    if free_tip is not None:
-        step["free_tip"] = [float(v) for v in free_tip]
-        step["shoulder_torque"] = float(alloc.shoulder_torque[0])
-    return step, bool(check.feasible[0])
-
-
-def shifted_phases(phases: list[dict[str, Any]], dt: float) -> list[dict[str, Any]]:
-    out = copy.deepcopy(phases)
-    for phase in out:
-        for step in phase["steps"]:
-            step["t"] = float(step["t"] + dt)
-    return out
-
-
-def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]],
-                 planned: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The continuation: the executed plan's fields with these phases; `planned`, the new
-    plan they come from, if any, gives its time step and step limits (its trajectories')."""
-    plan = {k: v for k, v in request.plan.items()
-            if k not in ("phases", "verified", "time_step", "limits")}
-    for key in ("time_step", "limits"):
-        source = request.plan if planned is None else planned
-        if key in source:
-            plan[key] = source[key]
-    plan["phases"] = phases
-    # The continuation starts where the grasp failed, not at the scenario's start.
-    held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
-    plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
-    plan = add_ramps(plan, request.scenario)  # the new phases' attach and release
-    score_plan(plan, request.scenario.robot.attach_failure)
-    return plan
-
-
-def retry_replanner(request: ReplanRequest) -> dict[str, Any] | None:
-    """Re-grasp the failed anchor from where the body is (a fresh grasp: new strength and
-    attach draws), finish the failed body phase from here and go on with the plan."""
-    scn, plan, k = request.scenario, request.plan, request.phase
-    phase = plan["phases"][k]
-    if phase["kind"] != "body":
-        return None
-    tip = np.array(scn.anchors[scn.anchor_index[request.anchor]].position)
-    pose = np.asarray(request.pose, dtype=float)
-    a, ok_a = configuration(scn, request.stance, pose, tip, 0.0)
-    b, ok_b = configuration(scn, request.stance, pose, tip, RETRY_DURATION)
-    start, ok_c = configuration(scn, tuple(phase["stance"]), pose, None, RETRY_DURATION)
-    end_step = phase["steps"][-1]
-    remaining = max(1.0, float(end_step["t"]) - request.time)
-    end, ok_d = configuration(scn, tuple(phase["stance"]), np.array(end_step["pose"]), None,
-                              RETRY_DURATION + remaining)
-    if not (ok_a and ok_b and ok_c and ok_d):
-        return None
-    reach = {"kind": "reach", "stance": list(request.stance), "free_boom": request.boom,
-             "from_anchor": request.anchor, "to_anchor": request.anchor, "steps": [a, b]}
-    body = {"kind": "body", "stance": list(phase["stance"]), "free_boom": None,
-            "steps": [start, end]}
-    rest = shifted_phases(plan["phases"][k + 1:], end["t"] - float(end_step["t"]))
-    return _finish_plan(request, [reach, body, *rest])
-
-
-@dataclasses.dataclass
-class FootstepReplanner:
-    """Move the free boom to another reachable anchor from where the body is, then plan the
-    rest of the climb from that 4-stance with the whole pipeline (`planning.pipeline.
-    plan_climb`: footsteps, then a seed and SCP per phase), so the continuation is a plan like
-    any other, trajectories and tensions included.
-
-    Candidates are the reachable anchors nearest the goal whose 3-stance (gripper there) and
-    4-stance both hold at the current pose; the first `candidates` are tried in turn."""
-
-    candidates: int = 3
-    max_expansions: int = 400
-    seed: int = 0
-    optimise: bool = True  # False: the continuation keeps its seed trajectories (no SCP)
-
-    def __call__(self, request: ReplanRequest) -> dict[str, Any] | None:
-        from planning.footsteps import FootstepConfig
-        from planning.pipeline import PipelineConfig, plan_climb
-        from planning.plan import REACH_DURATION
-        from planning.transition import reachable_anchors
-
-        scn, j = request.scenario, request.boom
-        pose = np.asarray(request.pose, dtype=float)
-        held = tuple(request.anchor if a is None else a for a in request.stance)
-        rng = np.random.default_rng([self.seed, j])
-        idx = reachable_anchors(scn, held, j, pose, rng)
-        goal = np.asarray(scn.goal_position)
-        idx = idx[np.argsort(np.linalg.norm(scn.anchor_positions[idx] - goal, axis=1))]
-        old_tip = np.array(scn.anchors[scn.anchor_index[request.anchor]].position)
-        tried = 0
-        for k in idx:
-            if tried >= self.candidates:
-                break
-            new = scn.anchors[k]
-            four = tuple(new.id if i == j else a for i, a in enumerate(request.stance))
-            a, ok_a = configuration(scn, request.stance, pose, old_tip, 0.0)
-            b, ok_b = configuration(scn, request.stance, pose, np.array(new.position),
-                                    REACH_DURATION)
-            _, ok_c = configuration(scn, four, pose, None, REACH_DURATION)
-            if not (ok_a and ok_b and ok_c):
-                continue
-            tried += 1
-            start = dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
-                                        start_stance=four)
-            config = PipelineConfig(footstep=FootstepConfig(seed=self.seed,
-                                                            max_expansions=self.max_expansions),
-                                    optimise=self.optimise)
-            plan = plan_climb(start, "rbp", config)
-            if not plan["success"]:
-                continue
-            reach = {"kind": "reach", "stance": list(request.stance), "free_boom": j,
-                     "from_anchor": request.anchor, "to_anchor": new.id, "steps": [a, b]}
-            rest = shifted_phases(plan["phases"], REACH_DURATION)
-            return _finish_plan(request, [reach, *rest], plan)
-        return None
 
 
 # ---------------------------------------------------------------------------------------------

@@ -11,17 +11,17 @@ Because this drives hardware: commands are clamped to the robot's boom-length an
 limits, their change from one command to the next is bounded (`max_length_rate`,
 `max_tension_rate`: no plan can command a jump), a non-finite command is refused (the last
 safe one is repeated), the command holds still when no status has come back for
-`status_timeout`, and a status that does not decode or is out of range is logged as received
-but ignored (`StatusFilter` keeps the last good one).
+`status_timeout` (all in `systems.rig_safety`), and a status that does not decode or is out
+of range is logged as received but ignored (`StatusFilter`, in `systems.rig_messages` with the
+rest of the LCM side, keeps the last good one).
 
 Python LeafSystems are never freed in pydrake 1.51 (STACK.md section 5): `run_rig` builds its
 diagram once per run, and `replay_log` one monitor per log.
 """
 
+
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import json
 import shutil
 import tempfile
@@ -34,41 +34,24 @@ from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, LeafSystem
-from pydrake.systems.lcm import (
-    LcmInterfaceSystem,
-    LcmPublisherSystem,
-    LcmSubscriberSystem,
-    SerializerInterface,
-)
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from rb_drake import geometry, grasp
 from rb_drake.files import atomic_write
-from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
 from rb_drake.stance import Stance
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
-
-MEMQ = "memq://"
-CLAMP_REPORT_TOL = 1e-9  # m or N: smaller corrections by the limit clamp are not counted
-
-
-@dataclasses.dataclass(frozen=True)
-class RigLcmConfig:
-    """Where the rig is on LCM. The default bus is in-process (`memq://`), never the network:
-    pass a `udpm://` URL explicitly to reach the hardware."""
-
-    url: str = MEMQ
-    command_channel: str = "RIG_COMMAND"
-    status_channel: str = "RIG_STATUS"
-    setup_channel: str = "RIG_SETUP"
-    period: float = 0.1  # s between commands
-    status_timeout: float = 0.5  # s without a good status before the command holds still
-    # The largest change of a command per second: the simulated winch's speed, 4x the boom
-    # rates of the bundled plans (about 0.13 m/s); twice their tension rates (about 13 N/s).
-    max_length_rate: float = 0.5    # m/s per boom
-    max_tension_rate: float = 25.0  # N/s per boom
+from systems.rig_messages import (
+    MEMQ,
+    LogWriter,
+    RawSerializer,
+    RigLcmConfig,
+    StatusFilter,
+    decode_status,
+)
+from systems.rig_safety import RigCommandSource, SafetyReport
 
 
 class RigInputError(ValueError):
@@ -142,197 +125,7 @@ def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
 
 
 # ---------------------------------------------------------------------------------------------
-# The two systems
-
-
-class CommandMemory(NamedTuple):
-    """`RigCommandSource`'s state: the last command sent and what the guards did so far."""
-
-    boom_length: np.ndarray | None  # (4,) m, of the last command sent (None before the first)
-    tension: np.ndarray | None      # (4,) N
-    refused: int = 0                # commands that were not finite: the last one repeated
-    held: int = 0                   # commands held still because no status came back
-    clamped: int = 0                # commands clamped to the boom limits
-    rate_limited: int = 0           # commands whose change was cut to the rate bounds
-
-
-class RigCommandSource(LeafSystem):
-    """Input `last_status_time` (1, s of context time) -> output `command` (rig_command_t):
-    the plan at plan time `time_offset` + context time, made safe for the hardware.
-
-    Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
-    are the plan's tensions, both interpolated linearly in time and clamped to the robot's
-    `boom_length` and `boom_tension` limits; each then moves from the last command sent by at
-    most `max_length_rate` x `period` (m) and `max_tension_rate` x `period` (N), so a jump
-    in the plan becomes a ramp. A command with a NaN or inf is refused and the
-    last one sent is repeated; so is the last one when no status came back for
-    `status_timeout` (the rig holds still). The state (`CommandMemory`) changes only in the
-    periodic update, which stores the command the publisher just sent.
-    """
-
-    def __init__(self, robot: RobotParams, anchors: np.ndarray, pose: PiecewisePolynomial,
-                 tension: PiecewisePolynomial, time_offset: float = 0.0, period: float = 0.1,
-                 status_timeout: float = float("inf"), max_length_rate: float = float("inf"),
-                 max_tension_rate: float = float("inf")):
-        if not (np.all(np.isfinite(pose.value(time_offset)))
-                and np.all(np.isfinite(tension.value(time_offset)))):
-            raise ValueError("the first command must be finite: nothing safe comes before it")
-        super().__init__()
-        self._robot = robot
-        self._anchors = np.asarray(anchors, dtype=float)
-        self._pose = pose
-        self._tension = tension
-        self._time_offset = time_offset
-        self._status_timeout = status_timeout
-        self._max_step = (max_length_rate * period, max_tension_rate * period)  # m, N
-        self._memory = self.DeclareAbstractState(AbstractValue.Make(CommandMemory(None, None)))
-        self.last_status_time_port = self.DeclareVectorInputPort("last_status_time", 1)
-        self.command_port = self.DeclareAbstractOutputPort(
-            "command", lambda: AbstractValue.Make(rig_command_t()), self._calc_command,
-            prerequisites_of_calc={self.all_sources_ticket()})
-        # Stores what the publisher sent at the same period (publishing comes first).
-        self.DeclareInitializationUnrestrictedUpdateEvent(self._remember)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._remember)
-
-    def memory(self, context) -> CommandMemory:
-        return context.get_abstract_state(self._memory).get_value()
-
-    def _decide(self, context) -> tuple[np.ndarray, np.ndarray, str]:
-        """(boom lengths, tensions, what happened: "ok", "clamped", "rate-limited", "refused"
-        or "held")."""
-        t = self._time_offset + context.get_time()
-        memory = self.memory(context)
-        if memory.boom_length is not None and self.last_status_time_port.HasValue(context):
-            silence = context.get_time() - self.last_status_time_port.Eval(context)[0]
-            if silence > self._status_timeout:
-                return memory.boom_length, memory.tension, "held"
-        pose = self._pose.value(t).ravel()
-        length = geometry.boom_geometry(self._robot, pose, self._anchors).length[0]
-        tension = self._tension.value(t).ravel()
-        if not (np.all(np.isfinite(length)) and np.all(np.isfinite(tension))):
-            return memory.boom_length, memory.tension, "refused"  # the first one is finite
-        safe_length = np.clip(length, *self._robot.boom_length)
-        safe_tension = np.clip(tension, *self._robot.boom_tension)
-        # A plan on a limit may miss it by round-off: that is not worth reporting.
-        clamped = max(np.abs(safe_length - length).max(),
-                      np.abs(safe_tension - tension).max()) > CLAMP_REPORT_TOL
-        if memory.boom_length is None:  # the first command: the plan's start, nothing before
-            return safe_length, safe_tension, "clamped" if clamped else "ok"
-        # Both ends lie within the limits, so the ramp between them does too.
-        dl, df = self._max_step
-        ramp_length = memory.boom_length + np.clip(safe_length - memory.boom_length, -dl, dl)
-        ramp_tension = memory.tension + np.clip(safe_tension - memory.tension, -df, df)
-        limited = max(np.abs(ramp_length - safe_length).max(),
-                      np.abs(ramp_tension - safe_tension).max()) > CLAMP_REPORT_TOL
-        what = "rate-limited" if limited else "clamped" if clamped else "ok"
-        return ramp_length, ramp_tension, what
-
-    def _calc_command(self, context, output) -> None:
-        length, tension, _ = self._decide(context)
-        msg = rig_command_t()
-        msg.utime = round((self._time_offset + context.get_time()) * 1e6)
-        msg.boom_length = length
-        msg.tension_setpoint = tension
-        output.set_value(msg)
-
-    def _remember(self, context, state) -> None:
-        length, tension, what = self._decide(context)
-        memory = self.memory(context)
-        state.get_mutable_abstract_state(self._memory).set_value(CommandMemory(
-            length.copy(), tension.copy(), memory.refused + (what == "refused"),
-            memory.held + (what == "held"), memory.clamped + (what == "clamped"),
-            memory.rate_limited + (what == "rate-limited")))
-
-
-class RawSerializer(SerializerInterface):
-    """Hands a subscriber's message on as the bytes received, so a message that does not
-    decode reaches `StatusFilter` instead of raising inside the LCM pump."""
-
-    def __init__(self):
-        SerializerInterface.__init__(self)
-
-    def CreateDefaultValue(self):  # noqa: N802 (Drake's name)
-        return AbstractValue.Make(b"")
-
-    def Deserialize(self, buffer, abstract_value) -> None:  # noqa: N802
-        abstract_value.set_value(bytes(buffer))
-
-    def Serialize(self, abstract_value):  # noqa: N802
-        return abstract_value.get_value()
-
-
-def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
-    """The status in `data`, or None if it does not decode (another message type, garbage)
-    or is out of range: not finite, a negative winch length, or a force beyond ten times the
-    tension limit."""
-    try:
-        status = rig_status_t.decode(data)
-    except ValueError:
-        return None
-    values = np.array([*status.winch_length, *status.load_cell_force, *status.hinge_angle])
-    if not np.all(np.isfinite(values)):
-        return None
-    if np.any(np.asarray(status.winch_length) < 0.0):
-        return None
-    if np.any(np.abs(status.load_cell_force) > 10.0 * robot.boom_tension[1]):
-        return None
-    return status
-
-
-class StatusMemory(NamedTuple):
-    """`StatusFilter`'s state."""
-
-    raw: bytes                  # the subscriber's last message, as received
-    status: rig_status_t        # the last good status (a default one before any)
-    time: float                 # s of context time when it came (the start before any)
-    good: int = 0
-    bad: int = 0
-
-
-class StatusFilter(LeafSystem):
-    """Input `raw` (bytes of the last status message) -> outputs `status` (rig_status_t, the
-    last good one) and `last_status_time` (1, s of context time when it came).
-
-    A message that does not decode or is out of range (`decode_status`) is counted and
-    ignored. The outputs already see the subscriber's newest message (`current`); the state
-    stores that view in a per-step update.
-    """
-
-    def __init__(self, robot: RobotParams):
-        super().__init__()
-        self._robot = robot
-        self.raw_port = self.DeclareAbstractInputPort("raw", AbstractValue.Make(b""))
-        self._memory = self.DeclareAbstractState(
-            AbstractValue.Make(StatusMemory(b"", rig_status_t(), 0.0)))
-        self.status_port = self.DeclareAbstractOutputPort(
-            "status", lambda: AbstractValue.Make(rig_status_t()),
-            lambda context, out: out.set_value(self.current(context).status))
-        self.last_status_time_port = self.DeclareVectorOutputPort(
-            "last_status_time", 1,
-            lambda context, out: out.SetAtIndex(0, self.current(context).time))
-        self.DeclareInitializationUnrestrictedUpdateEvent(self._start)
-        self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
-
-    def memory(self, context) -> StatusMemory:
-        return context.get_abstract_state(self._memory).get_value()
-
-    def _start(self, context, state) -> None:
-        state.get_mutable_abstract_state(self._memory).set_value(
-            StatusMemory(b"", rig_status_t(), context.get_time()))
-
-    def current(self, context) -> StatusMemory:
-        """The stored memory updated with the subscriber's message, if it is a new one."""
-        memory = self.memory(context)
-        raw = self.raw_port.Eval(context)
-        if not raw or raw == memory.raw:
-            return memory
-        status = decode_status(raw, self._robot)
-        if status is None:
-            return memory._replace(raw=raw, bad=memory.bad + 1)
-        return StatusMemory(raw, status, context.get_time(), memory.good + 1, memory.bad)
-
-    def _update(self, context, state) -> None:
-        state.get_mutable_abstract_state(self._memory).set_value(self.current(context))
+# The grasp monitor and the diagram
 
 
 class GraspMonitor(LeafSystem):
@@ -410,34 +203,6 @@ class GraspRecord(NamedTuple):
     force: np.ndarray       # (N, 4) N, measured
 
 
-class SafetyReport(NamedTuple):
-    """What the guards of a run did (counts of commands and statuses)."""
-
-    clamped: int            # commands clamped to the boom-length or tension limits
-    refused: int            # non-finite commands replaced by the last safe one
-    held: int               # commands held still: no good status for status_timeout
-    bad_statuses: int       # statuses ignored: undecodable or out of range
-    rate_limited: int = 0   # commands whose change was cut to the rate bounds
-
-    def messages(self, config: RigLcmConfig) -> list[str]:
-        """One line per guard that acted, for the run's output."""
-        lines = []
-        if self.held:
-            lines.append(f"  status timeout: no good status for {config.status_timeout:g} s; "
-                         f"held the last safe setpoint for {self.held} commands")
-        if self.refused:
-            lines.append(f"  refused {self.refused} non-finite commands (repeated the last "
-                         "safe one)")
-        if self.clamped:
-            lines.append(f"  clamped {self.clamped} commands to the boom limits")
-        if self.rate_limited:
-            lines.append(f"  slowed {self.rate_limited} commands to the rate bounds "
-                         f"({config.max_length_rate:g} m/s, {config.max_tension_rate:g} N/s)")
-        if self.bad_statuses:
-            lines.append(f"  ignored {self.bad_statuses} bad statuses (kept in the log)")
-        return lines
-
-
 class RigRun(NamedTuple):
     live: GraspRecord
     commands: int           # published
@@ -449,25 +214,6 @@ class RigRun(NamedTuple):
     @property
     def timed_out(self) -> bool:
         return self.safety.held > 0
-
-
-class _LogWriter:
-    """Every message on the rig's channels, into an LCM event log stamped with its utime (a
-    message that does not decode keeps its bytes and the previous event's stamp)."""
-
-    def __init__(self, bus: DrakeLcm, config: RigLcmConfig, path: Path):
-        self.events = lcm.EventLog(str(path), "w", overwrite=True)
-        self.counts = {config.command_channel: 0, config.status_channel: 0}
-        self.utime = 0
-        for channel, kind in ((config.command_channel, rig_command_t),
-                              (config.status_channel, rig_status_t)):
-            bus.Subscribe(channel, lambda data, c=channel, k=kind: self.write(c, data, k))
-
-    def write(self, channel: str, data: bytes, kind) -> None:
-        with contextlib.suppress(ValueError):  # garbage: logged as received all the same
-            self.utime = kind.decode(data).utime
-        self.events.write_event(self.utime, channel, data)
-        self.counts[channel] += 1
 
 
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
@@ -490,7 +236,7 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
     parts = build_rig_diagram(phase, bus, config)
     with tempfile.TemporaryDirectory(prefix="rig-log-") as tmp:
         partial = Path(tmp) / "run.lcm"
-        writer = _LogWriter(bus, config, partial)
+        writer = LogWriter(bus, config, partial)
         setup = rig_setup_t()
         setup.utime = round(phase.start_time * 1e6)
         setup.scenario_json = json.dumps(phase.scenario.to_dict(resolved=True))
@@ -561,7 +307,8 @@ class RigLog(NamedTuple):
     winch_length: np.ndarray      # (N, 4) m, measured
 
 
-def replay_log(path: str | Path, config: RigLcmConfig = RigLcmConfig()) -> RigLog:
+def replay_log(path: str | Path,
+               config: RigLcmConfig = RigLcmConfig()) -> RigLog:  # noqa: B008 (frozen)
     """Read a log written by `run_rig` and pass each good status through a `GraspMonitor`
     (statuses that do not decode or are out of range are skipped, as the live run did)."""
     path = Path(path)

@@ -1,28 +1,32 @@
 """The plan as trajectories: a plan file's phases as trajectories of body pose, feed-forward
-tensions and free tip (`PlanTrajectory`, which says how phases become trajectories), its
-holdings and one trial's drawn strengths laid out per phase (`StrengthDraws`), and
-`PlanSource`, the leaf system that outputs the plan at the current time. A plan file the
-simulation cannot run raises `PlanError`.
+tensions and free tip (`PlanTrajectory`, which says how phases become trajectories). Its
+holdings and one trial's drawn strengths laid out per phase (`StrengthDraws`) are in
+`systems.holdings`, and `PlanSource`, the leaf system that outputs the plan at the current
+time, in `systems.plan_source`. A plan file the simulation cannot run raises `PlanError`.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, Context, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario, scenario_from_dict
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
+from systems.holdings import holdings_of
 
 DWELL_MOTION = 0.8  # of a trajectory phase's final dwell spent finishing its last motion
+
+# PlanSource's free_limb output: the limb a shoulder carries (`PlanTrajectory.carried_limb`):
+# the planned free tip (x, y), its velocity, the boom's mass in the plant, the boom (-1: none)
+# and the share of the limb its shoulder carries (1 for a free boom, less in a ramp)
+FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass", "boom", "share")
+FREE_LIMB_SIZE = len(FREE_LIMB_FIELDS)
 
 
 class PlanError(ValueError):
@@ -39,16 +43,6 @@ def plan_scenario(plan: dict[str, Any], source: str = "<plan>") -> Scenario:
     data = dict(plan["scenario"])
     data["robot"] = plan["robot"]
     return scenario_from_dict(data, source, check_start=False)
-
-
-class Holding(NamedTuple):
-    """Boom `boom` on `anchor` during phases first..last; `attach` when it starts by a regrasp."""
-
-    boom: int
-    anchor: str
-    first: int
-    last: int
-    attach: bool
 
 
 class PhaseTrajectory(NamedTuple):
@@ -232,7 +226,7 @@ class PlanTrajectory:
         self.velocity = self.pose.derivative(1)
         self.acceleration = self.velocity.derivative(1)
         self.starts = np.array([p.start for p in self.phases])
-        self.holdings = _holdings([p.stance.ids for p in self.phases])
+        self.holdings = holdings_of([p.stance.ids for p in self.phases])
         # holding_of[k, i]: the holding of boom i during phase k (-1: free)
         self.holding_of = np.full((len(self.phases), NUM_BOOMS), -1, dtype=int)
         for h, hold in enumerate(self.holdings):
@@ -439,111 +433,6 @@ class PlanTrajectory:
         return sum(h.attach for h in self.holdings)
 
 
-def _holdings(stances: Sequence[tuple[str | None, ...]]) -> list[Holding]:
-    """Maximal runs of phases in which a boom stays on one anchor (as planning.probability)."""
-    out: list[Holding] = []
-    for i in range(NUM_BOOMS):
-        k = 0
-        while k < len(stances):
-            anchor = stances[k][i]
-            end = k
-            while end + 1 < len(stances) and stances[end + 1][i] == anchor:
-                end += 1
-            if anchor is not None:
-                out.append(Holding(i, anchor, k, end, attach=k > 0))
-            k = end + 1
-    return sorted(out, key=lambda h: (h.first, h.boom))
-
-
 def free_boom(stance: Stance) -> int | None:
     """`stance.free_boom` from the ids, for the per-step systems (the property costs 10 us)."""
     return stance.ids.index(None) if None in stance.ids else None
-
-
-class StrengthDraws(NamedTuple):
-    """One trial's draws laid out per phase: quantile[k, i] is the strength quantile u of the
-    holding of boom i in phase k (NaN when free); attach[k] the attach draw of the boom that
-    regrasps at the start of phase k (NaN when none), which fails when below attach_failure."""
-
-    quantile: np.ndarray     # (phases, 4)
-    attach: np.ndarray       # (phases,)
-    attach_boom: np.ndarray  # (phases,) int, -1 when none
-    attach_failure: float
-
-    @staticmethod
-    def none(plan: PlanTrajectory) -> StrengthDraws:
-        """Draws under which nothing ever fails (u = 0, no attach draws)."""
-        n = len(plan.phases)
-        return StrengthDraws(np.zeros((n, NUM_BOOMS)), np.full(n, np.nan),
-                             np.full(n, -1), 0.0)
-
-    @staticmethod
-    def for_trial(plan: PlanTrajectory, quantiles: np.ndarray, attach_draws: np.ndarray,
-                  attach_failure: float) -> StrengthDraws:
-        """From one draw per holding (`plan.holdings` order) of u and of the attach variable."""
-        n = len(plan.phases)
-        q = np.full((n, NUM_BOOMS), np.nan)
-        attach, boom = np.full(n, np.nan), np.full(n, -1)
-        for h, hold in enumerate(plan.holdings):
-            q[hold.first:hold.last + 1, hold.boom] = quantiles[h]
-            if hold.attach:
-                attach[hold.first], boom[hold.first] = attach_draws[h], hold.boom
-        return StrengthDraws(q, attach, boom, float(attach_failure))
-
-
-# ---------------------------------------------------------------------------------------------
-# The plan as a leaf system
-
-
-_PLAN_PLACEHOLDER = AbstractValue.Make(None)
-# PlanSource's free_limb output: the limb a shoulder carries (`PlanTrajectory.carried_limb`):
-# the planned free tip (x, y), its velocity, the boom's mass in the plant, the boom (-1: none)
-# and the share of the limb its shoulder carries (1 for a free boom, less in a ramp)
-FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass", "boom", "share")
-FREE_LIMB_SIZE = len(FREE_LIMB_FIELDS)
-
-
-class PlanSource(LeafSystem):
-    """The plan at the current time: desired state (pose, velocity) and acceleration,
-    feed-forward tensions, free limb (FREE_LIMB_FIELDS), phase index and stance. The plan is an
-    abstract parameter (`set_plan`)."""
-
-    def __init__(self):
-        super().__init__()
-        self._plan_index = self.DeclareAbstractParameter(_PLAN_PLACEHOLDER)
-        self.DeclareVectorOutputPort("desired_state", 6, self._calc_desired)
-        self.DeclareVectorOutputPort("desired_acceleration", 3, self._calc_acceleration)
-        self.DeclareVectorOutputPort("feedforward_tension", NUM_BOOMS, self._calc_tension)
-        self.DeclareVectorOutputPort("free_limb", FREE_LIMB_SIZE, self._calc_free_limb)
-        self.DeclareVectorOutputPort("phase", 1, self._calc_phase)
-        self.DeclareAbstractOutputPort("stance", lambda: AbstractValue.Make(None),
-                                       self._calc_stance)
-
-    def set_plan(self, context: Context, plan: PlanTrajectory) -> None:
-        context.get_mutable_abstract_parameter(self._plan_index).set_value(plan)
-
-    def plan(self, context: Context) -> PlanTrajectory:
-        return context.get_abstract_parameter(self._plan_index).get_value()
-
-    def _phase(self, context: Context) -> PhaseTrajectory:
-        return self.plan(context).phase_at(context.get_time())
-
-    def _calc_desired(self, context: Context, output: BasicVector) -> None:
-        plan, t = self.plan(context), context.get_time()
-        output.SetFromVector(np.concatenate([plan.pose.value(t).ravel(),
-                                             plan.velocity.value(t).ravel()]))
-
-    def _calc_acceleration(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self.plan(context).acceleration.value(context.get_time()).ravel())
-
-    def _calc_tension(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self._phase(context).tension.value(context.get_time()).ravel())
-
-    def _calc_free_limb(self, context: Context, output: BasicVector) -> None:
-        output.SetFromVector(self.plan(context).carried_limb(context.get_time()))
-
-    def _calc_phase(self, context: Context, output: BasicVector) -> None:
-        output.SetAtIndex(0, self.plan(context).phase_index(context.get_time()))
-
-    def _calc_stance(self, context: Context, output: AbstractValue) -> None:
-        output.set_value(self._phase(context).stance)

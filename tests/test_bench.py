@@ -185,16 +185,17 @@ def test_unknown_section_is_refused(monkeypatch: pytest.MonkeyPatch,
     assert "nope" in capsys.readouterr().err
 
 
-def test_the_rbp_hook_registers_bench_with_every_option() -> None:
-    import argparse
+def test_rbp_bench_hands_every_option_to_experiments_bench(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rbp bench` is registered once, in rbp/cli.py, and forwards its options unchanged."""
+    import experiments.bench
+    from rbp.cli import main
 
-    from experiments.bench import add_bench_command, run
-
-    parser = argparse.ArgumentParser(prog="rbp")
-    add_bench_command(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["bench", "--only", "scp", "--moves", "2", "--samples", "7",
-                              "--caves", "5", "--compare", "old.json"])
-    assert args.func is run, args.func
+    seen = []
+    monkeypatch.setattr(experiments.bench, "run", lambda args: seen.append(args) or 0)
+    assert main(["bench", "--only", "scp", "--moves", "2", "--samples", "7", "--caves", "5",
+                 "--compare", "old.json"]) == 0
+    (args,) = seen
     assert (args.only, args.moves, args.samples, args.caves, args.compare) == (
         "scp", 2, 7, 5, "old.json"), vars(args)
     assert args.json is None and args.out == "out/bench", vars(args)

@@ -1,0 +1,121 @@
+"""Benchmark rbp against what a user would write instead, side by side on the same inputs.
+
+Three sections, each run in this one process, cases interleaved so that a noisy shared machine
+slows every method alike; times are medians over cases.
+
+* allocation: the most robust tensions at a pose. Ours: `statics.allocate` (per pose, and
+  vectorised over a batch), `statics.ForceAllocator` (Drake + OSQP / Clarabel). Theirs: the
+  public ReachBot code's formulation, cvxpy maximising sum cp.log_normcdf(z_i) subject to
+  A f = b and the tension bounds (a DPP problem built once, re-solved with Clarabel and ECOS),
+  and scipy SLSQP on the exact objective (log_ndtr). All maximise the same J = sum log Phi(z_i)
+  - REGULARISATION/2 |f|^2; every answer is scored with the exact J, against the best answer
+  of the case. cp.log_normcdf is a piecewise quadratic approximation (exactly 0 for z >= 3),
+  so cvxpy's own objective value is compared with the exact one too. Cases: random poses and
+  stances on the bundled caves, feasible by `check_poses` (4- and 3-stances), plus 4-stances
+  whose statics hold but whose probability is below p_min (the planner allocates those too).
+* scp: one phase's trajectory. Ours: `scp.optimise_body` / `optimise_reach` on seeds from
+  `seeds.body_seed` / `reach_seed` along the first moves of a climb on the bundled caves.
+  Theirs: one nonlinear program of the same phase solved by IPOPT (bundled with Drake; allowed
+  here, never in the product): the exact geometry, written here independently of rb_drake as
+  a function of the poses that Drake differentiates (AutoDiffXd), the statics A(q) f = b(q),
+  boom length, shoulder angle, pull angle and shoulder torque limits as constraints, r_k >=
+  log p_min, fixed start and goal states and the merit of `planning.scp` (robustness, dynamics
+  penalty, smoothness), from the same seed. Differences, each forced by the method: collisions
+  are not modelled (not smooth); the floor is log p_min, not SCP's max(log p_min, the seed's
+  least r_k), which starves the interior-point method where the seed is near certain; poses
+  and velocities are boxed far from the seed (interior-point methods diverge on unbounded
+  variables here). Both answers are re-checked with `check_poses` and scored with the merit
+  of `PhaseProgram.evaluate`; the program's own merit is checked equal to it at the seed.
+* footstep: `footsteps.plan_footsteps` against `baseline.plan_naive` on short generated caves.
+
+Writes every case and a summary to a JSON file; `--compare OLD.json` prints new/old ratios of
+every summary metric.
+
+    python -m experiments.bench --only allocation,scp --samples 300 --out out/bench
+    rbp bench --compare out/bench/bench-old.json
+
+The sections are `allocation.py`, `scp.py` (its phases `phases.py`, the IPOPT program
+`ipopt.py`) and `footstep.py`; `report.py` holds the results file and --compare; `stats.py`
+what they share.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from experiments.bench.allocation import run_allocation
+from experiments.bench.footstep import run_footstep
+from experiments.bench.report import jsonable, machine, print_comparison
+from experiments.bench.scp import run_scp
+from rb_drake.files import atomic_write_text
+
+SECTIONS = ("allocation", "scp", "footstep")
+FORMAT = "rbp-bench/1"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--only", default=",".join(SECTIONS),
+                        help=f"comma-separated sections (default: {','.join(SECTIONS)})")
+    parser.add_argument("--samples", type=int, default=300,
+                        help="allocation cases (default 300)")
+    parser.add_argument("--moves", type=int, default=4,
+                        help="scp: regrasps along climbs of the bundled caves; each gives a "
+                             "body and a reach phase (default 4)")
+    parser.add_argument("--ipopt-iterations", type=int, default=1000,
+                        help="scp: IPOPT's iteration cap per phase (default 1000)")
+    parser.add_argument("--caves", type=int, default=3,
+                        help="footstep: generated caves (default 3)")
+    parser.add_argument("--max-expansions", type=int, default=60,
+                        help="footstep: the planners' cap (default 60)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
+    parser.add_argument("--json", metavar="FILE", help="results file (default OUT/bench.json)")
+    parser.add_argument("--compare", metavar="OLD", help="an earlier results file: print the "
+                        "ratio new/old of every summary metric")
+
+
+def run(args: argparse.Namespace) -> int:
+    sections = [s.strip() for s in args.only.split(",") if s.strip()]
+    unknown = sorted(set(sections) - set(SECTIONS))
+    if unknown:
+        print(f"error: unknown section(s) {unknown}; choose from {list(SECTIONS)}",
+              file=sys.stderr)
+        return 2
+    old = None
+    if args.compare:  # read first: a bad file should fail before minutes of benchmarking
+        try:
+            old = json.loads(Path(args.compare).read_text())
+        except (OSError, ValueError) as e:
+            print(f"error: --compare {args.compare}: {e}", file=sys.stderr)
+            return 2
+    result: dict[str, Any] = {
+        "format": FORMAT, "created": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(),
+        "options": {k: v for k, v in vars(args).items() if k != "func"}, "sections": {}}
+    started = time.perf_counter()
+    for name in SECTIONS:
+        if name not in sections:
+            continue
+        if name == "allocation":
+            result["sections"][name] = run_allocation(args.samples, args.seed)
+        elif name == "scp":
+            result["sections"][name] = run_scp(args.moves, args.seed, args.ipopt_iterations)
+        else:
+            result["sections"][name] = run_footstep(args.caves, args.max_expansions, args.seed)
+    result["seconds"] = time.perf_counter() - started
+    out = Path(args.json) if args.json else Path(args.out) / "bench.json"
+    atomic_write_text(out, json.dumps(result, indent=1, default=jsonable))
+    print(f"\nwrote {out} ({result['seconds']:.0f} s)")
+    if old is not None:
+        print_comparison(old, result, args.compare)
+    return 0
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))

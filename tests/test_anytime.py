@@ -108,3 +108,20 @@ def test_plan_file_records_cost_and_bound(demo: Scenario, optimal) -> None:
     assert search["history"] and search["history"][-1]["cost"] == search["cost"]
     again = plan_footsteps(demo, config)
     assert again.stances == fp.stances and again.cost == fp.cost, "not reproducible"
+
+
+@pytest.mark.parametrize("setting, field", [("{target_bound: 0.5}", "target_bound"),
+                                            ("{improve_factor: -1}", "improve_factor"),
+                                            ("{weights: [10, 0]}", "weights")])
+def test_bad_anytime_settings_get_one_line(tmp_path, setting: str, field: str) -> None:
+    from cli_helpers import run_rbp
+
+    config = tmp_path / "planner.yaml"
+    config.write_text(f"footstep:\n  anytime: {setting}\n")
+    out = tmp_path / "plan.json"
+    run = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(out),
+                  cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"footstep.anytime.{field}" in lines[0], run.stderr
+    assert not out.exists(), "no plan may be written for a refused configuration"

@@ -84,7 +84,26 @@ def plan_setup(args: argparse.Namespace):
         source = args.config or args.from_plan or "(configuration)"
         raise UserError(f"{source}: footstep.search: must be one of {', '.join(SEARCHES)}, "
                         f"got {cfg.footstep.search!r}")
+    anytime = cfg.footstep.anytime
+    if anytime is not None:
+        source = args.config or args.from_plan or "(configuration)"
+        problem = anytime_problem(anytime)
+        if problem:
+            raise UserError(f"{source}: footstep.anytime.{problem}")
     return scn, planner, cfg, motion
+
+
+def anytime_problem(anytime) -> str:
+    """What is wrong with an AnytimeConfig ("field: reason"), or "" if nothing."""
+    if not anytime.target_bound >= 1.0:
+        return f"target_bound: must be 1 (optimal) or more, got {anytime.target_bound}"
+    if anytime.improve_factor is not None and not anytime.improve_factor >= 0:
+        return f"improve_factor: must be 0 or more, or null, got {anytime.improve_factor}"
+    if not anytime.improve_min >= 0:
+        return f"improve_min: must be 0 or more, got {anytime.improve_min}"
+    if not all(w > 0 for w in anytime.weights):
+        return f"weights: must all be positive, got {list(anytime.weights)}"
+    return ""
 
 
 def _from_plan(path: Path):

@@ -64,6 +64,7 @@ from rb_drake.scenario import Scenario
 Stance4 = tuple[str, str, str, str]
 Vertex = tuple[Stance4, int]  # (stance, component)
 ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
+BOUND_EVERY = 100  # expansions between two updates of the anytime search's lower bound
 
 
 @dataclasses.dataclass
@@ -608,6 +609,15 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
                     heapq.heapify(open_list)
             continue  # a goal's successors cannot be cheaper routes
+        if best is not None and (expansions - first_expansions) % BOUND_EVERY == 0:
+            # The lower bound rises as the search goes on: record it (and stop at the target).
+            lo = lower()
+            if lo > history[-1][2] * (1.0 + 1e-9):
+                history.append((time.perf_counter() - t0, best_cost, lo, expansions))
+                if progress is not None:
+                    progress(expansions, tested, nearest, bound=best_cost / lo)
+                if best_cost <= anytime.target_bound * lo:
+                    break
         if max_expansions is not None and expansions >= max_expansions and best is None:
             stop = "budget"
             reason = (f"gave up after {expansions} expansions without reaching the goal "

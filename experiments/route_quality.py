@@ -160,6 +160,39 @@ def compare(new: dict[str, Any], old: dict[str, Any]) -> None:
               f"{median(ratios):.3f}")
 
 
+def against_oracle(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each variant's routes against the oracle's, cave by cave, over several runs' files (the
+    oracle may have run separately, on part of the caves): how many routes are within 5 % of
+    the best cost the oracle found (its proven optimum where it says so), how many of those
+    optima were proved, and the cost ratios."""
+    caves: dict[tuple[str, int], dict[str, Any]] = {}
+    for run in runs:  # a variant of a cave is taken from the first file that has it
+        for cave in run["caves"]:
+            entry = caves.setdefault((cave["kind"], cave["seed"]), {})
+            for v in run["variants"]:
+                entry.setdefault(v, cave[v])
+    with_oracle = [c for c in caves.values() if c.get("oracle", {}).get("success")]
+    out: dict[str, Any] = {"caves_with_an_oracle_route": len(with_oracle),
+                           "oracle_proved_optimal": sum(c["oracle"]["bound"] == 1.0
+                                                        for c in with_oracle),
+                           "oracle_median_bound": median([c["oracle"]["bound"]
+                                                          for c in with_oracle])}
+    variants = sorted({v for c in with_oracle for v in c} - {"oracle"})
+    for v in variants:
+        pairs = [(c[v]["cost"], c["oracle"]["cost"], c["oracle"]["bound"] == 1.0)
+                 for c in with_oracle if v in c and c[v]["success"]]
+        ratios = [a / b for a, b, _ in pairs]
+        out[v] = {"routes": len(pairs),
+                  "within_5pct_of_oracle_best": sum(r <= 1.05 + 1e-9 for r in ratios),
+                  "within_5pct_of_a_proven_optimum": sum(r <= 1.05 + 1e-9 and proved
+                                                         for r, (_, _, proved)
+                                                         in zip(ratios, pairs, strict=True)),
+                  "better_than_oracle": sum(r < 1.0 - 1e-9 for r in ratios),
+                  "median_cost_ratio_to_oracle": median(ratios),
+                  "ratios": sorted(round(r, 4) for r in ratios)}
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.route_quality",
                                      description=__doc__.split("\n\n")[0])
@@ -176,7 +209,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--out", default="out/route_quality.json")
     parser.add_argument("--compare", default=None, help="another run's json")
+    parser.add_argument("--against-oracle", nargs="+", metavar="RUN.json", default=None,
+                        help="no search: compare the variants of these runs' files with the "
+                             "oracle variant found in them, cave by cave, and print it (a "
+                             "variant of a cave is taken from the first file that has it)")
     args = parser.parse_args(argv)
+    if args.against_oracle:
+        runs = [json.loads(Path(f).read_text()) for f in args.against_oracle]
+        print(json.dumps(against_oracle(runs), indent=1))
+        return 0
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in VARIANTS]
     if bad:

@@ -67,8 +67,9 @@ def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = O
         return FootstepConfig(search="sampled", max_expansions=max_expansions)
     if planner == "rbp-hybrid":
         return FootstepConfig(search="hybrid", max_expansions=max_expansions)
-    if planner == "oracle":
-        return FootstepConfig(max_expansions=None, time_limit=oracle_seconds)
+    if planner == "oracle":  # labels caves route / noroute: its first route is enough (the
+        # optimum is experiments.route_quality's oracle, rbp plan --thorough)
+        return FootstepConfig(max_expansions=None, time_limit=oracle_seconds, anytime=None)
     return FootstepConfig(max_expansions=max_expansions)
 
 

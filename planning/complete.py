@@ -42,23 +42,17 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.components import UNKNOWN, Component, StanceComponents
-from planning.lattice import SPAN, LatticeConfig, pack, poses_of, unpack
-from planning.search_cost import DistanceHeuristic, RegraspHeuristic, boom_costs
-from planning.transition import anchor_table
-from rb_drake.feasibility import body_in_rock
-from rb_drake.feasibility_kernel import (
-    _packed_rock,
-    _robot_params,
-    held_kernel_threads,
-    kernel_threads,
-    lattice_move_kernel,
-    lattice_move_table,
-    lattice_reach_rows,
-    lattice_reached_anchors,
-    reach_violation,
-    score_poses,
+from planning.components import UNKNOWN, StanceComponents
+from planning.lattice import LatticeConfig, poses_of, unpack
+from planning.lattice_moves import (
+    LatticeTransition,
+    goal_is_holdable,
+    lattice_transition,
+    move_table,
+    start_components,
 )
+from planning.search_cost import DistanceHeuristic, RegraspHeuristic, boom_costs
+from rb_drake.feasibility_kernel import held_kernel_threads
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
@@ -74,16 +68,6 @@ class LatticeMemo:
     components: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
     transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
     config: LatticeConfig | None = None  # the lattice all of it was decided on
-
-
-class LatticeTransition(NamedTuple):
-    """Every lattice pose of component `component` of `stance` that holds boom `boom`'s move
-    to `anchor`, with the worst of the four configurations' r and each one's r."""
-
-    keys: np.ndarray      # (E,) lattice keys (sorted)
-    worst: np.ndarray     # (E,)
-    r4: np.ndarray        # (E, 4) CONFIG_NAMES order
-    tested: int           # lattice poses tested
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,94 +126,6 @@ def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: Lat
     return hit
 
 
-def _lattice_grid(cfg: LatticeConfig) -> tuple:
-    """The lattice arguments of the compiled kernels that decode keys: span, dx, dphi, n."""
-    return SPAN, float(cfg.position_step), float(cfg.angle_step), int(cfg.angle_count)
-
-
-def _lattice_args(scn: Scenario, cfg: LatticeConfig) -> tuple:
-    """The robot and lattice arguments of the compiled reach kernels."""
-    return (_robot_params(scn.robot, _NO_GRAVITY), *_lattice_grid(cfg))
-
-
-_NO_GRAVITY = np.zeros(2)  # the reach tests' robot parameters need none
-
-
-def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarray:
-    """Rows of component `lat` at which boom `boom` may let go and reaches `anchor` (the reach
-    test of `reach_violation`), its segment to `anchor` clear of rock (the kernel's test of
-    it): the poses a transition of that move can use, decided in one compiled pass."""
-    target = scn.anchor_positions[scn.anchor_index[anchor]]
-    return lattice_reach_rows(lat.keys, lat.boom_release_rows(boom), float(target[0]),
-                              float(target[1]), int(boom), *_lattice_args(scn, lat.lattice),
-                              _packed_rock(scn.rock)[0])
-
-
-def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
-                       ignore_grasps: bool = False, rows: np.ndarray | None = None,
-                       arrival: StanceComponents | None = None,
-                       labels: np.ndarray | None = None) -> LatticeTransition:
-    """Decide boom `boom`'s move to `anchor` from component `lat` of `stance` on every lattice
-    pose (see the module doc); `rows`: `move_rows`, if known. `arrival`: the new stance's
-    components found so far, if any: a pose they already decide (in a component, or scored
-    infeasible) is looked up, not scored again (the same answer: module doc); `labels`:
-    `arrival.known_component` of the rows' keys, if known."""
-    rows = move_rows(scn, lat, boom, anchor) if rows is None else rows
-    tested = len(rows)
-    if arrival is None or not tested:
-        return _scored_transition(scn, lat, stance, boom, anchor, ignore_grasps, rows, tested)
-    if labels is None:
-        labels = arrival.known_component(lat.keys[rows])
-    parts = [_scored_transition(scn, lat, stance, boom, anchor, ignore_grasps,
-                                rows[labels == UNKNOWN], tested)]
-    for c in sorted(set(labels[labels >= 0].tolist())):  # np.unique, at a tenth of its cost
-        # In component c of the new stance S': feasible there, its segment to the new anchor
-        # clear, and the 3-stance with the gripper at the new anchor is S''s release set of
-        # this boom, decided by the flood fill with the same operations.
-        src = rows[labels == c]
-        comp = arrival.components[int(c)]
-        at = np.searchsorted(comp.keys, lat.keys[src])
-        ok = comp.release[at, boom]
-        src, at = src[ok], at[ok]
-        r4 = np.column_stack([lat.robustness[src], lat.release_r[src, boom],
-                              comp.release_r[at, boom], comp.robustness[at]])
-        parts.append(LatticeTransition(lat.keys[src], r4.min(axis=1), r4, tested))
-    keys = np.concatenate([p.keys for p in parts])
-    order = np.argsort(keys, kind="stable")
-    return LatticeTransition(keys[order], np.concatenate([p.worst for p in parts])[order],
-                             np.concatenate([p.r4 for p in parts])[order], tested)
-
-
-def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
-                       ignore_grasps: bool, rows: np.ndarray, tested: int) -> LatticeTransition:
-    """The move decided by the kernel on `rows` of `lat` (`lattice_transition`)."""
-    if not len(rows):
-        return LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
-    table = anchor_table(scn)
-    free = len(table.row)
-    held = [table.row[a] for a in stance]
-    stance_rows = np.array([held, held], dtype=np.int64)
-    stance_rows[0, boom] = free  # the 3-stance, its gripper at the new anchor (tip 0)
-    stance_rows[1, boom] = table.row[anchor]  # the new 4-stance
-    # The 3-stance first (its tensions are unique: cheap), the new 4-stance where it holds.
-    # Every segment but the freed boom's to its new anchor is the old 4-stance's, clear at
-    # these poses, and that one is clear at every row of `move_rows` (the kernel's own test of
-    # it), so neither configuration tests a segment again. The new 4-stance's
-    # release set of this boom is the 3-stance with the gripper at the new anchor as the
-    # attach ramp starts, the gripper counted unloaded (the first test, without that grasp,
-    # is a necessary condition of it, and it decided the freed boom's segment).
-    kept, arrive, r_new = lattice_move_kernel(
-        lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom),
-        *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector),
-        table.positions, table.normals, table.f_normal, table.f_lateral, table.sigma_normal,
-        table.sigma_lateral, stance_rows, np.array([table.row[anchor], free], dtype=np.int64),
-        *_packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
-    r4 = np.empty((len(kept), 4))
-    r4[:, 0], r4[:, 1], r4[:, 2], r4[:, 3] = (lat.robustness[kept], lat.release_r[kept, boom],
-                                              arrive, r_new)
-    return LatticeTransition(lat.keys[kept], r4.min(axis=1), r4, tested)
-
-
 def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
                   g: float = math.inf) -> bool:
     """Whether every pose a move could use (`labels`: what the child stance's components know
@@ -243,118 +139,6 @@ def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
         if done is None or done > g + 1e-12:
             return False
     return True
-
-
-def _near_anchors(scn: Scenario, lat: Component, stance: tuple) -> np.ndarray:
-    """Indices of the anchors within reach (boom length plus shoulder offset) of component
-    `lat`'s bounding box, the stance's own anchors excluded: no other can be a move's."""
-    pts = scn.anchor_positions
-    lo, hi = lat.box
-    gap = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts, pts - hi)), axis=1)
-    near = gap <= scn.robot.max_reach + 1e-6
-    near[[scn.anchor_index[a] for a in stance]] = False
-    return np.flatnonzero(near)
-
-
-def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
-    """Per boom, the indices of every anchor it reaches from some release pose of component
-    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
-    the component, anchors beyond reach of its bounding box left out first."""
-    pts = scn.anchor_positions
-    near = _near_anchors(scn, lat, stance)
-    if not len(near):
-        return [near] * 4
-    found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
-                                    np.ascontiguousarray(pts[near]),
-                                    *_lattice_args(scn, lat.lattice))
-    return [near[found[j]] for j in range(4)]
-
-
-def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[int, np.ndarray]]]:
-    """Per boom, every move of component `lat` that some pose can use: (anchor index, its
-    `move_rows`) for each anchor that the boom reaches from a release pose with its segment
-    there clear of rock, in one compiled pass over the component (`lattice_move_table`). The
-    anchors of `candidate_moves` whose every such segment meets rock are left out: no pose
-    holds their move (the 3-stance with the gripper at the new anchor tests that segment)."""
-    pts = scn.anchor_positions
-    near = _near_anchors(scn, lat, stance)
-    if not len(near):
-        return [[] for _ in range(4)]
-    rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,
-                                       np.ascontiguousarray(pts[near]),
-                                       *_lattice_args(scn, lat.lattice),
-                                       _packed_rock(scn.rock)[0])
-    K = len(near)
-    at, anchors = offsets.tolist(), near.tolist()  # Python ints: numpy scalars cost 10x
-    return [[(anchors[k], rows[at[j * K + k]:at[j * K + k + 1]])
-             for k in range(K) if at[j * K + k + 1] > at[j * K + k]]
-            for j in range(4)]
-
-
-def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
-    """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
-    (exact on the lattice), the stance's own anchors excluded."""
-    return candidate_moves(scn, lat, stance)[boom]
-
-
-def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
-                     link_step: float = 0.005) -> dict[int, np.ndarray]:
-    """The components the start pose is joined to, each with the lattice pose it joins: a
-    feasible lattice pose of a neighbouring cell (within one step in x, y and phi) whose
-    straight segment from the start pose is feasible every `link_step` m or rad."""
-    start = np.asarray(scn.start_pose, dtype=float)
-    out: dict[int, np.ndarray] = {}
-    base = np.floor(start / np.array([cfg.position_step, cfg.position_step,
-                                      cfg.angle_step])).astype(np.int64)
-    corners = np.array(list(itertools.product((0, 1), repeat=3))) + base
-    keys = pack(corners, cfg.angle_count)
-    held = []  # (robustness, component, pose) of each feasible corner
-    for key, comp in zip(keys, lat.component_of(keys), strict=True):
-        if comp >= 0:
-            c = lat.components[comp]
-            row = int(np.searchsorted(c.keys, key))
-            held.append((-float(c.robustness[row]), int(comp), c.poses_at(np.array([row]))[0]))
-    stance = scn.stance(scn.start_stance)
-    for _, comp, end in sorted(held, key=lambda h: h[0]):
-        if comp in out:
-            continue
-        n = max(2, int(np.ceil(np.abs(end - start).max() / link_step)) + 1)
-        link = start + np.linspace(0.0, 1.0, n)[:, None] * (end - start)
-        if score_poses(scn, stance, link).feasible.all():
-            out[comp] = end
-    return out
-
-
-def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
-    """Whether some lattice pose within the goal tolerance could hold a stance at all: its body
-    clear of rock and every boom reaching some anchor (a necessary condition for a goal vertex,
-    so False proves that no route exists at the lattice's resolution)."""
-    goal = np.asarray(scn.goal_position, dtype=float)
-    tol, dx = scn.goal_tolerance, cfg.position_step
-    i = np.arange(math.ceil((goal[0] - tol) / dx), math.floor((goal[0] + tol) / dx) + 1)
-    k = np.arange(math.ceil((goal[1] - tol) / dx), math.floor((goal[1] + tol) / dx) + 1)
-    ii, kk = np.meshgrid(i, k, indexing="ij")
-    cells = np.column_stack([ii.ravel(), kk.ravel()])
-    cells = cells[np.linalg.norm(cells * dx - goal, axis=1) <= tol]
-    if not len(cells):
-        return False
-    near = np.flatnonzero(np.linalg.norm(scn.anchor_positions - goal, axis=1)
-                          <= tol + scn.robot.max_reach + 1e-6)
-    if not len(near):
-        return False
-    n = cfg.angle_count
-    for m in range(-n // 2, n // 2):  # an orientation at a time: bounded memory
-        poses = np.column_stack([cells * dx, np.full(len(cells), m * cfg.angle_step)])
-        ok = np.ones(len(poses), dtype=bool)
-        for j in range(4):
-            v = reach_violation(scn.robot, poses, scn.anchor_positions[near],
-                                np.full(len(near), j))
-            ok &= (v == 0.0).any(axis=1)
-        if not ok.any():
-            continue
-        if not scn.rock.polygons or not body_in_rock(scn.robot, scn.rock, poses[ok]).all():
-            return True
-    return False
 
 
 def _threads_held(search: Callable[..., CompleteResult]) -> Callable[..., CompleteResult]:

@@ -18,16 +18,7 @@ import math
 import numpy as np
 import pytest
 
-from planning.complete import (
-    LatticeMemo,
-    candidate_anchors,
-    complete_search,
-    goal_is_holdable,
-    lattice_transition,
-    move_rows,
-    move_table,
-    start_components,
-)
+from planning.complete import LatticeMemo, complete_search
 from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
 from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
 from planning.lattice import (
@@ -36,6 +27,14 @@ from planning.lattice import (
     poses_of,
     reachable_lattice,
     stance_lattice,
+)
+from planning.lattice_moves import (
+    candidate_anchors,
+    goal_is_holdable,
+    lattice_transition,
+    move_rows,
+    move_table,
+    start_components,
 )
 from planning.plan import build_plan
 from planning.transition import transition_stances

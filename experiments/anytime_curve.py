@@ -32,8 +32,7 @@ def search_history(kind: str, seed: int, time_limit: float) -> dict:
     default_stop = None
     if fp.history:
         first = fp.history[0][3]
-        default_stop = first + max(AnytimeConfig().improve_min,
-                                   AnytimeConfig().improve_factor * first)
+        default_stop = first + AnytimeConfig().improve_expansions(first)
     return {"kind": kind, "seed": seed, "success": bool(fp.success), "stop": fp.stop,
             "quality": fp.quality, "regrasps": len(fp.steps) if fp.success else None,
             "default_stop_expansions": default_stop,

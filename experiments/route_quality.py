@@ -15,18 +15,17 @@ run the script in each tree, then compare).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import multiprocessing
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from experiments.common import cave_kind, make_cave
+from experiments.sweep import machine_info, quantiles
 
 VARIANTS = ("default", "first", "sampled", "w30", "w3", "anytime-f1", "anytime-f4", "oracle",
             "oracle-a*")
@@ -56,9 +55,6 @@ def footstep_config(variant: str, time_limit: float | None):
         "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
                       "heuristic_weight": 1.0},
     }[variant]
-    fields = {f.name for f in dataclasses.fields(FootstepConfig)}
-    if "anytime" not in fields:  # a tree from before the anytime search
-        settings.pop("anytime", None)
     return FootstepConfig(**settings)
 
 
@@ -66,14 +62,7 @@ def run_cave(job: tuple[str, int, tuple[float, float], list[str], float | None]
              ) -> dict[str, Any]:
     from planning.footsteps import plan_footsteps
     from planning.plan import build_plan
-    try:
-        from planning.search_cost import edge_cost
-    except ImportError:  # a tree from before planning.search_cost, for --compare
-        from planning.footsteps import boom_costs
-
-        def edge_cost(scn, old, boom, anchor, pose):
-            c = -math.log(1.0 - scn.robot.attach_failure)
-            return max(c, 1e-9) + float(boom_costs(scn, old, boom, anchor, pose).sum())
+    from planning.search_cost import edge_cost
 
     kind, seed, length, variants, limit = job
     scn = make_cave(kind, seed, length)
@@ -101,11 +90,8 @@ def run_cave(job: tuple[str, int, tuple[float, float], list[str], float | None]
 
 
 def median(values: list[float]) -> float | None:
-    v = sorted(x for x in values if x is not None and math.isfinite(x))
-    if not v:
-        return None
-    n = len(v)
-    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+    """The median of the finite values (None when there are none)."""
+    return quantiles([x for x in values if x is not None and math.isfinite(x)])["median"]
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
@@ -235,9 +221,7 @@ def main(argv: list[str] | None = None) -> int:
             caves.append(cave)
             line = " ".join(f"{v}:{cave[v]['stop'] or cave[v]['regrasps']}" for v in variants)
             print(f"[{k}/{len(jobs)}] {cave['kind']} {cave['seed']}: {line}", file=sys.stderr)
-    result = {"variants": variants, "machine": {"node": platform.node(),
-                                                "processor": platform.processor(),
-                                                "cpus": os.cpu_count()},
+    result = {"variants": variants, "machine": machine_info(),
               "args": {k: v for k, v in vars(args).items() if k != "compare"},
               "wall_seconds": time.perf_counter() - t0,
               "summary": summary(caves, variants), "caves": caves}

@@ -51,7 +51,7 @@ from planning.lattice_moves import (
     move_table,
     start_components,
 )
-from planning.search_cost import DistanceHeuristic, RegraspHeuristic, boom_costs
+from planning.search_cost import DistanceHeuristic, RegraspHeuristic, edge_cost
 from rb_drake.feasibility_kernel import held_kernel_threads
 from rb_drake.scenario import Scenario
 
@@ -175,8 +175,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     elif memo.config != cfg:
         raise ValueError(f"a memo of lattice {memo.config} cannot serve lattice {cfg}")
     t0 = time.perf_counter()
-    lower_bound = DistanceHeuristic(scn)
-    c_attach = lower_bound.c_attach
+    distance_heuristic = DistanceHeuristic(scn)
+    c_attach = distance_heuristic.c_attach
     goal = np.asarray(scn.goal_position, dtype=float)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
@@ -185,7 +185,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     graph = nx.DiGraph()
     tested = 0
 
-    distance = lower_bound.distance
+    distance = distance_heuristic.distance
 
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
@@ -229,7 +229,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if exact:
             return bound(stance)
         # the weighted distance, in the order it always had
-        return weight * c_attach * distance(stance) / lower_bound.max_step
+        return weight * c_attach * distance(stance) / distance_heuristic.max_step
 
     # Entries: (f, tie, g, kind, child stance, payload). kind 0: a stance reached by an
     # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
@@ -254,15 +254,16 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     first_expansions = -1
     schedule = list(anytime.weights) if anytime is not None else []
 
-    proven = [0.0]  # the highest lower bound found so far (each one is valid)
+    proven = 0.0  # the highest lower bound found so far (each one is valid)
 
     def lower() -> float:
         """min over the open list of g + bound (and the best cost): the optimum is no lower."""
+        nonlocal proven
         lo = best_cost
         for entry in itertools.chain(open_list, deferred):
             lo = min(lo, entry[2] + bound(entry[4]))
-        proven[0] = max(proven[0], lo)
-        return proven[0]
+        proven = max(proven, lo)
+        return proven
 
     def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
                    child: Stance4, comp: int | None) -> tuple:
@@ -271,7 +272,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
         poses = poses_of(unpack(tr.keys[order], cfg.angle_count), cfg)
         pose = poses[0]
-        cost = c_attach + float(boom_costs(scn, stance, j, anchor, pose).sum())
+        cost = edge_cost(scn, stance, j, anchor, pose)
         g_child = g_parent + cost
         data = graph.edges[move[0], child]
         data["cost"] = min(data.get("cost", math.inf), cost)
@@ -283,7 +284,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         """Whether nothing through `stance` at `g` can beat the best route (or reach the goal)."""
         return g + bound(stance) >= best_cost * (1.0 - 1e-12)
 
-    def finished(g_goal: float, vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
+    def finished(vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
         path, poses, probs, others, cost = [vertex], [], [], [], 0.0
         while parent[path[-1]][0] is not None:
             (pv, _j, _a), pz, pp, alt, c = parent[path[-1]]
@@ -367,7 +368,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                      if box_gap <= scn.goal_tolerance else ())
         if len(near_goal):
             goal_pose = lat.poses_at(near_goal[[int(np.argmax(lat.robustness[near_goal]))]])[0]
-            found = finished(g, vertex, goal_pose)
+            found = finished(vertex, goal_pose)
             if anytime is None:
                 return found._replace(frontier=_frontier(open_list, closed))
             if found.cost < best_cost:

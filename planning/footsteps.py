@@ -36,8 +36,8 @@ from planning.ramps import ramp_ends_hold
 from planning.search_cost import (
     DistanceHeuristic,
     attach_cost,
-    boom_costs,
     centroid_distance,
+    edge_cost,
     goal_distance,
 )
 from planning.transition import (
@@ -251,8 +251,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         tr = cache[ck]
         if not tr.feasible:
             return None
-        cost = c_attach + float(boom_costs(scn, node, j, anchor, tr.pose).sum())
-        return Edge(cost, tr.pose)
+        return Edge(edge_cost(scn, node, j, anchor, tr.pose), tr.pose)
 
     def heuristic(node: Stance4) -> float:
         return distance_heuristic(node)

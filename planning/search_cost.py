@@ -6,10 +6,13 @@ Cost. The plan's success probability is p_path = prod_holdings min_t P_i(t) * (1
 a path this bounds -log p_path from above (over the configurations the footstep plan knows), so
 minimising it favours both few regrasps and robust grasps.
 
-Heuristic. `DistanceHeuristic`: a regrasp moves one of four anchors by at most 2 (L_max + |s|),
-so the anchors' centroid advances at most `max_step` per regrasp, and
-h = -log(1 - p_att) * goal_distance / max_step never overestimates. The searches multiply it by
-their `heuristic_weight`.
+Heuristics. `DistanceHeuristic` orders the search for a first route: a regrasp moves one of
+four anchors by at most 2 (L_max + |s|), so the anchors' centroid advances at most `max_step`
+per regrasp, and h = -log(1 - p_att) * goal_distance / max_step estimates the regrasps left.
+It is not a strict lower bound (`goal_distance` also counts a lagging anchor's distance beyond
+reach, which one regrasp can remove, and a goal stance's centroid may lie beyond the goal
+tolerance); the searches multiply it by their `heuristic_weight` anyway. `RegraspHeuristic` is
+the admissible, consistent bound: it prunes, and proves how far a route is from the optimum.
 
 Both searches (`planning.footsteps`' sampled one and `planning.complete`) take their cost and
 heuristic from here, so a new heuristic is written once.
@@ -83,7 +86,7 @@ def goal_distance(scn: Scenario, stance: tuple[str, ...]) -> float:
 
 class DistanceHeuristic:
     """h(stance) = -log(1 - p_att) * goal_distance / max_step, memoised per stance (module
-    doc): a lower bound on the cost to go (unweighted)."""
+    doc): an estimate of the cost to go that orders the first-route search (unweighted)."""
 
     def __init__(self, scn: Scenario) -> None:
         self.scn = scn

@@ -113,51 +113,93 @@ def boom_hop_length(robot: RobotParams) -> float:
     return robot.boom_length[1] * max(1.0, 2.0 * math.sin(spread / 2.0))
 
 
+ORIENTATION_CELLS = 36  # the goal pose's orientation, in cells of 10 deg (RegraspHeuristic)
+
+
+def goal_targets(scn: Scenario, cells: int = ORIENTATION_CELLS) -> np.ndarray:
+    """(cells, 4, anchors) bool: whether boom j may hold the anchor in a stance that holds a
+    goal pose whose orientation lies in cell k, [-pi + k d, -pi + (k + 1) d], d = 2 pi / cells.
+
+    A superset, so that a bound built on it never overestimates: at such a pose (centre c within
+    the goal tolerance of G, orientation theta in the cell) boom j's shoulder s lies within
+    rho = tolerance + |s_j| d / 2 of q = G + R(theta_mid) s_j, and the anchor lies in the boom's
+    sector from s (length at most L_max, direction within the shoulder range of theta + d_j),
+    a subset of the sector from s widened by d / 2 each side; so a - q lies within rho of that
+    widened sector, and the test is a lower bound of the distance to it (the larger of the
+    distances beyond L_max and to the sector's infinite cone)."""
+    robot = scn.robot
+    pts = scn.anchor_positions
+    goal = np.asarray(scn.goal_position, dtype=float)
+    step = 2.0 * math.pi / cells
+    shoulders = robot.shoulder_array
+    out = np.zeros((cells, 4, len(pts)), dtype=bool)
+    for k in range(cells):
+        mid = -math.pi + (k + 0.5) * step
+        c, s = math.cos(mid), math.sin(mid)
+        for j in range(4):
+            q = goal + np.array([c * shoulders[j, 0] - s * shoulders[j, 1],
+                                 s * shoulders[j, 0] + c * shoulders[j, 1]])
+            rho = scn.goal_tolerance + float(np.linalg.norm(shoulders[j])) * step / 2.0
+            v = pts - q
+            r = np.linalg.norm(v, axis=1)
+            off = np.arctan2(v[:, 1], v[:, 0]) - mid - robot.shoulder_directions[j]
+            beyond = np.abs((off + math.pi) % (2.0 * math.pi) - math.pi) - (
+                robot.shoulder_range + step / 2.0)
+            to_cone = np.where(beyond <= 0.0, 0.0,
+                               np.where(beyond < math.pi / 2,
+                                        r * np.sin(np.clip(beyond, 0.0, math.pi / 2)), r))
+            gap = np.maximum(r - robot.boom_length[1], to_cone)
+            out[k, j] = gap <= rho * (1.0 + 1e-9) + 1e-7
+    return out
+
+
 class RegraspHeuristic:
     """A lower bound on the cost to go from the regrasps each boom still needs.
 
     Relaxed graph, one per boom j: its vertices are the anchors, an edge joins two anchors at
-    most `boom_hop_length` apart (every move of boom j is one of them), and its targets are the
-    anchors within L_max + |shoulder j| + goal tolerance of the goal (where boom j's anchor must
-    be in a stance that holds a pose within the goal tolerance). hops_j(a), the fewest edges
-    from a to a target (breadth-first from the targets), is at most the regrasps boom j still
-    needs, and every regrasp costs at least -log(1 - p_att), so
+    most `boom_hop_length` apart (every move of boom j is one of them). A route ends in a
+    stance holding a goal pose of some orientation theta, where boom j's anchor is one that
+    boom j reaches from there: for each cell k of orientations, the targets T_jk are
+    `goal_targets`' superset of those anchors. hops_jk(a), the fewest edges from a to T_jk
+    (breadth-first from the targets), is at most the regrasps boom j still needs if the route
+    ends at an orientation in cell k; the booms share that orientation, and every regrasp costs
+    at least -log(1 - p_att), so
 
-        h(stance) = -log(1 - p_att) * sum_j hops_j(a_j)
+        h(stance) = -log(1 - p_att) * min_k sum_j hops_jk(a_j)
 
-    never overestimates. It is consistent too: a regrasp changes one boom's hops by at most 1
-    and costs at least -log(1 - p_att); an anchor with no path to a target gets h = inf (no
-    route passes a stance holding it). The tables are computed once per scenario."""
+    never overestimates. It is consistent too: a regrasp moves one boom along one edge, which
+    changes each hops_jk by at most 1 and so the minimum by at most 1, and costs at least
+    -log(1 - p_att); a stance with no cell where every boom has a path gets h = inf (no route
+    passes it). The tables are computed once per scenario."""
 
-    def __init__(self, scn: Scenario) -> None:
+    def __init__(self, scn: Scenario, cells: int = ORIENTATION_CELLS) -> None:
         self.scn = scn
         self.c_attach = attach_cost(scn.robot)
-        robot = scn.robot
         pts = scn.anchor_positions
-        goal = np.asarray(scn.goal_position, dtype=float)
-        hop = boom_hop_length(robot) * (1.0 + 1e-9) + 1e-9
+        hop = boom_hop_length(scn.robot) * (1.0 + 1e-9) + 1e-9
         diff = pts[:, None, :] - pts[None, :, :]
         adjacent = np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
-        to_goal = np.linalg.norm(pts - goal, axis=1)
-        shoulders = np.linalg.norm(robot.shoulder_array, axis=1)
-        self.hops = np.full((4, len(pts)), np.inf)
-        for j in range(4):
-            radius = robot.boom_length[1] + shoulders[j] + scn.goal_tolerance
-            frontier = to_goal <= radius * (1.0 + 1e-9) + 1e-9
-            level = 0
-            while frontier.any():
-                self.hops[j, frontier] = level
-                level += 1
-                frontier = adjacent[frontier].any(axis=0) & np.isinf(self.hops[j])
+        targets = goal_targets(scn, cells)
+        # hops[k, j, a]; boom j's tables differ between cells only through their targets
+        self.hops = np.full(targets.shape, np.inf)
+        for k in range(cells):
+            for j in range(4):
+                frontier = targets[k, j]
+                level = 0
+                while frontier.any():
+                    self.hops[k, j, frontier] = level
+                    level += 1
+                    frontier = adjacent[frontier].any(axis=0) & np.isinf(self.hops[k, j])
+        self._booms = np.arange(4)
         self._row = scn.anchor_index
         self._cache: dict[tuple, float] = {}
 
     def regrasps(self, stance: tuple[str, ...]) -> float:
-        """sum_j hops_j(a_j): the fewest regrasps the relaxed graphs allow (inf: none)."""
+        """min_k sum_j hops_jk(a_j): the fewest regrasps the relaxed graphs allow (inf: none)."""
         h = self._cache.get(stance)
         if h is None:
-            h = self._cache[stance] = float(sum(self.hops[j, self._row[a]]
-                                                for j, a in enumerate(stance)))
+            rows = [self._row[a] for a in stance]
+            h = self._cache[stance] = float(self.hops[:, self._booms, rows].sum(axis=1).min())
         return h
 
     def __call__(self, stance: tuple[str, ...]) -> float:

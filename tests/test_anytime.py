@@ -18,7 +18,15 @@ from planning.complete import AnytimeConfig, complete_search
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.lattice import LatticeConfig
 from planning.plan import build_plan, validate
-from planning.search_cost import RegraspHeuristic, boom_hop_length, edge_cost
+from planning.lattice import poses_of
+from planning.search_cost import (
+    ORIENTATION_CELLS,
+    RegraspHeuristic,
+    boom_hop_length,
+    edge_cost,
+    goal_targets,
+)
+from rb_drake.feasibility_kernel import reach_violation
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 
 COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
@@ -50,6 +58,73 @@ def test_bound_is_consistent_on_every_evaluated_edge(demo: Scenario, optimal) ->
     goal_stance = optimal.path[-1][0]
     assert bound(goal_stance) == 0.0, "the bound of the goal stance must be 0"
     assert math.isfinite(bound(tuple(demo.start_stance)))
+
+
+def test_bound_never_exceeds_the_cost_to_go(demo: Scenario, optimal) -> None:
+    """h(v) <= the cheapest cost from v to the goal stance through the edges the exhaustive A*
+    evaluated (its components merged, so no more than the true cost to go), at every stance
+    that reaches it there."""
+    import networkx as nx
+
+    bound = RegraspHeuristic(demo)
+    def stance(node: tuple) -> tuple:  # the search graph's nodes: vertices or stances
+        return node[0] if len(node) == 2 else node
+
+    graph = nx.DiGraph()  # over stances (components merged: a cost to go no higher)
+    for u, v, c in optimal.graph.edges(data="cost"):
+        if c is not None:
+            graph.add_edge(stance(u), stance(v), cost=c)
+    goal = stance(optimal.path[-1])
+    to_go = nx.single_source_dijkstra_path_length(graph.reverse(copy=False), goal, weight="cost")
+    assert len(to_go) >= 10, f"only {len(to_go)} stances reach the goal: the check is vacuous"
+    worst = max(bound(v) - c for v, c in to_go.items())
+    assert worst <= 1e-12, f"h exceeds the cost to go by {worst:.3g} at some stance"
+    informative = sum(bound(v) > 0 for v in to_go)
+    assert informative >= len(to_go) // 2, "the bound is 0 almost everywhere: it tests nothing"
+
+
+def _targets_cover(demo: Scenario, poses: np.ndarray) -> int:
+    """Assert every anchor boom j reaches from `poses` is a target of their orientation cell;
+    return how many (pose, boom, anchor) reaches there were."""
+    theta = (poses[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    cell = np.minimum(((theta + math.pi) / (2 * math.pi) * ORIENTATION_CELLS).astype(int),
+                      ORIENTATION_CELLS - 1)
+    targets = goal_targets(demo)
+    anchors = demo.anchor_positions
+    reached = 0
+    for j in range(4):
+        hit = reach_violation(demo.robot, poses, anchors, np.full(len(anchors), j)) == 0.0
+        reached += int(hit.sum())
+        missed = hit & ~targets[cell, j, :]
+        assert not missed.any(), (
+            f"boom {j} reaches anchor {np.argwhere(missed)[0][1]} from a goal pose in cell "
+            f"{cell[np.argwhere(missed)[0][0]]} that goal_targets leaves out")
+    return reached
+
+
+def test_goal_targets_hold_every_anchor_a_goal_pose_reaches(demo: Scenario) -> None:
+    """Every anchor that boom j reaches from a goal pose (centre within the tolerance, any
+    orientation) is among the targets of that orientation's cell: brute force on random poses
+    and on every lattice goal pose (the poses the search tests)."""
+    rng = np.random.default_rng(7)
+    n = 20000
+    radius = demo.goal_tolerance * np.sqrt(rng.uniform(0, 1, n))
+    angle = rng.uniform(-math.pi, math.pi, n)
+    poses = np.column_stack([demo.goal_position[0] + radius * np.cos(angle),
+                             demo.goal_position[1] + radius * np.sin(angle),
+                             rng.uniform(-math.pi, math.pi, n)])
+    assert _targets_cover(demo, poses) > 0, "no goal pose reaches an anchor: vacuous"
+    step = COARSE.position_step
+    r = int(math.ceil(demo.goal_tolerance / step))
+    gi, gk = (round(c / step) for c in demo.goal_position)
+    half = COARSE.angle_count // 2
+    idx = np.array([(i, k, m) for i in range(gi - r, gi + r + 1)
+                    for k in range(gk - r, gk + r + 1) for m in range(-half, half)])
+    lattice = poses_of(idx, COARSE)
+    near = np.linalg.norm(lattice[:, :2] - np.asarray(demo.goal_position), axis=1)
+    assert _targets_cover(demo, lattice[near <= demo.goal_tolerance]) > 0
+    # and the targets are not everything: the orientation cells tell the booms apart
+    assert goal_targets(demo).mean() < 0.5
 
 
 def test_edge_costs_are_the_route_cost(demo: Scenario, optimal) -> None:

@@ -42,7 +42,7 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.components import UNKNOWN, StanceComponents
+from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, unpack
 from planning.lattice_moves import (
     LatticeTransition,
@@ -82,10 +82,15 @@ class AnytimeConfig:
     and under any load: `improve_factor` times the first route's expansions (at least
     `improve_min`); None: no limit but the search's own (`rbp plan --thorough`)."""
 
-    weights: tuple[float, ...] = (10.0, 3.0, 1.0)
+    weights: tuple[float, ...] = (5.0, 3.0, 2.0, 1.0)
     target_bound: float = 1.0
     improve_factor: float | None = 2.0
     improve_min: int = 50
+    # Each better route restarts the search at the next weight (from the start, the lattice
+    # work kept in the memo) instead of re-keying the open list (ARA*): a greedy first search
+    # leaves poor g-values behind that a lower weight has to undo one vertex at a time (Richter,
+    # Thayer and Ruml, "The joy of forgetting", ICAPS 2010).
+    restart: bool = True
 
     def improve_expansions(self, first: int) -> float:
         """Expansions to look for better routes once the first took `first` expansions."""
@@ -141,6 +146,27 @@ def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
     return True
 
 
+def goal_pose_of(scn: Scenario, lat: Component) -> np.ndarray | None:
+    """The most robust pose of component `lat` within the goal tolerance (None: none is): a
+    vertex with one is a goal."""
+    goal = np.asarray(scn.goal_position, dtype=float)
+    lo, hi = lat.box  # no pose within the tolerance unless its bounding box is
+    if float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - goal, goal - hi)))) > \
+            scn.goal_tolerance:
+        return None
+    near = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1) <= scn.goal_tolerance)
+    if not len(near):
+        return None
+    return lat.poses_at(near[[int(np.argmax(lat.robustness[near]))]])[0]
+
+
+def best_poses(tr: LatticeTransition, pick: np.ndarray, cfg: LatticeConfig) -> tuple:
+    """The transition's rows `pick`, most robust first (at most ALTERNATIVES): their lattice
+    poses and the four configurations' P at the first, the edge's pose."""
+    order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
+    return poses_of(unpack(tr.keys[order], cfg.angle_count), cfg), np.exp(tr.r4[order[0]])
+
+
 def _threads_held(search: Callable[..., CompleteResult]) -> Callable[..., CompleteResult]:
     """The search with `kernel_threads()` read once, not at every fill and move."""
     @functools.wraps(search)
@@ -177,7 +203,6 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     t0 = time.perf_counter()
     distance_heuristic = DistanceHeuristic(scn)
     c_attach = distance_heuristic.c_attach
-    goal = np.asarray(scn.goal_position, dtype=float)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_lat = _stance_components(scn, memo, start, cfg, ignore_grasps)
@@ -235,13 +260,16 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
     # transition, parent's g, alternatives, edge cost); kind 1: a move to evaluate, payload
     # ((parent vertex, boom, anchor), rows), g the parent's g plus the least an edge costs.
-    open_list: list = []
     start_pose = np.asarray(scn.start_pose, dtype=float)
-    if math.isfinite(bound(start)):
-        for comp in joined:
-            heapq.heappush(open_list, (heuristic(start), next(tie), 0.0, 0, start,
-                                       ((start, comp), None, start_pose, None, None, 0.0,
-                                        None, 0.0)))
+
+    def start_entries() -> list:
+        if not math.isfinite(bound(start)):
+            return []
+        return sorted((heuristic(start), next(tie), 0.0, 0, start,
+                       ((start, comp), None, start_pose, None, None, 0.0, None, 0.0))
+                      for comp in joined)
+
+    open_list: list = start_entries()
     closed: dict[Vertex, float] = {}
     parent: dict[Vertex, tuple] = {}
     expanded: list[tuple[Vertex, np.ndarray]] = []
@@ -269,15 +297,14 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                    child: Stance4, comp: int | None) -> tuple:
         """An open-list entry for the child reached through the most robust pose of `pick`."""
         (stance, _), j, anchor = move
-        order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
-        poses = poses_of(unpack(tr.keys[order], cfg.angle_count), cfg)
+        poses, p4 = best_poses(tr, pick, cfg)
         pose = poses[0]
         cost = edge_cost(scn, stance, j, anchor, pose)
         g_child = g_parent + cost
         data = graph.edges[move[0], child]
         data["cost"] = min(data.get("cost", math.inf), cost)
         return (g_child + heuristic(child), next(tie), g_child, 0, child,
-                ((child, comp), move, pose, np.exp(tr.r4[order[0]]), tr, g_parent, poses,
+                ((child, comp), move, pose, p4, tr, g_parent, poses,
                  cost))
 
     def beaten(g: float, stance: tuple) -> bool:
@@ -361,13 +388,8 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if progress is not None:
             progress(expansions, tested, nearest)
         lat = memo.components[stance].components[comp]
-        lo, hi = lat.box  # no pose within the tolerance unless its bounding box is
-        box_gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - goal, goal - hi))))
-        near_goal = (np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1)
-                                    <= scn.goal_tolerance)
-                     if box_gap <= scn.goal_tolerance else ())
-        if len(near_goal):
-            goal_pose = lat.poses_at(near_goal[[int(np.argmax(lat.robustness[near_goal]))]])[0]
+        goal_pose = goal_pose_of(scn, lat)
+        if goal_pose is not None:
             found = finished(vertex, goal_pose)
             if anytime is None:
                 return found._replace(frontier=_frontier(open_list, closed))
@@ -391,8 +413,13 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 if schedule:
                     weight = schedule.pop(0)
                     exact = weight <= 1.0
-                    open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
-                    heapq.heapify(open_list)
+                    if anytime.restart:  # the open list's lower bound is recorded above
+                        open_list = start_entries()
+                        closed.clear()
+                        parent.clear()
+                    else:
+                        open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
+                        heapq.heapify(open_list)
             continue  # a goal's successors cannot be cheaper routes
         if best is not None and (expansions - first_expansions) % BOUND_EVERY == 0:
             # The lower bound rises as the search goes on: record it (and stop at the target).

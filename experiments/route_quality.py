@@ -27,14 +27,17 @@ from typing import Any
 from experiments.common import cave_kind, make_cave
 from experiments.sweep import machine_info, quantiles
 
-VARIANTS = ("default", "first", "sampled", "w30", "w3", "anytime-f1", "anytime-f4", "oracle",
-            "oracle-a*")
+VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
+            "anytime-f4", "oracle", "oracle-a*")
 
 
 def footstep_config(variant: str, time_limit: float | None):
     """The footstep configuration of a named variant: "default" (today's `rbp plan`), "first"
     (the first route of the complete search, weight 300: the default before the anytime
-    search), "sampled", "w30" / "w3" (lower weights, first route), "anytime-fK" (the first
+    search), "before" (the default of commit 203c53d: ARA*, weights 10, 3, 1, a fixed budget of
+    1000 expansions), "ara" (today's weights, re-keying the open list at each weight as ARA*
+    does instead of restarting), "sampled",
+    "w30" / "w3" (lower weights, first route), "anytime-fK" (the first
     route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
     proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
     start)."""
@@ -49,6 +52,9 @@ def footstep_config(variant: str, time_limit: float | None):
         "sampled": {"search": "sampled"},
         "w30": {"heuristic_weight": 30.0, "anytime": None},
         "w3": {"heuristic_weight": 3.0, "anytime": None},
+        "before": {"anytime": AnytimeConfig(weights=(10.0, 3.0, 1.0), restart=False),
+                   "expansions_per_metre": 0.0},
+        "ara": {"anytime": AnytimeConfig(restart=False)},
         "anytime-f1": {"anytime": AnytimeConfig(improve_factor=1.0)},
         "anytime-f4": {"anytime": AnytimeConfig(improve_factor=4.0)},
         "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},

@@ -31,6 +31,7 @@ import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
 from planning.complete import AnytimeConfig, LatticeMemo, complete_search, search_result
+from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
 from planning.ramps import ramp_ends_hold
 from planning.search_cost import (
@@ -74,8 +75,16 @@ class FootstepConfig:
     # a proven bound on how far the best is from the optimum (planning.complete.AnytimeConfig;
     # None: the first route, as before)
     anytime: AnytimeConfig | None = dataclasses.field(default_factory=AnytimeConfig)
+    # complete search only: the route with the fewest regrasps whose predicted success
+    # exp(-cost) is at least this (planning.constrained), or the proof that none reaches it;
+    # None: the anytime search
+    min_success: float | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
+    # complete search: the budget grows with the climb, to at least this many expansions per
+    # metre from the start pose to the goal (a 20 m climb needs about ten times a 2 m one's
+    # search, not the same); 0: max_expansions as given
+    expansions_per_metre: float = 300.0
     time_limit: float | None = None    # s; None: no limit
     goal_samples: int = 96
     polish_rounds: int = 8   # local search rounds per transition pose of the found path
@@ -125,6 +134,9 @@ class FootstepPlan(NamedTuple):
     first_cost: float = math.nan
     history: list[tuple[float, float, float, int]] | None = None
     quality: str = ""
+    # --min-success P: the route has the fewest regrasps of those with exp(-cost) >= P (or,
+    # with stop "noroute", none reaches P)
+    min_success: float | None = None
 
 
 class Explored(NamedTuple):
@@ -313,6 +325,15 @@ def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], b
     return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)
 
 
+def expansion_budget(scn: Scenario, cfg: FootstepConfig) -> int | None:
+    """The complete search's expansion budget on `scn`: max_expansions, or more for a long
+    climb (`expansions_per_metre` times the start's distance to the goal)."""
+    if cfg.max_expansions is None:
+        return None
+    climb = float(np.linalg.norm(np.asarray(scn.start_pose[:2]) - np.asarray(scn.goal_position)))
+    return max(int(cfg.max_expansions), math.ceil(cfg.expansions_per_metre * climb))
+
+
 def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                    progress: Callable[..., None] | None,
                    exclude: Collection[tuple[tuple[str, ...], int, str]],
@@ -320,9 +341,15 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     """plan_footsteps through the complete search (planning.complete)."""
     t0 = time.perf_counter()
     start_pose = np.asarray(scn.start_pose, dtype=float)
-    result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
-                             cfg.time_limit, exclude, memo.lattice, progress,
-                             cfg.transition.ignore_grasps, cfg.anytime)
+    cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
+    if cfg.min_success is not None:
+        result = constrained_search(scn, cfg.min_success, cfg.lattice, cfg.max_expansions,
+                                    cfg.time_limit, exclude, memo.lattice, progress,
+                                    cfg.transition.ignore_grasps)
+    else:
+        result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
+                                 cfg.time_limit, exclude, memo.lattice, progress,
+                                 cfg.transition.ignore_grasps, cfg.anytime)
     search = search_result(result)
     explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))
                 for k, (v, p) in enumerate(result.expanded)]
@@ -337,7 +364,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                        f"start is {centroid_distance(scn, start):.2f} m)")
         return FootstepPlan(False, reason, [start], [], start_pose, None, result.expansions,
                             result.transitions_tested, time.perf_counter() - t0, search, None,
-                            result.stop, explored, frontier, memo)
+                            result.stop, explored, frontier, memo, min_success=cfg.min_success)
     stances = [v[0] for v in result.path]
     steps = []
     others = result.alternatives or [None] * len(result.poses)
@@ -351,7 +378,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                         result.expansions, result.transitions_tested,
                         time.perf_counter() - t0, search, None, "", explored, frontier, memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
-                        result.quality)
+                        result.quality, cfg.min_success)
 
 
 def explored_stances(scn: Scenario, result: SearchResult,

@@ -67,6 +67,8 @@ def search_record(fp: FootstepPlan) -> dict[str, Any]:
                               "transitions_tested": int(fp.transitions_tested)}
     if fp.success and math.isfinite(fp.cost):
         record["cost"] = float(fp.cost)
+    if fp.min_success is not None:  # the fewest-regrasp route within it (planning.constrained)
+        record["min_success"] = float(fp.min_success)
     if fp.success and math.isfinite(fp.lower_bound):  # an anytime search's proven bound
         record.update(lower_bound=float(fp.lower_bound), first_cost=float(fp.first_cost),
                       bound=float(fp.cost / fp.lower_bound) if fp.lower_bound > 0 else None,

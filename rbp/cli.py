@@ -10,6 +10,7 @@ import argparse
 import atexit
 import contextlib
 import json
+import math
 import os
 import sys
 import threading
@@ -107,6 +108,9 @@ def _summary(plan: dict) -> str:
 
 def _route_quality(search: dict) -> str:
     """How far the route is from the best one, as the anytime search proved it."""
+    if search.get("min_success") is not None:
+        return (f"; the fewest regrasps with predicted success >= {search['min_success']:g} "
+                f"(search cost {search['cost']:.4f}, exp(-cost) {math.exp(-search['cost']):.4f})")
     if search.get("quality") == "optimal":
         return f"; route optimal (search cost {search['cost']:.4f})"
     if search.get("bound") is not None:
@@ -266,6 +270,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "to the optimal route (the lowest search cost, proved) or a proof "
                            "that none exists; with --time-limit, the best route found and how "
                            "far from the optimum it is proved to be")
+    plan.add_argument("--min-success", type=float, metavar="P",
+                      help="the route with the fewest regrasps whose predicted success (the "
+                           "search's, exp(-cost)) is at least P, or the proof that none "
+                           "reaches P (complete search, no expansion budget unless given)")
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,

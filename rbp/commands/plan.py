@@ -62,6 +62,17 @@ def plan_setup(args: argparse.Namespace):
     if args.thorough:  # the oracle: complete, no expansion budget, on to the proven optimum
         flags["search"], flags["max_expansions"] = "complete", None
         flags["anytime"] = AnytimeConfig(improve_factor=None)
+    if getattr(args, "min_success", None) is not None:
+        if args.thorough:
+            raise UserError("--min-success: give it or --thorough, not both (--thorough asks "
+                            "for the most robust route, --min-success for the fewest regrasps "
+                            "within a success probability)")
+        if not 0.0 < args.min_success < 1.0:
+            raise UserError(f"--min-success: must lie strictly between 0 and 1, got "
+                            f"{args.min_success}")
+        flags["search"], flags["min_success"] = "complete", args.min_success
+        if args.max_expansions is None:
+            flags["max_expansions"] = None
     if args.time_limit is not None:
         flags["time_limit"] = args.time_limit
     if flags:
@@ -90,6 +101,11 @@ def plan_setup(args: argparse.Namespace):
         problem = anytime_problem(anytime)
         if problem:
             raise UserError(f"{source}: footstep.anytime.{problem}")
+    wanted = cfg.footstep.min_success
+    if wanted is not None and not 0.0 < wanted < 1.0:
+        source = args.config or args.from_plan or "(configuration)"
+        raise UserError(f"{source}: footstep.min_success: must lie strictly between 0 and 1, "
+                        f"or null, got {wanted}")
     return scn, planner, cfg, motion
 
 
@@ -152,11 +168,13 @@ class SearchRecord:
 def run_planner(scn, planner: str, cfg, motion: bool = True, quiet: bool = False,
                 record: SearchRecord | None = None) -> dict[str, Any]:
     """The whole pipeline (footsteps, then seeds and SCP per phase) -> plan dictionary."""
+    from planning.footsteps import expansion_budget
     from planning.pipeline import plan_climb
     from rbp.progress import SearchProgress
 
-    with SearchProgress(f"{planner} on {scn.name}", cfg.footstep.max_expansions,
-                        quiet=quiet) as bar:
+    budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
+              else cfg.footstep.max_expansions)
+    with SearchProgress(f"{planner} on {scn.name}", budget, quiet=quiet) as bar:
         if not motion:
             from planning.baseline import plan_naive
             from planning.footsteps import plan_footsteps

@@ -1,0 +1,214 @@
+"""The route with the fewest regrasps whose predicted success is at least P (`rbp plan
+--min-success P`): a resource-constrained search over the complete search's graph.
+
+The graph is `planning.complete`'s: vertices are (4-stance, component of its feasible lattice
+poses), an edge is a regrasp decided on every lattice pose, and its cost is
+`planning.search_cost.edge_cost` (-log of the regrasp's attach and grasp probabilities at its
+most robust transition pose). A route's predicted success is exp(-its cost). The search
+minimises the number of regrasps subject to cost <= B = -log P:
+
+- labels (vertex, regrasps k, cost c) are popped in order of f = k + hops(vertex), then c,
+  where hops is `RegraspHeuristic.regrasps`, the admissible and consistent lower bound on the
+  regrasps left (f never decreases along a route), so a vertex's labels are popped with k
+  non-decreasing;
+- a label is dominated, and dropped, when a label of its vertex with no more regrasps and no
+  higher cost was popped before it; one whose cost plus the lower bound on the cost to go
+  exceeds B cannot lead to a route within P, and is dropped too;
+- a vertex's moves are evaluated when they are popped, keyed by the least they can cost (the
+  attach term), so every key is a lower bound on the labels it leads to: the first goal label
+  popped has the fewest regrasps of any route within P and, of those, the lowest cost (the
+  most robust).
+
+When no label is left, no route at the lattice's resolution has predicted success >= P: a
+proof, as the complete search's "noroute" is.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+import time
+from collections.abc import Callable, Collection
+
+import networkx as nx
+import numpy as np
+
+from planning.complete import (
+    CompleteResult,
+    LatticeMemo,
+    _stance_components,
+    _threads_held,
+    best_poses,
+    goal_pose_of,
+)
+from planning.components import UNKNOWN
+from planning.lattice import LatticeConfig
+from planning.lattice_moves import (
+    goal_is_holdable,
+    lattice_transition,
+    move_table,
+    start_components,
+)
+from planning.search_cost import RegraspHeuristic, edge_cost, goal_distance
+from rb_drake.scenario import Scenario
+
+
+@_threads_held
+def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig | None = None,
+                       max_expansions: int | None = None, time_limit: float | None = None,
+                       exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
+                       memo: LatticeMemo | None = None,
+                       progress: Callable[..., None] | None = None,
+                       ignore_grasps: bool = False) -> CompleteResult:
+    """The fewest-regrasp route with exp(-cost) >= `min_success` (module doc), or the proof that
+    none exists (`stop == "noroute"`), or a budget stop (`"budget"`). `exclude`: moves
+    (stance, boom, anchor) not to take (the pipeline's search again without a move whose
+    motion failed)."""
+    if not 0.0 < min_success < 1.0:
+        raise ValueError(f"min_success must lie in (0, 1), got {min_success}")
+    cfg = lattice or LatticeConfig()
+    memo = memo if memo is not None else LatticeMemo(config=cfg)
+    t0 = time.perf_counter()
+    budget = -math.log(min_success)
+    slack = budget * (1.0 + 1e-12)
+    bound = RegraspHeuristic(scn)
+    graph = nx.DiGraph()
+    start = tuple(scn.start_stance)
+    joined = start_components(scn, _stance_components(scn, memo, start, cfg, ignore_grasps), cfg)
+    if not goal_is_holdable(scn, cfg):
+        return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
+                              "tolerance can hold a stance", [], [], [], None, 0, 0, [], [],
+                              graph)
+    if not joined:
+        return CompleteResult(False, "nostart", "the start pose is joined to no feasible lattice "
+                              "pose of its stance", [], [], [], None, 0, 0, [], [], graph)
+    excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
+    tie = itertools.count()
+    # a label: (vertex, regrasps, cost, parent label, pose, P4, alternatives); the open list
+    # holds (regrasps + bound, cost, tie, label, None) for a label and (the child's, its parent's
+    # cost plus the least the edge can cost, tie, parent label, move) for a move: first not yet
+    # evaluated (attach term only), then evaluated (its transition known, its poses' least)
+    labels: list[tuple] = []
+    open_list: list[tuple] = []
+
+    def push(vertex: tuple, k: int, cost: float, parent: int, pose, p4, alternatives) -> None:
+        hops = bound.regrasps(vertex[0])
+        if not math.isfinite(hops) or cost + bound.c_attach * hops > slack:
+            return  # no route through it reaches the goal within the budget
+        if cost >= popped_cost.get(vertex, math.inf):
+            return  # dominated: popped before with no more regrasps and no higher cost
+        labels.append((vertex, k, cost, parent, pose, p4, alternatives))
+        heapq.heappush(open_list, (k + hops, cost, next(tie), len(labels) - 1, None))
+
+    popped_cost: dict[tuple, float] = {}
+    start_pose = np.asarray(scn.start_pose, dtype=float)
+    for comp in joined:
+        push((start, comp), 0, 0.0, -1, start_pose, None, None)
+    expansions = tested = 0
+    nearest = math.inf
+    found: tuple[int, np.ndarray] | None = None  # (goal label, goal pose)
+    expanded: list[tuple[tuple, np.ndarray]] = []
+    stop, reason = "noroute", ""
+    while open_list:
+        f, cost, _, index, move = heapq.heappop(open_list)
+        if move is not None:  # a move: evaluate it, then (when popped again) enter the child
+            j, anchor, rows, child, tr = move
+            vertex = labels[index][0]
+            stance, comp = vertex
+            k, base = labels[index][1], labels[index][2]
+            if tr is None:
+                lat = memo.components[stance].components[comp]
+                key = (stance, comp, j, anchor)
+                tr = memo.transitions.get(key)
+                if tr is None:
+                    known = memo.components.get(child)
+                    seen = None if known is None else known.known_component(lat.keys[rows])
+                    tr = memo.transitions[key] = lattice_transition(
+                        scn, lat, stance, j, anchor, ignore_grasps, rows, known, seen)
+                    tested += 1
+                if len(tr.keys):
+                    # At any of its poses the edge costs at least the attach term plus the
+                    # worst configuration's -r (a sum over booms of the per-boom worst is at
+                    # least the worst sum): the child's components wait for that key.
+                    least = base + bound.c_attach + max(0.0, -float(tr.worst.max()))
+                    heapq.heappush(open_list, (f, least * (1.0 - 1e-12), next(tie), index,
+                                               (j, anchor, rows, child, tr)))
+                continue
+            known = memo.components.get(child)
+            if known is not None:  # every component it enters popped as cheaply: dominated
+                seen = known.known_component(tr.keys)
+                if (seen != UNKNOWN).all() and all(
+                        popped_cost.get((child, c2), math.inf) <= cost
+                        for c2 in set(seen[seen >= 0].tolist())):
+                    continue
+            comps = _stance_components(scn, memo, child, cfg, ignore_grasps).component_of(
+                tr.keys)
+            for c2 in np.unique(comps):
+                poses, p4 = best_poses(tr, np.flatnonzero(comps == c2), cfg)
+                step = edge_cost(scn, stance, j, anchor, poses[0])
+                graph.add_edge(vertex, (child, int(c2)), cost=step, boom=j, anchor=anchor)
+                push((child, int(c2)), k + 1, base + step, index, poses[0], p4, poses)
+            continue
+        vertex, k, _, _, pose, _, _ = labels[index]
+        if cost >= popped_cost.get(vertex, math.inf):
+            continue
+        popped_cost[vertex] = cost
+        stance, comp = vertex
+        lat = memo.components[stance].components[comp]
+        goal_pose = goal_pose_of(scn, lat)
+        if goal_pose is not None:
+            # Popped in order of (regrasps + bound, cost) with every key a lower bound on what
+            # it leads to: no route left has fewer regrasps, or as few and a lower cost.
+            found = (index, goal_pose)
+            break
+        expansions += 1
+        expanded.append((vertex, pose))
+        nearest = min(nearest, goal_distance(scn, stance))
+        if progress is not None:
+            progress(expansions, tested, nearest)
+        if max_expansions is not None and expansions > max_expansions:
+            stop, reason = "budget", (f"gave up after {max_expansions} expansions without a "
+                                      f"route of predicted success >= {min_success:g}")
+            break
+        if time_limit is not None and time.perf_counter() - t0 > time_limit:
+            stop, reason = "budget", (f"gave up after {time_limit:g} s ({expansions} "
+                                      f"expansions) without a route of predicted success >= "
+                                      f"{min_success:g}")
+            break
+        for j, moves in enumerate(move_table(scn, lat, stance)):
+            for a, rows in moves:
+                anchor = scn.anchors[a].id
+                if (stance, j, anchor) in excluded:
+                    continue
+                child = tuple(anchor if i == j else b for i, b in enumerate(stance))
+                hops = bound.regrasps(child)
+                least = cost + bound.c_attach  # every edge costs at least the attach term
+                if not math.isfinite(hops) or least + bound.c_attach * hops > slack:
+                    continue
+                heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
+                                           (j, anchor, rows, child, None)))
+    if found is None:
+        if stop == "noroute" and excluded:
+            stop = "exhausted"
+            reason = f"no route without the {len(excluded)} excluded moves"
+        elif stop == "noroute":
+            reason = (f"no route with predicted success >= {min_success:g} at resolution "
+                      f"{cfg.position_step * 100:g} cm / {cfg.angle_step_deg:g} deg: every "
+                      f"route's search cost exceeds -log P = {budget:.4g} ({expansions} "
+                      "vertices expanded)")
+        return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested,
+                              expanded, [], graph)
+    path, poses, probs, others = [], [], [], []
+    index = found[0]
+    total = labels[index][2]
+    while index >= 0:
+        vertex, _, _, parent, pose, p4, alternatives = labels[index]
+        path.append(vertex)
+        if parent >= 0:
+            poses.append(pose)
+            probs.append(p4)
+            others.append(alternatives)
+        index = parent
+    return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1], found[1],
+                          expansions, tested, expanded, [], graph, others[::-1], cost=total)

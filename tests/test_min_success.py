@@ -1,0 +1,114 @@
+"""`rbp plan --min-success P`: the fewest-regrasp route whose predicted success is at least P
+(planning.constrained), held against the complete search's proven optimum on the demo cave
+with a coarse lattice (5 cm x 5 deg; the code is the same at any resolution)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+import planning.complete as complete_module
+from planning.complete import AnytimeConfig, complete_search
+from planning.constrained import constrained_search
+from planning.lattice import LatticeConfig
+from rb_drake.scenario import Scenario, bundled_caves, load_scenario
+
+COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
+EXHAUSTIVE = AnytimeConfig(improve_factor=None)
+
+
+@pytest.fixture(scope="module")
+def demo() -> Scenario:
+    return load_scenario(bundled_caves()["demo-shaft"])
+
+
+@pytest.fixture(scope="module")
+def optimal(demo: Scenario):
+    """The most robust route (lowest search cost), proved."""
+    found = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    assert found.success and found.quality == "optimal"
+    return found
+
+
+@pytest.fixture(scope="module")
+def fewest(demo: Scenario) -> int:
+    """The fewest regrasps of any route: A* with every edge costing the same."""
+    patch = pytest.MonkeyPatch()
+    patch.setattr(complete_module, "edge_cost", lambda scn, *args: 0.01)
+    try:
+        found = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    finally:
+        patch.undo()
+    assert found.success and found.quality == "optimal"
+    return len(found.path) - 1
+
+
+def test_just_below_the_optimum_finds_a_route_within_p(demo: Scenario, optimal) -> None:
+    p = math.exp(-optimal.cost) * (1 - 1e-6)
+    found = constrained_search(demo, p, COARSE)
+    assert found.success, found.reason
+    assert found.cost <= -math.log(p) * (1 + 1e-12), "the route misses the success asked for"
+    assert len(found.path) - 1 <= len(optimal.path) - 1, (
+        "the most robust route also reaches P, so the fewest-regrasp one has at most its "
+        "regrasps")
+
+
+def test_above_the_optimum_is_a_proof_of_no_route(demo: Scenario, optimal) -> None:
+    p = math.exp(-optimal.cost) * (1 + 1e-6)
+    found = constrained_search(demo, p, COARSE)
+    assert not found.success and found.stop == "noroute", (
+        f"no route can beat the proven optimum, yet: {found.stop} {found.reason}")
+    assert f"{p:g}" in found.reason
+
+
+def test_a_loose_p_gives_the_fewest_regrasps(demo: Scenario, optimal, fewest: int) -> None:
+    found = constrained_search(demo, 1e-6, COARSE)
+    assert found.success
+    assert len(found.path) - 1 == fewest, (
+        f"{len(found.path) - 1} regrasps where the unconstrained fewest is {fewest}")
+    # the edges' costs add up to the reported cost
+    total = sum(found.graph.edges[u, v]["cost"] for u, v in zip(found.path[:-1], found.path[1:],
+                                                                 strict=True))
+    assert total == pytest.approx(found.cost, rel=1e-9)
+
+
+def test_regrasps_never_fall_as_p_rises(demo: Scenario, optimal) -> None:
+    top = math.exp(-optimal.cost)
+    counts = []
+    for p in (top ** 4, top ** 2, top ** 1.2, top * (1 - 1e-6)):
+        found = constrained_search(demo, p, COARSE)
+        assert found.success and found.cost <= -math.log(p) * (1 + 1e-12)
+        counts.append(len(found.path) - 1)
+    assert counts == sorted(counts), f"regrasps {counts} for rising P"
+
+
+def test_cli_min_success_writes_the_record(tmp_path) -> None:
+    from cli_helpers import run_rbp
+
+    config = tmp_path / "planner.yaml"
+    config.write_text("footstep:\n  lattice: {position_step: 0.05, angle_step_deg: 5.0}\n")
+    out = tmp_path / "plan.json"
+    run = run_rbp("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "--config",
+                  str(config), "--min-success", "0.5", "-o", str(out), cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    plan = json.loads(out.read_text())
+    assert plan["search"]["min_success"] == 0.5
+    assert math.exp(-plan["search"]["cost"]) >= 0.5
+    assert "fewest regrasps" in run.stdout
+
+
+@pytest.mark.parametrize("args, field", [(["--min-success", "1.5"], "--min-success"),
+                                         (["--min-success", "0"], "--min-success"),
+                                         (["--min-success", "0.9", "--thorough"],
+                                          "--min-success")])
+def test_bad_min_success_gets_one_line(tmp_path, args: list[str], field: str) -> None:
+    from cli_helpers import run_rbp
+
+    out = tmp_path / "plan.json"
+    run = run_rbp("plan", "demo-shaft", *args, "-o", str(out), cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and field in lines[0], run.stderr
+    assert not out.exists()

@@ -13,6 +13,7 @@ seconds per metre, against length.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing
 import os
@@ -21,7 +22,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.route_quality import VARIANTS, median, run_cave
+from experiments.common import ROUTE_VARIANTS as VARIANTS
+from experiments.common import finite_median as median
+from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
 
 KINDS = ("shaft", "crevasse")
@@ -78,10 +81,16 @@ def draw(rows: list[dict[str, Any]], path: Path) -> None:
         for k, (field, label) in enumerate(fields):
             ax = axes[i, k]
             for v in sorted({r["variant"] for r in rows}):
-                pts = [(r["length"], r[field]) for r in rows
-                       if r["kind"] == kind and r["variant"] == v and r[field] is not None]
-                if pts:
-                    ax.plot(*zip(*pts, strict=True), "o-", label=v)
+                mine = [r for r in rows if r["kind"] == kind and r["variant"] == v
+                        and r[field] is not None]
+                if mine:
+                    line, = ax.plot([r["length"] for r in mine], [r[field] for r in mine],
+                                    "o-", label=v)
+                    if k == 0:  # how many of the caves each median is over
+                        for r in mine:
+                            ax.annotate(f"{r['routes']}/{r['caves']}", (r["length"], r[field]),
+                                        textcoords="offset points", xytext=(4, 4), fontsize=7,
+                                        color=line.get_color())
             ax.set_xlabel("cave length (m)")
             ax.set_ylabel(label)
             ax.set_title(f"{kind}: {label}", fontsize=9)
@@ -89,7 +98,8 @@ def draw(rows: list[dict[str, Any]], path: Path) -> None:
                 ax.set_ylim(0, 1)
             ax.grid(alpha=0.3)
         axes[i, 0].legend(fontsize=8)
-    fig.suptitle("Long climbs: median over seeds (routes found only, for regrasps and p_path)")
+    fig.suptitle("Long climbs: median over seeds (over the routes found, n/N beside each point, "
+                 "for regrasps and p_path)")
     fig.tight_layout()
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp, dpi=110)
@@ -118,8 +128,13 @@ def main(argv: list[str] | None = None) -> int:
         os.environ.setdefault("RBP_THREADS", "1")
     caves: list[dict[str, Any]] = []
     t0 = time.perf_counter()
-    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
-        for k, cave in enumerate(pool.imap_unordered(run_job, jobs), 1):
+    with contextlib.ExitStack() as stack:
+        if args.workers > 1:
+            pool = stack.enter_context(multiprocessing.get_context("spawn").Pool(args.workers))
+            done = pool.imap_unordered(run_job, jobs)
+        else:  # in this process
+            done = map(run_job, jobs)
+        for k, cave in enumerate(done, 1):
             caves.append(cave)
             line = " ".join(f"{v}:{cave[v]['stop'] or cave[v]['regrasps']}"
                             f"/{cave[v]['seconds']:.0f}s" for v in variants)

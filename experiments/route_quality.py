@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import multiprocessing
 import os
 import sys
@@ -24,80 +23,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.common import cave_kind, make_cave
-from experiments.sweep import machine_info, quantiles
-
-VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
-            "anytime-f4", "oracle", "oracle-a*")
-
-
-def footstep_config(variant: str, time_limit: float | None):
-    """The footstep configuration of a named variant: "default" (today's `rbp plan`), "first"
-    (the first route of the complete search, weight 300: the default before the anytime
-    search), "before" (the default of commit 203c53d: ARA*, weights 10, 3, 1, a fixed budget of
-    1000 expansions), "ara" (today's weights, re-keying the open list at each weight as ARA*
-    does instead of restarting), "sampled",
-    "w30" / "w3" (lower weights, first route), "anytime-fK" (the first
-    route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
-    proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
-    start)."""
-    from planning.complete import AnytimeConfig
-    from planning.footsteps import FootstepConfig
-
-    limit = 600.0 if time_limit is None else time_limit
-    exhaustive = AnytimeConfig(improve_factor=None)
-    settings: dict[str, Any] = {
-        "default": {},
-        "first": {"anytime": None},
-        "sampled": {"search": "sampled"},
-        "w30": {"heuristic_weight": 30.0, "anytime": None},
-        "w3": {"heuristic_weight": 3.0, "anytime": None},
-        "before": {"anytime": AnytimeConfig(weights=(10.0, 3.0, 1.0), restart=False),
-                   "expansions_per_metre": 0.0},
-        "ara": {"anytime": AnytimeConfig(restart=False)},
-        "anytime-f1": {"anytime": AnytimeConfig(improve_factor=1.0)},
-        "anytime-f4": {"anytime": AnytimeConfig(improve_factor=4.0)},
-        "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},
-        "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
-                      "heuristic_weight": 1.0},
-    }[variant]
-    return FootstepConfig(**settings)
-
-
-def run_cave(job: tuple[str, int, tuple[float, float], list[str], float | None]
-             ) -> dict[str, Any]:
-    from planning.footsteps import plan_footsteps
-    from planning.plan import build_plan
-    from planning.search_cost import edge_cost
-
-    kind, seed, length, variants, limit = job
-    scn = make_cave(kind, seed, length)
-    out: dict[str, Any] = {"kind": kind, "seed": seed}
-    for variant in variants:
-        config = footstep_config(variant, limit)
-        t0 = time.perf_counter()
-        fp = plan_footsteps(scn, config)
-        seconds = time.perf_counter() - t0
-        plan = build_plan(scn, fp, "rbp")
-        cost = None
-        if fp.success:
-            cost = sum(edge_cost(scn, a, s.boom, s.to_anchor,
-                                 s.found_pose if s.found_pose is not None else s.pose)
-                       for a, s in zip(fp.stances[:-1], fp.steps, strict=True))
-        search = plan.get("search", {})
-        out[variant] = {"success": bool(fp.success), "stop": fp.stop,
-                        "regrasps": len(fp.steps) if fp.success else None,
-                        "cost": cost, "p_path": plan.get("p_path"),
-                        "p_grasps": plan.get("p_grasps"),
-                        "bound": search.get("bound"), "lower_bound": search.get("lower_bound"),
-                        "expansions": int(fp.expansions), "seconds": seconds,
-                        "stances": [list(s) for s in fp.stances] if fp.success else None}
-    return out
-
-
-def median(values: list[float]) -> float | None:
-    """The median of the finite values (None when there are none)."""
-    return quantiles([x for x in values if x is not None and math.isfinite(x)])["median"]
+from experiments.common import ROUTE_VARIANTS as VARIANTS
+from experiments.common import cave_kind
+from experiments.common import finite_median as median
+from experiments.common import route_variants as run_cave
+from experiments.sweep import machine_info
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:

@@ -259,7 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                            "configuration and seed (flags given override them)")
     plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
     plan.add_argument("--max-expansions", type=int,
-                      help="give up after expanding this many stances (default 1000)")
+                      help="give up after expanding this many stances (default 1000, or 300 "
+                           "per metre from the start to the goal if more)")
     plan.add_argument("--search", choices=("complete", "hybrid", "sampled"),
                       help="footstep search: complete (default; on the 2 cm x 2.5 deg pose "
                            "lattice: finds a route whenever one exists there, and proves it "

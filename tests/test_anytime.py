@@ -16,9 +16,8 @@ import pytest
 
 from planning.complete import AnytimeConfig, complete_search
 from planning.footsteps import FootstepConfig, plan_footsteps
-from planning.lattice import LatticeConfig
+from planning.lattice import LatticeConfig, poses_of
 from planning.plan import build_plan, validate
-from planning.lattice import poses_of
 from planning.search_cost import (
     ORIENTATION_CELLS,
     RegraspHeuristic,
@@ -115,7 +114,7 @@ def test_goal_targets_hold_every_anchor_a_goal_pose_reaches(demo: Scenario) -> N
                              rng.uniform(-math.pi, math.pi, n)])
     assert _targets_cover(demo, poses) > 0, "no goal pose reaches an anchor: vacuous"
     step = COARSE.position_step
-    r = int(math.ceil(demo.goal_tolerance / step))
+    r = math.ceil(demo.goal_tolerance / step)
     gi, gk = (round(c / step) for c in demo.goal_position)
     half = COARSE.angle_count // 2
     idx = np.array([(i, k, m) for i in range(gi - r, gi + r + 1)

@@ -222,3 +222,29 @@ def test_calibration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     with pytest.raises(SystemExit) as bad:
         calibration.main([*args, "--caves", "nowhere"])
     assert bad.value.code == 2
+
+
+def test_long_climbs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two short shafts, the first-route variant: a table row per length, and the figure."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "long.json"
+    monkeypatch.setattr(sys, "argv", ["long_climbs.py", "--lengths", "4", "5", "--kinds",
+                                      "shaft", "--seeds", "5002", "--variants", "first",
+                                      "--out", str(out)])
+    with pytest.raises(SystemExit) as done:
+        runpy.run_module("experiments.long_climbs", run_name="__main__")
+    assert done.value.code == 0
+    result = json.loads(out.read_text())
+    assert [r["length"] for r in result["table"]] == [4.0, 5.0]
+    for cave in result["caves"]:
+        run = cave["first"]
+        assert cave["climb"] > 0
+        if run["success"]:
+            assert run["regrasps"] >= 1 and 0 < run["p_path"] <= 1, run
+    for row in result["table"]:
+        assert row["routes"] <= row["caves"] == 1, row
+        if row["routes"]:
+            cave = next(c for c in result["caves"] if c["length"] == row["length"])
+            assert row["regrasps_per_metre"] == pytest.approx(
+                cave["first"]["regrasps"] / cave["climb"], rel=1e-12), row
+    assert_png(out.with_suffix(".png"))

@@ -55,8 +55,8 @@ def plan_setup(args: argparse.Namespace):
     flags: dict[str, Any] = {}
     if args.seed is not None:
         flags["seed"] = args.seed
-    if args.max_expansions is not None:
-        flags["max_expansions"] = args.max_expansions
+    if args.max_expansions is not None:  # exactly this budget, whatever the climb's length
+        flags["max_expansions"], flags["expansions_per_metre"] = args.max_expansions, 0.0
     if args.search is not None:
         flags["search"] = args.search
     if args.thorough:  # the oracle: complete, no expansion budget, on to the proven optimum

@@ -283,11 +283,15 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     schedule = list(anytime.weights) if anytime is not None else []
 
     proven = 0.0  # the highest lower bound found so far (each one is valid)
+    # g + bound of the vertex being expanded: popped, its successors not yet pushed, it is in
+    # no list, yet it may be the optimal route's only vertex left to expand
+    current = math.inf
 
     def lower() -> float:
-        """min over the open list of g + bound (and the best cost): the optimum is no lower."""
+        """min over the open list (and the vertex being expanded) of g + bound, and the best
+        cost: the optimum is no lower."""
         nonlocal proven
-        lo = best_cost
+        lo = min(best_cost, current)
         for entry in itertools.chain(open_list, deferred):
             lo = min(lo, entry[2] + bound(entry[4]))
         proven = max(proven, lo)
@@ -384,6 +388,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex
+        current = g + bound(stance)
         nearest = min(nearest, distance(stance))
         if progress is not None:
             progress(expansions, tested, nearest)
@@ -420,6 +425,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     else:
                         open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
                         heapq.heapify(open_list)
+            current = math.inf
             continue  # a goal's successors cannot be cheaper routes
         if best is not None and (expansions - first_expansions) % BOUND_EVERY == 0:
             # The lower bound rises as the search goes on: record it (and stop at the target).
@@ -454,8 +460,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                     heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
                                                g + c_attach, 1, child,
                                                ((vertex, j, anchor), rows)))
+        current = math.inf  # its successors are in the open list
     if best is not None:
-        lo = lower() if open_list else best_cost
+        lo = lower()
         now = time.perf_counter() - t0
         if not history or history[-1][1:3] != (best_cost, lo):
             history.append((now, best_cost, lo, expansions))

@@ -159,6 +159,24 @@ def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
     assert max(lows) <= optimal.cost * (1 + 1e-9), "a lower bound above the optimum"
 
 
+@pytest.mark.parametrize("restart", [True, False])
+def test_lower_bound_counts_the_vertex_being_expanded(demo: Scenario, optimal, monkeypatch,
+                                                      restart: bool) -> None:
+    """With the bound refreshed at every expansion, it is also taken while a vertex is popped
+    and its successors not yet pushed (after a restart, the start alone, with the open list
+    empty): that vertex must count, or the search proves a wrong optimum."""
+    import planning.complete as complete_module
+
+    monkeypatch.setattr(complete_module, "BOUND_EVERY", 1)
+    found = complete_search(demo, COARSE, heuristic_weight=300.0,
+                            anytime=AnytimeConfig(improve_factor=None, restart=restart))
+    assert found.success and found.quality == "optimal"
+    assert found.cost == pytest.approx(optimal.cost, rel=1e-9), (
+        f"claimed optimal at {found.cost:.6f}; the optimum is {optimal.cost:.6f}")
+    assert all(lo <= optimal.cost * (1 + 1e-9) for _, _, lo, _ in found.history), (
+        "a lower bound above the optimum")
+
+
 def test_target_bound_stops_within_it(demo: Scenario, optimal) -> None:
     found = complete_search(demo, COARSE, heuristic_weight=300.0,
                             anytime=AnytimeConfig(improve_factor=None, target_bound=1.5))

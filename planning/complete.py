@@ -48,8 +48,8 @@ from planning.lattice_moves import (
     LatticeTransition,
     goal_is_holdable,
     lattice_transition,
-    move_table,
     start_components,
+    vertex_moves,
 )
 from planning.search_cost import DistanceHeuristic, RegraspHeuristic, edge_cost
 from rb_drake.feasibility_kernel import held_kernel_threads
@@ -450,16 +450,10 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         if best is not None and \
                 expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
-        for j, moves in enumerate(move_table(scn, lat, stance)):
-            for k, rows in moves:
-                anchor = scn.anchors[k].id
-                if (stance, j, anchor) in excluded:
-                    continue
-                child = tuple(anchor if i == j else a for i, a in enumerate(stance))
-                if not beaten(g + c_attach, child):
-                    heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
-                                               g + c_attach, 1, child,
-                                               ((vertex, j, anchor), rows)))
+        for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):
+            if not beaten(g + c_attach, child):
+                heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
+                                           g + c_attach, 1, child, ((vertex, j, anchor), rows)))
         current = math.inf  # its successors are in the open list
     if best is not None:
         lo = lower()

@@ -47,8 +47,8 @@ from planning.lattice import LatticeConfig
 from planning.lattice_moves import (
     goal_is_holdable,
     lattice_transition,
-    move_table,
     start_components,
+    vertex_moves,
 )
 from planning.search_cost import RegraspHeuristic, edge_cost, goal_distance
 from rb_drake.scenario import Scenario
@@ -176,18 +176,13 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
                                       f"expansions) without a route of predicted success >= "
                                       f"{min_success:g}")
             break
-        for j, moves in enumerate(move_table(scn, lat, stance)):
-            for a, rows in moves:
-                anchor = scn.anchors[a].id
-                if (stance, j, anchor) in excluded:
-                    continue
-                child = tuple(anchor if i == j else b for i, b in enumerate(stance))
-                hops = bound.regrasps(child)
-                least = cost + bound.c_attach  # every edge costs at least the attach term
-                if not math.isfinite(hops) or least + bound.c_attach * hops > slack:
-                    continue
-                heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
-                                           (j, anchor, rows, child, None)))
+        for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):
+            hops = bound.regrasps(child)
+            least = cost + bound.c_attach  # every edge costs at least the attach term
+            if not math.isfinite(hops) or least + bound.c_attach * hops > slack:
+                continue
+            heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
+                                       (j, anchor, rows, child, None)))
     if found is None:
         if stop == "noroute" and excluded:
             stop = "exhausted"

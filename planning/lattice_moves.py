@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Collection, Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -177,6 +178,19 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     return [[(anchors[k], rows[at[j * K + k]:at[j * K + k + 1]])
              for k in range(K) if at[j * K + k + 1] > at[j * K + k]]
             for j in range(4)]
+
+
+def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
+                 excluded: Collection[tuple[tuple, int, str]] = ()
+                 ) -> Iterator[tuple[int, str, np.ndarray, tuple]]:
+    """Every move of component `lat` of `stance` (`move_table`'s) but the `excluded` ones
+    (stance, boom, anchor): (boom, anchor id, its `move_rows`, the child stance)."""
+    for j, moves in enumerate(move_table(scn, lat, stance)):
+        for k, rows in moves:
+            anchor = scn.anchors[k].id
+            if (stance, j, anchor) not in excluded:
+                yield j, anchor, rows, tuple(anchor if i == j else a
+                                             for i, a in enumerate(stance))
 
 
 def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:

@@ -109,13 +109,25 @@ class ParamError(ValueError):
         self.reason = reason
 
 
+# Physically meaningful magnitudes of robot parameters (docs/formats.md): beyond them a value is
+# a typo, and refusing it at reading keeps overflow out of the statics.
+MAX_SIZE = 100.0      # m: body sides, shoulder offsets
+MAX_BOOM = 1e3        # m: boom length
+MAX_FORCE = 1e6       # N: boom tension; N m: shoulder torque
+MAX_MASS = 1e6        # kg: body and gripper; kg/m: boom density
+MAX_DEGREES = 1e4     # shoulder directions
+
+
 def _number(field: str, value: Any, lo: float | None = None, hi: float | None = None,
             lo_open: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParamError(field, f"expected a number, got {type(value).__name__} {value!r}")
-    v = float(value)
+        raise ParamError(field, f"expected a number, got {type(value).__name__} {_short(value)}")
+    try:
+        v = float(value)
+    except OverflowError:  # an integer too large for a float
+        v = math.inf
     if not math.isfinite(v):
-        raise ParamError(field, f"must be finite, got {value!r}")
+        raise ParamError(field, f"must be finite, got {_short(value)}")
     if lo is not None and (v <= lo if lo_open else v < lo):
         raise ParamError(field, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
     if hi is not None and v > hi:
@@ -123,14 +135,19 @@ def _number(field: str, value: Any, lo: float | None = None, hi: float | None = 
     return v
 
 
-def _vector(field: str, value: Any, n: int) -> tuple[float, ...]:
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _vector(field: str, value: Any, n: int, bound: float) -> tuple[float, ...]:
     if not isinstance(value, list | tuple) or len(value) != n:
-        raise ParamError(field, f"expected a list of {n} numbers, got {value!r}")
-    return tuple(_number(f"{field}[{k}]", v) for k, v in enumerate(value))
+        raise ParamError(field, f"expected a list of {n} numbers, got {_short(value)}")
+    return tuple(_number(f"{field}[{k}]", v, -bound, bound) for k, v in enumerate(value))
 
 
-def _interval(field: str, value: Any, lo: float) -> tuple[float, float]:
-    a, b = _vector(field, value, 2)
+def _interval(field: str, value: Any, lo: float, hi: float) -> tuple[float, float]:
+    a, b = _vector(field, value, 2, hi)
     if a < lo:
         raise ParamError(f"{field}[0]", f"must be >= {lo}, got {a}")
     if not a < b:
@@ -143,7 +160,8 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
     if overrides is None:
         return RobotParams()
     if not isinstance(overrides, Mapping):
-        raise ParamError("robot", f"expected a mapping of parameter names, got {overrides!r}")
+        raise ParamError("robot", "expected a mapping of parameter names, got "
+                         f"{_short(overrides)}")
     known = {f.name for f in dataclasses.fields(RobotParams)}
     changes: dict[str, Any] = {}
     for key, value in overrides.items():
@@ -151,24 +169,29 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
             raise ParamError(str(key),
                              f"unknown robot parameter; known: {', '.join(sorted(known))}")
         if key == "body_size":
-            w, h = _vector(key, value, 2)
+            w, h = _vector(key, value, 2, MAX_SIZE)
             if w <= 0 or h <= 0:
                 raise ParamError(key, f"sides must be positive, got {[w, h]}")
             changes[key] = (w, h)
         elif key == "shoulders":
             if not isinstance(value, list | tuple) or len(value) != NUM_BOOMS:
-                raise ParamError(key, f"expected {NUM_BOOMS} [x, y] pairs, got {value!r}")
-            changes[key] = tuple(_vector(f"{key}[{i}]", s, 2) for i, s in enumerate(value))
+                raise ParamError(key, f"expected {NUM_BOOMS} [x, y] pairs, got {_short(value)}")
+            changes[key] = tuple(_vector(f"{key}[{i}]", s, 2, MAX_SIZE)
+                                 for i, s in enumerate(value))
         elif key == "shoulder_directions_deg":
-            changes[key] = _vector(key, value, NUM_BOOMS)
+            changes[key] = _vector(key, value, NUM_BOOMS, MAX_DEGREES)
         elif key == "shoulder_range_deg":
             changes[key] = _number(key, value, 0.0, 180.0, lo_open=True)
-        elif key == "boom_length" or key == "boom_tension":
-            changes[key] = _interval(key, value, 0.0)
+        elif key == "boom_length":
+            changes[key] = _interval(key, value, 0.0, MAX_BOOM)
+        elif key == "boom_tension":
+            changes[key] = _interval(key, value, 0.0, MAX_FORCE)
         elif key in ("body_mass",):
-            changes[key] = _number(key, value, 0.0, lo_open=True)
-        elif key in ("shoulder_torque_max", "gripper_mass", "boom_linear_density"):
-            changes[key] = _number(key, value, 0.0)
+            changes[key] = _number(key, value, 0.0, MAX_MASS, lo_open=True)
+        elif key == "shoulder_torque_max":
+            changes[key] = _number(key, value, 0.0, MAX_FORCE)
+        elif key in ("gripper_mass", "boom_linear_density"):
+            changes[key] = _number(key, value, 0.0, MAX_MASS)
         elif key == "attach_failure":
             changes[key] = _number(key, value, 0.0, 1.0)
         elif key == "p_min":

@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from rb_drake.collision import Rock, polygon_is_simple, signed_area
+from rb_drake.input_files import InputFileError, load_yaml, read_text
 from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
 from rb_drake.stance import Stance
 
@@ -24,6 +25,13 @@ FORMAT = "reachbot-scenario/1"
 MARS_GRAVITY = (0.0, -3.71)
 ANCHOR_DEPTH_TOL = 0.01  # m: an anchor may sit this far inside its rock (numerical slack)
 ANCHOR_GAP_TOL = 0.05    # m: ... and this far off the rock surface (a gripper grasps rock)
+
+# Physically meaningful magnitudes (docs/formats.md): a value beyond them is a typo or an attack,
+# and refusing it at reading keeps overflow (1e308 squared) out of the planner.
+MAX_COORDINATE = 1e4  # m: walls, anchors, start and goal positions, goal tolerance
+MAX_ANGLE = 1e4       # rad for the start pose's angle, degrees for an anchor's normal angle
+MAX_GRAVITY = 1e3     # m/s^2 per component (Earth 9.81)
+MAX_FORCE = 1e6       # N: anchor limit surfaces and their spreads
 
 
 class ScenarioError(ValueError):
@@ -153,22 +161,31 @@ class _Reader:
         return m[key]
 
     def number(self, field: str, value: Any, positive: bool = False,
-               nonnegative: bool = False) -> float:
+               nonnegative: bool = False, bound: float = MAX_COORDINATE) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.fail(field, f"expected a number, got {_describe(value)}")
-        v = float(value)
+        try:
+            v = float(value)
+        except OverflowError:  # an integer too large for a float
+            v = math.inf
         if not math.isfinite(v):
-            raise self.fail(field, f"must be a finite number, got {value!r}")
+            raise self.fail(field, f"must be a finite number, got {_describe(value)}")
+        if abs(v) > bound:
+            raise self.fail(field, f"must be at most {bound:g} in magnitude, got {v:g}")
         if positive and v <= 0:
             raise self.fail(field, f"must be positive, got {v}")
         if nonnegative and v < 0:
             raise self.fail(field, f"must not be negative, got {v}")
         return v
 
-    def vector(self, field: str, value: Any, n: int) -> tuple[float, ...]:
+    def vector(self, field: str, value: Any, n: int,
+               bounds: Sequence[float] = ()) -> tuple[float, ...]:
+        """`n` numbers, the k-th at most bounds[k] in magnitude (MAX_COORDINATE by default)."""
         if not isinstance(value, list | tuple) or len(value) != n:
             raise self.fail(field, f"expected a list of {n} numbers, got {_describe(value)}")
-        return tuple(self.number(f"{field}[{k}]", v) for k, v in enumerate(value))
+        limits = list(bounds) + [MAX_COORDINATE] * (n - len(bounds))
+        return tuple(self.number(f"{field}[{k}]", v, bound=limits[k])
+                     for k, v in enumerate(value))
 
 
 def _describe(value: Any) -> str:
@@ -195,7 +212,8 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise rd.fail("name", f"expected a string, got {_describe(name)}")
-    gravity = rd.vector("gravity", data.get("gravity", list(MARS_GRAVITY)), 2)
+    gravity = rd.vector("gravity", data.get("gravity", list(MARS_GRAVITY)), 2,
+                        (MAX_GRAVITY, MAX_GRAVITY))
 
     overrides = data.get("robot") or {}
     try:
@@ -230,7 +248,8 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
         anchors.append(_parse_anchor(rd, f"anchors[{k}]", raw, seen, rock))
 
     start = rd.mapping("start", rd.require("", data, "start"))
-    pose = rd.vector("start.pose", rd.require("start", start, "pose"), 3)
+    pose = rd.vector("start.pose", rd.require("start", start, "pose"), 3,
+                     (MAX_COORDINATE, MAX_COORDINATE, MAX_ANGLE))
     stance_raw = rd.require("start", start, "stance")
     if not isinstance(stance_raw, list) or len(stance_raw) != NUM_BOOMS:
         raise rd.fail("start.stance", f"expected {NUM_BOOMS} anchor ids (one per boom), "
@@ -276,7 +295,7 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     pos = rd.vector(f"{field}.position", rd.require(field, raw, "position"), 2)
     normal_raw = rd.require(field, raw, "normal")
     if isinstance(normal_raw, int | float) and not isinstance(normal_raw, bool):
-        deg = rd.number(f"{field}.normal", normal_raw)
+        deg = rd.number(f"{field}.normal", normal_raw, bound=MAX_ANGLE)
         normal = (math.cos(math.radians(deg)), math.sin(math.radians(deg)))
     else:
         nx, ny = rd.vector(f"{field}.normal", normal_raw, 2)
@@ -289,13 +308,13 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
     sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
     fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),
-                   positive=True)
+                   positive=True, bound=MAX_FORCE)
     ft = rd.number(f"{field}.limit.lateral", rd.require(f"{field}.limit", limit, "lateral"),
-                   positive=True)
+                   positive=True, bound=MAX_FORCE)
     sn = rd.number(f"{field}.sigma.normal", rd.require(f"{field}.sigma", sigma, "normal"),
-                   positive=True)
+                   positive=True, bound=MAX_FORCE)
     st = rd.number(f"{field}.sigma.lateral", rd.require(f"{field}.sigma", sigma, "lateral"),
-                   positive=True)
+                   positive=True, bound=MAX_FORCE)
     p = np.array(pos)
     if rock.polygons and rock.contains(p) and rock.distance(p) > ANCHOR_DEPTH_TOL:
         raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is inside rock "
@@ -328,32 +347,14 @@ def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
     return scenario_from_dict(data, str(path), check_start=check_start)
 
 
-# libyaml's loader when PyYAML was built with it: 3 ms for a bundled cave instead of 22 ms.
-SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-
-
 def read_yaml_file(path: str | Path, error: type[ScenarioError] = ScenarioError) -> Any:
-    """The YAML document of a file; a missing or unreadable file or bad YAML raises `error`
-    (ScenarioError or a subclass) naming the file and, for bad YAML, the line and column."""
-    path = Path(path)
-    source = str(path)
+    """The YAML document of a file, read within rb_drake.input_files' bounds; a missing,
+    unreadable, oversized or non-regular file, bad YAML, an alias or a duplicate key raises
+    `error` (ScenarioError or a subclass) naming the file and the field, line or "(file)"."""
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise error(source, "(file)", "no such file") from None
-    except OSError as e:
-        raise error(source, "(file)", f"cannot read: {e.strerror}") from None
-    except UnicodeDecodeError as e:
-        raise error(source, "(file)", f"not UTF-8 text (byte {e.start}): is this the "
-                    "right file?") from None
-    try:
-        data = yaml.load(text, Loader=SAFE_LOADER)
-    except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(file)"
-        problem = getattr(e, "problem", None) or " ".join(str(e).split())
-        raise error(source, where, f"not valid YAML: {problem}") from None
-    return data
+        return load_yaml(read_text(path))
+    except InputFileError as e:
+        raise error(str(path), e.field, e.reason) from None
 
 
 def scenario_to_yaml(scn: Scenario) -> str:

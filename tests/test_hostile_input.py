@@ -1,0 +1,201 @@
+"""Hostile input files: none can hang rbp, exhaust its memory or end in a traceback.
+
+Each file here is refused by `rb_drake.input_files` or the scenario reader with one line naming
+the file, the field and the reason; on the command line, exit status 2 within seconds. The
+bounds are stated in docs/formats.md.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rb_drake.input_files import MAX_DEPTH, InputFileError, load_json, load_yaml, read_text
+from rb_drake.scenario import ScenarioError, bundled_caves, load_scenario
+from tests.cli_helpers import run_rbp
+
+DEMO = bundled_caves()["demo-shaft"]
+
+
+def _bomb(levels: int = 9, width: int = 9) -> str:
+    """The "billion laughs": each level a list of `width` aliases of the level below."""
+    lines = [f"l0: &l0 [{', '.join(['lol'] * width)}]"]
+    for k in range(1, levels):
+        lines.append(f"l{k}: &l{k} [{', '.join([f'*l{k - 1}'] * width)}]")
+    return "\n".join(lines) + "\n"
+
+
+def _demo_text() -> str:
+    return DEMO.read_text()
+
+
+def _with_top(field: str, value_yaml: str) -> str:
+    """demo-shaft.yaml with its top-level `field` replaced by `value_yaml` (a YAML fragment)."""
+    kept = [line for line in _demo_text().splitlines()
+            if not line.startswith(f"{field}:")]
+    return "\n".join(kept) + f"\n{field}: {value_yaml}\n"
+
+
+def test_alias_bomb_refused_quickly_in_little_memory():
+    text = _bomb()
+    start = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(InputFileError, match="expands to more than"):
+        load_yaml(text)
+    elapsed = time.perf_counter() - start
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert elapsed < 1.0, f"the alias bomb took {elapsed:.2f} s to refuse (limit 1 s)"
+    assert grown_mb < 50, f"refusing the alias bomb grew the peak memory by {grown_mb:.0f} MB"
+
+
+@pytest.mark.parametrize("field", ["name", "gravity", "robot"])
+def test_alias_bomb_in_a_scenario_field(tmp_path, field):
+    """The issue's reproduction: nested aliases in a cave's name, gravity or robot."""
+    bomb = "[" + ", ".join(["*l8"] * 9) + "]"
+    path = tmp_path / "bomb.yaml"
+    path.write_text(_bomb() + _with_top(field, bomb).replace("\n\n", "\n"))
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(path)
+    assert caught.value.source == str(path), f"the error names {caught.value.source}"
+    assert "expands to more than" in caught.value.reason, caught.value.reason
+
+
+def test_a_few_aliases_still_read():
+    """yaml.safe_dump writes an alias for an object shared by two fields: such files read."""
+    shared = [0.0, -3.71]
+    text = yaml.safe_dump({"a": shared, "b": shared})
+    assert "*" in text, "PyYAML no longer writes aliases for shared objects"
+    assert load_yaml(text) == {"a": shared, "b": shared}
+
+
+def test_recursive_alias_refused():
+    with pytest.raises(InputFileError, match="infinite"):
+        load_yaml("a: &a [1, *a]\n")
+
+
+def test_duplicate_key_refused_with_both_lines(tmp_path):
+    path = tmp_path / "two-goals.yaml"
+    path.write_text(_demo_text() + "goal: {position: [0.0, 2.0]}\n")
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(path)
+    assert "duplicate key 'goal'" in caught.value.reason, caught.value.reason
+    assert caught.value.field.startswith("line "), f"field {caught.value.field!r} has no line"
+
+
+def test_duplicate_key_inside_a_nested_mapping():
+    with pytest.raises(InputFileError, match="duplicate key 'normal'"):
+        load_yaml("limit: {normal: 1, lateral: 2, normal: 3}\n")
+
+
+def test_duplicate_json_key_refused():
+    with pytest.raises(InputFileError, match="duplicate key 'format'"):
+        load_json('{"format": "a", "format": "b"}')
+
+
+def test_deep_nesting_refused():
+    text = "[" * (MAX_DEPTH + 5) + "]" * (MAX_DEPTH + 5)
+    with pytest.raises(InputFileError, match=r"nested|nesting"):
+        load_yaml(text)
+
+
+def test_ordinary_yaml_still_reads():
+    data = load_yaml("a: [1, 2.5, x]\nb: {c: null}\n")
+    assert data == {"a": [1, 2.5, "x"], "b": {"c": None}}, data
+    assert load_yaml("") is None, "an empty document reads as None, as PyYAML's"
+
+
+def test_bundled_caves_read_the_same_as_pyyaml():
+    for name, path in bundled_caves().items():
+        assert load_yaml(path.read_text()) == yaml.safe_load(path.read_text()), name
+
+
+def test_oversized_file_refused_without_reading(tmp_path, monkeypatch):
+    monkeypatch.setenv("RBP_MAX_INPUT_MB", "0.001")  # about 1 kB
+    path = tmp_path / "big.yaml"
+    path.write_text("x: " + "a" * 5000 + "\n")
+    with pytest.raises(InputFileError, match=r"over the .* limit"):
+        read_text(path)
+
+
+def test_directory_and_fifo_refused(tmp_path):
+    with pytest.raises(InputFileError, match="directory"):
+        read_text(tmp_path)
+    fifo = tmp_path / "pipe.yaml"
+    os.mkfifo(fifo)
+    start = time.perf_counter()
+    with pytest.raises(InputFileError, match="pipe"):
+        read_text(fifo)
+    assert time.perf_counter() - start < 1.0, "a FIFO with no writer must not block"
+
+
+def test_symlink_loop_refused(tmp_path):
+    loop = tmp_path / "loop.yaml"
+    loop.symlink_to(loop)
+    with pytest.raises(InputFileError, match="cannot read"):
+        read_text(loop)
+
+
+@pytest.mark.skipif(not Path("/dev/zero").exists(), reason="no /dev/zero")
+def test_device_refused():
+    with pytest.raises(InputFileError, match="device"):
+        read_text("/dev/zero")
+
+
+# (name, top-level field, YAML value, field named in the error)
+EXTREME = [
+    ("goal-1e308", "goal", "{position: [0.0, 1.0e+308]}", "goal.position[1]"),
+    ("gravity-1e308", "gravity", "[0.0, -1.0e+308]", "gravity[1]"),
+    ("huge-integer", "gravity", "[0.0, -" + "9" * 400 + "]", "gravity[1]"),
+    ("body-mass-1e308", "robot", "{body_mass: 1.0e+308}", "robot.body_mass"),
+    ("boom-1e308", "robot", "{boom_length: [0.1, 1.0e+308]}", "robot.boom_length[1]"),
+    ("tension-1e308", "robot", "{boom_tension: [0.5, 1.0e+308]}", "robot.boom_tension[1]"),
+]
+
+
+@pytest.mark.parametrize(("top", "value", "field"), [c[1:] for c in EXTREME],
+                         ids=[c[0] for c in EXTREME])
+def test_extreme_numbers_refused_at_reading(tmp_path, top, value, field):
+    path = tmp_path / "extreme.yaml"
+    path.write_text(_with_top(top, value))
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(path)
+    assert caught.value.field == field, f"{caught.value.field!r} != {field!r}: {caught.value}"
+    assert "at most" in caught.value.reason or "<=" in caught.value.reason or \
+        "finite" in caught.value.reason, caught.value.reason
+
+
+def test_anchor_limit_1e308_refused(tmp_path):
+    text = _demo_text()
+    start = text.index("normal:", text.index("limit:"))
+    end = text.index(",", start)
+    path = tmp_path / "limit.yaml"
+    path.write_text(text[:start] + "normal: 1.0e+308" + text[end:])
+    with pytest.raises(ScenarioError, match=r"limit\.normal: must be at most"):
+        load_scenario(path)
+
+
+def test_cli_refuses_hostile_files_in_one_line(tmp_path):
+    """On the command line: exit 2, one line naming the file, and no traceback."""
+    bomb = tmp_path / "bomb.yaml"
+    bomb.write_text(_bomb())
+    fifo = tmp_path / "pipe.yaml"
+    os.mkfifo(fifo)
+    extreme = tmp_path / "goal.yaml"
+    extreme.write_text(_with_top("goal", "{position: [0.0, 1.0e+308]}"))
+    for path in (bomb, fifo, extreme, tmp_path):
+        for command in (("scenario", "check"), ("plan", "--footsteps-only", "-o",
+                                                 str(tmp_path / "p.json"))):
+            start = time.perf_counter()
+            result = run_rbp(*command[:2], str(path), *command[2:], cwd=tmp_path)
+            elapsed = time.perf_counter() - start
+            lines = result.stderr.strip().splitlines()
+            assert result.returncode == 2, (command, path, result.returncode, result.stderr)
+            assert len(lines) == 1 and str(path) in lines[0], (command, path, result.stderr)
+            assert "Traceback" not in result.stderr, result.stderr
+            assert elapsed < 30, f"{command} {path} took {elapsed:.1f} s"
+    assert not (tmp_path / "p.json").exists(), "a refused plan wrote its output file"

@@ -224,7 +224,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
-            "anytime-f4", "oracle", "oracle-a*")
+            "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -236,9 +236,11 @@ def variant_config(variant: str, time_limit: float | None):
     "w30" / "w3" (lower weights, first route), "anytime-fK" (the first
     route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
     proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
-    start)."""
+    start), "repair" (the first route repaired window by window: planning.route_repair) and
+    "default-repair" (today's default, then repaired)."""
     from planning.complete import AnytimeConfig
     from planning.footsteps import FootstepConfig
+    from planning.route_repair import RepairConfig
 
     limit = 600.0 if time_limit is None else time_limit
     exhaustive = AnytimeConfig(improve_factor=None)
@@ -256,6 +258,8 @@ def variant_config(variant: str, time_limit: float | None):
         "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},
         "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
                       "heuristic_weight": 1.0},
+        "repair": {"anytime": None, "repair": RepairConfig()},
+        "default-repair": {"repair": RepairConfig()},
     }[variant]
     return FootstepConfig(**settings)
 

@@ -34,6 +34,7 @@ from planning.complete import AnytimeConfig, LatticeMemo, complete_search, searc
 from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
 from planning.ramps import ramp_ends_hold
+from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import (
     DistanceHeuristic,
     attach_cost,
@@ -79,6 +80,9 @@ class FootstepConfig:
     # exp(-cost) is at least this (planning.constrained), or the proof that none reaches it;
     # None: the anytime search
     min_success: float | None = None
+    # complete search only: the route improved window by window, each window searched to its
+    # optimum (planning.route_repair); None: the route as the search found it
+    repair: RepairConfig | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
     # complete search: the budget grows with the climb, to at least this many expansions per
@@ -350,6 +354,9 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
         result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
                                  cfg.time_limit, exclude, memo.lattice, progress,
                                  cfg.transition.ignore_grasps, cfg.anytime)
+        if cfg.repair is not None and result.success:
+            result = repair_route(scn, result, memo.lattice, cfg.repair,
+                                  cfg.transition.ignore_grasps, exclude)
     search = search_result(result)
     explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))
                 for k, (v, p) in enumerate(result.expanded)]

@@ -237,7 +237,7 @@ def variant_config(variant: str, time_limit: float | None):
     route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
     proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
     start)."""
-    from planning.complete import AnytimeConfig
+    from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
 
     limit = 600.0 if time_limit is None else time_limit

@@ -30,9 +30,10 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from planning.transition import anchor_table, pack_rows
+from planning.transition_score import pack_rows
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility_kernel import reach_violation, score_rows
-from rb_drake.params import RobotParams
+from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario
 
 
@@ -52,7 +53,8 @@ class LatticeConfig:
         """Orientation indices -n/2 .. n/2 - 1 cover the whole circle."""
         n = round(360.0 / self.angle_step_deg)
         if n % 2 or abs(n * self.angle_step_deg - 360.0) > 1e-9:
-            raise ValueError(f"angle_step_deg must divide 180 deg, got {self.angle_step_deg}")
+            raise RbpInputError(f"must divide 180 deg, got {self.angle_step_deg}",
+                                field="angle_step_deg")
         return n
 
 
@@ -198,14 +200,15 @@ class StanceLattice(NamedTuple):
 def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
                    ignore_grasps: bool = False) -> StanceLattice:
     """The feasible lattice poses of `stance`, their release booms and components."""
-    table = anchor_table(scn)
+    table = scn.anchor_table
     free = len(table.row)
     held = [table.row[a] for a in stance]
     anchors = table.positions[held]
-    idx = reachable_lattice(scn.robot, anchors, np.arange(4), cfg)
+    idx = reachable_lattice(scn.robot, anchors, np.arange(NUM_BOOMS), cfg)
     reachable = len(idx)
     poses = poses_of(idx, cfg)
-    rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
+    rows = [held] + [[free if i == j else held[i] for i in range(NUM_BOOMS)]
+                     for j in range(NUM_BOOMS)]
     stances, tips = pack_rows(table, rows, [free, *held])
     P = len(idx)
     # The four release 3-stances are decided where the 4-stance holds (KernelCheck.release_r).

@@ -20,7 +20,6 @@ import numpy as np
 
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack
-from planning.transition import anchor_table
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
     _packed_rock,
@@ -33,6 +32,7 @@ from rb_drake.feasibility_kernel import (
     reach_violation,
     score_poses,
 )
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 
@@ -109,7 +109,7 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     """The move decided by the kernel on `rows` of `lat` (`lattice_transition`)."""
     if not len(rows):
         return LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
-    table = anchor_table(scn)
+    table = scn.anchor_table
     free = len(table.row)
     held = [table.row[a] for a in stance]
     stance_rows = np.array([held, held], dtype=np.int64)
@@ -156,7 +156,7 @@ def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.nda
     found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
                                     np.ascontiguousarray(pts[near]),
                                     *_lattice_args(scn, lat.lattice))
-    return [near[found[j]] for j in range(4)]
+    return [near[found[j]] for j in range(NUM_BOOMS)]
 
 
 def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[int, np.ndarray]]]:
@@ -168,7 +168,7 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     pts = scn.anchor_positions
     near = _near_anchors(scn, lat, stance)
     if not len(near):
-        return [[] for _ in range(4)]
+        return [[] for _ in range(NUM_BOOMS)]
     rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,
                                        np.ascontiguousarray(pts[near]),
                                        *_lattice_args(scn, lat.lattice),
@@ -177,7 +177,7 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     at, anchors = offsets.tolist(), near.tolist()  # Python ints: numpy scalars cost 10x
     return [[(anchors[k], rows[at[j * K + k]:at[j * K + k + 1]])
              for k in range(K) if at[j * K + k + 1] > at[j * K + k]]
-            for j in range(4)]
+            for j in range(NUM_BOOMS)]
 
 
 def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
@@ -248,7 +248,7 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     for m in range(-n // 2, n // 2):  # an orientation at a time: bounded memory
         poses = np.column_stack([cells * dx, np.full(len(cells), m * cfg.angle_step)])
         ok = np.ones(len(poses), dtype=bool)
-        for j in range(4):
+        for j in range(NUM_BOOMS):
             v = reach_violation(scn.robot, poses, scn.anchor_positions[near],
                                 np.full(len(near), j))
             ok &= (v == 0.0).any(axis=1)

@@ -18,6 +18,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
+from rb_drake.params import NUM_BOOMS
+
 
 class PathProbability(NamedTuple):
     p_path: float
@@ -55,7 +57,7 @@ def path_probability(configurations: Iterable[Configuration],
             if anchor is not None and p is not None:
                 worst[i] = min(worst[i], float(p))
         first = False
-    for i in range(4):
+    for i in range(NUM_BOOMS):
         if current[i] is not None:
             holdings.append((i, current[i], worst[i]))
     p_grasps = 1.0

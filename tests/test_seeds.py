@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 from planning import seeds
+from planning.body_seeds import _ReachFilter
 from planning.footsteps import candidate_moves, edge_rng
 from planning.seeds import (
     Seed,
     SeedConfig,
-    _ReachFilter,
     body_seed,
     reach_seed,
     retract_path,
@@ -400,7 +400,7 @@ def test_a_gripper_path_may_touch_its_own_rock_only_in_its_last_2_cm() -> None:
     anchor it grips, the gripper may touch the rock; any further out, it may not."""
     from types import SimpleNamespace
 
-    from planning.seeds import _arc_is_clear
+    from planning.reach_seeds import _arc_is_clear
     from rb_drake.collision import ANCHOR_CLEARANCE
 
     # A floor block with its top at y = 0; the anchor at the origin, normal up. The path comes

@@ -3,7 +3,7 @@
 A vertex of the complete search is (4-stance, component). `StanceComponents` holds the
 components of one stance found so far, each grown by `planning.flood` from a pose the search
 entered at, with the booms that may let go at each of its poses: the same sets, pose for pose,
-as `lattice.stance_lattice` finds by scoring the stance's whole reachable lattice, but only for
+as the tests' `stance_lattice` finds by scoring the stance's whole reachable lattice, but only for
 the components the search enters.
 """
 

@@ -28,7 +28,6 @@ from rb_drake.feasibility_kernel import (
     lattice_move_kernel,
     lattice_move_table,
     lattice_reach_rows,
-    lattice_reached_anchors,
     reach_violation,
     score_poses,
 )
@@ -145,25 +144,11 @@ def _near_anchors(scn: Scenario, lat: Component, stance: tuple) -> np.ndarray:
     return np.flatnonzero(near)
 
 
-def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
-    """Per boom, the indices of every anchor it reaches from some release pose of component
-    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
-    the component, anchors beyond reach of its bounding box left out first."""
-    pts = scn.anchor_positions
-    near = _near_anchors(scn, lat, stance)
-    if not len(near):
-        return [near] * 4
-    found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
-                                    np.ascontiguousarray(pts[near]),
-                                    *_lattice_args(scn, lat.lattice))
-    return [near[found[j]] for j in range(NUM_BOOMS)]
-
-
 def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[int, np.ndarray]]]:
     """Per boom, every move of component `lat` that some pose can use: (anchor index, its
     `move_rows`) for each anchor that the boom reaches from a release pose with its segment
     there clear of rock, in one compiled pass over the component (`lattice_move_table`). The
-    anchors of `candidate_moves` whose every such segment meets rock are left out: no pose
+    anchors the boom reaches but whose every such segment meets rock are left out: no pose
     holds their move (the 3-stance with the gripper at the new anchor tests that segment)."""
     pts = scn.anchor_positions
     near = _near_anchors(scn, lat, stance)
@@ -191,12 +176,6 @@ def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
             if (stance, j, anchor) not in excluded:
                 yield j, anchor, rows, tuple(anchor if i == j else a
                                              for i, a in enumerate(stance))
-
-
-def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
-    """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
-    (exact on the lattice), the stance's own anchors excluded."""
-    return candidate_moves(scn, lat, stance)[boom]
 
 
 def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,

@@ -210,10 +210,6 @@ class RigRun(NamedTuple):
     log: Path
     safety: SafetyReport = SafetyReport(0, 0, 0, 0)
 
-    @property
-    def timed_out(self) -> bool:
-        return self.safety.held > 0
-
 
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
             sim_rig: RigSimConfig | None = None, plan_source: str = "") -> RigRun:

@@ -17,20 +17,14 @@ import math
 
 import numpy as np
 import pytest
+from lattice_reference import candidate_anchors, stance_lattice
 
 from planning.complete import complete_search
 from planning.complete_config import CompleteConfig
 from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
 from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
-from planning.lattice import (
-    LatticeConfig,
-    pack,
-    poses_of,
-    reachable_lattice,
-    stance_lattice,
-)
+from planning.lattice import LatticeConfig, pack, poses_of, reachable_lattice
 from planning.lattice_moves import (
-    candidate_anchors,
     goal_is_holdable,
     lattice_transition,
     move_rows,

@@ -338,7 +338,9 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                         heapq.heapify(open_list)
             current = math.inf
             continue  # a goal's successors cannot be cheaper routes
-        if best is not None and (expansions - first_expansions) % BOUND_EVERY == 0:
+        # (a route is kept in `best` only by an anytime search: `anytime` is set below)
+        if best is not None and anytime is not None and \
+                (expansions - first_expansions) % BOUND_EVERY == 0:
             # The lower bound rises as the search goes on: record it (and stop at the target).
             lo = lower()
             if lo > history[-1][2] * (1.0 + 1e-9):
@@ -358,7 +360,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
             break
-        if best is not None and \
+        if best is not None and anytime is not None and \
                 expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
         for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):

@@ -170,7 +170,7 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
     atomic_write(path, write)
 
 
-STOP_REASONS = {
+STOP_REASONS: dict[str, str] = {
     Stop.BUDGET: "stopped on its budget (max_expansions or time_limit reached): no claim",
     Stop.EXHAUSTED: "exhausted: every stance it could reach was expanded (not a proof)",
     Stop.NOROUTE: "proved no route at the lattice's resolution",

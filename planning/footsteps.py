@@ -311,7 +311,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     seconds = time.perf_counter() - t0
     explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
-                        result.expansions, tested, seconds, result, cache, "", explored,
+                        result.expansions, tested, seconds, result, cache, Stop.ROUTE, explored,
                         frontier, memo)
 
 
@@ -381,7 +381,8 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                                    probabilities, alternatives))
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
-                        time.perf_counter() - t0, search, None, "", explored, frontier, memo,
+                        time.perf_counter() - t0, search, None, Stop.ROUTE, explored, frontier,
+                        memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
                         result.quality, cfg.min_success)
 

@@ -17,7 +17,7 @@ import dataclasses
 import functools
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import networkx as nx
 import numpy as np
@@ -104,7 +104,7 @@ def best_poses(tr: LatticeTransition, pick: np.ndarray, cfg: LatticeConfig) -> t
 def threads_held(search: Callable[..., CompleteResult]) -> Callable[..., CompleteResult]:
     """The search with `kernel_threads()` read once, not at every fill and move."""
     @functools.wraps(search)
-    def held(*args, **kwargs) -> CompleteResult:
+    def held(*args: Any, **kwargs: Any) -> CompleteResult:
         with held_kernel_threads():
             return search(*args, **kwargs)
     return held

@@ -120,7 +120,7 @@ def retract_path(start: np.ndarray, end: np.ndarray, shoulder: np.ndarray, radiu
     shoulder, round the shoulder (the shorter way) to the line towards `end`, and out to it."""
     a, b, s = (np.asarray(v, dtype=float) for v in (start, end, shoulder))
     ua, ub = (a - s) / np.linalg.norm(a - s), (b - s) / np.linalg.norm(b - s)
-    ra, rb = min(radius, np.linalg.norm(a - s)), min(radius, np.linalg.norm(b - s))
+    ra, rb = min(radius, float(np.linalg.norm(a - s))), min(radius, float(np.linalg.norm(b - s)))
     th_a, th_b = math.atan2(ua[1], ua[0]), math.atan2(ub[1], ub[0])
     sweep = (th_b - th_a + math.pi) % (2 * math.pi) - math.pi
 

@@ -248,6 +248,7 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
         best_key, best_pose, best_r4 = k2[b], more[b].copy(), r2[b]
     if best_key <= -VIOLATION_OFFSET:
         return Transition(False, None, None, _explain(miss), (evaluated + 3) // 4)
+    assert best_r4 is not None  # set with the best key, which is feasible
     return Transition(True, best_pose, np.exp(best_r4), "", (evaluated + 3) // 4)
 
 
@@ -323,6 +324,7 @@ def polish_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor
     if best_key <= -VIOLATION_OFFSET:
         raise ValueError("polish_transition needs a feasible transition pose")
     s_old, _, s_new = transition_stances(scn, old, boom, new_anchor)
+    assert s_new is not None  # a new anchor is given
     spread = np.asarray(step, dtype=float)
     for _ in range(rounds):
         cand = best + rng.normal(0.0, 1.0, (samples, 3)) * spread

@@ -19,9 +19,10 @@ from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, 
 
 
 class World(Protocol):
-    """What feasibility needs of a scenario."""
+    """What feasibility needs of a scenario (read-only, as a frozen Scenario's fields are)."""
 
-    robot: RobotParams
+    @property
+    def robot(self) -> RobotParams: ...
 
     @property
     def rock(self) -> Rock: ...

@@ -74,7 +74,7 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         run = run_rig(plan, args.phase, config, args.log, sim_rig=sim,
                       plan_source=f"{path.name} phase {args.phase}")
     except RigInputError as e:
-        where = "" if e.field.startswith("--") else f"{path}: "
+        where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None
     stance = plan["phases"][args.phase]["stance"]
     print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "

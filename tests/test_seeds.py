@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planning import seeds
+from planning import reach_seeds
 from planning.body_seeds import _ReachFilter
 from planning.footsteps import candidate_moves, edge_rng
 from planning.seeds import (
@@ -368,9 +368,9 @@ def test_reach_seed_without_clear_arc(wide: Scenario, wide_reaches, monkeypatch)
     assert not Rock([block]).segments_hit(seed.tips[:-1], seed.tips[1:]).any(), (
         "the tip path crosses the block")
     # Block the retracted swing as well (one radius tried, mid-swing): no tip path is clear.
-    monkeypatch.setattr(seeds, "RETRACT_RADII", (0.2,))
+    monkeypatch.setattr(reach_seeds, "RETRACT_RADII", (0.2,))  # where reach_seed reads it
     shoulder = geometry.shoulder_positions(wide.robot, pose)[0, j]
-    for radius in seeds.RETRACT_RADII:
+    for radius in reach_seeds.RETRACT_RADII:
         swing = retract_path(old, new, shoulder, radius, cfg.step)
         on = np.flatnonzero(np.isclose(np.linalg.norm(swing - shoulder, axis=1), radius))
         mid = swing[on[len(on) // 2]]

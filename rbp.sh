@@ -2,7 +2,8 @@
 # One entry point that also does the set-up: on first use (or when pyproject.toml changes) it
 # creates the virtual environment .venv with Python >= 3.11 and installs rbp into it.
 #   ./rbp.sh demo      plan the bundled demo cave and write its pictures and files to out/demo
-#   ./rbp.sh test      lint (ruff) and run the test suite (pytest); extra args go to pytest
+#   ./rbp.sh test      lint (ruff), type-check (mypy) and run the test suite (pytest); extra
+#                      args go to pytest
 #   ./rbp.sh ARGS...   any rbp command, e.g. ./rbp.sh scenario show demo-shaft -o cave.png
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -36,6 +37,7 @@ case "${1:-}" in
     test)
         shift
         "$VENV/bin/ruff" check .
+        "$VENV/bin/mypy"  # the library, as [tool.mypy] in pyproject.toml says
         exec "$VENV/bin/python" -m pytest "$@"
         ;;
     demo)

@@ -19,10 +19,11 @@ import sys
 from pathlib import Path
 
 from experiments.common import make_cave
+from rb_drake.errors import EXIT_OK
 
 
 def search_history(kind: str, seed: int, time_limit: float) -> dict:
-    from planning.complete import AnytimeConfig
+    from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig, plan_footsteps
 
     scn = make_cave(kind, seed, (4.5, 5.0))
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     atomic_save_figure(curve_figure(runs), out, dpi=110)
     atomic_write_text(out.with_suffix(".json"), json.dumps(runs, indent=1) + "\n")
     print(f"wrote {out} and {out.with_suffix('.json')}")
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -42,6 +42,7 @@ from experiments.sweep import (
     sweep,
     write_results,
 )
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 
 def oracle_label(record: dict[str, Any]) -> str:
@@ -249,7 +250,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "figure": str(figure),
     }
     write_results(args.out, results)
-    return 1 if results["errors"] else 0
+    return EXIT_FAILED if results["errors"] else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from pathlib import Path
 from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
+from rb_drake.errors import EXIT_OK
 from rb_drake.files import atomic_write_text
 from rb_drake.generate import KINDS, CaveConfig, generate_cave
 
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) / "bench_footsteps.json"
     atomic_write_text(out, json.dumps(result, indent=1))
     print(f"wrote {out}")
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

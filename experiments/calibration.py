@@ -31,6 +31,7 @@ from experiments.sweep import (
     sweep,
     write_results,
 )
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 TOLERANCE = 0.005  # |p_sim - p_path| of a calibrated plan
 RESIDUAL_RANGE = 0.05  # the residual panel's scale below 0; plans further off are labelled
@@ -262,7 +263,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "figure": None if figure is None else str(figure),
     }
     write_results(args.out, results)
-    return 1 if results["errors"] else 0
+    return EXIT_FAILED if results["errors"] else EXIT_OK
 
 
 if __name__ == "__main__":

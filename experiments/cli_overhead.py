@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from statistics import median
 
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
+
 FLOOR_IMPORTS = ("numpy", "scipy.special", "scipy.sparse", "scipy.ndimage", "numba", "networkx",
                  "pydrake.solvers", "ompl", "yaml")
 
@@ -62,21 +64,21 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
             wall, proc = timed([*rbp, "plan", args.cave, "-o", str(plan_file), *extra], out, tree)
             if proc.returncode != 0:
                 print(proc.stdout, proc.stderr, file=sys.stderr)
-                return 1
+                return EXIT_FAILED
             planning = json.loads(plan_file.read_text())["timing"]["total"]
             rows.append({"run": name, "repeat": k, "wall": wall, "planning": planning,
                          "ratio": wall / planning})
             check_wall, proc = timed([*rbp, "check", str(plan_file)], out, tree)
             if proc.returncode != 0:
                 print(proc.stdout, proc.stderr, file=sys.stderr)
-                return 1
+                return EXIT_FAILED
             check = "before: check" if tree else "check"
             rows.append({"run": check, "repeat": k, "wall": check_wall, "planning": planning,
                          "ratio": check_wall / planning})
         wall, proc = timed(floor, out, None)
         if proc.returncode != 0:
             print(proc.stdout, proc.stderr, file=sys.stderr)
-            return 1
+            return EXIT_FAILED
         rows.append({"run": "import floor", "repeat": k, "wall": wall, "planning": planning,
                      "ratio": wall / planning})
     for r in rows:
@@ -91,7 +93,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
               f"{median([r['wall'] - r['planning'] for r in mine]):5.2f} s, ratio to planning "
               f"{median([r['ratio'] for r in mine]):.2f}")
     (out / "results.json").write_text(json.dumps(rows, indent=1) + "\n")
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

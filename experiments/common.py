@@ -238,7 +238,7 @@ def variant_config(variant: str, time_limit: float | None):
     proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
     start), "repair" (the first route repaired window by window: planning.route_repair) and
     "default-repair" (today's default, then repaired)."""
-    from planning.complete import AnytimeConfig
+    from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
 

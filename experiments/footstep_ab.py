@@ -32,6 +32,7 @@ from typing import Any
 
 from experiments.common import cave_kind
 from experiments.sweep import quantiles
+from rb_drake.errors import EXIT_OK
 
 _CHILD = r"""
 import json, sys, time
@@ -155,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
                                             "thorough": args.thorough,
                                             "all_cores": args.all_cores, "caves": rows,
                                             "summary": summary}, indent=1))
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

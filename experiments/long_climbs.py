@@ -26,6 +26,7 @@ from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
+from rb_drake.errors import EXIT_OK
 
 KINDS = ("shaft", "crevasse")
 
@@ -154,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         print(json.dumps(r))
     print(f"wrote {out} and {out.with_suffix('.png')}")
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from experiments.sweep import (
     sweep,
     write_results,
 )
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 BINS = (0.0, 0.5, 0.8, 0.9, 0.95, 0.98, 1.0)  # p_path bins of the pooled calibration
 
@@ -175,7 +176,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "figure": str(figure),
     }
     write_results(args.out, results)
-    return 1 if results["errors"] else 0
+    return EXIT_FAILED if results["errors"] else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import numpy as np
 
 from planning.pipeline import plan_climb
 from planning.plan_faults import FAULTS, judge, random_fault
+from rb_drake.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import bundled_caves, load_scenario
 
@@ -47,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         plan = plan_climb(load_scenario(caves[name]))
         if not plan["success"]:
             print(f"{name}: no plan ({plan['reason']})", file=sys.stderr)
-            return 2
+            return EXIT_USAGE
         plans[name] = plan
     rng = np.random.default_rng(args.seed)
     by_rule: Counter[str] = Counter()
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
             "by_class": dict(by_class), "by_rule": dict(by_rule), "seconds": seconds},
             indent=1) + "\n")
         print(f"wrote {args.out}")
-    return 1 if accepted or misattributed else 0
+    return EXIT_FAILED if accepted or misattributed else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import argparse
 from typing import Any
 
 from experiments.sweep import machine_info, write_results
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 
 def rbp_body_plan(scn) -> dict[str, Any]:
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     path = write_plan(plan, f"{args.out}/plan.json")
     if not plan["success"]:
         print(f"{scn.name}: no body plan ({plan['reason']})")
-        return 1
+        return EXIT_FAILED
     sim = None if args.hardware else RigSimConfig(seed=args.seed)
     run = run_rig(plan, 0, RigLcmConfig(url=args.lcm_url, period=args.period),
                   f"{args.out}/rig.lcm", sim_rig=sim, plan_source=f"{args.planner} body plan")
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     rec = log.replay
     if not len(rec.time):
         print(f"no status received on {run.lcm_url}: is the rig on this bus?")
-        return 1
+        return EXIT_FAILED
     figure = atomic_save_figure(report_figure(log), f"{args.out}/rig.png", dpi=120)
     anchors = {a: {"start": float(rec.p_grasp[0, i]), "end": float(rec.p_grasp[-1, i]),
                    "min": float(rec.p_grasp[:, i].min()),
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "anchors": anchors,
         "min_p_all_grasps": float(np.prod(rec.p_grasp, axis=1).min()),
         "figure": str(figure), "log": str(run.log), "plan_file": str(path)})
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

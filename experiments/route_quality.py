@@ -28,6 +28,7 @@ from experiments.common import cave_kind
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
+from rb_drake.errors import EXIT_OK
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.against_oracle:
         runs = [json.loads(Path(f).read_text()) for f in args.against_oracle]
         print(json.dumps(against_oracle(runs), indent=1))
-        return 0
+        return EXIT_OK
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
@@ -170,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {out}")
     if args.compare:
         compare(result, json.loads(Path(args.compare).read_text()))
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

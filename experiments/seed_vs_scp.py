@@ -33,6 +33,7 @@ from experiments.sweep import (
     sweep,
     write_results,
 )
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 KINDS = ("body", "reach")
 TOLERANCE = 1e-9  # a change in P smaller than this is no change
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "figure": str(figure),
     }
     write_results(args.out, results)
-    return 1 if results["errors"] else 0
+    return EXIT_FAILED if results["errors"] else EXIT_OK
 
 
 if __name__ == "__main__":

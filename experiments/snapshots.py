@@ -14,6 +14,7 @@ import argparse
 
 from experiments.common import make_cave, plan_cave, plan_record
 from experiments.sweep import machine_info, write_results
+from rb_drake.errors import EXIT_OK
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
             "length": list(args.length)},
         "cave": scn.name, "plan": plan_record(plan), "attempts": attempts,
         "figure": str(figure), "plan_file": str(path)})
-    return 0
+    return EXIT_OK
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
+from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text
 
 RECORD_FORMAT = "rbp-trial/1"
@@ -45,7 +46,7 @@ class Trial(NamedTuple):
     params: dict[str, Any]   # JSON-able keyword arguments
 
 
-class SweepError(Exception):
+class SweepError(RbpError):
     """A sweep that cannot run as asked (bad trial names, a folder holding another sweep)."""
 
 
@@ -259,17 +260,17 @@ def check_sweep_arguments(parser: argparse.ArgumentParser, args: argparse.Namesp
 
 def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, Any]]:
     """`run_sweep` with the shared flags, for a script: a sweep that cannot run ends it with
-    one line on stderr (status 2), an interruption with a line on how to resume (status 3, as
-    every rbp command: rbp.cli.EXIT_INTERRUPTED)."""
+    one line on stderr (status EXIT_USAGE), an interruption with a line on how to resume
+    (EXIT_INTERRUPTED, as every rbp command)."""
     try:
         return run_sweep(trials, args.out, args.workers, args.cluster)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
-        raise SystemExit(2) from None
+        raise SystemExit(EXIT_USAGE) from None
     except KeyboardInterrupt:
         print(f"interrupted: finished trials are kept in {Path(args.out) / 'trials'}; run the "
               "same command again to resume", file=sys.stderr)
-        raise SystemExit(3) from None
+        raise SystemExit(EXIT_INTERRUPTED) from None
 
 
 def write_results(out: str | Path, results: dict[str, Any], name: str = "results.json") -> Path:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Callable, Hashable, Iterable, Sequence
 from typing import Any, NamedTuple
 
 import networkx as nx
@@ -35,7 +35,7 @@ class SearchResult(NamedTuple):
     evaluations: int
     graph: nx.DiGraph              # every evaluated feasible edge
     reason: str
-    expanded: tuple = ()           # nodes in expansion order (the start first)
+    expanded: Sequence[Hashable] = ()  # nodes in expansion order (the start first)
     node_data: Any = None          # dict: the data each reached node was last reached with
 
 

@@ -21,6 +21,7 @@ from planning.footsteps import (
     edge_rng,
     goal_pose_in,
 )
+from planning.search_outcome import Stop
 from planning.transition import find_transition
 from rb_drake.scenario import Scenario
 
@@ -61,7 +62,7 @@ def plan_naive(scn: Scenario, config: FootstepConfig | None = None,
             return FootstepPlan(False, f"stuck after {len(steps)} steps: no feasible move from "
                                 f"stance {list(stance)}", stances, steps,
                                 np.asarray(scn.start_pose), None, len(stances), tested,
-                                time.perf_counter() - t0, stop="exhausted")
+                                time.perf_counter() - t0, stop=Stop.EXHAUSTED)
     return FootstepPlan(False, f"no goal after {max_steps} steps", stances, steps,
                         np.asarray(scn.start_pose), None, len(stances), tested,
-                        time.perf_counter() - t0, stop="budget")
+                        time.perf_counter() - t0, stop=Stop.BUDGET)

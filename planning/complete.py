@@ -29,21 +29,18 @@ configurations' r), polished afterwards on the found path as the sampled search 
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import heapq
 import itertools
 import math
 import time
 from collections.abc import Callable, Collection
-from typing import NamedTuple
+from enum import IntEnum
 
 import networkx as nx
 import numpy as np
 
-from planning.astar import SearchResult
-from planning.components import UNKNOWN, Component, StanceComponents
-from planning.lattice import LatticeConfig, poses_of, unpack
+from planning.complete_config import AnytimeConfig, CompleteConfig
+from planning.components import UNKNOWN
 from planning.lattice_moves import (
     LatticeTransition,
     goal_is_holdable,
@@ -51,84 +48,28 @@ from planning.lattice_moves import (
     start_components,
     vertex_moves,
 )
+from planning.lattice_search import (
+    CompleteResult,
+    LatticeMemo,
+    Stance4,
+    Vertex,
+    best_poses,
+    goal_pose_of,
+    stance_components,
+    threads_held,
+)
 from planning.search_cost import DistanceHeuristic, RegraspHeuristic, edge_cost
-from rb_drake.feasibility_kernel import held_kernel_threads
+from planning.search_outcome import Quality, Stop
 from rb_drake.scenario import Scenario
 
-Stance4 = tuple[str, str, str, str]
-Vertex = tuple[Stance4, int]  # (stance, component)
-ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
 BOUND_EVERY = 100  # expansions between two updates of the anytime search's lower bound
 
 
-@dataclasses.dataclass
-class LatticeMemo:
-    """Stance components and transitions already decided on one scenario (same lattice)."""
+class Entry(IntEnum):
+    """What an open-list entry holds (its fourth field; the search's comment on `open_list`)."""
 
-    components: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
-    transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
-    config: LatticeConfig | None = None  # the lattice all of it was decided on
-
-
-@dataclasses.dataclass(frozen=True)
-class AnytimeConfig:
-    """After the first route, the search goes on for better ones (docs/model.md): each route
-    found lowers the ordering weight to the next of `weights` (a weight <= 1 orders by the
-    admissible bound itself: A*), and everything that cannot beat the best route is pruned. It
-    stops when the best cost is within `target_bound` of the proven lower bound (1: optimal),
-    when nothing is left that could beat it (optimal), or when its improvement budget is spent.
-
-    The budget is work, not time, so that the same cave gives the same plan on any machine
-    and under any load: `improve_factor` times the first route's expansions (at least
-    `improve_min`); None: no limit but the search's own (`rbp plan --thorough`)."""
-
-    weights: tuple[float, ...] = (5.0, 3.0, 2.0, 1.0)
-    target_bound: float = 1.0
-    improve_factor: float | None = 2.0
-    improve_min: int = 50
-    # Each better route restarts the search at the next weight (from the start, the lattice
-    # work kept in the memo) instead of re-keying the open list (ARA*): a greedy first search
-    # leaves poor g-values behind that a lower weight has to undo one vertex at a time (Richter,
-    # Thayer and Ruml, "The joy of forgetting", ICAPS 2010).
-    restart: bool = True
-
-    def improve_expansions(self, first: int) -> float:
-        """Expansions to look for better routes once the first took `first` expansions."""
-        if self.improve_factor is None:
-            return math.inf
-        return max(float(self.improve_min), self.improve_factor * first)
-
-
-class CompleteResult(NamedTuple):
-    success: bool
-    stop: str                      # "", "budget", "noroute", "nostart"
-    reason: str
-    path: list[Vertex]
-    poses: list[np.ndarray]        # transition pose per edge
-    probabilities: list[np.ndarray]  # the four configurations' P per edge
-    goal_pose: np.ndarray | None
-    expansions: int
-    transitions_tested: int
-    expanded: list[tuple[Vertex, np.ndarray]]   # (vertex, pose reached at), in order
-    frontier: list[tuple[Vertex, np.ndarray]]
-    graph: nx.DiGraph
-    # per edge, its most robust lattice poses in the component entered, best first (the
-    # first is `poses`'): others for the pipeline where the gripper's path fails at the first
-    alternatives: list[np.ndarray] | None = None
-    cost: float = math.nan         # the route's cost (planning.search_cost)
-    lower_bound: float = math.nan  # the optimal cost is at least this (anytime search)
-    first_cost: float = math.nan   # the first route's cost (anytime search)
-    # (seconds, best cost, lower bound, expansions) each time either improved (anytime search)
-    history: list[tuple[float, float, float, int]] | None = None
-    quality: str = ""              # "optimal", "bounded" (cost <= bound * optimum), "" (first)
-
-
-def _stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
-                       ignore_grasps: bool) -> StanceComponents:
-    hit = memo.components.get(stance)
-    if hit is None:
-        hit = memo.components[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)
-    return hit
+    REACHED = 0  # a stance reached by an evaluated move, its component not yet known
+    MOVE = 1     # a move still to evaluate (its transition poses not yet computed)
 
 
 def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
@@ -146,55 +87,25 @@ def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
     return True
 
 
-def goal_pose_of(scn: Scenario, lat: Component) -> np.ndarray | None:
-    """The most robust pose of component `lat` within the goal tolerance (None: none is): a
-    vertex with one is a goal."""
-    goal = np.asarray(scn.goal_position, dtype=float)
-    lo, hi = lat.box  # no pose within the tolerance unless its bounding box is
-    if float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - goal, goal - hi)))) > \
-            scn.goal_tolerance:
-        return None
-    near = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1) <= scn.goal_tolerance)
-    if not len(near):
-        return None
-    return lat.poses_at(near[[int(np.argmax(lat.robustness[near]))]])[0]
-
-
-def best_poses(tr: LatticeTransition, pick: np.ndarray, cfg: LatticeConfig) -> tuple:
-    """The transition's rows `pick`, most robust first (at most ALTERNATIVES): their lattice
-    poses and the four configurations' P at the first, the edge's pose."""
-    order = pick[np.argsort(-tr.worst[pick], kind="stable")[:ALTERNATIVES]]
-    return poses_of(unpack(tr.keys[order], cfg.angle_count), cfg), np.exp(tr.r4[order[0]])
-
-
-def _threads_held(search: Callable[..., CompleteResult]) -> Callable[..., CompleteResult]:
-    """The search with `kernel_threads()` read once, not at every fill and move."""
-    @functools.wraps(search)
-    def held(*args, **kwargs) -> CompleteResult:
-        with held_kernel_threads():
-            return search(*args, **kwargs)
-    return held
-
-
-@_threads_held
-def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
-                    heuristic_weight: float = 300.0, max_expansions: int | None = None,
-                    time_limit: float | None = None,
+@threads_held
+def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                     memo: LatticeMemo | None = None,
-                    progress: Callable[..., None] | None = None,
-                    ignore_grasps: bool = False,
-                    anytime: AnytimeConfig | None = None) -> CompleteResult:
-    """A* over (stance, component) vertices on the pose lattice (module doc).
+                    progress: Callable[..., None] | None = None) -> CompleteResult:
+    """A* over (stance, component) vertices on the pose lattice (module doc), as `config`
+    says (`CompleteConfig`).
 
-    `anytime`: after the first route, look for better ones (`AnytimeConfig`); the result then
-    carries the best cost, the proven lower bound and their history. A `heuristic_weight` of
-    at most 1 orders by the admissible bound: the first route is then optimal.
-
-    `max_expansions` / `time_limit` (s) stop it with `stop == "budget"`; None: no limit.
+    With `config.anytime`, after the first route it looks for better ones (`AnytimeConfig`);
+    the result then carries the best cost, the proven lower bound and their history.
+    `exclude`: moves (stance, boom, anchor) not to take; `memo`: what earlier searches on this
+    scenario decided (same lattice).
     `progress(expansions, transitions tested, nearest goal distance)` after each expansion,
     and with `bound=` (cost over the proven lower bound) whenever an anytime search improves."""
-    cfg = lattice or LatticeConfig()
+    config = config or CompleteConfig()
+    cfg = config.lattice
+    heuristic_weight, anytime = config.heuristic_weight, config.anytime
+    max_expansions, time_limit = config.max_expansions, config.time_limit
+    ignore_grasps = config.ignore_grasps
     memo = memo if memo is not None else LatticeMemo()
     if memo.config is None:
         memo.config = cfg
@@ -205,7 +116,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     c_attach = distance_heuristic.c_attach
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
-    start_lat = _stance_components(scn, memo, start, cfg, ignore_grasps)
+    start_lat = stance_components(scn, memo, start, cfg, ignore_grasps)
     joined = start_components(scn, start_lat, cfg)
     graph = nx.DiGraph()
     tested = 0
@@ -213,12 +124,12 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     distance = distance_heuristic.distance
 
     if not goal_is_holdable(scn, cfg):
-        return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
+        return CompleteResult(False, Stop.NOROUTE, "no route: no lattice pose within the goal "
                               "tolerance can hold a stance (the body meets rock, or some boom "
                               "reaches no anchor)", [], [], [], None, 0, 0, [], [], graph)
     if not joined:
-        return CompleteResult(False, "nostart", "the start pose is joined to no feasible lattice "
-                              f"pose of its stance at {cfg.position_step * 100:g} cm / "
+        return CompleteResult(False, Stop.NOSTART, "the start pose is joined to no feasible "
+                              f"lattice pose of its stance at {cfg.position_step * 100:g} cm / "
                               f"{cfg.angle_step_deg:g} deg", [], [], [], None, 0, 0, [], [],
                               graph)
     tie = itertools.count()
@@ -256,16 +167,16 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         # the weighted distance, in the order it always had
         return weight * c_attach * distance(stance) / distance_heuristic.max_step
 
-    # Entries: (f, tie, g, kind, child stance, payload). kind 0: a stance reached by an
+    # Entries: (f, tie, g, kind, child stance, payload). Entry.REACHED: a stance reached by an
     # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
-    # transition, parent's g, alternatives, edge cost); kind 1: a move to evaluate, payload
+    # transition, parent's g, alternatives, edge cost); Entry.MOVE: a move to evaluate, payload
     # ((parent vertex, boom, anchor), rows), g the parent's g plus the least an edge costs.
     start_pose = np.asarray(scn.start_pose, dtype=float)
 
     def start_entries() -> list:
         if not math.isfinite(bound(start)):
             return []
-        return sorted((heuristic(start), next(tie), 0.0, 0, start,
+        return sorted((heuristic(start), next(tie), 0.0, Entry.REACHED, start,
                        ((start, comp), None, start_pose, None, None, 0.0, None, 0.0))
                       for comp in joined)
 
@@ -275,7 +186,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
     expanded: list[tuple[Vertex, np.ndarray]] = []
     expansions = 0
     nearest = math.inf
-    stop, reason = "noroute", ""
+    stop, reason = Stop.NOROUTE, ""
     best: CompleteResult | None = None  # the cheapest route so far
     best_cost = math.inf
     history: list[tuple[float, float, float, int]] = []  # (s, cost, lower bound, expansions)
@@ -307,7 +218,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         g_child = g_parent + cost
         data = graph.edges[move[0], child]
         data["cost"] = min(data.get("cost", math.inf), cost)
-        return (g_child + heuristic(child), next(tie), g_child, 0, child,
+        return (g_child + heuristic(child), next(tie), g_child, Entry.REACHED, child,
                 ((child, comp), move, pose, p4, tr, g_parent, poses,
                  cost))
 
@@ -324,7 +235,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             others.append(alt)
             path.append(pv)
             cost += c
-        return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1], goal_pose,
+        return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], goal_pose,
                               expansions, tested, expanded, [], graph, others[::-1],
                               cost=cost)
 
@@ -333,7 +244,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
         _, _, g, kind, child_stance, payload = popped
         if beaten(g, child_stance):
             continue
-        if kind == 1:
+        if kind == Entry.MOVE:
             move, rows = payload
             (stance, comp), j, anchor = move
             child: Stance4 = child_stance
@@ -364,7 +275,7 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
             continue
         (child, comp), move, pose, p4, tr, g_parent, alternatives, cost = payload
         if comp is None:  # entered through a move: split among the child's components
-            comps = _stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
+            comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             if (comps < 0).any():  # the kernel is deterministic: never expected
                 raise RuntimeError("a transition pose is missing from the new stance's lattice")
             hit = np.unique(comps)
@@ -427,7 +338,9 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                         heapq.heapify(open_list)
             current = math.inf
             continue  # a goal's successors cannot be cheaper routes
-        if best is not None and (expansions - first_expansions) % BOUND_EVERY == 0:
+        # (a route is kept in `best` only by an anytime search: `anytime` is set below)
+        if best is not None and anytime is not None and \
+                (expansions - first_expansions) % BOUND_EVERY == 0:
             # The lower bound rises as the search goes on: record it (and stop at the target).
             lo = lower()
             if lo > history[-1][2] * (1.0 + 1e-9):
@@ -437,49 +350,51 @@ def complete_search(scn: Scenario, lattice: LatticeConfig | None = None,
                 if best_cost <= anytime.target_bound * lo:
                     break
         if max_expansions is not None and expansions >= max_expansions and best is None:
-            stop = "budget"
+            stop = Stop.BUDGET
             reason = (f"gave up after {expansions} expansions without reaching the goal "
                       f"(max_expansions {max_expansions})")
             break
         elapsed = time.perf_counter() - t0
         if time_limit is not None and elapsed > time_limit:
-            stop = "budget"
+            stop = Stop.BUDGET
             reason = (f"gave up after {time_limit:g} s ({expansions} expansions) without "
                       "reaching the goal")
             break
-        if best is not None and \
+        if best is not None and anytime is not None and \
                 expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
         for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):
             if not beaten(g + c_attach, child):
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
-                                           g + c_attach, 1, child, ((vertex, j, anchor), rows)))
+                                           g + c_attach, Entry.MOVE, child,
+                                           ((vertex, j, anchor), rows)))
         current = math.inf  # its successors are in the open list
     if best is not None:
         lo = lower()
         now = time.perf_counter() - t0
         if not history or history[-1][1:3] != (best_cost, lo):
             history.append((now, best_cost, lo, expansions))
-        quality = "optimal" if best_cost <= lo * (1.0 + 1e-12) else "bounded"
+        quality = Quality.OPTIMAL if best_cost <= lo * (1.0 + 1e-12) else Quality.BOUNDED
         return best._replace(expansions=expansions, transitions_tested=tested,
                              expanded=expanded, frontier=_frontier(open_list, closed),
                              lower_bound=lo, first_cost=history[0][1], history=history,
                              quality=quality)
-    if stop == "noroute":
+    if stop == Stop.NOROUTE:
         reason = (f"no route at resolution {cfg.position_step * 100:g} cm / "
                   f"{cfg.angle_step_deg:g} deg: all {expansions} (stance, component) vertices "
                   "reachable from the start were expanded without reaching the goal")
         if excluded:
-            stop = "exhausted"
+            stop = Stop.EXHAUSTED
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph)
 
 
 def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
+    """The vertices reached (by an evaluated move) but never expanded, for pictures."""
     out, seen = [], set()
     for entry in open_list:
-        if entry[3] == 0:
+        if entry[3] == Entry.REACHED:
             vertex, _, pose = entry[5][:3]
             if vertex not in closed and vertex not in seen:
                 seen.add(vertex)
@@ -487,15 +402,4 @@ def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
     return out
 
 
-def search_result(result: CompleteResult) -> SearchResult:
-    """The result in `planning.astar`'s form, stances as nodes."""
-    graph = nx.DiGraph()
-    for (a, _), b in result.graph.edges():
-        graph.add_edge(a, b, cost=0.0, data=None)
-    return SearchResult(result.success, [v[0] for v in result.path], list(result.poses),
-                        None, float("nan"), result.expansions, result.transitions_tested, graph,
-                        result.reason, tuple(v[0] for v, _ in result.expanded),
-                        {v[0]: p for v, p in result.expanded})
-
-
-__all__ = ["LatticeConfig", "LatticeMemo", "complete_search", "poses_of"]
+__all__ = ["AnytimeConfig", "CompleteConfig", "LatticeMemo", "complete_search"]

@@ -3,7 +3,7 @@
 A vertex of the complete search is (4-stance, component). `StanceComponents` holds the
 components of one stance found so far, each grown by `planning.flood` from a pose the search
 entered at, with the booms that may let go at each of its poses: the same sets, pose for pose,
-as `lattice.stance_lattice` finds by scoring the stance's whole reachable lattice, but only for
+as the tests' `stance_lattice` finds by scoring the stance's whole reachable lattice, but only for
 the components the search enters.
 """
 
@@ -15,8 +15,9 @@ import numpy as np
 
 from planning.flood import grow_component, reach_box
 from planning.lattice import SPAN, LatticeConfig, poses_of, unpack
-from planning.transition import anchor_table, pack_rows
+from planning.transition_score import pack_rows
 from rb_drake.feasibility_kernel import component_arrays
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 INFEASIBLE = -1  # component_of / known_component: a pose no component holds
@@ -57,11 +58,12 @@ class StanceComponents:
 
     def __init__(self, scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
                  ignore_grasps: bool = False):
-        table = anchor_table(scn)
+        table = scn.anchor_table
         free = len(table.row)
         held = [table.row[a] for a in stance]
         # Row 0 the 4-stance, row 1 + j the 3-stance with boom j's gripper at its anchor.
-        rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
+        rows = [held] + [[free if i == j else held[i] for i in range(NUM_BOOMS)]
+                         for j in range(NUM_BOOMS)]
         self._stances, self._tips = pack_rows(table, rows, [free, *held])
         self._box = reach_box(table.positions[held], scn.robot.max_reach, cfg)
         self._scn, self._cfg, self._ignore = scn, cfg, ignore_grasps

@@ -34,40 +34,45 @@ from collections.abc import Callable, Collection
 import networkx as nx
 import numpy as np
 
-from planning.complete import (
-    CompleteResult,
-    LatticeMemo,
-    _stance_components,
-    _threads_held,
-    best_poses,
-    goal_pose_of,
-)
+from planning.complete_config import CompleteConfig
 from planning.components import UNKNOWN
-from planning.lattice import LatticeConfig
 from planning.lattice_moves import (
     goal_is_holdable,
     lattice_transition,
     start_components,
     vertex_moves,
 )
+from planning.lattice_search import (
+    CompleteResult,
+    LatticeMemo,
+    best_poses,
+    goal_pose_of,
+    stance_components,
+    threads_held,
+)
 from planning.search_cost import RegraspHeuristic, edge_cost, goal_distance
+from planning.search_outcome import Stop
+from rb_drake.errors import RbpInputError
 from rb_drake.scenario import Scenario
 
 
-@_threads_held
-def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig | None = None,
-                       max_expansions: int | None = None, time_limit: float | None = None,
-                       exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
+@threads_held
+def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig | None = None,
+                       *, exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                        memo: LatticeMemo | None = None,
-                       progress: Callable[..., None] | None = None,
-                       ignore_grasps: bool = False) -> CompleteResult:
+                       progress: Callable[..., None] | None = None) -> CompleteResult:
     """The fewest-regrasp route with exp(-cost) >= `min_success` (module doc), or the proof that
-    none exists (`stop == "noroute"`), or a budget stop (`"budget"`). `exclude`: moves
+    none exists (`stop == "noroute"`), or a budget stop (`"budget"`). `config` as the complete
+    search's: its lattice, budget (`max_expansions`, `time_limit`) and `ignore_grasps` (the
+    order is by regrasps, so `heuristic_weight` and `anytime` play no part). `exclude`: moves
     (stance, boom, anchor) not to take (the pipeline's search again without a move whose
     motion failed)."""
     if not 0.0 < min_success < 1.0:
-        raise ValueError(f"min_success must lie in (0, 1), got {min_success}")
-    cfg = lattice or LatticeConfig()
+        raise RbpInputError(f"must lie in (0, 1), got {min_success}", field="min_success")
+    config = config or CompleteConfig()
+    cfg = config.lattice
+    max_expansions, time_limit = config.max_expansions, config.time_limit
+    ignore_grasps = config.ignore_grasps
     memo = memo if memo is not None else LatticeMemo(config=cfg)
     t0 = time.perf_counter()
     budget = -math.log(min_success)
@@ -75,14 +80,14 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
     bound = RegraspHeuristic(scn)
     graph = nx.DiGraph()
     start = tuple(scn.start_stance)
-    joined = start_components(scn, _stance_components(scn, memo, start, cfg, ignore_grasps), cfg)
+    joined = start_components(scn, stance_components(scn, memo, start, cfg, ignore_grasps), cfg)
     if not goal_is_holdable(scn, cfg):
-        return CompleteResult(False, "noroute", "no route: no lattice pose within the goal "
+        return CompleteResult(False, Stop.NOROUTE, "no route: no lattice pose within the goal "
                               "tolerance can hold a stance", [], [], [], None, 0, 0, [], [],
                               graph)
     if not joined:
-        return CompleteResult(False, "nostart", "the start pose is joined to no feasible lattice "
-                              "pose of its stance", [], [], [], None, 0, 0, [], [], graph)
+        return CompleteResult(False, Stop.NOSTART, "the start pose is joined to no feasible "
+                              "lattice pose of its stance", [], [], [], None, 0, 0, [], [], graph)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     tie = itertools.count()
     # a label: (vertex, regrasps, cost, parent label, pose, P4, alternatives); the open list
@@ -109,7 +114,7 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
     nearest = math.inf
     found: tuple[int, np.ndarray] | None = None  # (goal label, goal pose)
     expanded: list[tuple[tuple, np.ndarray]] = []
-    stop, reason = "noroute", ""
+    stop, reason = Stop.NOROUTE, ""
     while open_list:
         f, cost, _, index, move = heapq.heappop(open_list)
         if move is not None:  # a move: evaluate it, then (when popped again) enter the child
@@ -142,7 +147,7 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
                         popped_cost.get((child, c2), math.inf) <= cost
                         for c2 in set(seen[seen >= 0].tolist())):
                     continue
-            comps = _stance_components(scn, memo, child, cfg, ignore_grasps).component_of(
+            comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(
                 tr.keys)
             for c2 in np.unique(comps):
                 poses, p4 = best_poses(tr, np.flatnonzero(comps == c2), cfg)
@@ -168,11 +173,11 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
         if progress is not None:
             progress(expansions, tested, nearest)
         if max_expansions is not None and expansions > max_expansions:
-            stop, reason = "budget", (f"gave up after {max_expansions} expansions without a "
+            stop, reason = Stop.BUDGET, (f"gave up after {max_expansions} expansions without a "
                                       f"route of predicted success >= {min_success:g}")
             break
         if time_limit is not None and time.perf_counter() - t0 > time_limit:
-            stop, reason = "budget", (f"gave up after {time_limit:g} s ({expansions} "
+            stop, reason = Stop.BUDGET, (f"gave up after {time_limit:g} s ({expansions} "
                                       f"expansions) without a route of predicted success >= "
                                       f"{min_success:g}")
             break
@@ -184,10 +189,10 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
             heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
                                        (j, anchor, rows, child, None)))
     if found is None:
-        if stop == "noroute" and excluded:
-            stop = "exhausted"
+        if stop == Stop.NOROUTE and excluded:
+            stop = Stop.EXHAUSTED
             reason = f"no route without the {len(excluded)} excluded moves"
-        elif stop == "noroute":
+        elif stop == Stop.NOROUTE:
             reason = (f"no route with predicted success >= {min_success:g} at resolution "
                       f"{cfg.position_step * 100:g} cm / {cfg.angle_step_deg:g} deg: every "
                       f"route's search cost exceeds -log P = {budget:.4g} ({expansions} "
@@ -205,5 +210,5 @@ def constrained_search(scn: Scenario, min_success: float, lattice: LatticeConfig
             probs.append(p4)
             others.append(alternatives)
         index = parent
-    return CompleteResult(True, "", "", path[::-1], poses[::-1], probs[::-1], found[1],
+    return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], found[1],
                           expansions, tested, expanded, [], graph, others[::-1], cost=total)

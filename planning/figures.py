@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
+from planning.search_outcome import Stop
 from rb_drake import draw
+from rb_drake.errors import RbpInputError
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 
@@ -76,7 +79,8 @@ def phase_figure(plan: dict[str, Any], k: int):
     phase = plan["phases"][k]
     motion = phase.get("motion")
     if motion is None:
-        raise ValueError(f"phase {k} holds no trajectory (plan it without --no-motion)")
+        raise RbpInputError("holds no trajectory (plan it without --no-motion)",
+                            field=f"phases[{k}].motion")
     t = np.array([s["t"] for s in phase["steps"]])
     t = t - t[0]
     tension = np.array([[np.nan if v is None else v for v in s["tension"]]
@@ -87,7 +91,7 @@ def phase_figure(plan: dict[str, Any], k: int):
     p_seed = np.array(motion["seed_p_success"])
     fig = draw.new_figure(figsize=(6.4, 5.6))
     top, bottom = fig.subplots(2, 1, sharex=True)
-    for i in range(4):
+    for i in range(NUM_BOOMS):
         if np.all(np.isnan(tension[:, i])):
             continue
         c = BOOM_COLOURS[i]
@@ -128,7 +132,7 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
 
     frames = [(phase, step) for phase in plan["phases"] for step in phase["steps"]]
     if not frames:
-        raise ValueError("the plan has no configurations to animate")
+        raise RbpInputError("the plan has no configurations to animate", field="phases")
     frames = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1,
                                                        min(max_frames, len(frames))).astype(int))]
     fig = draw.new_figure(figsize=(6, 6))
@@ -166,11 +170,11 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
     atomic_write(path, write)
 
 
-STOP_REASONS = {
-    "budget": "stopped on its budget (max_expansions or time_limit reached): no claim",
-    "exhausted": "exhausted: every stance it could reach was expanded (not a proof)",
-    "noroute": "proved no route at the lattice's resolution",
-    "nostart": "the start pose joins no lattice pose of its stance",
+STOP_REASONS: dict[str, str] = {
+    Stop.BUDGET: "stopped on its budget (max_expansions or time_limit reached): no claim",
+    Stop.EXHAUSTED: "exhausted: every stance it could reach was expanded (not a proof)",
+    Stop.NOROUTE: "proved no route at the lattice's resolution",
+    Stop.NOSTART: "the start pose joins no lattice pose of its stance",
 }
 
 
@@ -217,7 +221,7 @@ def search_figure(scn: Scenario, fp):
         ax.plot(*scn.start_pose[:2], "X", color="#cb181d", ms=11, zorder=9, ls="none",
                 label="start (the search recorded no stances)")
     why = STOP_REASONS.get(getattr(fp, "stop", "") or "", "stopped")
-    if getattr(fp, "stop", "") == "noroute":
+    if getattr(fp, "stop", "") == Stop.NOROUTE:
         lattice = _lattice_of(fp)
         why += f" ({lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg)"
     ax.plot([], [], ls="none", label=f"search {why}")

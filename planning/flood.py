@@ -2,7 +2,7 @@
 
 The complete search needs, for each 4-stance it enters, the connected component (26-neighbours
 on the pose lattice of `planning.lattice`) of feasible poses that holds the poses it entered
-at. Scoring the stance's whole reachable lattice and labelling it (`lattice.stance_lattice`)
+at. Scoring the stance's whole reachable lattice and labelling it (the tests' `stance_lattice`)
 gives every component, but most of those poses are infeasible (booms through rock, tensions
 out of bounds) and many lie in components the search never enters. A flood fill from the
 seed scores only the component and its one-step boundary: 2.5-5x fewer poses on benchmark

@@ -30,9 +30,11 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
-from planning.complete import AnytimeConfig, LatticeMemo, complete_search, search_result
+from planning.complete import complete_search
+from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
+from planning.lattice_search import LatticeMemo, Stance4, search_result
 from planning.ramps import ramp_ends_hold
 from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import (
@@ -42,6 +44,7 @@ from planning.search_cost import (
     edge_cost,
     goal_distance,
 )
+from planning.search_outcome import Quality, Stop
 from planning.transition import (
     ReleaseSet,
     Transition,
@@ -51,11 +54,10 @@ from planning.transition import (
     reachable_anchors,
     release_poses,
 )
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility_kernel import score_poses
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
-
-Stance4 = tuple[str, str, str, str]
-
 
 SEARCHES = ("hybrid", "complete", "sampled")
 
@@ -73,8 +75,8 @@ class FootstepConfig:
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     heuristic_weight: float = 300.0  # <= 1: A* on the admissible bound (optimal routes)
     # complete search only: after the first route, better ones for twice its expansions, with
-    # a proven bound on how far the best is from the optimum (planning.complete.AnytimeConfig;
-    # None: the first route, as before)
+    # a proven bound on how far the best is from the optimum
+    # (planning.complete_config.AnytimeConfig; None: the first route, as before)
     anytime: AnytimeConfig | None = dataclasses.field(default_factory=AnytimeConfig)
     # complete search only: the route with the fewest regrasps whose predicted success
     # exp(-cost) is at least this (planning.constrained), or the proof that none reaches it;
@@ -94,6 +96,12 @@ class FootstepConfig:
     polish_rounds: int = 8   # local search rounds per transition pose of the found path
     seed: int = 0
     transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
+
+    def complete_config(self) -> CompleteConfig:
+        """The complete (or constrained) search's part of this configuration."""
+        return CompleteConfig(lattice=self.lattice, heuristic_weight=self.heuristic_weight,
+                              max_expansions=self.max_expansions, time_limit=self.time_limit,
+                              ignore_grasps=self.transition.ignore_grasps, anytime=self.anytime)
 
 
 class Step(NamedTuple):
@@ -122,11 +130,10 @@ class FootstepPlan(NamedTuple):
     seconds: float
     search: SearchResult | None = None
     transitions: dict | None = None   # every transition tested: (stance, boom, anchor) -> result
-    # Why the search stopped: "" (a route was found), "budget" (max_expansions reached),
-    # "exhausted" (every stance the search could reach was expanded; not a proof that no route
-    # exists unless the search is complete) or "noroute" (a complete search proved that no
-    # route exists at its resolution).
-    stop: str = ""
+    # Why the search stopped (planning.search_outcome.Stop): a route was found, the budget was
+    # reached, every stance it could reach was expanded (no proof unless the search is
+    # complete), or a complete search proved that no route exists at its resolution.
+    stop: Stop = Stop.ROUTE
     explored: list[Explored] | None = None  # expanded stances, in expansion order
     frontier: list[Explored] | None = None  # stances reached but never expanded
     memo: FootstepMemo | None = None  # what the search decided, for a search again
@@ -137,7 +144,7 @@ class FootstepPlan(NamedTuple):
     lower_bound: float = math.nan
     first_cost: float = math.nan
     history: list[tuple[float, float, float, int]] | None = None
-    quality: str = ""
+    quality: Quality = Quality.FIRST
     # --min-success P: the route has the fewest regrasps of those with exp(-cost) >= P (or,
     # with stop "noroute", none reaches P)
     min_success: float | None = None
@@ -185,7 +192,7 @@ def candidate_moves(scn: Scenario, stance: tuple[str, ...], pose: np.ndarray,
     goal = np.asarray(scn.goal_position)
     moves = []
     rng = np.random.default_rng([seed, zlib.crc32(str(stance).encode())])
-    for j in range(4):
+    for j in range(NUM_BOOMS):
         idx = reachable_anchors(scn, stance, j, pose, rng)
         order = np.argsort(np.linalg.norm(scn.anchor_positions[idx] - goal, axis=1))
         moves += [(j, scn.anchors[k].id) for k in idx[order][:per_boom]]
@@ -213,7 +220,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     `progress(expansions, transitions tested, nearest goal distance in m)` follows the search."""
     cfg = config or FootstepConfig()
     if cfg.search not in SEARCHES:
-        raise ValueError(f"search must be one of {SEARCHES}, got {cfg.search!r}")
+        raise RbpInputError(f"must be one of {SEARCHES}, got {cfg.search!r}", field="search")
     memo = memo if memo is not None else FootstepMemo()
     if cfg.search == "complete":
         return _plan_complete(scn, cfg, progress, exclude, memo)
@@ -295,20 +302,20 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
         if budget:
             reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
-        stop = "budget" if budget else "exhausted"
+        stop = Stop.BUDGET if budget else Stop.EXHAUSTED
         explored, frontier = explored_stances(scn, result, start_pose)
         return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache, stop, explored,
                             frontier, memo)
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
-        j = next(i for i in range(4) if a[i] != b[i])
+        j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
         steps.append(polished_step(scn, cfg, a, j, b[j], pose,
                                    cache[(a, j, b[j])].probabilities))
     seconds = time.perf_counter() - t0
     explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
-                        result.expansions, tested, seconds, result, cache, "", explored,
+                        result.expansions, tested, seconds, result, cache, Stop.ROUTE, explored,
                         frontier, memo)
 
 
@@ -347,13 +354,11 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
     if cfg.min_success is not None:
-        result = constrained_search(scn, cfg.min_success, cfg.lattice, cfg.max_expansions,
-                                    cfg.time_limit, exclude, memo.lattice, progress,
-                                    cfg.transition.ignore_grasps)
+        result = constrained_search(scn, cfg.min_success, cfg.complete_config(),
+                                    exclude=exclude, memo=memo.lattice, progress=progress)
     else:
-        result = complete_search(scn, cfg.lattice, cfg.heuristic_weight, cfg.max_expansions,
-                                 cfg.time_limit, exclude, memo.lattice, progress,
-                                 cfg.transition.ignore_grasps, cfg.anytime)
+        result = complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
+                                 progress=progress)
         if cfg.repair is not None and result.success:
             result = repair_route(scn, result, memo.lattice, cfg.repair,
                                   cfg.transition.ignore_grasps, exclude)
@@ -378,12 +383,13 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     for a, b, pose, probabilities, alternatives in zip(stances[:-1], stances[1:], result.poses,
                                                        result.probabilities, others,
                                                        strict=True):
-        j = next(i for i in range(4) if a[i] != b[i])
+        j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
         steps.append(polished_step(scn, cfg, a, j, b[j], np.asarray(pose, dtype=float),
                                    probabilities, alternatives))
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
-                        time.perf_counter() - t0, search, None, "", explored, frontier, memo,
+                        time.perf_counter() - t0, search, None, Stop.ROUTE, explored, frontier,
+                        memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
                         result.quality, cfg.min_success)
 

@@ -15,8 +15,8 @@ feasibility kernel, and keeps the feasible ones with:
 Nothing here samples: a lattice pose is in the set exactly when the kernel finds it feasible.
 
 The search itself grows only the components it enters (`planning.components`, by flood fill);
-`stance_lattice`, which scores the whole reachable lattice, is the reference the tests hold
-those components equal to.
+the tests hold those components equal to a reference that scores the whole reachable lattice
+(`stance_lattice` in tests/lattice_reference.py).
 """
 
 from __future__ import annotations
@@ -24,16 +24,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 
-from planning.transition import anchor_table, pack_rows
-from rb_drake.feasibility_kernel import reach_violation, score_rows
+from rb_drake.errors import RbpInputError
+from rb_drake.feasibility_kernel import reach_violation
 from rb_drake.params import RobotParams
-from rb_drake.scenario import Scenario
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,7 +49,8 @@ class LatticeConfig:
         """Orientation indices -n/2 .. n/2 - 1 cover the whole circle."""
         n = round(360.0 / self.angle_step_deg)
         if n % 2 or abs(n * self.angle_step_deg - 360.0) > 1e-9:
-            raise ValueError(f"angle_step_deg must divide 180 deg, got {self.angle_step_deg}")
+            raise RbpInputError(f"must divide 180 deg, got {self.angle_step_deg}",
+                                field="angle_step_deg")
         return n
 
 
@@ -172,64 +170,3 @@ def _reachable_kernel(anchors, shoulders, directions, lo, hi, half, dx, dphi,
                 out[n, 2] = m
                 n += 1
     return out[:n].copy()
-
-
-class StanceLattice(NamedTuple):
-    """The feasible lattice poses of one 4-stance, sorted by key."""
-
-    keys: np.ndarray        # (F,) int64, sorted
-    idx: np.ndarray         # (F, 3) lattice indices
-    poses: np.ndarray       # (F, 3)
-    robustness: np.ndarray  # (F,) r in the 4-stance
-    release: np.ndarray     # (F, 4) bool: boom j may let go (3-stance, gripper at its anchor)
-    release_r: np.ndarray   # (F, 4) r of that 3-stance (-inf where infeasible)
-    component: np.ndarray   # (F,) connected component label, 0 .. n_components - 1
-    n_components: int
-    reachable: int          # lattice poses at which the booms reach (the region scored)
-
-    def find(self, keys: np.ndarray) -> np.ndarray:
-        """Rows of `keys` in this set (-1 where absent)."""
-        pos = np.searchsorted(self.keys, keys)
-        pos = np.minimum(pos, max(len(self.keys) - 1, 0))
-        hit = len(self.keys) > 0
-        return np.where(hit & (self.keys[pos] == keys) if hit else False, pos, -1)
-
-
-def stance_lattice(scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
-                   ignore_grasps: bool = False) -> StanceLattice:
-    """The feasible lattice poses of `stance`, their release booms and components."""
-    table = anchor_table(scn)
-    free = len(table.row)
-    held = [table.row[a] for a in stance]
-    anchors = table.positions[held]
-    idx = reachable_lattice(scn.robot, anchors, np.arange(4), cfg)
-    reachable = len(idx)
-    poses = poses_of(idx, cfg)
-    rows = [held] + [[free if i == j else held[i] for i in range(4)] for j in range(4)]
-    stances, tips = pack_rows(table, rows, [free, *held])
-    P = len(idx)
-    # The four release 3-stances are decided where the 4-stance holds (KernelCheck.release_r).
-    check = score_rows(scn, stances, tips, poses, np.arange(P), np.zeros(P, np.int64),
-                       np.zeros(P, np.int64), ignore_grasps, decide_only=True, release=True)
-    ok = check.feasible
-    idx, poses, r = idx[ok], poses[ok], check.robustness[ok]
-    release = ~np.isnan(check.release_r[ok])
-    release_r = np.where(release, check.release_r[ok], -np.inf)
-    component, n = _components(idx)
-    keys = pack(idx, cfg.angle_count)
-    order = np.argsort(keys)
-    return StanceLattice(keys[order], idx[order], poses[order], r[order], release[order],
-                         release_r[order], component[order], n, reachable)
-
-
-def _components(idx: np.ndarray) -> tuple[np.ndarray, int]:
-    """Connected components of lattice points under 26-connectivity."""
-    if not len(idx):
-        return np.zeros(0, dtype=np.int64), 0
-    lo = idx.min(axis=0)
-    shape = tuple(idx.max(axis=0) - lo + 1)
-    grid = np.zeros(shape, dtype=bool)
-    local = idx - lo
-    grid[local[:, 0], local[:, 1], local[:, 2]] = True
-    labels, n = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-    return labels[local[:, 0], local[:, 1], local[:, 2]].astype(np.int64) - 1, int(n)

@@ -20,7 +20,6 @@ import numpy as np
 
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack
-from planning.transition import anchor_table
 from rb_drake.feasibility import body_in_rock
 from rb_drake.feasibility_kernel import (
     _packed_rock,
@@ -29,10 +28,10 @@ from rb_drake.feasibility_kernel import (
     lattice_move_kernel,
     lattice_move_table,
     lattice_reach_rows,
-    lattice_reached_anchors,
     reach_violation,
     score_poses,
 )
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 
@@ -109,7 +108,7 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     """The move decided by the kernel on `rows` of `lat` (`lattice_transition`)."""
     if not len(rows):
         return LatticeTransition(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 4)), tested)
-    table = anchor_table(scn)
+    table = scn.anchor_table
     free = len(table.row)
     held = [table.row[a] for a in stance]
     stance_rows = np.array([held, held], dtype=np.int64)
@@ -145,30 +144,16 @@ def _near_anchors(scn: Scenario, lat: Component, stance: tuple) -> np.ndarray:
     return np.flatnonzero(near)
 
 
-def candidate_moves(scn: Scenario, lat: Component, stance: tuple) -> list[np.ndarray]:
-    """Per boom, the indices of every anchor it reaches from some release pose of component
-    `lat` (exact on the lattice), the stance's own anchors excluded: one compiled pass over
-    the component, anchors beyond reach of its bounding box left out first."""
-    pts = scn.anchor_positions
-    near = _near_anchors(scn, lat, stance)
-    if not len(near):
-        return [near] * 4
-    found = lattice_reached_anchors(lat.keys, lat.release_rows, lat.release_starts,
-                                    np.ascontiguousarray(pts[near]),
-                                    *_lattice_args(scn, lat.lattice))
-    return [near[found[j]] for j in range(4)]
-
-
 def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[int, np.ndarray]]]:
     """Per boom, every move of component `lat` that some pose can use: (anchor index, its
     `move_rows`) for each anchor that the boom reaches from a release pose with its segment
     there clear of rock, in one compiled pass over the component (`lattice_move_table`). The
-    anchors of `candidate_moves` whose every such segment meets rock are left out: no pose
+    anchors the boom reaches but whose every such segment meets rock are left out: no pose
     holds their move (the 3-stance with the gripper at the new anchor tests that segment)."""
     pts = scn.anchor_positions
     near = _near_anchors(scn, lat, stance)
     if not len(near):
-        return [[] for _ in range(4)]
+        return [[] for _ in range(NUM_BOOMS)]
     rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,
                                        np.ascontiguousarray(pts[near]),
                                        *_lattice_args(scn, lat.lattice),
@@ -177,7 +162,7 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     at, anchors = offsets.tolist(), near.tolist()  # Python ints: numpy scalars cost 10x
     return [[(anchors[k], rows[at[j * K + k]:at[j * K + k + 1]])
              for k in range(K) if at[j * K + k + 1] > at[j * K + k]]
-            for j in range(4)]
+            for j in range(NUM_BOOMS)]
 
 
 def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
@@ -191,12 +176,6 @@ def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
             if (stance, j, anchor) not in excluded:
                 yield j, anchor, rows, tuple(anchor if i == j else a
                                              for i, a in enumerate(stance))
-
-
-def candidate_anchors(scn: Scenario, lat: Component, stance: tuple, boom: int) -> np.ndarray:
-    """Indices of every anchor boom `boom` reaches from some release pose of component `lat`
-    (exact on the lattice), the stance's own anchors excluded."""
-    return candidate_moves(scn, lat, stance)[boom]
 
 
 def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
@@ -248,7 +227,7 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     for m in range(-n // 2, n // 2):  # an orientation at a time: bounded memory
         poses = np.column_stack([cells * dx, np.full(len(cells), m * cfg.angle_step)])
         ok = np.ones(len(poses), dtype=bool)
-        for j in range(4):
+        for j in range(NUM_BOOMS):
             v = reach_violation(scn.robot, poses, scn.anchor_positions[near],
                                 np.full(len(near), j))
             ok &= (v == 0.0).any(axis=1)

@@ -16,10 +16,12 @@ import math
 from pathlib import Path
 from typing import Any
 
+from rb_drake.errors import RbpInputError
+
 VERIFIER = "rbp-verify/2"  # bump when the rules change: older stamps then no longer count
 
 
-class PlanFileError(ValueError):
+class PlanFileError(RbpInputError):
     """A plan file that cannot be used: `field` (path in the file) and `reason`."""
 
     def __init__(self, field: str, reason: str):

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 from rb_drake.statics import statics_problem
 
@@ -30,8 +31,8 @@ def steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], poses
         step: dict[str, Any] = {
             "t": round(float(t0 + k * dt), 6),
             "pose": [float(v) for v in poses[k]],
-            "tension": [float(f[k, i]) if att[i] else None for i in range(4)],
-            "p_grasp": [float(np.exp(lp[k, i])) if att[i] else None for i in range(4)],
+            "tension": [float(f[k, i]) if att[i] else None for i in range(NUM_BOOMS)],
+            "p_grasp": [float(np.exp(lp[k, i])) if att[i] else None for i in range(NUM_BOOMS)],
             "p_success": float(np.exp(lp[k, att].sum())),
         }
         if tips is not None:

@@ -18,6 +18,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
+from rb_drake.params import NUM_BOOMS
+
 
 class PathProbability(NamedTuple):
     p_path: float
@@ -37,8 +39,8 @@ class Configuration(NamedTuple):
 
 def path_probability(configurations: Iterable[Configuration],
                      attach_failure: float) -> PathProbability:
-    current: list[str | None] = [None] * 4
-    worst = [1.0] * 4
+    current: list[str | None] = [None] * NUM_BOOMS
+    worst = [1.0] * NUM_BOOMS
     holdings: list[tuple[int, str, float]] = []
     regrasps = 0
     p_min = 1.0
@@ -47,17 +49,17 @@ def path_probability(configurations: Iterable[Configuration],
         p_min = min(p_min, float(config.p_success))
         for i, (anchor, p) in enumerate(zip(config.stance, config.p_grasp, strict=True)):
             if anchor != current[i]:
-                if current[i] is not None:
-                    holdings.append((i, current[i], worst[i]))
+                if (held := current[i]) is not None:
+                    holdings.append((i, held, worst[i]))
                 if anchor is not None and not first:
                     regrasps += 1
                 current[i], worst[i] = anchor, 1.0
             if anchor is not None and p is not None:
                 worst[i] = min(worst[i], float(p))
         first = False
-    for i in range(4):
-        if current[i] is not None:
-            holdings.append((i, current[i], worst[i]))
+    for i in range(NUM_BOOMS):
+        if (held := current[i]) is not None:
+            holdings.append((i, held, worst[i]))
     p_grasps = 1.0
     for _, _, p in holdings:
         p_grasps *= p

@@ -31,16 +31,16 @@ from collections.abc import Collection
 
 import numpy as np
 
-from planning.complete import (
+from planning.lattice import LatticeConfig
+from planning.lattice_moves import lattice_transition, vertex_moves
+from planning.lattice_search import (
     CompleteResult,
     LatticeMemo,
     Vertex,
     best_poses,
     goal_pose_of,
+    stance_components,
 )
-from planning.components import StanceComponents
-from planning.lattice import LatticeConfig
-from planning.lattice_moves import lattice_transition, vertex_moves
 from planning.search_cost import RegraspHeuristic, attach_cost, boom_hop_length, edge_cost
 from rb_drake.feasibility_kernel import held_kernel_threads
 from rb_drake.params import NUM_BOOMS
@@ -98,14 +98,6 @@ class _HopTable:
         return table
 
 
-def _components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
-                ignore_grasps: bool) -> StanceComponents:
-    hit = memo.components.get(stance)
-    if hit is None:
-        hit = memo.components[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)
-    return hit
-
-
 def _window_search(scn: Scenario, memo: LatticeMemo, cfg: LatticeConfig, start: Vertex,
                    target: Vertex | None, budget: float, max_expansions: int,
                    hops: _HopTable, goal_bound: RegraspHeuristic, ignore_grasps: bool,
@@ -161,7 +153,7 @@ def _window_search(scn: Scenario, memo: LatticeMemo, cfg: LatticeConfig, start: 
             child = vertex[0]
             source, edge, j, anchor = info
             tr = rows
-            comps = _components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
+            comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             hit = np.unique(comps[comps >= 0]).tolist()
             if len(hit) == 1:
                 vertex, info = (child, hit[0]), (source, edge)
@@ -183,7 +175,7 @@ def _window_search(scn: Scenario, memo: LatticeMemo, cfg: LatticeConfig, start: 
         if info is not None:
             parent[vertex] = info
         stance, comp = vertex
-        lat = _components(scn, memo, stance, cfg, ignore_grasps).components[comp]
+        lat = stance_components(scn, memo, stance, cfg, ignore_grasps).components[comp]
         goal_pose = None
         if target is None:
             goal_pose = goal_pose_of(scn, lat)

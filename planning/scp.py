@@ -100,10 +100,6 @@ class ScpResult(NamedTuple):
         """Control effort per step: the sum of the attached booms' tensions (N)."""
         return np.nansum(self.tensions, axis=1)
 
-    @property
-    def seed_effort(self) -> np.ndarray:
-        return np.nansum(self.seed_tensions, axis=1)
-
 
 class Evaluation(NamedTuple):
     merit: float

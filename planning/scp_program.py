@@ -13,7 +13,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from planning.scp_linearise import Iterate, Linearisation, linearisation
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility import World
+from rb_drake.params import NUM_BOOMS
 from rb_drake.stance import Stance
 from rb_drake.statics import statics_problem
 
@@ -159,7 +161,7 @@ class SubproblemProgram:
             self._floor_pattern.matrix, np.full(N, -np.inf), np.zeros(N), qf),
             "robustness_floor")
         # kinematic limits, linearised in the pose: boom length and shoulder angle (4N rows)
-        kb, bb, cb = np.meshgrid(k3, np.arange(4), np.arange(3), indexing="ij")
+        kb, bb, cb = np.meshgrid(k3, np.arange(NUM_BOOMS), np.arange(3), indexing="ij")
         self._kin_pattern = _Pattern((4 * kb + bb).ravel(), (3 * kb + cb).ravel(), (4 * N, nq))
         self.lengths = named(prog.AddLinearConstraint(
             self._kin_pattern.matrix, np.zeros(4 * N), np.zeros(4 * N), self.q.ravel()),
@@ -217,7 +219,8 @@ class SubproblemProgram:
             for var in self.f.ravel():  # tensions in units of 10 N: ADMM needs similar scales
                 prog.SetVariableScaling(var, 10.0)
         else:
-            raise ValueError(f"solver must be 'clarabel' or 'osqp', got {cfg.solver!r}")
+            raise RbpInputError(f"must be 'clarabel' or 'osqp', got {cfg.solver!r}",
+                                field="solver")
         if not self.solver.available() or not self.solver.AreProgramAttributesSatisfied(prog):
             raise RuntimeError(f"{cfg.solver} cannot solve the SCP subproblem here")
 

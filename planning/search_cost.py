@@ -24,14 +24,13 @@ import math
 
 import numpy as np
 
-from planning.transition import anchor_table
 from rb_drake.feasibility_kernel import (
     ALL_SEGMENTS,
     _packed_rock,
     _robot_params,
     transition_boom_costs,
 )
-from rb_drake.params import RobotParams
+from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario
 
 
@@ -47,7 +46,7 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
     """Per boom, the worst -log P_i over the transition's four configurations at `pose`: old
     4-stance, 3-stance with the gripper at its old and at its new anchor, new 4-stance (a
     free boom's entry counts 0), in one compiled call (`transition_boom_costs`)."""
-    table = anchor_table(scn)
+    table = scn.anchor_table
     free = len(table.row)
     held = [table.row[a] for a in old]
     target = table.row[new_anchor]
@@ -136,7 +135,7 @@ def goal_targets(scn: Scenario, cells: int = ORIENTATION_CELLS) -> np.ndarray:
     for k in range(cells):
         mid = -math.pi + (k + 0.5) * step
         c, s = math.cos(mid), math.sin(mid)
-        for j in range(4):
+        for j in range(NUM_BOOMS):
             q = goal + np.array([c * shoulders[j, 0] - s * shoulders[j, 1],
                                  s * shoulders[j, 0] + c * shoulders[j, 1]])
             rho = scn.goal_tolerance + float(np.linalg.norm(shoulders[j])) * step / 2.0
@@ -183,14 +182,14 @@ class RegraspHeuristic:
         # hops[k, j, a]; boom j's tables differ between cells only through their targets
         self.hops = np.full(targets.shape, np.inf)
         for k in range(cells):
-            for j in range(4):
+            for j in range(NUM_BOOMS):
                 frontier = targets[k, j]
                 level = 0
                 while frontier.any():
                     self.hops[k, j, frontier] = level
                     level += 1
                     frontier = adjacent[frontier].any(axis=0) & np.isinf(self.hops[k, j])
-        self._booms = np.arange(4)
+        self._booms = np.arange(NUM_BOOMS)
         self._row = scn.anchor_index
         self._cache: dict[tuple, float] = {}
 

@@ -17,26 +17,23 @@ poses, seeded, and has a fixed sample budget.
 from __future__ import annotations
 
 import dataclasses
-import weakref
 from typing import NamedTuple
 
 import numpy as np
 
-from rb_drake.feasibility import REASON_TEXT, Reason, check_poses, violation
-from rb_drake.feasibility_kernel import (
-    PackedStances,
-    reach_violation,
-    score_poses,
-    score_rows,
+from planning.transition_score import (
+    ALL,
+    ARRIVE,
+    CONFIG_NAMES,
+    RELEASE,
+    VIOLATION_OFFSET,
+    score_configurations,
 )
+from rb_drake.feasibility import REASON_TEXT, Reason
+from rb_drake.feasibility_kernel import reach_violation, score_poses
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
-
-CONFIG_NAMES = ("old 4-stance", "3-stance, gripper at old anchor",
-                "3-stance, gripper at new anchor", "new 4-stance")
-RELEASE = (0, 1)   # the configurations that do not depend on the new anchor
-ARRIVE = (2, 3)
-ALL = (0, 1, 2, 3)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,180 +79,6 @@ def transition_stances(scn: Scenario, old: tuple[str, ...], boom: int,
         return s_old, s_old.without(boom), None
     new = tuple(new_anchor if i == boom else a for i, a in enumerate(old))
     return s_old, s_old.without(boom), scn.stance(new)
-
-
-VIOLATION_OFFSET = 1e3  # keys of infeasible poses sit below every feasible robustness
-
-
-class _NaiveWorld:
-    """The scenario as the naive baseline sees it (same rock, robot and gravity)."""
-
-    def __init__(self, scn: Scenario):
-        self.robot = scn.robot
-        self.rock = scn.rock
-        self.gravity_vector = scn.gravity_vector
-
-
-class _AnchorTable(NamedTuple):
-    """A scenario's anchors as rows (as `Scenario.stance` reads them), plus a last row of NaN
-    for a free boom: the kernel's stances are gathered from it by index."""
-
-    row: dict[str, int]
-    positions: np.ndarray      # (N + 1, 2)
-    normals: np.ndarray        # (N + 1, 2)
-    f_normal: np.ndarray       # (N + 1,)
-    f_lateral: np.ndarray
-    sigma_normal: np.ndarray
-    sigma_lateral: np.ndarray
-
-
-_ANCHOR_TABLES: dict[int, tuple[weakref.ref, _AnchorTable]] = {}
-
-
-def anchor_table(scn: Scenario) -> _AnchorTable:
-    hit = _ANCHOR_TABLES.get(id(scn))
-    if hit is not None and hit[0]() is scn:
-        return hit[1]
-    nan2 = (np.nan, np.nan)
-
-    def col(get, default) -> np.ndarray:
-        return np.array([get(a) for a in scn.anchors] + [default], dtype=float)
-
-    table = _AnchorTable({a.id: k for k, a in enumerate(scn.anchors)},
-                         col(lambda a: a.position, nan2), col(lambda a: a.normal, nan2),
-                         col(lambda a: a.f_normal, np.nan), col(lambda a: a.f_lateral, np.nan),
-                         col(lambda a: a.sigma_normal, np.nan),
-                         col(lambda a: a.sigma_lateral, np.nan))
-    if len(_ANCHOR_TABLES) >= 64:  # forget scenarios that are gone
-        for key in [k for k, (ref, _) in _ANCHOR_TABLES.items() if ref() is None]:
-            del _ANCHOR_TABLES[key]
-    _ANCHOR_TABLES[id(scn)] = (weakref.ref(scn), table)
-    return table
-
-
-def _configurations(scn: Scenario, old: tuple[str, ...], boom: int,
-                    new_anchor: str | None) -> tuple[PackedStances, np.ndarray, np.ndarray,
-                                                     np.ndarray]:
-    """A move's stances (old 4-stance, 3-stance, new 4-stance if any) and free-gripper tips
-    (none, at the old anchor, at the new one) as kernel rows, and each configuration's
-    (CONFIG_NAMES order) stance row and tip row."""
-    table = anchor_table(scn)
-    free = len(table.row)
-    held = [table.row[a] for a in old]
-    rows = [held, held.copy()]
-    rows[1][boom] = free
-    tips = [free, held[boom]]
-    if new_anchor is not None:
-        rows.append(held.copy())
-        rows[2][boom] = table.row[new_anchor]
-        tips.append(rows[2][boom])
-    stances, tip_points = pack_rows(table, rows, tips)
-    return stances, tip_points, _STANCE_OF, _TIP_OF
-
-
-def pack_rows(table: _AnchorTable, rows: list[list[int]],
-              tips: list[int]) -> tuple[PackedStances, np.ndarray]:
-    """Kernel stances from rows of anchor-table indices, one per boom (the table's last row,
-    `len(table.row)`, leaves that boom free), and the tips' positions from table indices."""
-    idx = np.array(rows)
-    stances = PackedStances(table.positions[idx], table.normals[idx], table.f_normal[idx],
-                            table.f_lateral[idx], table.sigma_normal[idx],
-                            table.sigma_lateral[idx], idx != len(table.row))
-    return stances, table.positions[np.array(tips)]
-
-
-_STANCE_OF = np.array([0, 1, 1, 2])
-_TIP_OF = np.array([0, 1, 2, 0])
-
-
-def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | None,
-           poses: np.ndarray, ignore_grasps: bool, configs: tuple[int, ...] = ALL,
-           known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pose: a search key, the four robustnesses (-inf where infeasible, NaN where not
-    evaluated) and the first failure code (10 * configuration + Reason; 0 if none).
-
-    Only `configs` are evaluated; `known` (P, 4) supplies robustnesses already computed for the
-    others (all feasible). The key is the worst robustness where every configuration is
-    feasible, and minus the evaluated configurations' summed violation, below
-    -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored).
-
-    Every configuration at every pose is one row of one compiled call
-    (`feasibility_kernel.score_rows`); `_score_reference` is the same through check_poses and
-    violation."""
-    if new_anchor is None and any(k in configs for k in ARRIVE):
-        raise ValueError("the arrival configurations need the new anchor")
-    stances, tips, stance_of, tip_of = _configurations(scn, old, boom, new_anchor)
-    world = scn if not ignore_grasps else _NaiveWorld(scn)
-    P = poses.shape[0]
-    ks = np.array([k for k in (0, 3, 1, 2) if k in configs], dtype=np.int64)  # as _score_reference
-    C = len(ks)
-    check = score_rows(world, stances, tips, poses, np.tile(np.arange(P), C),
-                       np.repeat(stance_of[ks], P), np.repeat(tip_of[ks], P), ignore_grasps)
-    ok = check.feasible.reshape(C, P)
-    r = np.full((P, 4), np.nan) if known is None else known.astype(float, copy=True)
-    r[:, ks] = np.where(ok, check.robustness.reshape(C, P), -np.inf).T
-    total_violation = np.zeros(P)
-    for v in check.violation.reshape(C, P):  # summed in _score_reference's order
-        total_violation += v
-    # The first failure: the lowest failing configuration's code.
-    codes = np.where(ok, np.iinfo(np.int64).max, check.reason.reshape(C, P) + 10 * ks[:, None])
-    feasible = ok.all(axis=0)
-    reason = np.where(feasible, 0, codes.min(axis=0, initial=np.iinfo(np.int64).max))
-    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
-        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
-    else:
-        key = np.where(feasible, np.nanmin(np.where(np.isnan(r), np.inf, r), axis=1),
-                       -VIOLATION_OFFSET - total_violation)
-    return key, r, reason
-
-
-def _score_reference(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | None,
-                     poses: np.ndarray, ignore_grasps: bool, configs: tuple[int, ...] = ALL,
-                     known: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray,
-                                                               np.ndarray]:
-    """`_score` through the numpy path (check_poses + violation), for the tests to compare."""
-    s_old, s_three, s_new = transition_stances(scn, old, boom, new_anchor)
-    world = scn if not ignore_grasps else _NaiveWorld(scn)
-    P = poses.shape[0]
-    r = np.full((P, 4), np.nan) if known is None else known.astype(float, copy=True)
-    total_violation = np.zeros(P)
-    reason = np.zeros(P, dtype=int)
-    feasible = np.ones(P, dtype=bool)
-    tip_old = s_old.positions[boom]
-    tip_new = s_new.positions[boom] if s_new is not None else None
-    # One vectorised check per stance kind: the two 4-stances differ in one anchor (a per-row
-    # stance), the two 3-stances in where the free gripper is (a per-row tip).
-    groups = []
-    fours = [k for k in (0, 3) if k in configs]
-    threes = [k for k in (1, 2) if k in configs]
-    if fours:
-        second = np.repeat([k == 3 for k in fours], P)
-        stance = Stance.mix(s_old, s_new, second) if 3 in fours and 0 in fours else (
-            s_old if fours == [0] else s_new)
-        groups.append((fours, stance, None))
-    if threes:
-        tips = np.vstack([np.broadcast_to(tip_old if k == 1 else tip_new, (P, 2))
-                          for k in threes])
-        groups.append((threes, s_three, tips))
-    for ks, stance, tip in groups:
-        rows_all = np.vstack([poses] * len(ks))
-        check = check_poses(world, stance, rows_all, tip, full=True, ignore_grasps=ignore_grasps)
-        v = violation(world, stance, rows_all, check, tip, ignore_grasps)
-        for n, k in enumerate(ks):
-            rows = slice(n * P, (n + 1) * P)
-            ok = check.feasible[rows]
-            r[:, k] = np.where(ok, check.allocation.robustness[rows], -np.inf)
-            total_violation += v[rows]
-            codes = check.reason[rows] + 10 * k
-            first = (reason == 0) & ~ok | (~ok & (reason > codes))
-            reason[first] = codes[first]
-            feasible &= ok
-    if ignore_grasps:  # the naive planner only asks for feasibility, not robustness
-        key = np.where(feasible, 0.0, -VIOLATION_OFFSET - total_violation)
-    else:
-        key = np.where(feasible, np.nanmin(np.where(np.isnan(r), np.inf, r), axis=1),
-                       -VIOLATION_OFFSET - total_violation)
-    return key, r, reason
 
 
 def _sample_around(rng: np.random.Generator, centre: np.ndarray, guess: np.ndarray | None,
@@ -305,7 +128,8 @@ def _cross_entropy(scn, old, boom, new_anchor, elite, elite_key, rng, cfg, confi
         mean = elite.mean(axis=0)
         std = np.maximum(elite.std(axis=0), [0.02, 0.02, 0.02])
         cand = mean + rng.normal(0.0, 1.0, (cfg.refine_samples, 3)) * std
-        k2, r2, reason2 = _score(scn, old, boom, new_anchor, cand, cfg.ignore_grasps, configs)
+        k2, r2, reason2 = score_configurations(scn, old, boom, new_anchor, cand,
+                                               cfg.ignore_grasps, configs)
         evaluated += len(cand) * len(configs)
         miss = max(miss, _furthest(reason2, r2))
         stalled = 0 if k2.max() > best else stalled + 1
@@ -329,14 +153,14 @@ def release_poses(scn: Scenario, old: tuple[str, ...], boom: int, rng: np.random
     cfg = config or TransitionConfig()
     robot = scn.robot
     held = scn.stance(old).positions
-    centre = _meeting_point(scn, held, np.arange(4))
+    centre = _meeting_point(scn, held, np.arange(NUM_BOOMS))
     cand = _sample_around(rng, centre, guess, cfg.release_candidates, cfg)
-    kin = _kinematic_violation(robot, cand, held, np.arange(4))
+    kin = _kinematic_violation(robot, cand, held, np.arange(NUM_BOOMS))
     if kin.min() > cfg.max_reach_violation:
         return ReleaseSet(np.zeros((0, 3)), np.zeros((0, 4)), "no sampled pose reaches the four "
                           "anchors within boom length and shoulder range", len(cand))
     poses = cand[_best_by_reach(rng, kin, cfg.release_samples)]
-    key, r, reason = _score(scn, old, boom, None, poses, cfg.ignore_grasps, RELEASE)
+    key, r, reason = score_configurations(scn, old, boom, None, poses, cfg.ignore_grasps, RELEASE)
     evaluated = 2 * len(poses)
     miss = _furthest(reason, r)
     ok = key > -VIOLATION_OFFSET
@@ -391,8 +215,9 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
     if len(reaching) > cfg.samples:
         reaching = rng.choice(reaching, cfg.samples, replace=False)
     poses = release.poses[reaching]
-    key, r4, reason = _score(scn, old, boom, new_anchor, poses, cfg.ignore_grasps, ARRIVE,
-                             known=release.robustness[reaching])
+    key, r4, reason = score_configurations(scn, old, boom, new_anchor, poses,
+                                           cfg.ignore_grasps, ARRIVE,
+                                           known=release.robustness[reaching])
     evaluated += 2 * len(poses)
     miss = _furthest(reason, r4) if len(poses) else (-1, 0)
     if len(poses) and key.max() < -VIOLATION_OFFSET - cfg.hopeless_violation:
@@ -423,6 +248,7 @@ def find_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: 
         best_key, best_pose, best_r4 = k2[b], more[b].copy(), r2[b]
     if best_key <= -VIOLATION_OFFSET:
         return Transition(False, None, None, _explain(miss), (evaluated + 3) // 4)
+    assert best_r4 is not None  # set with the best key, which is feasible
     return Transition(True, best_pose, np.exp(best_r4), "", (evaluated + 3) // 4)
 
 
@@ -434,7 +260,7 @@ def _cannot_let_go(boom: int, release: ReleaseSet) -> Transition:
 
 def _furthest(reason: np.ndarray, r4: np.ndarray) -> tuple[int, int]:
     """(progress, failure code) of the sample that got furthest: the most configurations
-    feasible, then the latest failing test (codes as `_score`'s)."""
+    feasible, then the latest failing test (codes as `score_configurations`')."""
     passed = (r4 > -np.inf).sum(axis=1)
     progress = passed * 100 + reason % 10
     k = int(np.argmax(progress))
@@ -460,7 +286,7 @@ def reachable_anchors(scn: Scenario, stance: tuple[str, ...], boom: int, pose: n
     poses = np.column_stack([pose[0] + rng.normal(0.0, 0.5, samples),
                              pose[1] + rng.normal(0.0, 0.5, samples),
                              rng.uniform(-0.8, 0.8, samples)])
-    ok = _kinematic_violation(robot, poses, held, np.arange(4)) == 0.0
+    ok = _kinematic_violation(robot, poses, held, np.arange(NUM_BOOMS)) == 0.0
     if not ok.any():
         return np.zeros(0, dtype=int)
     pts = scn.anchor_positions
@@ -493,15 +319,16 @@ def polish_transition(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor
     Returns the pose and its four probabilities; never worse than `pose`."""
     origin = np.asarray(pose, dtype=float).copy()
     best = origin.copy()
-    key, r, _ = _score(scn, old, boom, new_anchor, best[None], False)
+    key, r, _ = score_configurations(scn, old, boom, new_anchor, best[None], False)
     best_key, best_r = float(key[0]), r[0]
     if best_key <= -VIOLATION_OFFSET:
         raise ValueError("polish_transition needs a feasible transition pose")
     s_old, _, s_new = transition_stances(scn, old, boom, new_anchor)
+    assert s_new is not None  # a new anchor is given
     spread = np.asarray(step, dtype=float)
     for _ in range(rounds):
         cand = best + rng.normal(0.0, 1.0, (samples, 3)) * spread
-        k2, r2, _ = _score(scn, old, boom, new_anchor, cand, False)
+        k2, r2, _ = score_configurations(scn, old, boom, new_anchor, cand, False)
         moved = False
         for b in np.argsort(k2)[::-1][:3]:  # the best few, in case the best is cut off
             if k2[b] <= best_key:

@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
 from rb_drake import geometry, grasp
-from rb_drake.params import RobotParams
+from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -99,7 +99,7 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
                          alpha=alpha, zorder=6))
     sh = geometry.shoulder_positions(robot, pose)[0]
     booms, tips, colours, styles = [], [], [], []
-    for i in range(4):
+    for i in range(NUM_BOOMS):
         if stance.attached[i]:
             tip = stance.positions[i]
             colour = prob_colour(probabilities[i]) if probabilities is not None else "#3182bd"

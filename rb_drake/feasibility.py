@@ -13,15 +13,16 @@ import numpy as np
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE, Rock
-from rb_drake.params import RobotParams
+from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, statics_problem
 
 
 class World(Protocol):
-    """What feasibility needs of a scenario."""
+    """What feasibility needs of a scenario (read-only, as a frozen Scenario's fields are)."""
 
-    robot: RobotParams
+    @property
+    def robot(self) -> RobotParams: ...
 
     @property
     def rock(self) -> Rock: ...
@@ -222,7 +223,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     out: list[str] = []
     lo, hi = robot.boom_length
     rng = robot.shoulder_range_deg
-    for i in range(4):
+    for i in range(NUM_BOOMS):
         if not np.isfinite(targets[i, 0]):
             continue
         L, th = geo.length[0, i], np.degrees(geo.shoulder_angle[0, i])
@@ -235,7 +236,7 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
         if body_in_rock(robot, rock, pose[None])[0]:
             out.append("body collides with rock")
         end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[0])
-        for i in range(4):
+        for i in range(NUM_BOOMS):
             if np.isfinite(targets[i, 0]) and rock.segments_hit(geo.shoulders[0, i],
                                                                  end[i])[()]:
                 out.append(f"boom {i}: collides with rock")

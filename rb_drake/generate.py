@@ -15,8 +15,9 @@ import numpy as np
 
 from rb_drake import geometry
 from rb_drake.collision import Rock
+from rb_drake.errors import RbpError, RbpInputError
 from rb_drake.feasibility import check_poses
-from rb_drake.params import RobotParams
+from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
 
 KINDS = ("shaft", "crevasse", "rockfall")
@@ -182,7 +183,7 @@ def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
     pos = scn.anchor_positions
     for pose in np.atleast_2d(poses):
         cands = []
-        for i in range(4):
+        for i in range(NUM_BOOMS):
             r = geometry.reach(robot, pose, pos, np.full(len(pos), i))
             th = r.shoulder_angle[0]
             ok = r.violation[0] == 0.0
@@ -201,11 +202,17 @@ def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
     return best
 
 
+class CaveGenerationError(RbpError, RuntimeError):
+    """No cave of the kind asked for had a feasible start stance in `CaveConfig.max_redraws`
+    draws (the user's seed and configuration: `rbp scenario generate` reports it as their
+    input's). A RuntimeError, as callers catch it."""
+
+
 def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
                   robot: RobotParams | None = None) -> Scenario:
     """A random cave of `kind` ('shaft', 'crevasse' or 'rockfall'); the same seed, the same cave."""
     if kind not in KINDS:
-        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+        raise RbpInputError(f"must be one of {KINDS}, got {kind!r}", field="kind")
     cfg = config or CaveConfig()
     robot = robot or RobotParams()
     rng = np.random.default_rng(seed)
@@ -233,5 +240,5 @@ def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
         pose, ids, _ = found
         return dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
                                    start_stance=ids)
-    raise RuntimeError(f"no cave of kind {kind!r} with a feasible start stance after "
-                       f"{cfg.max_redraws} draws from seed {seed}; loosen the CaveConfig")
+    raise CaveGenerationError(f"no cave of kind {kind!r} with a feasible start stance after "
+                              f"{cfg.max_redraws} draws from seed {seed}; loosen the CaveConfig")

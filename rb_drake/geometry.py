@@ -192,19 +192,3 @@ def tip_positions(robot: RobotParams, pose: np.ndarray, shoulder_angles: np.ndar
     p = shoulder_positions(robot, pose)[0]
     a = pose[2] + robot.shoulder_directions + np.asarray(shoulder_angles)
     return p + np.asarray(lengths)[:, None] * np.stack([np.cos(a), np.sin(a)], axis=-1)
-
-
-def tip_jacobian(robot: RobotParams, pose: np.ndarray, shoulder_angles: np.ndarray,
-                 lengths: np.ndarray, boom: int) -> np.ndarray:
-    """d tip / d q, q = [x, y, phi, theta_0, L_0, ..., theta_3, L_3] (Drake's order): (2, 11)."""
-    pose = np.asarray(pose, dtype=float)
-    a = pose[2] + robot.shoulder_directions[boom] + shoulder_angles[boom]
-    e = np.array([np.cos(a), np.sin(a)])
-    r = shoulder_offsets(robot, pose)[0, boom]
-    J = np.zeros((2, 11))
-    J[:, 0] = [1.0, 0.0]
-    J[:, 1] = [0.0, 1.0]
-    J[:, 2] = perp(r) + lengths[boom] * perp(e)
-    J[:, 3 + 2 * boom] = lengths[boom] * perp(e)
-    J[:, 4 + 2 * boom] = e
-    return J

@@ -25,6 +25,8 @@ from typing import Any
 
 import yaml
 
+from rb_drake.errors import RbpInputError
+
 DEFAULT_MAX_INPUT_MB = 64.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
 MAX_NODES = 1_000_000   # values of a YAML document, aliases expanded (bundled caves: < 10,000)
@@ -34,14 +36,13 @@ MAX_ALIASES = 10_000    # alias uses in a YAML document
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class InputFileError(ValueError):
+class InputFileError(RbpInputError):
     """An input file refused before its content is interpreted: `field` ("(file)" for the
-    file as a whole, "line L, column C" inside it) and `reason`."""
+    file as a whole, "line L, column C" inside it) and `reason`; each reader adds the file."""
 
     def __init__(self, field: str, reason: str):
-        super().__init__(f"{field}: {reason}")
-        self.field = field
-        self.reason = reason
+        super().__init__(reason, field=field)
+        self.field: str = field
 
 
 def max_input_bytes() -> int:

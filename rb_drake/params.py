@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from rb_drake.errors import RbpInputError
+
 NUM_BOOMS = 4
 
 
@@ -100,13 +102,11 @@ class RobotParams:
         return dataclasses.replace(self, **changes)
 
 
-class ParamError(ValueError):
+class ParamError(RbpInputError):
     """A robot parameter override is malformed. `field` is its name inside `robot:`."""
 
     def __init__(self, field: str, reason: str):
-        super().__init__(f"{field}: {reason}")
-        self.field = field
-        self.reason = reason
+        super().__init__(reason, field=field)
 
 
 # Physically meaningful magnitudes of robot parameters (docs/formats.md): beyond them a value is

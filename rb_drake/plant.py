@@ -31,7 +31,6 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
 )
 from pydrake.multibody.tree import (
-    JacobianWrtVariable,
     ModelInstanceIndex,
     MultibodyConstraintId,
     PlanarJoint,
@@ -130,13 +129,6 @@ class ReachBotPlant:
     anchors: list[PlanarJoint] = dataclasses.field(default_factory=list)  # with hold_tips
     holds: list[MultibodyConstraintId] = dataclasses.field(default_factory=list)
 
-    def q_from(self, pose: Sequence[float], shoulder_angles: Sequence[float],
-               lengths: Sequence[float]) -> np.ndarray:
-        """Drake's q vector for pose (x, y, phi), shoulder angles (4,) and boom lengths (4,)."""
-        q = np.zeros(self.plant.num_positions())
-        q[self.q_order] = self.canonical_q(pose, shoulder_angles, lengths)
-        return q
-
     @staticmethod
     def canonical_q(pose: Sequence[float], shoulder_angles: Sequence[float],
                     lengths: Sequence[float]) -> np.ndarray:
@@ -174,13 +166,6 @@ class ReachBotPlant:
                 body.SetSpatialInertiaInBodyFrame(context, SpatialInertia.SolidSphereWithMass(
                     body.default_mass() + 0.5 * float(m), radius))
 
-    def tip_jacobian(self, context: Context, boom: int) -> np.ndarray:
-        """d tip_boom / d q (x-y rows), columns in the canonical q order, shape (2, nq)."""
-        world = self.plant.world_frame()
-        J = self.plant.CalcJacobianTranslationalVelocity(
-            context, JacobianWrtVariable.kQDot, self.tips[boom].body_frame(), np.zeros(3),
-            world, world)
-        return J[:2, self.q_order]
 
 
 def build_plant(robot: RobotParams, gravity: Sequence[float] = (0.0, -3.71),

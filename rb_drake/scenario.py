@@ -11,12 +11,13 @@ import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
 
 from rb_drake.collision import Rock, polygon_is_simple, signed_area
+from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_yaml, read_text
 from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
 from rb_drake.stance import Stance
@@ -34,14 +35,13 @@ MAX_GRAVITY = 1e3     # m/s^2 per component (Earth 9.81)
 MAX_FORCE = 1e6       # N: anchor limit surfaces and their spreads
 
 
-class ScenarioError(ValueError):
-    """A scenario the planner refuses: `source` (file), `field` (dotted path) and `reason`."""
+class ScenarioError(RbpInputError):
+    """A scenario the planner refuses: `source` (file, also `file`), `field` (dotted path) and
+    `reason`."""
 
     def __init__(self, source: str, field: str, reason: str):
-        super().__init__(f"{source}: {field}: {reason}")
+        super().__init__(reason, file=source, field=field)
         self.source = source
-        self.field = field
-        self.reason = reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,6 +64,20 @@ class Anchor:
             "limit": {"normal": float(self.f_normal), "lateral": float(self.f_lateral)},
             "sigma": {"normal": float(self.sigma_normal), "lateral": float(self.sigma_lateral)},
         }
+
+
+class AnchorTable(NamedTuple):
+    """A scenario's anchors as rows (as `Scenario.stance` reads them), plus a last row of NaN
+    for a free boom: the feasibility kernel's stances are gathered from it by index
+    (`planning.transition_score.pack_rows`)."""
+
+    row: dict[str, int]        # anchor id -> row; len(row) is the free boom's row
+    positions: np.ndarray      # (N + 1, 2)
+    normals: np.ndarray        # (N + 1, 2)
+    f_normal: np.ndarray       # (N + 1,)
+    f_lateral: np.ndarray
+    sigma_normal: np.ndarray
+    sigma_lateral: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,6 +110,21 @@ class Scenario:
     def anchor_normals(self) -> np.ndarray:
         return np.array([a.normal for a in self.anchors], dtype=float).reshape(-1, 2)
 
+    @cached_property
+    def anchor_table(self) -> AnchorTable:
+        """The anchors as the kernel's table (`AnchorTable`), built once per scenario and held
+        by it: a scenario is immutable, so the table can never go stale."""
+        nan2 = (math.nan, math.nan)
+
+        def col(get, default) -> np.ndarray:
+            return np.array([get(a) for a in self.anchors] + [default], dtype=float)
+
+        return AnchorTable(dict(self.anchor_index), col(lambda a: a.position, nan2),
+                           col(lambda a: a.normal, nan2), col(lambda a: a.f_normal, math.nan),
+                           col(lambda a: a.f_lateral, math.nan),
+                           col(lambda a: a.sigma_normal, math.nan),
+                           col(lambda a: a.sigma_lateral, math.nan))
+
     @property
     def gravity_vector(self) -> np.ndarray:
         return np.asarray(self.gravity, dtype=float)
@@ -103,7 +132,7 @@ class Scenario:
     def stance(self, ids: Sequence[str | None]) -> Stance:
         """Stance arrays for anchor ids per boom (None: the boom is free)."""
         if len(ids) != NUM_BOOMS:
-            raise ValueError(f"a stance names {NUM_BOOMS} anchors (None for free), got {ids!r}")
+            raise RbpInputError(f"a stance names {NUM_BOOMS} anchors (None for free), got {ids!r}")
         rows = [self.anchors[self.anchor_index[i]] if i is not None else None for i in ids]
         nan2 = (math.nan, math.nan)
 

@@ -24,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rb_drake import geometry
+from rb_drake.errors import RbpInputError
 from rb_drake.grasp import HALF_PI, log_ndtr_derivatives, mills_ratio
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
@@ -237,7 +238,7 @@ class ForceAllocator:
             for key in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
                 self.options.SetOption(self.solver.solver_id(), key, 1e-10)
         else:
-            raise ValueError(f"solver must be 'osqp' or 'clarabel', got {solver!r}")
+            raise RbpInputError(f"must be 'osqp' or 'clarabel', got {solver!r}", field="solver")
         if not self.solver.available() or not self.solver.AreProgramAttributesSatisfied(prog):
             raise RuntimeError(f"{solver} cannot solve the force-allocation QP here")
         self.last_infeasible: list[str] = []

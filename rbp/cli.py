@@ -17,12 +17,8 @@ import threading
 from pathlib import Path
 from typing import NoReturn
 
+from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from rbp.commands.common import UserError, load_scenario_spec, read_plan
-
-EXIT_OK = 0           # done: a plan was found and written, a plan verified, ...
-EXIT_FAILED = 1       # ran, but no route / planning failed / the plan does not verify
-EXIT_USAGE = 2        # bad input (one line naming the file, field and reason), or unwritable output
-EXIT_INTERRUPTED = 3  # Ctrl-C (or a closed output pipe): no traceback, no half-written file
 
 EXIT_STATUSES = """exit status:
   0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
@@ -54,7 +50,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(f"wrote {args.output}: {scn.name}, {len(scn.anchors)} anchors, "
           f"start stance {list(scn.start_stance)}")
-    return 0
+    return EXIT_OK
 
 
 def cmd_scenario_check(args: argparse.Namespace) -> int:
@@ -75,7 +71,7 @@ def cmd_scenario_check(args: argparse.Namespace) -> int:
               f"{np.degrees(alloc.pull_angles[0, i]):+6.1f} deg, P = "
               f"{np.exp(alloc.log_probs[0, i]):.5f}")
     print(f"  goal {list(scn.goal_position)} +- {scn.goal_tolerance} m")
-    return 0
+    return EXIT_OK
 
 
 def cmd_scenario_show(args: argparse.Namespace) -> int:
@@ -86,7 +82,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     fig = scenario_figure(scn)
     atomic_save_figure(fig, args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
-    return 0
+    return EXIT_OK
 
 
 def cmd_scenario_list(args: argparse.Namespace) -> int:
@@ -94,7 +90,7 @@ def cmd_scenario_list(args: argparse.Namespace) -> int:
 
     for name, path in bundled_caves().items():
         print(f"{name:20s} {path}")
-    return 0
+    return EXIT_OK
 
 
 def _summary(plan: dict) -> str:
@@ -165,7 +161,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"{path}: {p}")
     if problems:
         print(f"{path}: {len(problems)} problems")
-        return 1
+        return EXIT_FAILED
     n = sum(len(p["steps"]) for p in plan["phases"])
     print(f"{path}: ok: {len(plan['phases'])} phases, {n} configurations verified; "
           + _summary(plan))
@@ -175,7 +171,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
         write_plan(stamp(plan), path)
         print(f"{path}: stamped as verified")
-    return 0
+    return EXIT_OK
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

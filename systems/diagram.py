@@ -65,6 +65,7 @@ from pydrake.systems.primitives import Adder, LogVectorOutput, MatrixGain
 
 from planning.ramps import RELEASE_TENSION
 from rb_drake import geometry
+from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.plant import ARM_MASS, BODY_THICKNESS, ReachBotPlant, build_plant
 from rb_drake.scenario import Scenario
@@ -153,7 +154,7 @@ class ClimbSimulator:
                  sample_period: float = SAMPLE_PERIOD, plant: str = "full",
                  time_step: float = PLANT_TIME_STEP):
         if plant not in ("full", "body"):
-            raise ValueError(f"plant must be 'full' or 'body', got {plant!r}")
+            raise RbpInputError(f"must be 'full' or 'body', got {plant!r}", field="plant")
         robot, g = scn.robot, scn.gravity_vector
         gains = gains or ControlGains()
         self.scenario = scn
@@ -283,7 +284,7 @@ class ClimbSimulator:
         `progress(phase, phases, t)` after each phase."""
         if plan.scenario.robot != self.scenario.robot or not np.array_equal(
                 plan.scenario.gravity_vector, self.scenario.gravity_vector):
-            raise ValueError("the plan's robot or gravity differs from the simulator's")
+            raise RbpInputError("the plan's robot or gravity differs from the simulator's")
         ctx = self.context
         self.diagram.SetDefaultContext(ctx)
         ctx.SetTime(0.0)
@@ -448,7 +449,7 @@ class ClimbSimulator:
         if state[0] > 0:
             k, boom = int(state[2]), int(state[3])
             failure = Failure(float(state[1]), k, boom, plan.phases[k].stance.ids[boom] or "",
-                              Cause.NAMES[int(state[4])], float(state[5]), float(state[6]))
+                              Cause(int(state[4])).label, float(state[5]), float(state[6]))
         grasp_log = data["grasp"]
         return SimulationRecord(plan, times[:n], np.rint(data["phase"][:, 0]).astype(int),
                                 data["state"], data["desired"], data["tension"],

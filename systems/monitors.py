@@ -10,7 +10,8 @@ failure (FAILURE_FIELDS, a `Failure` in the run's record), which stops the simul
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar, NamedTuple
+from enum import IntEnum, nonmember
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -131,13 +132,21 @@ class AnchorLoadMonitor(LeafSystem):
         output.SetFromVector(out)
 
 
-class Cause:
-    """Why a grasp failed (codes in GraspFailures' state)."""
+class Cause(IntEnum):
+    """Why a grasp failed: its code in GraspFailures' state (0: none), and its `label` in a
+    `Failure` and in the trial records."""
 
     OVERLOAD = 1  # the force exceeded the holding's drawn limit (or |psi| >= pi/2)
     ATTACH = 2    # a new grasp did not take hold on contact
     HANDOVER = 3  # a gripper had to open or close on a loaded boom: it did not, the climb stops
-    NAMES: ClassVar[dict[int, str]] = {1: "overload", 2: "attach", 3: "handover"}
+
+    # code -> label, for code that holds the bare int (GraspFailures' state, FirstFailures)
+    NAMES = nonmember({OVERLOAD: "overload", ATTACH: "attach", HANDOVER: "handover"})
+
+    @property
+    def label(self) -> str:
+        """"overload", "attach" or "handover", as records name the cause."""
+        return self.name.lower()
 
 
 FAILURE_FIELDS = ("failed", "time", "phase", "boom", "cause", "probability", "draw",

@@ -38,6 +38,7 @@ from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubsc
 from pydrake.trajectories import PiecewisePolynomial
 
 from rb_drake import geometry, grasp
+from rb_drake.errors import RbpInputError
 from rb_drake.files import atomic_write
 from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
 from rb_drake.stance import Stance
@@ -54,13 +55,11 @@ from systems.rig_messages import (
 from systems.rig_safety import RigCommandSource, SafetyReport
 
 
-class RigInputError(ValueError):
+class RigInputError(RbpInputError):
     """A plan or log the rig cannot use: `field` (path in the file) and `reason`."""
 
     def __init__(self, field: str, reason: str):
-        super().__init__(f"{field}: {reason}")
-        self.field = field
-        self.reason = reason
+        super().__init__(reason, field=field)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -210,10 +209,6 @@ class RigRun(NamedTuple):
     lcm_url: str
     log: Path
     safety: SafetyReport = SafetyReport(0, 0, 0, 0)
-
-    @property
-    def timed_out(self) -> bool:
-        return self.safety.held > 0
 
 
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,

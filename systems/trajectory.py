@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
+from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario, scenario_from_dict
 from rb_drake.stance import Stance
@@ -29,7 +30,7 @@ FREE_LIMB_FIELDS = ("tip_x", "tip_y", "tip_vx", "tip_vy", "boom_mass", "boom", "
 FREE_LIMB_SIZE = len(FREE_LIMB_FIELDS)
 
 
-class PlanError(ValueError):
+class PlanError(RbpInputError):
     """A plan file the simulation cannot run: `field` (a path in the plan) and `reason`."""
 
     def __init__(self, field: str, reason: str):

@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from planning.complete import AnytimeConfig, complete_search
+from planning.complete import complete_search
+from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.lattice import LatticeConfig, poses_of
 from planning.plan import build_plan, validate
@@ -40,7 +41,7 @@ def demo() -> Scenario:
 @pytest.fixture(scope="module")
 def optimal(demo: Scenario):
     """A* on the admissible bound (weight 1), to the proof of optimality."""
-    return complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    return complete_search(demo, CompleteConfig(COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE))
 
 
 def test_hop_length_is_the_chord_of_the_shoulder_range(demo: Scenario) -> None:
@@ -138,7 +139,8 @@ def test_edge_costs_are_the_route_cost(demo: Scenario, optimal) -> None:
 def test_astar_on_the_bound_equals_dijkstra(demo: Scenario, optimal, monkeypatch) -> None:
     assert optimal.success and optimal.quality == "optimal"
     monkeypatch.setattr(RegraspHeuristic, "__call__", lambda self, stance: 0.0)
-    dijkstra = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    dijkstra = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=1.0,
+                                                    anytime=EXHAUSTIVE))
     assert dijkstra.quality == "optimal"
     assert optimal.cost == pytest.approx(dijkstra.cost, rel=1e-9), (
         f"A* on the bound found cost {optimal.cost:.6f}, Dijkstra {dijkstra.cost:.6f}: the "
@@ -147,7 +149,8 @@ def test_astar_on_the_bound_equals_dijkstra(demo: Scenario, optimal, monkeypatch
 
 
 def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
-    found = complete_search(demo, COARSE, heuristic_weight=300.0, anytime=EXHAUSTIVE)
+    found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=300.0,
+                                                   anytime=EXHAUSTIVE))
     assert found.success and found.quality == "optimal"
     assert found.cost == pytest.approx(optimal.cost, rel=1e-9)
     history = found.history
@@ -168,8 +171,9 @@ def test_lower_bound_counts_the_vertex_being_expanded(demo: Scenario, optimal, m
     import planning.complete as complete_module
 
     monkeypatch.setattr(complete_module, "BOUND_EVERY", 1)
-    found = complete_search(demo, COARSE, heuristic_weight=300.0,
-                            anytime=AnytimeConfig(improve_factor=None, restart=restart))
+    found = complete_search(demo, CompleteConfig(
+        COARSE, heuristic_weight=300.0,
+        anytime=AnytimeConfig(improve_factor=None, restart=restart)))
     assert found.success and found.quality == "optimal"
     assert found.cost == pytest.approx(optimal.cost, rel=1e-9), (
         f"claimed optimal at {found.cost:.6f}; the optimum is {optimal.cost:.6f}")
@@ -178,8 +182,9 @@ def test_lower_bound_counts_the_vertex_being_expanded(demo: Scenario, optimal, m
 
 
 def test_target_bound_stops_within_it(demo: Scenario, optimal) -> None:
-    found = complete_search(demo, COARSE, heuristic_weight=300.0,
-                            anytime=AnytimeConfig(improve_factor=None, target_bound=1.5))
+    found = complete_search(demo, CompleteConfig(
+        COARSE, heuristic_weight=300.0,
+        anytime=AnytimeConfig(improve_factor=None, target_bound=1.5)))
     assert found.success
     assert found.cost <= 1.5 * found.lower_bound * (1 + 1e-12)
     assert found.lower_bound <= optimal.cost * (1 + 1e-9) <= found.cost * (1 + 2e-9)

@@ -17,25 +17,21 @@ import math
 
 import numpy as np
 import pytest
+from lattice_reference import candidate_anchors, stance_lattice
 
-from planning.complete import LatticeMemo, complete_search
+from planning.complete import complete_search
+from planning.complete_config import CompleteConfig
 from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
 from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
-from planning.lattice import (
-    LatticeConfig,
-    pack,
-    poses_of,
-    reachable_lattice,
-    stance_lattice,
-)
+from planning.lattice import LatticeConfig, pack, poses_of, reachable_lattice
 from planning.lattice_moves import (
-    candidate_anchors,
     goal_is_holdable,
     lattice_transition,
     move_rows,
     move_table,
     start_components,
 )
+from planning.lattice_search import LatticeMemo
 from planning.plan import build_plan
 from planning.transition import transition_stances
 from rb_drake import feasibility_kernel as fk
@@ -176,7 +172,7 @@ def test_grown_components_are_the_lattice_components(cave: str) -> None:
     and release sets, for the stances a short search enters."""
     scn = load_scenario(bundled_caves()[cave])
     memo = LatticeMemo()
-    complete_search(scn, COARSE, max_expansions=6, memo=memo)
+    complete_search(scn, CompleteConfig(COARSE, max_expansions=6), memo=memo)
     stances = list(memo.components)
     compared = 0
     for stance in stances:
@@ -334,7 +330,7 @@ def test_move_table_is_every_move_rows(kind: str, seed: int) -> None:
 
     scn = make_cave(kind, seed, (4.5, 5.0))
     memo = LatticeMemo()
-    complete_search(scn, max_expansions=15, memo=memo)
+    complete_search(scn, CompleteConfig(max_expansions=15), memo=memo)
     moves = left_out = 0
     for stance, known in memo.components.items():
         for comp in known.components:
@@ -409,7 +405,7 @@ def test_goal_in_rock_is_no_route_at_once(demo: Scenario) -> None:
 
 
 def test_budget_is_not_a_proof(demo: Scenario) -> None:
-    result = complete_search(demo, max_expansions=2)
+    result = complete_search(demo, CompleteConfig(max_expansions=2))
     if not result.success:
         assert result.stop == "budget", result.stop
 
@@ -452,7 +448,7 @@ def test_search_on_threads_equals_one_thread(demo: Scenario, monkeypatch) -> Non
     found = {}
     for threads in ("1", "2"):
         monkeypatch.setenv("RBP_THREADS", threads)
-        result = complete_search(demo, max_expansions=40)
+        result = complete_search(demo, CompleteConfig(max_expansions=40))
         found[threads] = ([v for v, _ in result.expanded], result.transitions_tested,
                           [p.tolist() for p in result.poses])
     assert found["1"] == found["2"]

@@ -31,10 +31,12 @@ import numpy as np
 import pytest
 from conftest import build_shaft
 from scipy.special import erfcx, log_ndtr
+from transition_reference import score_reference
 
-from planning import transition
+from planning import transition, transition_score
 from planning.footsteps import candidate_moves, edge_rng
-from planning.transition import _NaiveWorld, find_transition
+from planning.transition import find_transition
+from planning.transition_score import NaiveWorld, score_configurations
 from rb_drake import feasibility_kernel as fk
 from rb_drake.feasibility import Reason, check_poses, violation
 from rb_drake.generate import generate_cave
@@ -131,7 +133,7 @@ def _cases(name: str, scn: Scenario) -> list[Case]:
         tips = s4.positions[j] + rng.normal(0.0, 0.4, (n, 2))
         cases.append(Case(f"3-stance free {j}, tips scattered", scn, s3,
                           _around(rng, start, n), tips, False))
-    cases.append(Case("start 4-stance, grasps ignored", _NaiveWorld(scn), s4,
+    cases.append(Case("start 4-stance, grasps ignored", NaiveWorld(scn), s4,
                       _around(rng, start, n), None, True))
     move = _transition(scn) if name != "hard-shaft" else None
     if move is not None:
@@ -141,7 +143,7 @@ def _cases(name: str, scn: Scenario) -> list[Case]:
         mixed = Stance.mix(s_old, s_new, second)
         tips = np.where(second[:, None], s_new.positions[j], s_old.positions[j])
         for ignore in (False, True):
-            world = _NaiveWorld(scn) if ignore else scn
+            world = NaiveWorld(scn) if ignore else scn
             cases.append(Case(f"transition 4-stances mixed (ignore {ignore})", world, mixed,
                               _around(rng, pose, n), None, ignore))
             cases.append(Case(f"transition 3-stance, per-row tips (ignore {ignore})", world,
@@ -265,7 +267,7 @@ def test_special_functions_match_scipy() -> None:
 
 
 def test_score_matches_reference_path(scenarios: dict[str, Scenario]) -> None:
-    """transition._score (one compiled call for all configurations) and _score_reference
+    """score_configurations (one compiled call for all configurations) and score_reference
     (check_poses + violation per stance kind) on the same poses."""
     scn = scenarios["wide-shaft"]
     move = _transition(scn)
@@ -273,22 +275,22 @@ def test_score_matches_reference_path(scenarios: dict[str, Scenario]) -> None:
     old, j, anchor, pose = move
     poses = _around(_rng("score"), pose, 300)
     known = np.full((len(poses), 4), np.nan)
-    known[:, list(transition.RELEASE)] = -0.01
+    known[:, list(transition_score.RELEASE)] = -0.01
     for ignore in (False, True):
-        for configs, given in ((transition.ALL, None), (transition.RELEASE, None),
-                               (transition.ARRIVE, known), ((3,), None), ((1, 2), None)):
-            new = None if configs == transition.RELEASE else anchor
-            got = transition._score(scn, old, j, new, poses, ignore, configs, given)
-            want = transition._score_reference(scn, old, j, new, poses, ignore, configs, given)
+        for configs, given in ((transition_score.ALL, None), (transition_score.RELEASE, None),
+                               (transition_score.ARRIVE, known), ((3,), None), ((1, 2), None)):
+            new = None if configs == transition_score.RELEASE else anchor
+            got = score_configurations(scn, old, j, new, poses, ignore, configs, given)
+            want = score_reference(scn, old, j, new, poses, ignore, configs, given)
             label = f"configs {configs}, ignore_grasps {ignore}"
             np.testing.assert_array_equal(got[2], want[2], err_msg=f"{label}: failure codes")
             np.testing.assert_allclose(got[1], want[1], rtol=VALUE_RTOL, atol=VALUE_ATOL,
                                        err_msg=f"{label}: robustness")
             np.testing.assert_allclose(got[0], want[0], rtol=VALUE_RTOL, atol=VALUE_ATOL,
                                        err_msg=f"{label}: search key")
-            assert (got[0] > -transition.VIOLATION_OFFSET).any(), f"{label}: nothing feasible"
-            assert (got[0] <= -transition.VIOLATION_OFFSET).any(), f"{label}: all feasible"
-            if configs == transition.ALL:
+            assert (got[0] > -transition_score.VIOLATION_OFFSET).any(), f"{label}: nothing feasible"
+            assert (got[0] <= -transition_score.VIOLATION_OFFSET).any(), f"{label}: all feasible"
+            if configs == transition_score.ALL:
                 first = set((got[2] // 10)[got[2] > 0].tolist())
                 assert len(first) >= 2, f"{label}: first failures only in configurations {first}"
 

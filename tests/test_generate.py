@@ -132,7 +132,7 @@ def test_yaml_round_trip(kind, seed):
 
 @pytest.mark.parametrize("kind", ["volcano", "", "Shaft", "shafts"])
 def test_unknown_kind_refused(kind):
-    with pytest.raises(ValueError, match="kind must be one of"):
+    with pytest.raises(ValueError, match="kind: must be one of"):
         generate_cave(kind, 0)
 
 

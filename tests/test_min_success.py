@@ -10,7 +10,8 @@ import math
 import pytest
 
 import planning.complete as complete_module
-from planning.complete import AnytimeConfig, complete_search
+from planning.complete import complete_search
+from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
@@ -27,7 +28,8 @@ def demo() -> Scenario:
 @pytest.fixture(scope="module")
 def optimal(demo: Scenario):
     """The most robust route (lowest search cost), proved."""
-    found = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+    found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=1.0,
+                                                      anytime=EXHAUSTIVE))
     assert found.success and found.quality == "optimal"
     return found
 
@@ -38,7 +40,8 @@ def fewest(demo: Scenario) -> int:
     patch = pytest.MonkeyPatch()
     patch.setattr(complete_module, "edge_cost", lambda scn, *args: 0.01)
     try:
-        found = complete_search(demo, COARSE, heuristic_weight=1.0, anytime=EXHAUSTIVE)
+        found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=1.0,
+                                                      anytime=EXHAUSTIVE))
     finally:
         patch.undo()
     assert found.success and found.quality == "optimal"
@@ -49,12 +52,12 @@ def fewest(demo: Scenario) -> int:
 def tight(demo: Scenario, optimal):
     """P just below the optimum's predicted success."""
     p = math.exp(-optimal.cost) * (1 - 1e-6)
-    return p, constrained_search(demo, p, COARSE)
+    return p, constrained_search(demo, p, CompleteConfig(COARSE))
 
 
 @pytest.fixture(scope="module")
 def loose(demo: Scenario):
-    return constrained_search(demo, 1e-6, COARSE)
+    return constrained_search(demo, 1e-6, CompleteConfig(COARSE))
 
 
 def test_just_below_the_optimum_finds_a_route_within_p(optimal, tight) -> None:
@@ -68,7 +71,7 @@ def test_just_below_the_optimum_finds_a_route_within_p(optimal, tight) -> None:
 
 def test_above_the_optimum_is_a_proof_of_no_route(demo: Scenario, optimal) -> None:
     p = math.exp(-optimal.cost) * (1 + 1e-6)
-    found = constrained_search(demo, p, COARSE)
+    found = constrained_search(demo, p, CompleteConfig(COARSE))
     assert not found.success and found.stop == "noroute", (
         f"no route can beat the proven optimum, yet: {found.stop} {found.reason}")
     assert f"{p:g}" in found.reason

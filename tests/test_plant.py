@@ -5,14 +5,50 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from pydrake.multibody.plant import DiscreteContactApproximation
+from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from rb_drake import geometry
 from rb_drake.params import RobotParams, robot_from_dict
-from rb_drake.plant import ARM_MASS, MIN_MASS, build_plant, robot_urdf
+from rb_drake.plant import ARM_MASS, MIN_MASS, ReachBotPlant, build_plant, robot_urdf
 
 GRAVITY = (0.0, -3.71)
+
+
+# What the plant and geometry would offer only to these tests, so kept here: Drake's q from the
+# canonical joint values, and the tips' Jacobians from the plant and by hand.
+
+def q_from(rb: ReachBotPlant, pose, shoulder_angles, lengths) -> np.ndarray:
+    """Drake's q vector for pose (x, y, phi), shoulder angles (4,) and boom lengths (4,)."""
+    q = np.zeros(rb.plant.num_positions())
+    q[rb.q_order] = rb.canonical_q(pose, shoulder_angles, lengths)
+    return q
+
+
+def plant_tip_jacobian(rb: ReachBotPlant, context, boom: int) -> np.ndarray:
+    """d tip_boom / d q (x-y rows), columns in the canonical q order, shape (2, nq)."""
+    world = rb.plant.world_frame()
+    J = rb.plant.CalcJacobianTranslationalVelocity(
+        context, JacobianWrtVariable.kQDot, rb.tips[boom].body_frame(), np.zeros(3),
+        world, world)
+    return J[:2, rb.q_order]
+
+
+def geometry_tip_jacobian(robot: RobotParams, pose: np.ndarray, shoulder_angles: np.ndarray,
+                          lengths: np.ndarray, boom: int) -> np.ndarray:
+    """d tip / d q, q = [x, y, phi, theta_0, L_0, ..., theta_3, L_3] (Drake's order): (2, 11)."""
+    pose = np.asarray(pose, dtype=float)
+    a = pose[2] + robot.shoulder_directions[boom] + shoulder_angles[boom]
+    e = np.array([np.cos(a), np.sin(a)])
+    r = geometry.shoulder_offsets(robot, pose)[0, boom]
+    J = np.zeros((2, 11))
+    J[:, 0] = [1.0, 0.0]
+    J[:, 1] = [0.0, 1.0]
+    J[:, 2] = geometry.perp(r) + lengths[boom] * geometry.perp(e)
+    J[:, 3 + 2 * boom] = lengths[boom] * geometry.perp(e)
+    J[:, 4 + 2 * boom] = e
+    return J
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +94,7 @@ def test_default_positions_within_limits(rb):
 def test_tip_positions_match_geometry(robot, rb):
     ctx = rb.plant.CreateDefaultContext()
     for k, (pose, th, L) in enumerate(random_configs(robot, 20, seed=1)):
-        rb.plant.SetPositions(ctx, rb.q_from(pose, th, L))
+        rb.plant.SetPositions(ctx, q_from(rb, pose, th, L))
         got = rb.tip_positions(ctx)
         want = geometry.tip_positions(robot, pose, th, L)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12,
@@ -67,7 +103,7 @@ def test_tip_positions_match_geometry(robot, rb):
 
 def test_q_from_uses_position_start(rb):
     pose, th, L = [1.0, 2.0, 0.3], [0.1, 0.2, 0.3, 0.4], [1.1, 1.2, 1.3, 1.4]
-    q = rb.q_from(pose, th, L)
+    q = q_from(rb, pose, th, L)
     s = rb.base.position_start()
     assert q[s:s + 3].tolist() == pose, f"base q {q[s:s + 3]}"
     for i in range(4):
@@ -81,8 +117,8 @@ def test_tip_jacobian_matches_geometry_and_finite_differences(robot, rb):
     h = 1e-6
     for k, (pose, th, L) in enumerate(random_configs(robot, 20, seed=2)):
         qc = rb.canonical_q(pose, th, L)
-        plant.SetPositions(ctx, rb.q_from(pose, th, L))
-        J_plant = [rb.tip_jacobian(ctx, b) for b in range(4)]
+        plant.SetPositions(ctx, q_from(rb, pose, th, L))
+        J_plant = [plant_tip_jacobian(rb, ctx, b) for b in range(4)]
         # central differences of the plant's FK, in canonical q order
         J_fd = np.zeros((4, 2, 11))
         for j in range(11):
@@ -90,10 +126,10 @@ def test_tip_jacobian_matches_geometry_and_finite_differences(robot, rb):
             dq[j] = h
             for sign in (1.0, -1.0):
                 q = qc + sign * dq
-                plant.SetPositions(ctx, rb.q_from(q[:3], q[3::2], q[4::2]))
+                plant.SetPositions(ctx, q_from(rb, q[:3], q[3::2], q[4::2]))
                 J_fd[:, :, j] += sign * rb.tip_positions(ctx) / (2 * h)
         for b in range(4):
-            J_geo = geometry.tip_jacobian(robot, pose, th, L, b)
+            J_geo = geometry_tip_jacobian(robot, pose, th, L, b)
             np.testing.assert_allclose(J_plant[b], J_geo, rtol=0, atol=1e-10,
                                        err_msg=f"config {k} boom {b}: plant J != geometry J")
             np.testing.assert_allclose(J_plant[b], J_fd[b], rtol=0, atol=1e-6,
@@ -127,7 +163,7 @@ def test_overrides_change_the_plant(robot, rb):
     # the new shoulders show up in the FK
     ctx = rb2.plant.CreateDefaultContext()
     for k, (pose, th, L) in enumerate(random_configs(other, 5, seed=3)):
-        rb2.plant.SetPositions(ctx, rb2.q_from(pose, th, L))
+        rb2.plant.SetPositions(ctx, q_from(rb2, pose, th, L))
         np.testing.assert_allclose(rb2.tip_positions(ctx),
                                    geometry.tip_positions(other, pose, th, L), rtol=0, atol=1e-12,
                                    err_msg=f"config {k}: overridden plant FK != geometry")
@@ -146,7 +182,7 @@ def test_gravity_generalized_forces(robot, gravity):
     ctx = plant.CreateDefaultContext()
     m_tot = plant.CalcTotalMass(ctx)
     for k, (pose, th, L) in enumerate(random_configs(robot, 10, seed=4)):
-        plant.SetPositions(ctx, rb.q_from(pose, th, L))
+        plant.SetPositions(ctx, q_from(rb, pose, th, L))
         v0 = rb.base.velocity_start()  # planar joint: v = (xdot, ydot, phidot)
         tau = plant.CalcGravityGeneralizedForces(ctx)[v0:v0 + 2]
         np.testing.assert_allclose(tau, m_tot * np.asarray(gravity), rtol=0, atol=1e-9,

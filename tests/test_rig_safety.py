@@ -251,7 +251,7 @@ def test_silent_rig_makes_the_commands_hold(plan: dict[str, Any], tmp_path: Path
         f"held setpoint first sent at {times[same[0]]:.2f} s, last status {last_status:.2f} s")
     raw_len, _ = planned(plan, times[late])
     assert np.abs(raw_len[-1] - held_len).max() > 1e-3, "the plan must have moved on"
-    assert run.timed_out and run.safety.held == len(commands) - 1 - same[0], (
+    assert run.safety.held > 0 and run.safety.held == len(commands) - 1 - same[0], (
         f"held {run.safety.held}, identical tail {len(commands) - 1 - same[0]}")
     assert any("status timeout" in line for line in run.safety.messages(config)), "message"
 

@@ -12,8 +12,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planning.complete import AnytimeConfig, LatticeMemo, complete_search
+from planning.complete import complete_search
+from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.lattice import LatticeConfig
+from planning.lattice_search import LatticeMemo
 from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import edge_cost
 from rb_drake.feasibility import check_poses
@@ -31,15 +33,15 @@ def demo() -> Scenario:
 def first(demo: Scenario):
     """The first route (weight 300, no anytime search) and the memo its search filled."""
     memo = LatticeMemo()
-    result = complete_search(demo, COARSE, memo=memo, anytime=None)
+    result = complete_search(demo, CompleteConfig(COARSE), memo=memo)
     assert result.success, result.reason
     return result, memo
 
 
 @pytest.fixture(scope="module")
 def optimum(demo: Scenario) -> float:
-    proved = complete_search(demo, COARSE, heuristic_weight=1.0,
-                             anytime=AnytimeConfig(improve_factor=None))
+    proved = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=1.0,
+                                                  anytime=AnytimeConfig(improve_factor=None)))
     assert proved.quality == "optimal", proved.quality
     return proved.cost
 
@@ -90,7 +92,7 @@ def test_repair_is_deterministic(demo: Scenario, first) -> None:
     result, memo = first
     a = repair_route(demo, result, memo, RepairConfig(window=3, stride=2))
     fresh = LatticeMemo()
-    again = complete_search(demo, COARSE, memo=fresh, anytime=None)
+    again = complete_search(demo, CompleteConfig(COARSE), memo=fresh)
     b = repair_route(demo, again, fresh, RepairConfig(window=3, stride=2))
     assert [v[0] for v in a.path] == [v[0] for v in b.path], "a fresh memo changed the route"
     assert a.cost == pytest.approx(b.cost, rel=1e-12)

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planning import seeds
+from planning import reach_seeds
+from planning.body_seeds import _ReachFilter
 from planning.footsteps import candidate_moves, edge_rng
 from planning.seeds import (
     Seed,
     SeedConfig,
-    _ReachFilter,
     body_seed,
     reach_seed,
     retract_path,
@@ -368,9 +368,9 @@ def test_reach_seed_without_clear_arc(wide: Scenario, wide_reaches, monkeypatch)
     assert not Rock([block]).segments_hit(seed.tips[:-1], seed.tips[1:]).any(), (
         "the tip path crosses the block")
     # Block the retracted swing as well (one radius tried, mid-swing): no tip path is clear.
-    monkeypatch.setattr(seeds, "RETRACT_RADII", (0.2,))
+    monkeypatch.setattr(reach_seeds, "RETRACT_RADII", (0.2,))  # where reach_seed reads it
     shoulder = geometry.shoulder_positions(wide.robot, pose)[0, j]
-    for radius in seeds.RETRACT_RADII:
+    for radius in reach_seeds.RETRACT_RADII:
         swing = retract_path(old, new, shoulder, radius, cfg.step)
         on = np.flatnonzero(np.isclose(np.linalg.norm(swing - shoulder, axis=1), radius))
         mid = swing[on[len(on) // 2]]
@@ -400,7 +400,7 @@ def test_a_gripper_path_may_touch_its_own_rock_only_in_its_last_2_cm() -> None:
     anchor it grips, the gripper may touch the rock; any further out, it may not."""
     from types import SimpleNamespace
 
-    from planning.seeds import _arc_is_clear
+    from planning.reach_seeds import _arc_is_clear
     from rb_drake.collision import ANCHOR_CLEARANCE
 
     # A floor block with its top at y = 0; the anchor at the origin, normal up. The path comes

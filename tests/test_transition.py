@@ -341,11 +341,11 @@ def test_boom_costs_are_the_four_configurations_worst_log_p() -> None:
     an impossible grasp (-inf) the largest float, on feasible and infeasible poses alike."""
     from experiments.common import make_cave
     from planning.search_cost import boom_costs
-    from planning.transition import anchor_table, pack_rows
+    from planning.transition_score import pack_rows
     from rb_drake.feasibility_kernel import score_rows
 
     scn = make_cave("rockfall", 12, (4.5, 5.0))
-    table = anchor_table(scn)
+    table = scn.anchor_table
     rng = np.random.default_rng(7)
     ids = [a.id for a in scn.anchors]
     kinds = {"finite": 0, "infinite": 0}

@@ -52,6 +52,7 @@ from experiments.bench.allocation import run_allocation
 from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
 from experiments.bench.scp import run_scp
+from rb_drake.errors import EXIT_OK, EXIT_USAGE
 from rb_drake.files import atomic_write_text
 
 SECTIONS = ("allocation", "scp", "footstep")
@@ -85,14 +86,14 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         print(f"error: unknown section(s) {unknown}; choose from {list(SECTIONS)}",
               file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     old = None
     if args.compare:  # read first: a bad file should fail before minutes of benchmarking
         try:
             old = json.loads(Path(args.compare).read_text())
         except (OSError, ValueError) as e:
             print(f"error: --compare {args.compare}: {e}", file=sys.stderr)
-            return 2
+            return EXIT_USAGE
     result: dict[str, Any] = {
         "format": FORMAT, "created": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(),
         "options": {k: v for k, v in vars(args).items() if k != "func"}, "sections": {}}
@@ -112,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"\nwrote {out} ({result['seconds']:.0f} s)")
     if old is not None:
         print_comparison(old, result, args.compare)
-    return 0
+    return EXIT_OK
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

@@ -18,6 +18,7 @@ from experiments.bench.stats import count, fmt, quantiles, ratio
 from rb_drake import geometry
 from rb_drake.feasibility import Reason, check_poses
 from rb_drake.grasp import log_ndtr_derivatives
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import REGULARISATION, STATICS_TOL, ForceAllocator, allocate, statics_problem
@@ -73,7 +74,7 @@ def _sample_cave(scn: Scenario, name: str, rng: np.random.Generator, batch: int,
     poses = np.column_stack([rng.uniform(lo[0], hi[0], batch), rng.uniform(lo[1], hi[1], batch),
                              rng.normal(0.0, 0.3, batch)])
     reachable = np.stack([geometry.reach(robot, poses, pos, np.full(len(pos), i)).violation == 0
-                          for i in range(4)], axis=1)                    # (batch, 4, anchors)
+                          for i in range(NUM_BOOMS)], axis=1)         # (batch, 4, anchors)
     for p, pose in enumerate(poses):
         ids, used = [""] * 4, []
         for i in rng.permutation(4):  # booms in a random order, each a distinct anchor

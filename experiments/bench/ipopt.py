@@ -13,6 +13,7 @@ from scipy.special import log_ndtr
 
 from experiments.bench.phases import Segment
 from rb_drake.grasp import mills_ratio
+from rb_drake.params import NUM_BOOMS
 
 POSE_BOX = np.array([0.5, 0.5, 0.5])  # m, m, rad: IPOPT's box around the seed's extent
 SPEED_BOX = 1.0          # m/s, rad/s: IPOPT's bound on velocities (seeds move at 0.1 m/s)
@@ -134,7 +135,7 @@ class NonlinearPhase:
         r, torque = 0.0, 0.0
         lengths, angles, pulls = [], [], []
         a = 0
-        for i in range(4):
+        for i in range(NUM_BOOMS):
             sx, sy = robot.shoulders[i]
             rx, ry = c * sx - s * sy, s * sx + c * sy           # R(phi) s_i
             tx, ty = self.targets[k, i]

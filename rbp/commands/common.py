@@ -10,9 +10,11 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from rb_drake.errors import RbpInputError
 
-class UserError(Exception):
-    """A mistake in the user's input: printed as one line, exit status 2."""
+
+class UserError(RbpInputError):
+    """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):

@@ -31,7 +31,7 @@ def rbp_version() -> str:
 
 def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
-    from planning.complete import AnytimeConfig
+    from planning.complete_config import AnytimeConfig
     from planning.config_io import load_config
     from planning.pipeline import PipelineConfig
     from rbp.commands.common import UserError, load_scenario_spec

@@ -10,6 +10,8 @@ import argparse
 import math
 from pathlib import Path
 
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
+
 
 def add_rig_commands(subparsers) -> None:
     """Declare the three rig subcommands on `rbp`'s subparsers."""
@@ -65,14 +67,14 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     if not args.period > 0:
         raise UserError(f"--period: must be positive, got {args.period}")
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
-        return 1  # before any LCM traffic
+        return EXIT_FAILED  # before any LCM traffic
     config = RigLcmConfig(url=args.lcm_url, period=args.period)
     sim = RigSimConfig(seed=args.seed) if args.sim_rig else None
     try:
         run = run_rig(plan, args.phase, config, args.log, sim_rig=sim,
                       plan_source=f"{path.name} phase {args.phase}")
     except RigInputError as e:
-        where = "" if e.field.startswith("--") else f"{path}: "
+        where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None
     stance = plan["phases"][args.phase]["stance"]
     print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "
@@ -81,9 +83,9 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         print(f"  safety: {line}")
     if not len(run.live.time):
         print("  no status received: is the rig on this bus?")
-        return 1
+        return EXIT_FAILED
     print("\n".join(_summary(run.live, stance)))
-    return 0
+    return EXIT_OK
 
 
 def _replay(log_path: str):
@@ -109,7 +111,7 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
     if len(rec.time):
         print("\n".join(_summary(rec, log.stance_ids)))
         print(f"  min P(all grasps) = {float(np.prod(rec.p_grasp, axis=1).min()):.5f}")
-    return 0
+    return EXIT_OK
 
 
 def cmd_rig_report(args: argparse.Namespace) -> int:
@@ -123,4 +125,4 @@ def cmd_rig_report(args: argparse.Namespace) -> int:
         raise UserError(f"{args.log}: {channel}: no status messages to plot")
     atomic_save_figure(report_figure(log), args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
-    return 0
+    return EXIT_OK

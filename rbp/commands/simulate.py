@@ -18,6 +18,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rb_drake.errors import EXIT_FAILED, EXIT_OK
+
 
 def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     """Register `simulate` on the `rbp` sub-command parsers."""
@@ -79,7 +81,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     path = Path(args.plan)
     plan = _load_plan(path, getattr(args, "verify", True))
     if plan is None:
-        return 1
+        return EXIT_FAILED
 
     from rb_drake.files import atomic_write_text
     from systems.diagram import ClimbSimulator
@@ -161,4 +163,4 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             print(f"Meshcat: {meshcat.web_url()}")
             if sys.stdin.isatty():
                 input("press Enter to quit ")
-    return 0
+    return EXIT_OK

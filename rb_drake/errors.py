@@ -1,0 +1,42 @@
+"""The errors rbp raises on purpose, and the exit statuses of its commands.
+
+Every error of rbp's own derives from `RbpError`, so a caller can tell rbp's refusals from a
+bug (a bare `ValueError` or `TypeError` from numpy, Drake or rbp's own invariants). A mistake in
+the user's input (a scenario, a configuration, a plan file, a command-line value) is an
+`RbpInputError`: it names the `file`, the `field` inside it and the `reason`, which is what the
+command line prints on one line. `RbpInputError` is also a `ValueError`, as the errors it
+gathers were before, so code that catches `ValueError` still catches them.
+
+The exit statuses live here, in the lowest layer, so that the command line (`rbp/`) and the
+experiment scripts (`experiments/`), which cannot import each other's modules, use the same
+numbers. Only the standard library is imported: `rbp --help` stays instant.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+
+class RbpError(Exception):
+    """An error rbp raises on purpose (never a bug): the base of all of rbp's errors."""
+
+
+class RbpInputError(RbpError, ValueError):
+    """A mistake in the user's input: `file` (or another source, such as a command-line
+    option), `field` (a dotted path inside it) and `reason`, each optional. The message is
+    "file: field: reason" with the missing parts left out."""
+
+    def __init__(self, reason: str, *, file: str | None = None, field: str | None = None):
+        super().__init__(": ".join(part for part in (file, field, reason) if part is not None))
+        self.file = file
+        self.field = field
+        self.reason = reason
+
+
+# The exit status of an rbp command or an experiment script (`rbp --help` lists them). Plain
+# ints, as `sys.exit` and the tests compare them.
+EXIT_OK: Final = 0           # done: a plan was found and written, a plan verified, ...
+EXIT_FAILED: Final = 1       # ran, but no route / planning failed / the plan does not verify
+EXIT_USAGE: Final = 2        # bad input (one line naming the file, field and reason), or an
+#                              output that cannot be written
+EXIT_INTERRUPTED: Final = 3  # Ctrl-C (or a closed output pipe): no traceback, no half-written file

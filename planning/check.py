@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 
 from planning.plan import plan_configurations
+from planning.plan_model import plan_scenario
 from planning.probability import Configuration, path_probability
 from planning.ramps import ramp_statics
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import MIN_CONDITIONING, pull_within, wrench_conditioning
-from rb_drake.scenario import ScenarioError, scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
 
 TOL = 1e-9
@@ -44,13 +44,7 @@ def check_plan(plan: dict[str, Any], source: str = "<plan>") -> list[str]:
 def verify_plan(plan: dict[str, Any], source: str = "<plan>") -> list[Problem]:
     """Every broken rule in a schema-valid `plan`; [] for a valid plan. A malformed scenario or
     robot raises rb_drake.scenario.ScenarioError (bad input, not a wrong plan)."""
-    scenario = dict(plan["scenario"])
-    scenario["robot"] = plan["robot"]
-    try:
-        scn = scenario_from_dict(scenario, source, check_start=False)
-    except ScenarioError as e:  # name the field as it is in the plan file
-        field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
-        raise ScenarioError(source, field, e.reason) from None
+    scn = plan_scenario(plan, source)
     robot = scn.robot
     problems = climb_problems(plan, scn)
     bad_form = {p.phase for p in problems if p.rule in ("phase-form", "stance")

@@ -37,6 +37,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, Leaf
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.plan_model import plan_scenario
 from rb_drake import geometry, grasp
 from rb_drake.files import atomic_write
 from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
@@ -102,9 +103,9 @@ def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
         if any(f is None for f in s["tension"]):
             raise RigInputError(f"{where}.steps[{k}].tension", "a body phase needs 4 tensions")
     try:
-        scn = scenario_from_dict(plan["scenario"], "plan scenario", check_start=False)
+        scn = plan_scenario(plan, "plan scenario")
     except ScenarioError as e:
-        raise RigInputError(f"scenario.{e.field}", e.reason) from None
+        raise RigInputError(e.field, e.reason) from None
     for i, anchor in enumerate(phase["stance"]):
         if anchor not in scn.anchor_index:
             raise RigInputError(f"{where}.stance[{i}]", f"{anchor!r} is not an anchor of the "

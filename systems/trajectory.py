@@ -14,8 +14,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.plan_model import plan_scenario  # noqa: F401 (re-exported)
 from rb_drake.params import NUM_BOOMS
-from rb_drake.scenario import Scenario, scenario_from_dict
+from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
 from systems.holdings import holdings_of
@@ -36,13 +37,6 @@ class PlanError(ValueError):
         super().__init__(f"{field}: {reason}")
         self.field = field
         self.reason = reason
-
-
-def plan_scenario(plan: dict[str, Any], source: str = "<plan>") -> Scenario:
-    """The scenario a plan was made for, rebuilt from the plan file (its robot included)."""
-    data = dict(plan["scenario"])
-    data["robot"] = plan["robot"]
-    return scenario_from_dict(data, source, check_start=False)
 
 
 class PhaseTrajectory(NamedTuple):

@@ -7,6 +7,7 @@ time, in `systems.plan_source`. A plan file the simulation cannot run raises `Pl
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from typing import Any, NamedTuple
@@ -14,6 +15,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.plan_file import content_hash
 from planning.plan_model import plan_scenario  # noqa: F401 (re-exported)
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -225,6 +227,12 @@ class PlanTrajectory:
         self.holding_of = np.full((len(self.phases), NUM_BOOMS), -1, dtype=int)
         for h, hold in enumerate(self.holdings):
             self.holding_of[hold.first:hold.last + 1, hold.boom] = h
+
+    @functools.cached_property
+    def content_key(self) -> str:
+        """The plan's content hash (`plan_file.content_hash`): equal for equal plans, for
+        caches that outlive a trajectory (`systems.montecarlo`'s replans)."""
+        return content_hash(self.plan)
 
     @staticmethod
     def _phase(k: int, phase: dict[str, Any], scn: Scenario, previous_end: float | None,

@@ -43,6 +43,7 @@ from rb_drake.statics import statics_problem
 from rbp.commands.simulate import add_simulate_command, cmd_simulate
 from systems.control import BodyStatics, control_bounds
 from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
+from systems.holdings import StrengthDraws
 from systems.montecarlo import (
     FootstepReplanner,
     ReplanRequest,
@@ -51,7 +52,6 @@ from systems.montecarlo import (
     first_failures,
     monte_carlo,
     retry_replanner,
-    trial_draws,
     wilson_interval,
 )
 from systems.trajectory import (
@@ -64,6 +64,14 @@ from systems.trajectory import (
 
 SHORT = CaveConfig(length=(3.0, 3.2))
 LINE = 41  # configurations checked along a body phase
+
+
+def trial_draws(record: SimulationRecord, quantiles: np.ndarray,
+                attach_draws: np.ndarray) -> StrengthDraws:
+    """One trial's draws laid out for `GraspFailures` (the in-diagram run); only these tests
+    run a trial in the diagram (systems.montecarlo draws outside it)."""
+    return StrengthDraws.for_trial(record.plan, quantiles, attach_draws,
+                                   record.plan.scenario.robot.attach_failure)
 
 
 def _duration(a: np.ndarray, b: np.ndarray) -> float:

@@ -1,4 +1,4 @@
-"""The plan file (format `reachbot-plan/1`): built from a footstep plan, written, validated.
+"""The plan file (`reachbot-plan/2`, typed in `planning.plan_model`): built, scored, written.
 
 A plan alternates body phases (a 4-stance, the body moving) and reach phases (a 3-stance, the
 free gripper moving from one anchor to the next at a fixed pose); a body phase ends with the

@@ -325,7 +325,9 @@ class Plan(Part):
         scenario = dict(data["scenario"])
         inner = scenario.pop("robot", None)
         plan = super().from_dict(dict(data, scenario=scenario))
-        return dataclasses.replace(plan, scenario_robot=None if inner is None else dict(inner))
+        if isinstance(inner, Mapping):
+            inner = dict(inner)
+        return dataclasses.replace(plan, scenario_robot=inner)
 
     def to_dict(self) -> dict[str, Any]:
         """The plan-file object; a plan read from a `reachbot-plan/1` file gets its layout

@@ -43,6 +43,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
+from planning.plan_model import plan_dict
 from rb_drake import grasp
 from systems.diagram import ClimbSimulator, SimulationRecord
 from systems.monitors import Cause
@@ -264,8 +265,9 @@ class _Replanning:
         key = (record.plan.content_key, float(record.times[sample]),
                record.state[sample].tobytes(), boom, cause)
         if key not in self.cache:
-            request = ReplanRequest(scn, record.plan.plan, k, float(record.times[sample]),
-                                    pose.copy(), stance, boom, anchor, cause)
+            request = ReplanRequest(scn, plan_dict(record.plan.plan), k,
+                                    float(record.times[sample]), pose.copy(), stance, boom,
+                                    anchor, cause)
             new_plan = self.replanner(request)
             self.cache[key] = None
             if new_plan is not None:
@@ -334,7 +336,7 @@ def monte_carlo(record: SimulationRecord, trials: int, seed: int,
         summary = ReplanSummary(strategy, len(failed) - outcomes.get("fell", 0),
                                 len(rp.cache), saved, total, total / trials,
                                 wilson_interval(total, trials), dict(outcomes))
-    p_path = record.plan.plan.get("p_path")
+    p_path = record.plan.model.p_path
     return MonteCarloResult(trials, successes, successes / trials,
                             wilson_interval(successes, trials), p_path,
                             record.implied_p_path(), seed, failures, summary)

@@ -93,6 +93,17 @@ def test_golden_plan_in_todays_format_stores_the_robot_once(cave: str, tmp_path:
     assert plan_scenario(new).to_dict(resolved=True) == plan_scenario(old).to_dict(resolved=True)
 
 
+@pytest.mark.parametrize("cave", CAVES)
+def test_golden_plan_verifies_in_either_format(cave: str) -> None:
+    """rbp check's verifier, which reads the typed model, passes the golden plans as they are
+    (format 1, two robots) and upgraded (format 2, one robot)."""
+    from planning.check import verify_plan
+
+    plan = read_plan(GOLDEN / f"{cave}.json")
+    assert [str(p) for p in verify_plan(plan)] == []
+    assert [str(p) for p in verify_plan(plan.upgraded().to_dict())] == []
+
+
 def test_an_unknown_field_is_refused(tmp_path: Path) -> None:
     data = json.loads((GOLDEN / "rig.json").read_text())
     data["phases"][0]["steps"][0]["speed"] = 1.0

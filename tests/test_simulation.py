@@ -665,6 +665,20 @@ def test_replanning_is_pluggable_and_counts_saved_climbs(good: SimulationRecord,
     assert r.saved + sum(r.outcomes.values()) == trials - base.successes
 
 
+def test_replan_cache_key_is_the_plans_content(good: SimulationRecord,
+                                               good_plan: dict[str, Any]) -> None:
+    """monte_carlo caches replans by the plan's content (not by id(record), which Python reuses
+    once a record is collected): equal plans share a key, an edited one does not."""
+    scn = good.plan.scenario
+    assert PlanTrajectory(copy.deepcopy(good_plan), scn).content_key == good.plan.content_key
+    edited = copy.deepcopy(good_plan)
+    edited["phases"][0]["steps"][-1]["t"] += 1.0
+    for phase in edited["phases"][1:]:
+        for step in phase["steps"]:
+            step["t"] += 1.0
+    assert PlanTrajectory(edited, scn).content_key != good.plan.content_key
+
+
 def _failure_at_first_release(good: SimulationRecord) -> ReplanRequest:
     """The reaching boom's grasp fails at the end of the first body phase: the transition pose,
     which holds the 3-stance that frees that boom with its gripper on its old anchor."""

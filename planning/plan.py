@@ -20,7 +20,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from planning.easing import ease_motions
-from planning.plan_model import FORMAT, STAGES, Plan, SearchPoint, SearchRecord, plan_dict
+from planning.plan_model import (
+    FORMAT,
+    STAGES,
+    Motion,
+    Plan,
+    SearchPoint,
+    SearchRecord,
+    plan_dict,
+)
 from planning.plan_schema import schema, validate  # noqa: F401 (re-exported)
 from planning.plan_steps import allocation_step, steps_with_tensions
 from planning.probability import Configuration, PathProbability, path_probability
@@ -175,19 +183,19 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         seed_lp = np.append(m.seed.log_probs, m.seed.log_probs[-1])
         seed_tensions = np.vstack([seed_tensions, seed_tensions[-1:]])
         tensions = np.vstack([tensions, tensions[-1:]])
-        phase["motion"] = {
-            "seed_method": m.seed.method,
-            "seed_p_success": [float(np.exp(v)) for v in seed_lp],
-            "seed_tension": [[None if np.isnan(v) else float(v) for v in f]
-                             for f in seed_tensions],
-            "seed_effort": [float(np.nansum(f)) for f in seed_tensions],
-            "effort": [float(np.nansum(f)) for f in tensions],
-            "optimised": m.result is not None,
-            "improved": bool(used and m.result.improved),
-            "scp_status": (m.result.status if used else "not run" if m.result is None
-                           else "seed kept: SCP's steps exceed the plan's limits"),
-            "scp_iterations": int(m.result.iterations) if m.result is not None else 0,
-        }
+        phase["motion"] = Motion(
+            seed_method=m.seed.method,
+            seed_p_success=tuple(float(np.exp(v)) for v in seed_lp),
+            seed_tension=tuple(tuple(None if np.isnan(v) else float(v) for v in f)
+                               for f in seed_tensions),
+            seed_effort=tuple(float(np.nansum(f)) for f in seed_tensions),
+            effort=tuple(float(np.nansum(f)) for f in tensions),
+            optimised=m.result is not None,
+            improved=bool(used and m.result.improved),
+            scp_status=(m.result.status if used else "not run" if m.result is None
+                        else "seed kept: SCP's steps exceed the plan's limits"),
+            scp_iterations=int(m.result.iterations) if m.result is not None else 0,
+        ).to_dict()
         phases.append(phase)
     plan["phases"] = phases
     plan = add_ramps(ease_motions(plan, scn), scn)

@@ -136,3 +136,14 @@ def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None
     assert dataclasses.replace(new.provenance, command="", scenario_source="") == \
         dataclasses.replace(golden.provenance, command="", scenario_source="")
     assert_close(_comparable(new), _comparable(golden))
+
+
+def test_the_rig_plan_again_gives_its_golden_plan() -> None:
+    """systems.rig.rig_plan (the rig's straight-line body plan, built by plan_header and
+    allocation_step) makes the golden rig plan again, in today's format."""
+    from systems.rig import load_rig_scenario, rig_plan
+
+    new = Plan.from_dict(rig_plan(load_rig_scenario()))
+    golden = read_plan(GOLDEN / "rig.json")
+    assert new.format == FORMAT and new.scenario_robot is None
+    assert_close(_comparable(new), _comparable(golden))

@@ -75,8 +75,8 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[Pro
     if plan.success and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)
-        # p_grasps is optional (plans before it): absent (None) is not checked
-        p_grasps = mine.p_grasps if plan.p_grasps is None else plan.p_grasps
+        # p_grasps is optional (plans before it): absent, it is not checked; null is wrong
+        p_grasps = mine.p_grasps if plan.p_grasps_absent else plan.p_grasps
         for name, a, b in (("p_path", mine.p_path, plan.p_path),
                            ("p_min", mine.p_min, plan.p_min),
                            ("p_grasps", mine.p_grasps, p_grasps),

@@ -147,3 +147,16 @@ def test_the_rig_plan_again_gives_its_golden_plan() -> None:
     golden = read_plan(GOLDEN / "rig.json")
     assert new.format == FORMAT and new.scenario_robot is None
     assert_close(_comparable(new), _comparable(golden))
+
+
+def test_an_absent_p_grasps_stays_absent_and_null_is_not_absent() -> None:
+    """Plans from before p_grasps leave it out: such a plan writes back without it and
+    verifies; a successful plan whose p_grasps is null breaks rule `summary`, as before."""
+    from planning.check import verify_plan
+
+    data = json.loads((GOLDEN / "rig.json").read_text())
+    older = {k: v for k, v in data.items() if k != "p_grasps"}
+    assert Plan.from_dict(older).to_dict() == older
+    assert verify_plan(older) == []
+    problems = verify_plan(data | {"p_grasps": None})
+    assert [p.rule for p in problems] == ["summary"] and "p_grasps" in problems[0].text

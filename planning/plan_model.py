@@ -41,13 +41,11 @@ def spec(default: Any = dataclasses.MISSING, **schema: Any) -> Any:
     return dataclasses.field(default=default, metadata={"schema": schema})
 
 
-VEC2 = {"$ref": "#/$defs/vec2"}
-VEC4 = {"$ref": "#/$defs/vec4"}
-MAYBE4 = {"$ref": "#/$defs/maybe4"}
+MAYBE4 = {"$ref": "#/$defs/maybe4"}  # 4 numbers or nulls (plan_schema_gen.COMMON)
 
 
 def _tuple(value: Any) -> Any:
-    """JSON arrays as tuples (nested too), so that the frozen objects hash and compare."""
+    """JSON arrays as tuples (nested too): the parts stay immutable and compare by value."""
     return tuple(_tuple(v) for v in value) if isinstance(value, list) else value
 
 

@@ -17,14 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from planning.plan import plan_configurations
+from planning.plan_model import Plan, Step, plan_of, plan_scenario
 from planning.probability import Configuration, path_probability
 from planning.ramps import ramp_statics
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
 from rb_drake.feasibility import MIN_CONDITIONING, pull_within, wrench_conditioning
-from rb_drake.scenario import ScenarioError, scenario_from_dict
 from rb_drake.statics import STATICS_TOL, statics_problem
 
 TOL = 1e-9
@@ -36,83 +35,88 @@ def _same(a: float, b: Any) -> bool:
     return isinstance(b, int | float) and math.isclose(a, b, rel_tol=REL, abs_tol=ABS)
 
 
-def check_plan(plan: dict[str, Any], source: str = "<plan>") -> list[str]:
+def check_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[str]:
     """Every problem found in `plan`, in words ("WHERE: RULE: WHAT"); [] for a valid plan."""
     return [str(p) for p in verify_plan(plan, source)]
 
 
-def verify_plan(plan: dict[str, Any], source: str = "<plan>") -> list[Problem]:
-    """Every broken rule in a schema-valid `plan`; [] for a valid plan. A malformed scenario or
-    robot raises rb_drake.scenario.ScenarioError (bad input, not a wrong plan)."""
-    scenario = dict(plan["scenario"])
-    scenario["robot"] = plan["robot"]
-    try:
-        scn = scenario_from_dict(scenario, source, check_start=False)
-    except ScenarioError as e:  # name the field as it is in the plan file
-        field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
-        raise ScenarioError(source, field, e.reason) from None
+def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[Problem]:
+    """Every broken rule in a schema-valid `plan` (a Plan, or its plan-file object); [] for a
+    valid plan. A malformed scenario or robot raises rb_drake.scenario.ScenarioError (bad
+    input, not a wrong plan)."""
+    plan = plan_of(plan)
+    scn = plan_scenario(plan, source)
     robot = scn.robot
     problems = climb_problems(plan, scn)
     bad_form = {p.phase for p in problems if p.rule in ("phase-form", "stance")
                 and p.step is None}
     recomputed: list[Configuration] = []
-    for k, phase in enumerate(plan["phases"]):
+    for k, phase in enumerate(plan.phases):
         if k in bad_form:  # reported; its configurations cannot be set up
             continue
-        stance = scn.stance(tuple(phase["stance"]))
-        reach = phase["kind"] == "reach"
+        stance = scn.stance(tuple(phase.stance))
+        reach = phase.kind == "reach"
         efforts = []
-        for n, step in enumerate(phase["steps"]):
+        for n, step in enumerate(phase.steps):
             out: list[Problem] = []
 
             def fail(rule: str, text: str, k=k, n=n, out=out) -> None:
                 out.append(Problem(rule, text, k, n, locate(plan, k, n)))
 
-            pose = np.asarray(step["pose"], dtype=float)
-            tip = np.asarray(step["free_tip"], dtype=float) if reach else None
+            pose = np.asarray(step.pose, dtype=float)
+            tip = np.asarray(step.free_tip, dtype=float) if reach else None
             with np.errstate(all="ignore"):  # absurd numbers fail the checks, not numpy
                 p_grasp, p_success, effort = _check_configuration(scn, stance, pose, tip, step,
                                                                   fail)
             problems += out
             efforts.append(effort)
-            recomputed.append(Configuration(tuple(phase["stance"]), p_grasp, p_success))
+            recomputed.append(Configuration(tuple(phase.stance), p_grasp, p_success))
         _check_motion(plan, k, efforts, problems)
-    if plan["success"] and recomputed:
+    if plan.success and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
-        theirs = path_probability(plan_configurations(plan), robot.attach_failure)
-        for name, a, b in (("p_path", mine.p_path, plan["p_path"]),
-                           ("p_min", mine.p_min, plan["p_min"]),
-                           ("p_grasps", mine.p_grasps, plan.get("p_grasps", mine.p_grasps)),
-                           ("regrasps", mine.regrasps, plan["regrasps"]),
-                           ("p_path from the file's own p_grasp", theirs.p_path, plan["p_path"])):
+        theirs = path_probability(_configurations(plan), robot.attach_failure)
+        # p_grasps is optional (plans before it): absent, it is not checked; null is wrong
+        p_grasps = mine.p_grasps if plan.p_grasps_absent else plan.p_grasps
+        for name, a, b in (("p_path", mine.p_path, plan.p_path),
+                           ("p_min", mine.p_min, plan.p_min),
+                           ("p_grasps", mine.p_grasps, p_grasps),
+                           ("regrasps", mine.regrasps, plan.regrasps),
+                           ("p_path from the file's own p_grasp", theirs.p_path, plan.p_path)):
             if not _same(a, b):
                 problems.append(Problem("summary", f"{name}: the plan says {b}, recomputed {a}"))
     return problems
 
 
-def _check_motion(plan: dict[str, Any], k: int, efforts: list[float],
+def _configurations(plan: Plan):
+    """Every configuration of the plan as its file records it, in time order."""
+    for phase in plan.phases:
+        for step in phase.steps:
+            yield Configuration(phase.stance, step.p_grasp, step.p_success)
+
+
+def _check_motion(plan: Plan, k: int, efforts: list[float],
                   problems: list[Problem]) -> None:
     """A phase's `motion` record: one entry per step; `effort` is the summed tension."""
-    motion = plan["phases"][k].get("motion")
+    motion = plan.phases[k].motion
     if motion is None:
         return
     n_steps = len(efforts)
     for name in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
-        entries = motion.get(name) if isinstance(motion, dict) else None
-        if not isinstance(entries, list) or len(entries) != n_steps:
+        entries = getattr(motion, name)
+        if not isinstance(entries, tuple) or len(entries) != n_steps:
             problems.append(Problem("recorded-value", f"motion.{name} is not a list of one "
                                     f"entry per step ({n_steps})", k, None, locate(plan, k)))
             return
-    for n, (a, b) in enumerate(zip(efforts, motion["effort"], strict=True)):
+    for n, (a, b) in enumerate(zip(efforts, motion.effort, strict=True)):
         if not _same(a, b):
             problems.append(Problem("recorded-value", f"motion.effort {b} but the tensions sum "
                                     f"to {a}", k, n, locate(plan, k, n)))
 
 
-def _check_configuration(scn, stance, pose, tip, step, fail):
+def _check_configuration(scn, stance, pose, tip, step: Step, fail):
     """Checks one configuration; (p_grasp per boom, P, summed tension) recomputed."""
     robot = scn.robot
-    f = np.array([np.nan if v is None else v for v in step["tension"]], dtype=float)
+    f = np.array([np.nan if v is None else v for v in step.tension], dtype=float)
     prob = statics_problem(robot, scn.gravity_vector, pose, stance, tip)
     geo = prob.geometry
     lo, hi = robot.boom_length
@@ -139,8 +143,8 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
         if not abs(torque) <= robot.shoulder_torque_max + TOL:
             fail("torque", f"shoulder torque {torque:.3f} N m over the limit "
                  f"{robot.shoulder_torque_max}")
-        if not _same(torque, step.get("shoulder_torque")):
-            fail("recorded-value", f"shoulder_torque {step.get('shoulder_torque')} but "
+        if not _same(torque, step.shoulder_torque):
+            fail("recorded-value", f"shoulder_torque {step.shoulder_torque} but "
                  f"recomputed {torque}")
     if np.any(np.isnan(f[att])) or np.any(~np.isnan(f[~att])):
         fail("statics", "tensions must be given exactly for the attached booms")
@@ -149,9 +153,9 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
     load = prob.b[0]
     lo_f, hi_f = robot.boom_tension
     lower = np.where(att, lo_f, 0.0)
-    ramp = step.get("ramp")
+    ramp = step.ramp
     if ramp is not None:  # a release or attach ramp: boom j's limb partly on its shoulder
-        j, share = int(ramp["boom"]), float(ramp["share"])
+        j, share = int(ramp.boom), float(ramp.share)
         if tip is not None or not att[j]:
             fail("phase-form", f"a ramp step of boom {j} in a configuration where it is free")
         else:
@@ -179,10 +183,10 @@ def _check_configuration(scn, stance, pose, tip, step, fail):
     p_success = float(np.exp(lp[att].sum()))
     if not p_success >= robot.p_min - TOL:
         fail("probability", f"P = {p_success:.5f} below p_min {robot.p_min}")
-    if not _same(p_success, step["p_success"]):
-        fail("recorded-value", f"p_success {step['p_success']} but recomputed {p_success}")
+    if not _same(p_success, step.p_success):
+        fail("recorded-value", f"p_success {step.p_success} but recomputed {p_success}")
     p_grasp = [float(np.exp(v)) if att[i] else None for i, v in enumerate(lp)]
-    for i, (mine, theirs) in enumerate(zip(p_grasp, step["p_grasp"], strict=True)):
+    for i, (mine, theirs) in enumerate(zip(p_grasp, step.p_grasp, strict=True)):
         if (mine is None) != (theirs is None) or (mine is not None and not _same(mine, theirs)):
             fail("recorded-value", f"p_grasp[{i}] {theirs} but recomputed {mine}")
     return p_grasp, p_success, float(fa[att].sum())

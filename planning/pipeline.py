@@ -203,7 +203,7 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
                progress: Progress | None = None,
                footstep_progress: Callable[..., None] | None = None,
                footsteps_done: Callable[[FootstepPlan], None] | None = None) -> dict[str, Any]:
-    """The whole plan-file dictionary (`reachbot-plan/1`) for a scenario.
+    """The whole plan-file dictionary (`reachbot-plan/2`) for a scenario.
 
     `footsteps_done` is called with each footstep plan (the search's, then any retry's): a
     caller can picture where a failed search went."""

@@ -1,4 +1,4 @@
-"""The plan file (format `reachbot-plan/1`): built from a footstep plan, written, validated.
+"""The plan file (`reachbot-plan/2`, typed in `planning.plan_model`): built, scored, written.
 
 A plan alternates body phases (a 4-stance, the body moving) and reach phases (a 3-stance, the
 free gripper moving from one anchor to the next at a fixed pose); a body phase ends with the
@@ -20,8 +20,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from planning.easing import ease_motions
+from planning.plan_model import (
+    FORMAT,
+    STAGES,
+    Motion,
+    Plan,
+    SearchPoint,
+    SearchRecord,
+    plan_dict,
+)
 from planning.plan_schema import schema, validate  # noqa: F401 (re-exported)
-from planning.plan_steps import steps_with_tensions
+from planning.plan_steps import allocation_step, steps_with_tensions
 from planning.probability import Configuration, PathProbability, path_probability
 from planning.ramps import add_ramps
 from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
@@ -32,71 +41,44 @@ from rb_drake.scenario import Scenario
 if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write a plan
     from planning.footsteps import FootstepPlan
 
-FORMAT = "reachbot-plan/1"
 BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
 TURN_SPEED = 0.2      # rad/s
 REACH_DURATION = 5.0  # s for the free gripper to travel between anchors
-STAGES = ("footstep", "seed_body", "scp_body", "seed_reach", "scp_reach", "total")
 
 
 def _configuration(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
                    free_tip: np.ndarray | None, t: float) -> dict[str, Any]:
     stance = scn.stance(stance_ids)
     check = check_poses(scn, stance, pose, free_tip, full=True)
-    alloc = check.allocation
-    step: dict[str, Any] = {
-        "t": round(float(t), 6),
-        "pose": [float(v) for v in pose],
-        "tension": [float(f) if stance.attached[i] and np.isfinite(f) else None
-                    for i, f in enumerate(alloc.tensions[0])],
-        "p_grasp": [float(np.exp(lp)) if stance.attached[i] else None
-                    for i, lp in enumerate(alloc.log_probs[0])],
-        "p_success": float(np.exp(alloc.robustness[0])),
-    }
-    if free_tip is not None:
-        step["free_tip"] = [float(v) for v in free_tip]
-        step["shoulder_torque"] = float(alloc.shoulder_torque[0])
-    return step
+    return allocation_step(stance, check.allocation, 0, round(float(t), 6), pose, free_tip)
 
 
-def search_record(fp: FootstepPlan) -> dict[str, Any]:
+def search_record(fp: FootstepPlan) -> SearchRecord:
     """How the footstep search ended: `stop` is "" (a route), "budget", "exhausted" (an
     incomplete search ran out of stances: no proof), "noroute" (the complete search proved that
     no route exists at its resolution) or "nostart" (the start pose joins no lattice pose)."""
-    record: dict[str, Any] = {"stop": fp.stop, "expansions": int(fp.expansions),
-                              "transitions_tested": int(fp.transitions_tested)}
-    if fp.success and math.isfinite(fp.cost):
-        record["cost"] = float(fp.cost)
-    if fp.min_success is not None:  # the fewest-regrasp route within it (planning.constrained)
-        record["min_success"] = float(fp.min_success)
-    if fp.success and math.isfinite(fp.lower_bound):  # an anytime search's proven bound
-        record.update(lower_bound=float(fp.lower_bound), first_cost=float(fp.first_cost),
-                      bound=float(fp.cost / fp.lower_bound) if fp.lower_bound > 0 else None,
-                      quality=fp.quality,
-                      history=[{"seconds": float(t), "cost": float(c), "lower_bound": float(lo),
-                                "expansions": int(n)} for t, c, lo, n in fp.history or []])
-    return record
+    found = fp.success and math.isfinite(fp.cost)
+    anytime = fp.success and math.isfinite(fp.lower_bound)  # an anytime search's proven bound
+    return SearchRecord(
+        stop=fp.stop, expansions=int(fp.expansions),
+        transitions_tested=int(fp.transitions_tested),
+        cost=float(fp.cost) if found else None,
+        # the fewest-regrasp route within it (planning.constrained)
+        min_success=None if fp.min_success is None else float(fp.min_success),
+        lower_bound=float(fp.lower_bound) if anytime else None,
+        first_cost=float(fp.first_cost) if anytime else None,
+        bound=(float(fp.cost / fp.lower_bound) if anytime and fp.lower_bound > 0 else None),
+        quality=fp.quality if anytime else None,
+        history=(tuple(SearchPoint(seconds=float(t), cost=float(c), lower_bound=float(lo),
+                                   expansions=int(n)) for t, c, lo, n in fp.history or [])
+                 if anytime else None))
 
 
 def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
                timing: dict[str, float] | None = None) -> dict[str, Any]:
     """The plan-file dictionary for a footstep plan (phases at the footstep stage)."""
-    timing = {k: 0.0 for k in STAGES} | (timing or {})
-    plan: dict[str, Any] = {
-        "format": FORMAT,
-        "planner": planner,
-        "success": bool(fp.success),
-        "reason": fp.reason,
-        "p_min": None,
-        "p_path": None,
-        "p_grasps": None,
-        "regrasps": len(fp.steps),
-        "timing": timing,
-        "search": search_record(fp),
-        "scenario": scn.to_dict(resolved=True),
-        "robot": scn.robot.to_dict(),
-        "phases": [],
-    }
+    plan = plan_header(scn, planner, bool(fp.success), fp.reason, timing, search_record(fp))
+    plan["regrasps"] = len(fp.steps)
     t = 0.0
     poses = [fp.start_pose] + [s.pose for s in fp.steps]
     ends = [s.pose for s in fp.steps] + ([fp.goal_pose] if fp.goal_pose is not None else [])
@@ -124,6 +106,25 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
     plan = add_ramps(plan, scn)
     if fp.success:
         score_plan(plan, scn.robot.attach_failure)
+    return plan
+
+
+def plan_header(scn: Scenario, planner: str, success: bool, reason: str,
+                timing: dict[str, float] | None = None,
+                search: SearchRecord | None = None) -> dict[str, Any]:
+    """A plan without phases, in the current format: what every producer of a plan (the
+    pipeline, the naive baseline, the rig's plan) starts from. The robot is stored once, at the
+    top level (`scenario` is the cave without it); the summary is unset (`score_plan`)."""
+    plan: dict[str, Any] = {
+        "format": FORMAT, "planner": planner, "success": success, "reason": reason,
+        "p_min": None, "p_path": None, "p_grasps": None, "regrasps": 0,
+        "timing": {k: 0.0 for k in STAGES} | (timing or {}),
+    }
+    if search is not None:
+        plan["search"] = search.to_dict()
+    scenario = scn.to_dict(resolved=True)
+    del scenario["robot"]
+    plan |= {"scenario": scenario, "robot": scn.robot.to_dict(), "phases": []}
     return plan
 
 
@@ -182,19 +183,19 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         seed_lp = np.append(m.seed.log_probs, m.seed.log_probs[-1])
         seed_tensions = np.vstack([seed_tensions, seed_tensions[-1:]])
         tensions = np.vstack([tensions, tensions[-1:]])
-        phase["motion"] = {
-            "seed_method": m.seed.method,
-            "seed_p_success": [float(np.exp(v)) for v in seed_lp],
-            "seed_tension": [[None if np.isnan(v) else float(v) for v in f]
-                             for f in seed_tensions],
-            "seed_effort": [float(np.nansum(f)) for f in seed_tensions],
-            "effort": [float(np.nansum(f)) for f in tensions],
-            "optimised": m.result is not None,
-            "improved": bool(used and m.result.improved),
-            "scp_status": (m.result.status if used else "not run" if m.result is None
-                           else "seed kept: SCP's steps exceed the plan's limits"),
-            "scp_iterations": int(m.result.iterations) if m.result is not None else 0,
-        }
+        phase["motion"] = Motion(
+            seed_method=m.seed.method,
+            seed_p_success=tuple(float(np.exp(v)) for v in seed_lp),
+            seed_tension=tuple(tuple(None if np.isnan(v) else float(v) for v in f)
+                               for f in seed_tensions),
+            seed_effort=tuple(float(np.nansum(f)) for f in seed_tensions),
+            effort=tuple(float(np.nansum(f)) for f in tensions),
+            optimised=m.result is not None,
+            improved=bool(used and m.result.improved),
+            scp_status=(m.result.status if used else "not run" if m.result is None
+                        else "seed kept: SCP's steps exceed the plan's limits"),
+            scp_iterations=int(m.result.iterations) if m.result is not None else 0,
+        ).to_dict()
         phases.append(phase)
     plan["phases"] = phases
     plan = add_ramps(ease_motions(plan, scn), scn)
@@ -217,6 +218,8 @@ def plan_configurations(plan: dict[str, Any]):
             yield Configuration(phase["stance"], step["p_grasp"], step["p_success"])
 
 
-def write_plan(plan: dict[str, Any], path: str | Path) -> Path:
+def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:
+    """Write a plan (a Plan or its plan-file object) after checking it against the schema."""
+    plan = plan_dict(plan)
     validate(plan)
     return atomic_write_text(path, json.dumps(plan, indent=1, allow_nan=False) + "\n")

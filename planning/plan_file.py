@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from planning.plan_model import Plan
 from rb_drake.errors import RbpInputError
 
 VERIFIER = "rbp-verify/2"  # bump when the rules change: older stamps then no longer count
@@ -85,6 +86,11 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
         field = "/".join(str(p) for p in error.absolute_path) or "(top level)"
         raise PlanFileError(field, error.message)
     return plan
+
+
+def read_plan(path: str | Path) -> Plan:
+    """A plan file as a Plan (either format; see `read_plan_file` for the errors)."""
+    return Plan.from_dict(read_plan_file(path))
 
 
 def content_hash(plan: dict[str, Any]) -> str:

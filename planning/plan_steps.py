@@ -1,8 +1,10 @@
-"""The steps of a trajectory phase in a plan file, from the planned poses and tensions.
+"""The steps of a plan file: one configuration each (`plan_model.Step`), written here only.
 
 Both the plan builder (`planning.plan.build_motion_plan`) and the easing of its phases
-(`planning.easing.ease_phase`) write phase steps this way; it lives here so that neither of
-those two modules has to import the other.
+(`planning.easing.ease_phase`) write phase steps from planned poses and tensions
+(`steps_with_tensions`); the footstep-stage plan, the rig's plan and the replanners write
+single configurations with the robust allocation (`allocation_step`). Every step is made as a
+`Step` and written by its `to_dict`, so the five producers write one form.
 """
 
 from __future__ import annotations
@@ -11,9 +13,30 @@ from typing import Any
 
 import numpy as np
 
-from rb_drake.params import NUM_BOOMS
+from planning.plan_model import Step
 from rb_drake.scenario import Scenario
+from rb_drake.stance import Stance
 from rb_drake.statics import statics_problem
+
+
+def _maybe(values, attached) -> tuple[float | None, ...]:
+    return tuple(float(v) if a else None for v, a in zip(values, attached, strict=True))
+
+
+def allocation_step(stance: Stance, alloc: Any, row: int, t: float, pose: np.ndarray,
+                    free_tip: np.ndarray | None = None) -> dict[str, Any]:
+    """The step at `pose` with row `row` of a robust allocation (`check_poses(full=True)`):
+    a free boom's (or a non-finite) tension and a free boom's grasp probability are null."""
+    att = stance.attached
+    tension = alloc.tensions[row]
+    step = Step(
+        t=float(t), pose=tuple(float(v) for v in pose),
+        tension=_maybe(tension, [a and np.isfinite(f) for a, f in zip(att, tension, strict=True)]),
+        p_grasp=_maybe(np.exp(alloc.log_probs[row]), att),
+        p_success=float(np.exp(alloc.robustness[row])),
+        free_tip=None if free_tip is None else tuple(float(v) for v in free_tip),
+        shoulder_torque=None if free_tip is None else float(alloc.shoulder_torque[row]))
+    return step.to_dict()
 
 
 def steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], poses: np.ndarray,
@@ -28,15 +51,13 @@ def steps_with_tensions(scn: Scenario, stance_ids: tuple[str | None, ...], poses
     lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles))
     steps = []
     for k in range(len(poses)):
-        step: dict[str, Any] = {
-            "t": round(float(t0 + k * dt), 6),
-            "pose": [float(v) for v in poses[k]],
-            "tension": [float(f[k, i]) if att[i] else None for i in range(NUM_BOOMS)],
-            "p_grasp": [float(np.exp(lp[k, i])) if att[i] else None for i in range(NUM_BOOMS)],
-            "p_success": float(np.exp(lp[k, att].sum())),
-        }
-        if tips is not None:
-            step["free_tip"] = [float(v) for v in tips[k]]
-            step["shoulder_torque"] = float(prob.shoulder_torque[k])
-        steps.append(step)
+        step = Step(
+            t=round(float(t0 + k * dt), 6),
+            pose=tuple(float(v) for v in poses[k]),
+            tension=_maybe(f[k], att),
+            p_grasp=_maybe(np.exp(lp[k]), att),
+            p_success=float(np.exp(lp[k, att].sum())),
+            free_tip=None if tips is None else tuple(float(v) for v in tips[k]),
+            shoulder_torque=None if tips is None else float(prob.shoulder_torque[k]))
+        steps.append(step.to_dict())
     return steps

@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning.plan_model import Phase, Plan, Step
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION
 from rb_drake.params import ParamError, robot_from_dict
 from rb_drake.scenario import Scenario
@@ -75,23 +77,25 @@ class Problem(NamedTuple):
         return f"{self.where or 'plan'}: {self.rule}: {self.text}"
 
 
-def locate(plan: dict[str, Any], k: int | None, n: int | None = None) -> str:
+def locate(plan: Plan, k: int | None, n: int | None = None) -> str:
     """"phases[k] (kind) step n (t=...)" for the messages."""
     if k is None:
         return ""
-    phase = plan["phases"][k]
-    where = f"phases[{k}] ({phase['kind']})"
+    phase = plan.phases[k]
+    where = f"phases[{k}] ({phase.kind})"
     if n is not None:
-        where += f" step {n} (t={phase['steps'][n]['t']})"
+        where += f" step {n} (t={phase.steps[n].t})"
     return where
 
 
-def step_limits(plan: dict[str, Any]) -> dict[str, float]:
+def step_limits(plan: Plan | Mapping[str, Any]) -> dict[str, float]:
     """The plan's own limits between successive configurations of a trajectory."""
+    if isinstance(plan, Plan):
+        return dict(DEFAULT_LIMITS) | (plan.limits.as_dict() if plan.limits else {})
     return dict(DEFAULT_LIMITS) | dict(plan.get("limits") or {})
 
 
-def climb_problems(plan: dict[str, Any], scn: Scenario) -> list[Problem]:
+def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     """Every broken rule between configurations and between the plan and its cave."""
     out: list[Problem] = []
 
@@ -99,8 +103,8 @@ def climb_problems(plan: dict[str, Any], scn: Scenario) -> list[Problem]:
         out.append(Problem(rule, text, k, n, locate(plan, k, n)))
 
     _robot(plan, fail)
-    if not plan["phases"]:  # a plan that found no route may hold none
-        if plan["success"]:
+    if not plan.phases:  # a plan that found no route may hold none
+        if plan.success:
             fail("phase-order", "the plan claims success but has no phases")
         return out
     _start(plan, scn, fail)
@@ -114,8 +118,9 @@ def climb_problems(plan: dict[str, Any], scn: Scenario) -> list[Problem]:
     return out
 
 
-def _robot(plan, fail) -> None:
-    block = plan["scenario"].get("robot")
+def _robot(plan: Plan, fail) -> None:
+    """A `reachbot-plan/1` file's second robot, under `scenario`, is the plan's robot."""
+    block = plan.scenario_robot
     if block is None:
         return
     try:
@@ -123,150 +128,152 @@ def _robot(plan, fail) -> None:
     except ParamError as e:
         fail("robot", f"scenario.robot.{e.field}: {e.reason}")
         return
-    if inner != robot_from_dict(plan["robot"]):
-        a, b = inner.to_dict(), robot_from_dict(plan["robot"]).to_dict()
+    if inner != robot_from_dict(plan.robot):
+        a, b = inner.to_dict(), robot_from_dict(plan.robot).to_dict()
         names = [name for name in a if a[name] != b[name]]
         fail("robot", f"the robot under scenario differs from the top-level robot in {names}")
 
 
-def _start(plan, scn: Scenario, fail) -> None:
+def _start(plan: Plan, scn: Scenario, fail) -> None:
     """The first configuration is the scenario's start, or the plan's `start` (a continuation
     after a failed grasp starts where the robot was)."""
-    start = plan.get("start") or {"pose": list(scn.start_pose), "stance": list(scn.start_stance)}
-    first = plan["phases"][0]
-    step = first["steps"][0]
-    held = list(first["stance"])
-    if first["kind"] == "reach" and first.get("free_boom") in range(4):
-        held[first["free_boom"]] = first.get("from_anchor")
-    if held != list(start["stance"]):
+    if plan.start is not None:
+        start_pose, start_stance = list(plan.start.pose), list(plan.start.stance)
+    else:
+        start_pose, start_stance = list(scn.start_pose), list(scn.start_stance)
+    first = plan.phases[0]
+    step = first.steps[0]
+    held = list(first.stance)
+    if first.kind == "reach" and first.free_boom in range(4):
+        held[first.free_boom] = first.from_anchor
+    if held != start_stance:
         fail("start", f"the climb starts in stance {held}, not the start stance "
-             f"{list(start['stance'])}", 0, 0)
-    gap = np.abs(np.subtract(step["pose"], start["pose"])).max()
+             f"{start_stance}", 0, 0)
+    gap = np.abs(np.subtract(step.pose, start_pose)).max()
     if not gap <= POSE_TOL:
-        fail("start", f"the first pose {step['pose']} is not the start pose {start['pose']} "
+        fail("start", f"the first pose {list(step.pose)} is not the start pose {start_pose} "
              f"(off by {gap:.3g})", 0, 0)
-    if step["t"] != 0:
-        fail("start", f"the climb starts at t = {step['t']}, not 0", 0, 0)
+    if step.t != 0:
+        fail("start", f"the climb starts at t = {step.t}, not 0", 0, 0)
 
 
-def _phase_order(plan, fail) -> None:
-    phases = plan["phases"]
+def _phase_order(plan: Plan, fail) -> None:
+    phases = plan.phases
     for k in range(1, len(phases)):
-        if phases[k]["kind"] == phases[k - 1]["kind"]:
-            fail("phase-order", f"two {phases[k]['kind']} phases in a row", k)
-    if plan["success"] and phases[-1]["kind"] != "body":
+        if phases[k].kind == phases[k - 1].kind:
+            fail("phase-order", f"two {phases[k].kind} phases in a row", k)
+    if plan.success and phases[-1].kind != "body":
         fail("phase-order", "a successful climb ends on a body phase", len(phases) - 1)
-    reaches = sum(p["kind"] == "reach" for p in phases)
-    if reaches != plan["regrasps"]:
-        fail("summary", f"regrasps: the plan says {plan['regrasps']}, its phases hold {reaches} "
+    reaches = sum(p.kind == "reach" for p in phases)
+    if reaches != plan.regrasps:
+        fail("summary", f"regrasps: the plan says {plan.regrasps}, its phases hold {reaches} "
              "reach phases")
     for k, phase in enumerate(phases):
-        free = [i for i, a in enumerate(phase["stance"]) if a is None]
-        if phase["kind"] == "body" and free:
-            fail("phase-form", f"a body phase holds all four anchors, not {phase['stance']}", k)
-        if phase["kind"] == "reach" and free != [phase["free_boom"]]:
-            fail("phase-form", f"a reach phase frees exactly boom {phase['free_boom']}, not "
-                 f"{phase['stance']}", k)
-        held = [a for a in phase["stance"] if a is not None]
+        stance = list(phase.stance)
+        free = [i for i, a in enumerate(stance) if a is None]
+        if phase.kind == "body" and free:
+            fail("phase-form", f"a body phase holds all four anchors, not {stance}", k)
+        if phase.kind == "reach" and free != [phase.free_boom]:
+            fail("phase-form", f"a reach phase frees exactly boom {phase.free_boom}, not "
+                 f"{stance}", k)
+        held = [a for a in stance if a is not None]
         if len(set(held)) != len(held):
-            fail("phase-form", f"two booms on one anchor: {phase['stance']}", k)
-        tips = ["free_tip" in s for s in phase["steps"]]
-        if any(tips) != (phase["kind"] == "reach") or (any(tips) and not all(tips)):
+            fail("phase-form", f"two booms on one anchor: {stance}", k)
+        tips = [s.free_tip is not None for s in phase.steps]
+        if any(tips) != (phase.kind == "reach") or (any(tips) and not all(tips)):
             fail("phase-form", "free_tip is given on every step of a reach phase and only there",
                  k)
 
 
-def _stances(plan, scn: Scenario, fail) -> None:
-    phases = plan["phases"]
+def _stances(plan: Plan, scn: Scenario, fail) -> None:
+    phases = plan.phases
     for k, phase in enumerate(phases):
-        unknown = [a for a in phase["stance"] if a is not None and a not in scn.anchor_index]
+        unknown = [a for a in phase.stance if a is not None and a not in scn.anchor_index]
         if unknown:
             fail("stance", f"unknown anchors {unknown}", k)
-        if phase["kind"] != "reach":
+        if phase.kind != "reach":
             continue
-        j = phase["free_boom"]
         for end, name, n in (("from_anchor", "starts", 0), ("to_anchor", "ends", -1)):
-            anchor = phase[end]
+            anchor = getattr(phase, end)
             if anchor not in scn.anchor_index:
                 fail("stance", f"unknown {end} {anchor!r}", k)
                 continue
-            tip = phase["steps"][n].get("free_tip")
+            tip = phase.steps[n].free_tip
             if tip is None:
                 continue
             p = scn.anchors[scn.anchor_index[anchor]].position
             gap = math.dist(tip, p)
             if not gap <= POSE_TOL:
                 fail("reach-ends", f"the free gripper {name} {gap:.3g} m from {end} {anchor}",
-                     k, n % len(phase["steps"]))
+                     k, n % len(phase.steps))
     for k in range(1, len(phases)):
         before, phase = phases[k - 1], phases[k]
-        if phase["kind"] == "reach" and before["kind"] == "body":
-            j = phase["free_boom"]
-            if before["stance"][j] != phase["from_anchor"]:
-                fail("stance", f"boom {j} leaves {phase['from_anchor']} but held "
-                     f"{before['stance'][j]}", k)
-            expected = [None if i == j else a for i, a in enumerate(before["stance"])]
-        elif phase["kind"] == "body" and before["kind"] == "reach":
-            j = before["free_boom"]
-            expected = [before["to_anchor"] if i == j else a
-                        for i, a in enumerate(before["stance"])]
+        if phase.kind == "reach" and before.kind == "body":
+            j = phase.free_boom
+            if before.stance[j] != phase.from_anchor:
+                fail("stance", f"boom {j} leaves {phase.from_anchor} but held "
+                     f"{before.stance[j]}", k)
+            expected = [None if i == j else a for i, a in enumerate(before.stance)]
+        elif phase.kind == "body" and before.kind == "reach":
+            j = before.free_boom
+            expected = [before.to_anchor if i == j else a for i, a in enumerate(before.stance)]
         else:
             continue  # phase-order says what is wrong
-        changed = [i for i in range(4) if expected[i] != phase["stance"][i]]
+        changed = [i for i in range(4) if expected[i] != phase.stance[i]]
         if changed:
-            fail("stance", f"booms {changed} hold {[phase['stance'][i] for i in changed]} but "
+            fail("stance", f"booms {changed} hold {[phase.stance[i] for i in changed]} but "
                  f"the phases before lead to {[expected[i] for i in changed]}", k)
 
 
-def _joins(plan, fail) -> None:
-    phases = plan["phases"]
+def _joins(plan: Plan, fail) -> None:
+    phases = plan.phases
     for k in range(1, len(phases)):
-        a, b = phases[k - 1]["steps"][-1], phases[k]["steps"][0]
-        gap = np.abs(np.subtract(a["pose"], b["pose"])).max()
+        a, b = phases[k - 1].steps[-1], phases[k].steps[0]
+        gap = np.abs(np.subtract(a.pose, b.pose)).max()
         if not gap <= POSE_TOL:
             fail("phase-join", f"starts {gap:.3g} away from where phases[{k - 1}] ended "
-                 f"({b['pose']} after {a['pose']})", k, 0)
-        if abs(b["t"] - a["t"]) > TIME_TOL:
-            fail("phase-join", f"starts at t = {b['t']}, phases[{k - 1}] ended at t = {a['t']}",
+                 f"({list(b.pose)} after {list(a.pose)})", k, 0)
+        if abs(b.t - a.t) > TIME_TOL:
+            fail("phase-join", f"starts at t = {b.t}, phases[{k - 1}] ended at t = {a.t}",
                  k, 0)
 
 
-def is_trajectory(plan, phase) -> bool:
+def is_trajectory(plan: Plan, phase: Phase) -> bool:
     """Whether a phase holds a trajectory (one step every time_step) rather than end poses."""
-    return "time_step" in plan and "motion" in phase
+    return plan.time_step is not None and phase.motion is not None
 
 
-def _times(plan, fail) -> None:
-    dt = plan.get("time_step")
-    for k, phase in enumerate(plan["phases"]):
-        steps = phase["steps"]
+def _times(plan: Plan, fail) -> None:
+    dt = plan.time_step
+    for k, phase in enumerate(plan.phases):
+        steps = phase.steps
         regular = is_trajectory(plan, phase)
-        if "time_step" in plan and not regular and "start" not in plan:
+        if dt is not None and not regular and plan.start is None:
             # Only a continuation (`start`) splices in phases that hold end poses only.
             fail("phase-form", "a phase of a full plan without its trajectory (motion)", k)
-        if "motion" in phase and "time_step" not in plan:
+        if phase.motion is not None and dt is None:
             fail("phase-form", "a trajectory (motion) in a plan without time_step", k)
         for n in range(1, len(steps)):
-            gap = steps[n]["t"] - steps[n - 1]["t"]
+            gap = steps[n].t - steps[n - 1].t
             if not gap > 0:
-                fail("time-order", f"t = {steps[n]['t']} does not follow t = "
-                     f"{steps[n - 1]['t']}", k, n)
+                fail("time-order", f"t = {steps[n].t} does not follow t = "
+                     f"{steps[n - 1].t}", k, n)
             elif regular and abs(gap - dt) > TIME_TOL:
                 fail("time-order", f"{gap:.6g} s after the step before, not time_step {dt} s",
                      k, n)
 
 
-def _continuity(plan, fail) -> None:
+def _continuity(plan: Plan, fail) -> None:
     lim = step_limits(plan)
-    for k, phase in enumerate(plan["phases"]):
-        if not is_trajectory(plan, phase) or len(phase["steps"]) < 2:
+    for k, phase in enumerate(plan.phases):
+        if not is_trajectory(plan, phase) or len(phase.steps) < 2:
             continue
-        poses = np.array([s["pose"] for s in phase["steps"]], dtype=float)
+        poses = np.array([s.pose for s in phase.steps], dtype=float)
         d = np.diff(poses, axis=0)
         moves = [("the body moves", np.hypot(d[:, 0], d[:, 1]), lim["step"], "m"),
                  ("the body turns", np.abs(d[:, 2]), lim["turn_step"], "rad")]
-        if phase["kind"] == "reach" and all("free_tip" in s for s in phase["steps"]):
-            tips = np.array([s["free_tip"] for s in phase["steps"]], dtype=float)
+        if phase.kind == "reach" and all(s.free_tip is not None for s in phase.steps):
+            tips = np.array([s.free_tip for s in phase.steps], dtype=float)
             moves.append(("the free tip moves", np.linalg.norm(np.diff(tips, axis=0), axis=1),
                           lim["step"], "m"))
         for what, size, limit, unit in moves:
@@ -275,12 +282,12 @@ def _continuity(plan, fail) -> None:
                      k, int(n) + 1)
 
 
-def _goal(plan, scn: Scenario, fail) -> None:
-    if not plan["success"]:
+def _goal(plan: Plan, scn: Scenario, fail) -> None:
+    if not plan.success:
         return
-    k = len(plan["phases"]) - 1
-    n = len(plan["phases"][k]["steps"]) - 1
-    end = plan["phases"][k]["steps"][n]["pose"]
+    k = len(plan.phases) - 1
+    n = len(plan.phases[k].steps) - 1
+    end = plan.phases[k].steps[n].pose
     gap = math.dist(end[:2], scn.goal_position)
     if not gap <= scn.goal_tolerance + POSE_TOL:
         fail("goal", f"the plan claims success but ends {gap:.3f} m from the goal "
@@ -291,38 +298,37 @@ SHARE_TOL = 1e-9  # a ramp's share reaches 1 exactly (plans write the value 1.0)
 TENSION_TOL = 1e-9  # N, for the ramps' monotonic tensions
 
 
-def _ramp_run(steps: list, boom: int, from_end: bool) -> int:
+def _ramp_run(steps: tuple[Step, ...], boom: int | None, from_end: bool) -> int:
     """How many steps at the start (or end) of a phase are ramp steps of `boom`."""
     order = reversed(steps) if from_end else iter(steps)
     n = 0
     for step in order:
-        ramp = step.get("ramp")
-        if ramp is None or ramp.get("boom") != boom:
+        if step.ramp is None or step.ramp.boom != boom:
             break
         n += 1
     return n
 
 
-def _ramps(plan, fail) -> None:
+def _ramps(plan: Plan, fail) -> None:
     """Every release and attach is ramped (RULES "release", "attach"); ramp steps appear only
     there."""
-    phases = plan["phases"]
+    phases = plan.phases
     for k, phase in enumerate(phases):
-        steps = phase["steps"]
-        marked = [n for n, s in enumerate(steps) if "ramp" in s]
-        if phase["kind"] != "body":
+        steps = phase.steps
+        marked = [n for n, s in enumerate(steps) if s.ramp is not None]
+        if phase.kind != "body":
             for n in marked:
                 fail("phase-form", "a ramp step in a reach phase", k, n)
             continue
         lead = trail = 0
         before = phases[k - 1] if k > 0 else None
         after = phases[k + 1] if k + 1 < len(phases) else None
-        if before is not None and before["kind"] == "reach":
-            j = before.get("free_boom")
+        if before is not None and before.kind == "reach":
+            j = before.free_boom
             lead = _ramp_run(steps, j, from_end=False)
             _check_ramp(plan, k, j, list(range(lead + 1)), "attach", fail)
-        if after is not None and after["kind"] == "reach" and len(steps) > lead:
-            j = after.get("free_boom")
+        if after is not None and after.kind == "reach" and len(steps) > lead:
+            j = after.free_boom
             trail = min(_ramp_run(steps, j, from_end=True), len(steps) - lead - 1)
             _check_ramp(plan, k, j, list(range(len(steps) - 1, len(steps) - trail - 2, -1)),
                         "release", fail)
@@ -331,15 +337,15 @@ def _ramps(plan, fail) -> None:
                 fail("phase-form", "a ramp step away from a release or an attach", k, n)
 
 
-def _check_ramp(plan, k: int, boom, order: list[int], rule: str, fail) -> None:
+def _check_ramp(plan: Plan, k: int, boom, order: list[int], rule: str, fail) -> None:
     """One ramp of body phase k: `order` lists its step indices from the gripper's contact (the
     attach's first step, the release's last) to the first (last) configuration without a ramp,
     where the body is at rest on four booms."""
-    steps = plan["phases"][k]["steps"]
+    steps = plan.phases[k].steps
     contact = steps[order[0]]
     where = order[0]
-    f = contact["tension"][boom] if isinstance(boom, int) and 0 <= boom < 4 else None
-    if "ramp" not in contact or f is None:
+    f = contact.tension[boom] if isinstance(boom, int) and 0 <= boom < 4 else None
+    if contact.ramp is None or f is None:
         fail(rule, f"boom {boom}'s gripper {'closes' if rule == 'attach' else 'opens'} at "
              f"tension {f} N: no {rule} ramp (the tension must be at most {RELEASE_TENSION} N "
              "there)", k, where)
@@ -347,26 +353,26 @@ def _check_ramp(plan, k: int, boom, order: list[int], rule: str, fail) -> None:
     if not f <= RELEASE_TENSION:
         fail(rule, f"boom {boom}'s gripper {'closes' if rule == 'attach' else 'opens'} at "
              f"tension {f:.4g} N, over {RELEASE_TENSION} N", k, where)
-    if not abs(contact["ramp"]["share"] - 1.0) <= SHARE_TOL:
-        fail(rule, f"boom {boom}'s shoulder carries {contact['ramp']['share']} of its limb when "
+    if not abs(contact.ramp.share - 1.0) <= SHARE_TOL:
+        fail(rule, f"boom {boom}'s shoulder carries {contact.ramp.share} of its limb when "
              "its gripper lets go or takes hold, not all of it", k, where)
-    pose = contact["pose"]
+    pose = contact.pose
     for a, b in itertools.pairwise(order):  # from the contact outwards
         sa, sb = steps[a], steps[b]
-        if not np.abs(np.subtract(sb["pose"], pose)).max() <= POSE_TOL:
+        if not np.abs(np.subtract(sb.pose, pose)).max() <= POSE_TOL:
             fail(rule, "the body moves during the ramp", k, b)
-        share_a = sa["ramp"]["share"]
-        share_b = sb.get("ramp", {"share": 0.0})["share"]
-        fa, fb = sa["tension"][boom], sb["tension"][boom]
+        share_a = sa.ramp.share
+        share_b = sb.ramp.share if sb.ramp is not None else 0.0
+        fa, fb = sa.tension[boom], sb.tension[boom]
         if fb is None or not (share_b <= share_a + SHARE_TOL and fb >= fa - TENSION_TOL):
             fail(rule, f"boom {boom}'s load must move monotonically between its shoulder and "
                  f"its gripper (share {share_a:.3f} -> {share_b:.3f}, tension {fa} -> {fb})",
                  k, b)
     end = steps[order[-1]]
-    if "ramp" in end and end["ramp"].get("boom") == boom:
+    if end.ramp is not None and end.ramp.boom == boom:
         fail(rule, f"the {rule} ramp of boom {boom} has no configuration on four booms at its "
              "end", k, order[-1])
-    span = abs(float(end["t"]) - float(contact["t"]))
+    span = abs(float(end.t) - float(contact.t))
     if not span >= RAMP_DURATION - TIME_TOL:
         fail(rule, f"the {rule} ramp of boom {boom} lasts {span:.3g} s, under "
              f"{RAMP_DURATION} s", k, where)

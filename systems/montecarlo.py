@@ -43,9 +43,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
+from planning.plan_model import plan_dict
 from rb_drake import grasp
 from systems.diagram import ClimbSimulator, SimulationRecord
-from systems.holdings import StrengthDraws
 from systems.monitors import Cause
 from systems.replanning import FootstepReplanner as FootstepReplanner  # re-exported
 from systems.replanning import Replanner, ReplanRequest, still_holds
@@ -182,13 +182,6 @@ def describe_failures(record: SimulationRecord, first: FirstFailures, quantiles:
     return out
 
 
-def trial_draws(record: SimulationRecord, quantiles: np.ndarray,
-                attach_draws: np.ndarray) -> StrengthDraws:
-    """One trial's draws laid out for `GraspFailures` (the in-diagram run)."""
-    return StrengthDraws.for_trial(record.plan, quantiles, attach_draws,
-                                   record.plan.scenario.robot.attach_failure)
-
-
 # ---------------------------------------------------------------------------------------------
 # Monte Carlo
 
@@ -256,6 +249,7 @@ class _Replanning:
         self.seed = seed
         self.max_replans = max_replans
         self.progress = progress
+        # replans by the failure state they continue from (`_replanned`)
         self.cache: dict[tuple, SimulationRecord | None] = {}
 
     def _replanned(self, record: SimulationRecord, sample: int, boom: int, anchor: str,
@@ -267,10 +261,13 @@ class _Replanning:
         scn = record.plan.scenario
         if not still_holds(scn, stance, pose, boom, anchor):
             return None, "fell"
-        key = (id(record), sample, boom, cause)
+        # By content, not by id(record): an id is reused once its record is collected.
+        key = (record.plan.content_key, float(record.times[sample]),
+               record.state[sample].tobytes(), boom, cause)
         if key not in self.cache:
-            request = ReplanRequest(scn, record.plan.plan, k, float(record.times[sample]),
-                                    pose.copy(), stance, boom, anchor, cause)
+            request = ReplanRequest(scn, plan_dict(record.plan.plan), k,
+                                    float(record.times[sample]), pose.copy(), stance, boom,
+                                    anchor, cause)
             new_plan = self.replanner(request)
             self.cache[key] = None
             if new_plan is not None:
@@ -339,7 +336,7 @@ def monte_carlo(record: SimulationRecord, trials: int, seed: int,
         summary = ReplanSummary(strategy, len(failed) - outcomes.get("fell", 0),
                                 len(rp.cache), saved, total, total / trials,
                                 wilson_interval(total, trials), dict(outcomes))
-    p_path = record.plan.plan.get("p_path")
+    p_path = record.plan.model.p_path
     return MonteCarloResult(trials, successes, successes / trials,
                             wilson_interval(successes, trials), p_path,
                             record.implied_p_path(), seed, failures, summary)

@@ -19,6 +19,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.plan import score_plan
+from planning.plan_steps import allocation_step
 from planning.ramps import add_ramps
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -62,18 +63,7 @@ def configuration(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarra
     whether the configuration is feasible."""
     s = scn.stance(stance)
     check = check_poses(scn, s, np.asarray(pose, dtype=float), free_tip, full=True)
-    alloc = check.allocation
-    step: dict[str, Any] = {
-        "t": float(t), "pose": [float(v) for v in pose],
-        "tension": [float(f) if s.attached[i] and np.isfinite(f) else None
-                    for i, f in enumerate(alloc.tensions[0])],
-        "p_grasp": [float(np.exp(v)) if s.attached[i] else None
-                    for i, v in enumerate(alloc.log_probs[0])],
-        "p_success": float(np.exp(alloc.robustness[0])),
-    }
-    if free_tip is not None:
-        step["free_tip"] = [float(v) for v in free_tip]
-        step["shoulder_torque"] = float(alloc.shoulder_torque[0])
+    step = allocation_step(s, check.allocation, 0, float(t), pose, free_tip)
     return step, bool(check.feasible[0])
 
 

@@ -16,7 +16,8 @@ from typing import Any, Protocol
 import numpy as np
 
 import rb_drake
-from planning.plan import BODY_SPEED, FORMAT, STAGES, TURN_SPEED, score_plan, validate
+from planning.plan import BODY_SPEED, TURN_SPEED, plan_header, score_plan, validate
+from planning.plan_steps import allocation_step
 from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
 from rb_drake.params import RobotParams
@@ -51,25 +52,16 @@ def rig_plan(scn: Scenario, goal_pose: np.ndarray | None = None,
     stance_ids = tuple(scn.start_stance)
     check = check_poses(scn, scn.stance(stance_ids), poses, full=True)
     alloc = check.allocation
-    steps = [{
-        "t": round(float(duration * s[k]), 6),
-        "pose": [float(v) for v in poses[k]],
-        "tension": [float(f) if np.isfinite(f) else None for f in alloc.tensions[k]],
-        "p_grasp": [float(np.exp(lp)) for lp in alloc.log_probs[k]],
-        "p_success": float(np.exp(alloc.robustness[k])),
-    } for k in range(num_steps)]
+    stance = scn.stance(stance_ids)
+    steps = [allocation_step(stance, alloc, k, round(float(duration * s[k]), 6), poses[k])
+             for k in range(num_steps)]
     bad = np.flatnonzero(~check.feasible)
     reason = ("" if not len(bad) else f"pose {bad[0]} of the straight line: "
               f"{REASON_TEXT[Reason(check.reason[bad[0]])]}")
-    scenario = scn.to_dict(resolved=True)
-    scenario["goal"]["position"] = [float(goal[0]), float(goal[1])]  # the plan ends there
-    plan: dict[str, Any] = {
-        "format": FORMAT, "planner": "rbp", "success": not len(bad), "reason": reason,
-        "p_min": None, "p_path": None, "regrasps": 0, "timing": {k: 0.0 for k in STAGES},
-        "scenario": scenario, "robot": scn.robot.to_dict(),
-        "phases": [{"kind": "body", "stance": list(stance_ids), "free_boom": None,
-                    "steps": steps}],
-    }
+    goal_scn = dataclasses.replace(scn, goal_position=(float(goal[0]), float(goal[1])))
+    plan = plan_header(goal_scn, "rbp", not len(bad), reason)  # the plan ends at its goal
+    plan["phases"] = [{"kind": "body", "stance": list(stance_ids), "free_boom": None,
+                       "steps": steps}]
     if plan["success"]:
         score_plan(plan, scn.robot.attach_failure)
     validate(plan)

@@ -37,6 +37,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, Leaf
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.plan_model import Plan, plan_of, plan_scenario
 from rb_drake import geometry, grasp
 from rb_drake.errors import RbpInputError
 from rb_drake.files import atomic_write
@@ -81,35 +82,37 @@ class BodyPhase(NamedTuple):
         return self.scenario.stance(self.stance_ids)
 
 
-def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
-    """Phase `index` of a plan dict (already schema-valid); raises RigInputError."""
-    phases = plan["phases"]
+def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
+    """Phase `index` of a plan (a Plan, or its schema-valid file object); raises
+    RigInputError."""
+    plan = plan_of(plan)
+    phases = plan.phases
     if not 0 <= index < len(phases):
         raise RigInputError(f"phases[{index}]", f"no such phase; the plan has {len(phases)} "
                             f"phases (0..{len(phases) - 1})")
     phase = phases[index]
     where = f"phases[{index}]"
-    if phase["kind"] != "body":
-        raise RigInputError(f"{where}.kind", f"a {phase['kind']} phase; the rig runs body "
+    if phase.kind != "body":
+        raise RigInputError(f"{where}.kind", f"a {phase.kind} phase; the rig runs body "
                             "phases only (its anchors are fixed)")
-    steps = phase["steps"]
-    times = np.array([s["t"] for s in steps], dtype=float)
+    steps = phase.steps
+    times = np.array([s.t for s in steps], dtype=float)
     if np.any(np.diff(times) <= 0):
         k = int(np.flatnonzero(np.diff(times) <= 0)[0]) + 1
         raise RigInputError(f"{where}.steps[{k}].t", "times must increase from step to step")
     for k, s in enumerate(steps):
-        if any(f is None for f in s["tension"]):
+        if any(f is None for f in s.tension):
             raise RigInputError(f"{where}.steps[{k}].tension", "a body phase needs 4 tensions")
     try:
-        scn = scenario_from_dict(plan["scenario"], "plan scenario", check_start=False)
+        scn = plan_scenario(plan, "plan scenario")
     except ScenarioError as e:
-        raise RigInputError(f"scenario.{e.field}", e.reason) from None
-    for i, anchor in enumerate(phase["stance"]):
+        raise RigInputError(e.field, e.reason) from None
+    for i, anchor in enumerate(phase.stance):
         if anchor not in scn.anchor_index:
             raise RigInputError(f"{where}.stance[{i}]", f"{anchor!r} is not an anchor of the "
                                 "plan's scenario")
-    poses = np.array([s["pose"] for s in steps], dtype=float).T
-    tensions = np.array([s["tension"] for s in steps], dtype=float).T
+    poses = np.array([s.pose for s in steps], dtype=float).T
+    tensions = np.array([s.tension for s in steps], dtype=float).T
     # Later non-finite steps are refused at run time (the last safe command is repeated);
     # the first one has nothing safe before it.
     if not (np.all(np.isfinite(poses[:, 0])) and np.all(np.isfinite(tensions[:, 0]))):
@@ -117,7 +120,7 @@ def body_phase(plan: dict[str, Any], index: int) -> BodyPhase:
     if len(steps) == 1:  # hold still for a second
         times = np.append(times, times[0] + 1.0)
         poses, tensions = np.repeat(poses, 2, axis=1), np.repeat(tensions, 2, axis=1)
-    return BodyPhase(scn, tuple(phase["stance"]),
+    return BodyPhase(scn, tuple(phase.stance),
                      PiecewisePolynomial.FirstOrderHold(times, poses),
                      PiecewisePolynomial.FirstOrderHold(times, tensions),
                      float(times[0]), float(times[-1]))

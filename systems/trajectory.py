@@ -7,6 +7,7 @@ time, in `systems.plan_source`. A plan file the simulation cannot run raises `Pl
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from typing import Any, NamedTuple
@@ -14,9 +15,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.plan_file import content_hash
+from planning.plan_model import Phase, Plan, Step, plan_dict, plan_of
+from planning.plan_model import plan_scenario as plan_scenario  # re-exported
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
-from rb_drake.scenario import Scenario, scenario_from_dict
+from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
 from systems.holdings import holdings_of
@@ -37,13 +41,6 @@ class PlanError(RbpInputError):
         super().__init__(f"{field}: {reason}")
         self.field = field
         self.reason = reason
-
-
-def plan_scenario(plan: dict[str, Any], source: str = "<plan>") -> Scenario:
-    """The scenario a plan was made for, rebuilt from the plan file (its robot included)."""
-    data = dict(plan["scenario"])
-    data["robot"] = plan["robot"]
-    return scenario_from_dict(data, source, check_start=False)
 
 
 class PhaseTrajectory(NamedTuple):
@@ -126,11 +123,11 @@ def _continuous_acceleration_rates(times: np.ndarray, values: np.ndarray) -> np.
     return rates
 
 
-def _ramp_count(steps: list[dict[str, Any]], reverse: bool) -> int:
+def _ramp_count(steps: tuple[Step, ...], reverse: bool) -> int:
     """How many steps at the start (end) of a phase are ramp steps."""
     n = 0
     for step in (reversed(steps) if reverse else steps):
-        if "ramp" not in step:
+        if step.ramp is None:
             break
         n += 1
     return n
@@ -193,15 +190,17 @@ class PlanTrajectory:
     the steps (first-order hold).
     """
 
-    def __init__(self, plan: dict[str, Any], scn: Scenario, resample: float | None = 0.05):
-        self.plan = plan
+    def __init__(self, plan: Plan | dict[str, Any], scn: Scenario,
+                 resample: float | None = 0.05):
+        self.plan = plan  # as given: the replanners continue it (systems.replanning)
+        self.model = plan_of(plan)
         self.scenario = scn
         self.phases: list[PhaseTrajectory] = []
         knots_t: list[np.ndarray] = []
         knots_q: list[np.ndarray] = []
         knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
         previous_end = None
-        for k, phase in enumerate(plan["phases"]):
+        for k, phase in enumerate(self.model.phases):
             traj, t, q, v = self._phase(k, phase, scn, previous_end, resample)
             self.phases.append(traj)
             if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
@@ -233,19 +232,25 @@ class PlanTrajectory:
         for h, hold in enumerate(self.holdings):
             self.holding_of[hold.first:hold.last + 1, hold.boom] = h
 
+    @functools.cached_property
+    def content_key(self) -> str:
+        """The plan's content hash (`plan_file.content_hash`): equal for equal plans, for
+        caches that outlive a trajectory (`systems.montecarlo`'s replans)."""
+        return content_hash(plan_dict(self.plan))
+
     @staticmethod
-    def _phase(k: int, phase: dict[str, Any], scn: Scenario, previous_end: float | None,
+    def _phase(k: int, phase: Phase, scn: Scenario, previous_end: float | None,
                resample: float | None
                ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray]:
         """The phase, and the times, poses and velocities (NaN: not given) of its body."""
         where = f"phases[{k}]"
-        ids = tuple(phase["stance"])
+        ids = tuple(phase.stance)
         unknown = [a for a in ids if a is not None and a not in scn.anchor_index]
         if unknown:
             raise PlanError(f"{where}.stance", f"unknown anchor {unknown[0]!r}")
         stance = scn.stance(ids)
-        steps = phase["steps"]
-        times = np.array([s["t"] for s in steps], dtype=float)
+        steps = phase.steps
+        times = np.array([s.t for s in steps], dtype=float)
         if np.any(np.diff(times) <= 0):
             raise PlanError(f"{where}.steps", f"step times must increase, got {list(times)}")
         if previous_end is not None and abs(times[0] - previous_end) > 1e-6:
@@ -256,23 +261,23 @@ class PlanTrajectory:
         for n, s in enumerate(steps):
             for i in range(NUM_BOOMS):
                 if stance.attached[i]:
-                    if s["tension"][i] is None:
+                    if s.tension[i] is None:
                         raise PlanError(f"{where}.steps[{n}].tension[{i}]",
                                         "an attached boom needs a tension")
-                    tensions[n, i] = s["tension"][i]
-            ramp = s.get("ramp")
+                    tensions[n, i] = s.tension[i]
+            ramp = s.ramp
             if ramp is not None:
-                j = int(ramp["boom"])
+                j = int(ramp.boom)
                 if not stance.attached[j]:
                     raise PlanError(f"{where}.steps[{n}].ramp",
                                     f"a ramp of boom {j}, which is free here")
-                shares[n, j] = float(ramp["share"])
-        poses = np.array([s["pose"] for s in steps], dtype=float)
+                shares[n, j] = float(ramp.share)
+        poses = np.array([s.pose for s in steps], dtype=float)
         tips = None
         if stance.free_boom is not None:
-            if any("free_tip" not in s for s in steps):
+            if any(s.free_tip is None for s in steps):
                 raise PlanError(f"{where}.steps", "a phase with a free boom needs free_tip")
-            tips = np.array([s["free_tip"] for s in steps], dtype=float)
+            tips = np.array([s.free_tip for s in steps], dtype=float)
             shares[:, stance.free_boom] = 1.0
         start, end = float(times[0]), float(times[-1])
         # the ramps at either end (planning.ramps), the motion between them
@@ -346,10 +351,10 @@ class PlanTrajectory:
         grid = np.concatenate(sections_t)
         ramps = []
         if lead:
-            ramps.append((float(times[0]), float(times[a]), int(steps[0]["ramp"]["boom"])))
+            ramps.append((float(times[0]), float(times[a]), int(steps[0].ramp.boom)))
         if trail:
-            ramps.append((float(times[b - 1]), end, int(steps[-1]["ramp"]["boom"])))
-        traj = PhaseTrajectory(phase["kind"], start, end, stance,
+            ramps.append((float(times[b - 1]), end, int(steps[-1].ramp.boom)))
+        traj = PhaseTrajectory(phase.kind, start, end, stance,
                                _hold(grid, np.vstack(sections_f)), free_tip, _rate(free_tip),
                                _hold(grid, np.vstack(sections_s)), tuple(ramps),
                                (grid, np.vstack(sections_f), refine))

@@ -16,6 +16,7 @@ import yaml
 from cli_helpers import ROOT, run_rbp
 from conftest import SHAFT
 
+from planning.plan_model import FORMAT
 from rbp import cli
 from rbp.commands import plan as plan_cli
 
@@ -99,7 +100,7 @@ def test_interrupt_while_writing_leaves_no_file(tmp_path: Path, stuck_shaft: Pat
     real_dumps = json.dumps
 
     def dumps(obj, *args, **kwargs):
-        if isinstance(obj, dict) and obj.get("format") == "reachbot-plan/1":
+        if isinstance(obj, dict) and obj.get("format") == FORMAT:
             raise KeyboardInterrupt
         return real_dumps(obj, *args, **kwargs)
 

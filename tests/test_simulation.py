@@ -43,6 +43,7 @@ from rb_drake.statics import statics_problem
 from rbp.commands.simulate import add_simulate_command, cmd_simulate
 from systems.control import BodyStatics, control_bounds
 from systems.diagram import PLANT_TIME_STEP, ClimbSimulator, SimulationRecord
+from systems.holdings import StrengthDraws
 from systems.montecarlo import (
     FootstepReplanner,
     ReplanRequest,
@@ -51,7 +52,6 @@ from systems.montecarlo import (
     first_failures,
     monte_carlo,
     retry_replanner,
-    trial_draws,
     wilson_interval,
 )
 from systems.trajectory import (
@@ -64,6 +64,14 @@ from systems.trajectory import (
 
 SHORT = CaveConfig(length=(3.0, 3.2))
 LINE = 41  # configurations checked along a body phase
+
+
+def trial_draws(record: SimulationRecord, quantiles: np.ndarray,
+                attach_draws: np.ndarray) -> StrengthDraws:
+    """One trial's draws laid out for `GraspFailures` (the in-diagram run); only these tests
+    run a trial in the diagram (systems.montecarlo draws outside it)."""
+    return StrengthDraws.for_trial(record.plan, quantiles, attach_draws,
+                                   record.plan.scenario.robot.attach_failure)
 
 
 def _duration(a: np.ndarray, b: np.ndarray) -> float:
@@ -655,6 +663,20 @@ def test_replanning_is_pluggable_and_counts_saved_climbs(good: SimulationRecord,
     assert r.attempted > 0 and 0 < r.saved <= r.attempted
     assert r.successes == base.successes + r.saved
     assert r.saved + sum(r.outcomes.values()) == trials - base.successes
+
+
+def test_replan_cache_key_is_the_plans_content(good: SimulationRecord,
+                                               good_plan: dict[str, Any]) -> None:
+    """monte_carlo caches replans by the plan's content (not by id(record), which Python reuses
+    once a record is collected): equal plans share a key, an edited one does not."""
+    scn = good.plan.scenario
+    assert PlanTrajectory(copy.deepcopy(good_plan), scn).content_key == good.plan.content_key
+    edited = copy.deepcopy(good_plan)
+    edited["phases"][0]["steps"][-1]["t"] += 1.0
+    for phase in edited["phases"][1:]:
+        for step in phase["steps"]:
+            step["t"] += 1.0
+    assert PlanTrajectory(edited, scn).content_key != good.plan.content_key
 
 
 def _failure_at_first_release(good: SimulationRecord) -> ReplanRequest:

@@ -126,7 +126,8 @@ def _from_plan(path: Path):
     """The scenario, provenance and configuration a plan file was planned with."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
-    from rb_drake.scenario import scenario_from_dict
+    from planning.plan_model import plan_scenario
+    from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
 
     plan = read_plan(path)
@@ -134,7 +135,11 @@ def _from_plan(path: Path):
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
                         "(written by an older rbp), so it cannot be repeated")
-    scn = scenario_from_dict(plan["scenario"], source=f"{path}: scenario", check_start=True)
+    try:
+        scn = plan_scenario(plan, str(path), check_start=True)
+    except ScenarioError as e:
+        raise ScenarioError(f"{e.source}: scenario", e.field.removeprefix("scenario."),
+                            e.reason) from None
     cfg = config_from_dict(PipelineConfig, recorded["config"], str(path),
                            prefix="provenance.config")
     return scn, recorded, cfg

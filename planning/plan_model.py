@@ -1,0 +1,388 @@
+"""The plan file as typed objects: `Plan` and its parts, and the conversion to and from JSON.
+
+Every stage shares the plan: the planner builds it, `rbp check` verifies it, the simulator and
+the rig run it, the replanners continue it. Its parts are frozen dataclasses here, one per
+object of the file, each with `from_dict` (a schema-valid JSON object; numbers are kept as read,
+so that a plan read and written again hashes the same) and `to_dict` (the JSON object, fields
+in the file's order, optional fields omitted when absent). The JSON Schema of the file
+(`plan_schema.json`) is generated from these classes (`planning.plan_schema_gen`): each field's
+`metadata["schema"]` adds its bounds and description to what its type says, so the schema and
+the code cannot drift apart.
+
+The robot is stored once: `Plan.robot`. Format `reachbot-plan/1` also stored it under
+`scenario.robot`; reading such a file keeps that copy in `Plan.scenario_robot` (the verifier's
+`robot` rule compares the two) and writes it back, so an old file round-trips unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
+
+if TYPE_CHECKING:
+    from rb_drake.scenario import Scenario
+
+FORMAT = "reachbot-plan/2"
+FORMATS = ("reachbot-plan/1", FORMAT)  # what the reader accepts
+STAGES = ("footstep", "seed_body", "scp_body", "seed_reach", "scp_reach", "total")
+
+Planner = Literal["rbp", "naive"]
+PhaseKind = Literal["body", "reach"]
+Stop = Literal["", "budget", "exhausted", "noroute", "nostart"]
+Quality = Literal["", "optimal", "bounded"]
+
+
+def spec(default: Any = dataclasses.MISSING, **schema: Any) -> Any:
+    """A dataclass field whose JSON Schema adds `schema` (bounds, description, items, ...) to
+    what its type says; `default` makes the field optional in the file."""
+    if default is dataclasses.MISSING:
+        return dataclasses.field(metadata={"schema": schema})
+    return dataclasses.field(default=default, metadata={"schema": schema})
+
+
+MAYBE4 = {"$ref": "#/$defs/maybe4"}  # 4 numbers or nulls (plan_schema_gen.COMMON)
+
+
+def _tuple(value: Any) -> Any:
+    """JSON arrays as tuples (nested too): the parts stay immutable and compare by value."""
+    return tuple(_tuple(v) for v in value) if isinstance(value, list) else value
+
+
+def _list(value: Any) -> Any:
+    return [_list(v) for v in value] if isinstance(value, tuple) else value
+
+
+class Part:
+    """The JSON conversion shared by the parts of a plan: fields map one to one to keys;
+    `NESTED` names the fields that hold parts (or lists of parts), and `ALWAYS` the optional
+    fields written even when None (they are `null` in the file, not absent)."""
+
+    NESTED: ClassVar[dict[str, type]] = {}
+    ALWAYS: ClassVar[frozenset[str]] = frozenset()
+    OPEN: ClassVar[frozenset[str]] = frozenset()  # mapping fields kept as plain dicts
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Any:
+        kwargs: dict[str, Any] = {}
+        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+            if f.name not in data:
+                continue
+            value = data[f.name]
+            part = cls.NESTED.get(f.name)
+            if part is not None and value is not None:
+                value = (tuple(part.from_dict(v) for v in value) if isinstance(value, list)
+                         else part.from_dict(value))
+            elif f.name in cls.OPEN and value is not None:
+                value = dict(value)
+            else:
+                value = _tuple(value)
+            kwargs[f.name] = value
+        return cls(**kwargs)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if value is None and f.default is None and f.name not in self.ALWAYS:
+                continue
+            if isinstance(value, Part):
+                value = value.to_dict()
+            elif isinstance(value, tuple) and value and isinstance(value[0], Part):
+                value = [v.to_dict() for v in value]
+            elif isinstance(value, dict):
+                value = _plain(value)
+            else:
+                value = _list(value)
+            out[f.name] = value
+        return out
+
+
+def _plain(value: Any) -> Any:
+    """A copy of an open mapping (scenario, robot, config) as plain JSON values."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Ramp(Part):
+    """A release or attach ramp step (`planning.ramps`): the share of `boom`'s limb its
+    shoulder carries."""
+
+    boom: int = spec(minimum=0, maximum=3)
+    share: float = spec(minimum=0, maximum=1)
+    DESCRIPTION: ClassVar[str] = ("a release or attach ramp step: the share of boom's limb its "
+                                  "shoulder carries")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Step(Part):
+    """One configuration: time, body pose, each boom's tension and grasp probability (None for
+    a free boom), the configuration's probability; in a reach phase the free tip and its
+    shoulder's torque."""
+
+    t: float = spec(minimum=0)
+    pose: tuple[float, ...] = spec(minItems=3, maxItems=3)
+    tension: tuple[float | None, ...] = spec(ref="maybe4")
+    p_grasp: tuple[float | None, ...] = spec(ref="maybe4")
+    p_success: float = spec(minimum=0, maximum=1)
+    free_tip: tuple[float, ...] | None = spec(None, ref="vec2")
+    shoulder_torque: float | None = spec(None)
+    ramp: Ramp | None = spec(None)
+    NESTED: ClassVar[dict[str, type]] = {"ramp": Ramp}
+
+    def replace(self, **changes: Any) -> Step:
+        return dataclasses.replace(self, **changes)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Motion(Part):
+    """A trajectory phase's record of its seed and what SCP and easing made of it, per step
+    where a list (the final dwell repeats the last)."""
+
+    seed_method: str = spec()
+    seed_p_success: tuple[float, ...] = spec(items={"type": "number", "minimum": 0,
+                                                    "maximum": 1})
+    seed_tension: tuple[tuple[float | None, ...], ...] = spec(items=MAYBE4)
+    seed_effort: tuple[float, ...] = spec()
+    effort: tuple[float, ...] = spec()
+    optimised: bool = spec()
+    improved: bool = spec()
+    scp_status: str = spec()
+    scp_iterations: int = spec(minimum=0)
+    eased: int | None = spec(None, description="planning.easing: the easing's strength")
+    slowed: float | None = spec(None, description="planning.easing: the slow-down factor")
+    inertial_excess: float | None = spec(None)
+    inertial_dip: float | None = spec(None)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Phase(Part):
+    """A body phase (4-stance, the body moving) or a reach phase (3-stance, the free gripper
+    moving from `from_anchor` to `to_anchor` at a fixed pose)."""
+
+    kind: PhaseKind = spec()
+    stance: tuple[str | None, ...] = spec(minItems=4, maxItems=4)
+    free_boom: int | None = spec(minimum=0, maximum=3)
+    from_anchor: str | None = spec(None)
+    to_anchor: str | None = spec(None)
+    steps: tuple[Step, ...] = spec(minItems=1)
+    motion: Motion | None = spec(None)
+    NESTED: ClassVar[dict[str, type]] = {"steps": Step, "motion": Motion}
+    EXTRA: ClassVar[dict[str, Any]] = {
+        "if": {"properties": {"kind": {"const": "reach"}}},
+        "then": {"required": ["from_anchor", "to_anchor"],
+                 "properties": {"free_boom": {"type": "integer"},
+                                "steps": {"items": {"required": ["free_tip",
+                                                                 "shoulder_torque"]}}}},
+        "else": {"properties": {"free_boom": {"type": "null"}}},
+    }
+
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SearchPoint(Part):
+    """An anytime search's improvement: when, the cost and bound then, expansions so far."""
+
+    seconds: float = spec()
+    cost: float = spec()
+    lower_bound: float = spec()
+    expansions: int = spec()
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SearchRecord(Part):
+    """How the footstep search ended (`planning.plan.search_record`)."""
+
+    stop: Stop = spec()
+    expansions: int | None = spec(None, minimum=0)
+    transitions_tested: int | None = spec(None, minimum=0)
+    cost: float | None = spec(None, minimum=0,
+                              description="the route's search cost (planning.search_cost)")
+    min_success: float | None = spec(
+        None, exclusiveMinimum=0, exclusiveMaximum=1,
+        description="rbp plan --min-success: the route has the fewest regrasps of those whose "
+                    "predicted success exp(-cost) is at least this; with stop noroute, none is")
+    lower_bound: float | None = spec(None, minimum=0, description="anytime search: the "
+                                     "optimal cost is at least this")
+    first_cost: float | None = spec(None, minimum=0)
+    bound: float | None = spec(None, nullable=True, minimum=1,
+                               description="cost / lower_bound: the route's cost is at most "
+                                           "this times the optimum's")
+    quality: Quality | None = spec(None)
+    history: tuple[SearchPoint, ...] | None = spec(None)
+    NESTED: ClassVar[dict[str, type]] = {"history": SearchPoint}
+    DESCRIPTION: ClassVar[str] = "how the footstep search ended (optional)"
+
+    def to_dict(self) -> dict[str, Any]:
+        out = super().to_dict()
+        if self.lower_bound is not None and "bound" not in out:
+            out["bound"] = None  # written with the bound, null when it is 0
+            order = [f.name for f in dataclasses.fields(self)]
+            out = dict(sorted(out.items(), key=lambda kv: order.index(kv[0])))
+        return out
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Limits(Part):
+    """The largest change between successive trajectory steps (`planning.plan.step_limits`)."""
+
+    step: float = spec(exclusiveMinimum=0)
+    turn_step: float = spec(exclusiveMinimum=0)
+    DESCRIPTION: ClassVar[str] = ("the largest change between successive trajectory steps "
+                                  "(full plans; optional when reading)")
+
+    def as_dict(self) -> dict[str, float]:
+        return {"step": self.step, "turn_step": self.turn_step}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Start(Part):
+    """Where a continuation (a replan after a failed grasp) starts, instead of the scenario's
+    start."""
+
+    pose: tuple[float, ...] = spec(items={"type": "number"}, minItems=3, maxItems=3)
+    stance: tuple[str, ...] = spec(minItems=4, maxItems=4)
+    DESCRIPTION: ClassVar[str] = ("where a continuation (a replan after a failed grasp) "
+                                  "starts, instead of the scenario's start")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Provenance(Part):
+    """How the plan was made, enough to make it again (`rbp plan --from-plan`)."""
+
+    rbp_version: str = spec()
+    command: str = spec()
+    planner: Planner = spec()
+    motion: bool = spec()
+    seed: int = spec()
+    scenario_source: str = spec()
+    config: dict[str, Any] = spec(required=["footstep", "seed", "scp"],
+                                  description="the PipelineConfig (planning.config_io)")
+    OPEN: ClassVar[frozenset[str]] = frozenset({"config"})
+    DESCRIPTION: ClassVar[str] = ("how the plan was made, enough to make it again (rbp plan "
+                                  "--from-plan); optional when reading")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Verified(Part):
+    """The stamp of `rbp check --stamp` (`planning.plan_file`)."""
+
+    sha256: str = spec()
+    verifier: str = spec()
+    DESCRIPTION: ClassVar[str] = "the stamp of rbp check --stamp: the hash of the rest of the file"
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Plan(Part):
+    """A plan file: the summary (success, probabilities, regrasps), how it was made (timing,
+    search, provenance), the cave and robot it is for, and its phases. `scenario` and `robot`
+    are the file forms of rb_drake's scenario (without its robot) and robot (`plan_scenario`
+    turns them into a Scenario); `scenario_robot` is the second copy of the robot that format
+    `reachbot-plan/1` kept under `scenario.robot`, None in a plan of this format."""
+
+    format: str = spec(enum=list(FORMATS))
+    planner: Planner = spec()
+    success: bool = spec()
+    reason: str = spec(description="why the plan failed; empty on success")
+    p_min: float | None = spec(minimum=0, maximum=1)
+    p_path: float | None = spec(minimum=0, maximum=1)
+    p_grasps: float | None = spec(None, nullable=True, minimum=0, maximum=1,
+                                  description="p_path without the per-regrasp attach term "
+                                              "(optional)")
+    regrasps: int = spec(minimum=0)
+    timing: dict[str, float] = spec(required=list(STAGES),
+                                    additionalProperties={"type": "number", "minimum": 0},
+                                    description="seconds spent per stage")
+    search: SearchRecord | None = spec(None)
+    scenario: dict[str, Any] = spec(ref="scenario")
+    robot: dict[str, Any] = spec(ref="robot")
+    phases: tuple[Phase, ...] = spec()
+    time_step: float | None = spec(None, exclusiveMinimum=0,
+                                   description="s between trajectory steps (full plans)")
+    limits: Limits | None = spec(None)
+    start: Start | None = spec(None)
+    provenance: Provenance | None = spec(None)
+    verified: Verified | None = spec(None)
+    scenario_robot: dict[str, Any] | None = dataclasses.field(default=None, compare=True,
+                                                               metadata={"file": False})
+    # `p_grasps` left out of an older file (not null): kept out when written again, so that the
+    # file's stamp holds, and not checked by the verifier (rule `summary`), as before
+    p_grasps_absent: bool = dataclasses.field(default=False, metadata={"file": False})
+    ALWAYS: ClassVar[frozenset[str]] = frozenset({"p_grasps"})
+    NESTED: ClassVar[dict[str, type]] = {
+        "search": SearchRecord, "phases": Phase, "limits": Limits, "start": Start,
+        "provenance": Provenance, "verified": Verified}
+    OPEN: ClassVar[frozenset[str]] = frozenset({"timing", "scenario", "robot"})
+    DESCRIPTION: ClassVar[str] = ("A climb planned by rbp (or the naive baseline). Units SI, "
+                                  "angles in radians unless the name ends in _deg.")
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Plan:
+        """The plan of a schema-valid plan-file object, of either format."""
+        scenario = dict(data["scenario"])
+        inner = scenario.pop("robot", None)
+        plan = super().from_dict(dict(data, scenario=scenario))
+        if isinstance(inner, Mapping):
+            inner = dict(inner)
+        return dataclasses.replace(plan, scenario_robot=inner,
+                                   p_grasps_absent="p_grasps" not in data)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The plan-file object; a plan read from a `reachbot-plan/1` file gets its layout
+        back (the robot under `scenario` too), so that its stamp still holds."""
+        out = super().to_dict()
+        out.pop("scenario_robot", None)
+        out.pop("p_grasps_absent", None)
+        if self.p_grasps_absent and self.p_grasps is None:
+            del out["p_grasps"]
+        if self.scenario_robot is not None:
+            scenario = out["scenario"]
+            keys = list(scenario)
+            at = keys.index("gravity") + 1 if "gravity" in keys else len(keys)
+            items = list(scenario.items())
+            items.insert(at, ("robot", _plain(self.scenario_robot)))
+            out["scenario"] = dict(items)
+        return out
+
+    def replace(self, **changes: Any) -> Plan:
+        return dataclasses.replace(self, **changes)
+
+    def upgraded(self) -> Plan:
+        """This plan in the current format: the robot stored once (`robot`)."""
+        return dataclasses.replace(self, format=FORMAT, scenario_robot=None)
+
+
+def plan_of(plan: Plan | Mapping[str, Any]) -> Plan:
+    """`plan` as a Plan: a plan-file object (schema-valid) is converted, a Plan returned as is.
+    For the stages that still accept either while their callers move to the model."""
+    return plan if isinstance(plan, Plan) else Plan.from_dict(plan)
+
+
+def plan_dict(plan: Plan | Mapping[str, Any]) -> dict[str, Any]:
+    """`plan` as a plan-file object (the file boundary)."""
+    return plan.to_dict() if isinstance(plan, Plan) else dict(plan)
+
+
+def plan_scenario(plan: Plan | Mapping[str, Any], source: str = "<plan>",
+                  check_start: bool = False) -> Scenario:
+    """The scenario a plan was made for, rebuilt from the plan: its cave with the plan's robot
+    (`robot`, never the copy a `reachbot-plan/1` file keeps under `scenario.robot`). The one
+    place a plan becomes a Scenario (rbp check, the simulator, the rig, rbp plan --from-plan).
+    A malformed scenario or robot raises ScenarioError naming the field as it is in the file
+    (`robot.body_mass`, `scenario.anchors[2].position`)."""
+    from rb_drake.scenario import ScenarioError, scenario_from_dict
+
+    if isinstance(plan, Plan):
+        data, robot = dict(plan.scenario), plan.robot
+    else:
+        data, robot = dict(plan["scenario"]), plan["robot"]
+    data["robot"] = robot
+    try:
+        return scenario_from_dict(data, source, check_start=check_start)
+    except ScenarioError as e:
+        field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
+        raise ScenarioError(source, field, e.reason) from None

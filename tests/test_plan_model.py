@@ -1,0 +1,162 @@
+"""The typed plan model (planning.plan_model): the schema generated from it, the golden plans.
+
+`tests/data/golden/` holds plans of the bundled caves made before the model existed (format
+`reachbot-plan/1`, the robot stored twice): `rbp plan CAVE -o CAVE.json` for demo-shaft,
+demo-crevasse, shaft-1 and rockfall-3, and `systems.rig.rig_plan` on the rig's scenario
+(rig.json; `rbp plan rig` failed on that commit). Each must read through the model and write
+back to the same content, and planning demo-shaft again must give its plan again (in today's
+format, the robot stored once).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from conftest import ROOT
+
+from planning.plan import write_plan
+from planning.plan_file import PlanFileError, content_hash, has_valid_stamp, read_plan, stamp
+from planning.plan_model import FORMAT, Plan, Step, plan_scenario
+from planning.plan_schema_gen import SCHEMA_FILE, schema_text
+
+GOLDEN = ROOT / "tests" / "data" / "golden"
+CAVES = ("demo-shaft", "demo-crevasse", "shaft-1", "rockfall-3", "rig")
+# Fields that depend on when, where and how fast a plan was made, not on what was planned.
+VOLATILE = ("timing", "provenance")
+
+
+def assert_close(a: Any, b: Any, where: str = "plan", rel: float = 1e-9,
+                 abs_tol: float = 1e-9) -> None:
+    """`a` equals `b` but for floating-point noise in their numbers."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert set(a) == set(b), f"{where}: keys {sorted(set(a) ^ set(b))} differ"
+        for k in a:
+            assert_close(a[k], b[k], f"{where}.{k}", rel, abs_tol)
+    elif isinstance(a, list) and isinstance(b, list):
+        assert len(a) == len(b), f"{where}: {len(a)} items, not {len(b)}"
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_close(x, y, f"{where}[{i}]", rel, abs_tol)
+    elif isinstance(a, float | int) and isinstance(b, float | int) and not isinstance(a, bool):
+        assert math.isclose(a, b, rel_tol=rel, abs_tol=abs_tol), f"{where}: {a} != {b}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def test_the_committed_schema_is_the_generated_one() -> None:
+    """plan_schema.json is generated from the model: run `python -m planning.plan_schema_gen`
+    after changing planning/plan_model.py."""
+    assert SCHEMA_FILE.read_text() == schema_text(), (
+        "planning/plan_schema.json is stale: run python -m planning.plan_schema_gen")
+
+
+def test_the_schema_is_closed() -> None:
+    """Every object the model describes refuses unknown fields; the motion block is in it."""
+    schema = json.loads(SCHEMA_FILE.read_text())
+    assert schema["additionalProperties"] is False
+    for name in ("phase", "step", "ramp", "motion", "searchrecord", "searchpoint", "limits",
+                 "start", "provenance", "verified", "robot", "scenario"):
+        assert schema["$defs"][name]["additionalProperties"] is False, name
+    assert schema["$defs"]["phase"]["properties"]["motion"] == {"$ref": "#/$defs/motion"}
+
+
+@pytest.mark.parametrize("cave", CAVES)
+def test_golden_plan_reads_and_writes_back_unchanged(cave: str, tmp_path: Path) -> None:
+    """An old plan file (format 1) reads into the model and writes back to the same content,
+    so that its stamp (the hash of its content) still holds."""
+    source = GOLDEN / f"{cave}.json"
+    original = json.loads(source.read_text())
+    assert original["format"] == "reachbot-plan/1"
+    plan = read_plan(source)
+    assert isinstance(plan, Plan) and plan.scenario_robot == plan.robot
+    assert all(isinstance(s, Step) for p in plan.phases for s in p.steps)
+    out = write_plan(plan, tmp_path / "again.json")
+    again = json.loads(out.read_text())
+    assert again == original, f"{cave}: the plan changed on its way through the model"
+    assert content_hash(again) == content_hash(original)
+    assert has_valid_stamp(stamp(original)) and read_plan(out) == plan
+
+
+@pytest.mark.parametrize("cave", CAVES)
+def test_golden_plan_in_todays_format_stores_the_robot_once(cave: str, tmp_path: Path) -> None:
+    """Upgraded, the plan has one robot, the same scenario, and reads back to the same model."""
+    old = read_plan(GOLDEN / f"{cave}.json")
+    new = old.upgraded()
+    data = new.to_dict()
+    assert data["format"] == FORMAT and "robot" not in data["scenario"]
+    path = write_plan(new, tmp_path / "new.json")
+    assert read_plan(path) == new
+    assert plan_scenario(new).to_dict(resolved=True) == plan_scenario(old).to_dict(resolved=True)
+
+
+@pytest.mark.parametrize("cave", CAVES)
+def test_golden_plan_verifies_in_either_format(cave: str) -> None:
+    """rbp check's verifier, which reads the typed model, passes the golden plans as they are
+    (format 1, two robots) and upgraded (format 2, one robot)."""
+    from planning.check import verify_plan
+
+    plan = read_plan(GOLDEN / f"{cave}.json")
+    assert [str(p) for p in verify_plan(plan)] == []
+    assert [str(p) for p in verify_plan(plan.upgraded().to_dict())] == []
+
+
+def test_an_unknown_field_is_refused(tmp_path: Path) -> None:
+    data = json.loads((GOLDEN / "rig.json").read_text())
+    data["phases"][0]["steps"][0]["speed"] = 1.0
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(PlanFileError) as e:
+        read_plan(path)
+    assert e.value.field == "phases/0/steps/0" and "speed" in e.value.reason, str(e.value)
+
+
+def _comparable(plan: Plan) -> dict[str, Any]:
+    """The plan's content without what depends on the machine and the clock."""
+    data = plan.upgraded().to_dict()
+    for key in VOLATILE:
+        data.pop(key, None)
+    for point in (data.get("search") or {}).get("history", []):
+        point.pop("seconds")
+    return data
+
+
+def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None:
+    """`rbp plan demo-shaft` today makes the golden plan again (to floating-point noise), in
+    today's format; slow (a whole plan)."""
+    from rbp import cli
+
+    out = tmp_path / "demo-shaft.json"
+    assert cli.main(["plan", "demo-shaft", "-o", str(out), "--no-pictures", "--quiet"]) == 0
+    new, golden = read_plan(out), read_plan(GOLDEN / "demo-shaft.json")
+    assert new.format == FORMAT and new.scenario_robot is None
+    assert dataclasses.replace(new.provenance, command="", scenario_source="") == \
+        dataclasses.replace(golden.provenance, command="", scenario_source="")
+    assert_close(_comparable(new), _comparable(golden))
+
+
+def test_the_rig_plan_again_gives_its_golden_plan() -> None:
+    """systems.rig.rig_plan (the rig's straight-line body plan, built by plan_header and
+    allocation_step) makes the golden rig plan again, in today's format."""
+    from systems.rig import load_rig_scenario, rig_plan
+
+    new = Plan.from_dict(rig_plan(load_rig_scenario()))
+    golden = read_plan(GOLDEN / "rig.json")
+    assert new.format == FORMAT and new.scenario_robot is None
+    assert_close(_comparable(new), _comparable(golden))
+
+
+def test_an_absent_p_grasps_stays_absent_and_null_is_not_absent() -> None:
+    """Plans from before p_grasps leave it out: such a plan writes back without it and
+    verifies; a successful plan whose p_grasps is null breaks rule `summary`, as before."""
+    from planning.check import verify_plan
+
+    data = json.loads((GOLDEN / "rig.json").read_text())
+    older = {k: v for k, v in data.items() if k != "p_grasps"}
+    assert Plan.from_dict(older).to_dict() == older
+    assert verify_plan(older) == []
+    problems = verify_plan(data | {"p_grasps": None})
+    assert [p.rule for p in problems] == ["summary"] and "p_grasps" in problems[0].text

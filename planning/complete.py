@@ -316,7 +316,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     first_expansions = expansions
                 history.append((now, best_cost, lower(), expansions))
                 if progress is not None:
-                    progress(expansions, tested, nearest, bound=best_cost / history[-1][2])
+                    progress(expansions, tested, nearest, bound=_ratio(best_cost, history[-1][2]))
                 if best_cost <= anytime.target_bound * history[-1][2]:
                     break
                 # Better routes next: vertices reached more cheaply are expanded again, and the
@@ -346,7 +346,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             if lo > history[-1][2] * (1.0 + 1e-9):
                 history.append((time.perf_counter() - t0, best_cost, lo, expansions))
                 if progress is not None:
-                    progress(expansions, tested, nearest, bound=best_cost / lo)
+                    progress(expansions, tested, nearest, bound=_ratio(best_cost, lo))
                 if best_cost <= anytime.target_bound * lo:
                     break
         if max_expansions is not None and expansions >= max_expansions and best is None:
@@ -388,6 +388,14 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph)
+
+
+def _ratio(cost: float, lower_bound: float) -> float:
+    """cost / lower bound, the route's proven distance from the optimum: 1 when both are 0 (a
+    goal held in the start stance: the rig), inf while nothing positive is proven."""
+    if lower_bound > 0:
+        return cost / lower_bound
+    return 1.0 if cost <= 0 else math.inf
 
 
 def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:

@@ -20,6 +20,8 @@ import dataclasses
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
+from planning.search_outcome import Quality, Stop
+
 if TYPE_CHECKING:
     from rb_drake.scenario import Scenario
 
@@ -29,8 +31,6 @@ STAGES = ("footstep", "seed_body", "scp_body", "seed_reach", "scp_reach", "total
 
 Planner = Literal["rbp", "naive"]
 PhaseKind = Literal["body", "reach"]
-Stop = Literal["", "budget", "exhausted", "noroute", "nostart"]
-Quality = Literal["", "optimal", "bounded"]
 
 
 def spec(default: Any = dataclasses.MISSING, **schema: Any) -> Any:
@@ -58,7 +58,7 @@ class Part:
     `NESTED` names the fields that hold parts (or lists of parts), and `ALWAYS` the optional
     fields written even when None (they are `null` in the file, not absent)."""
 
-    NESTED: ClassVar[dict[str, type]] = {}
+    NESTED: ClassVar[dict[str, type[Part]]] = {}
     ALWAYS: ClassVar[frozenset[str]] = frozenset()
     OPEN: ClassVar[frozenset[str]] = frozenset()  # mapping fields kept as plain dicts
 
@@ -132,7 +132,7 @@ class Step(Part):
     free_tip: tuple[float, ...] | None = spec(None, ref="vec2")
     shoulder_torque: float | None = spec(None)
     ramp: Ramp | None = spec(None)
-    NESTED: ClassVar[dict[str, type]] = {"ramp": Ramp}
+    NESTED: ClassVar[dict[str, type[Part]]] = {"ramp": Ramp}
 
     def replace(self, **changes: Any) -> Step:
         return dataclasses.replace(self, **changes)
@@ -171,7 +171,7 @@ class Phase(Part):
     to_anchor: str | None = spec(None)
     steps: tuple[Step, ...] = spec(minItems=1)
     motion: Motion | None = spec(None)
-    NESTED: ClassVar[dict[str, type]] = {"steps": Step, "motion": Motion}
+    NESTED: ClassVar[dict[str, type[Part]]] = {"steps": Step, "motion": Motion}
     EXTRA: ClassVar[dict[str, Any]] = {
         "if": {"properties": {"kind": {"const": "reach"}}},
         "then": {"required": ["from_anchor", "to_anchor"],
@@ -214,7 +214,7 @@ class SearchRecord(Part):
                                            "this times the optimum's")
     quality: Quality | None = spec(None)
     history: tuple[SearchPoint, ...] | None = spec(None)
-    NESTED: ClassVar[dict[str, type]] = {"history": SearchPoint}
+    NESTED: ClassVar[dict[str, type[Part]]] = {"history": SearchPoint}
     DESCRIPTION: ClassVar[str] = "how the footstep search ended (optional)"
 
     def to_dict(self) -> dict[str, Any]:
@@ -313,7 +313,7 @@ class Plan(Part):
     # file's stamp holds, and not checked by the verifier (rule `summary`), as before
     p_grasps_absent: bool = dataclasses.field(default=False, metadata={"file": False})
     ALWAYS: ClassVar[frozenset[str]] = frozenset({"p_grasps"})
-    NESTED: ClassVar[dict[str, type]] = {
+    NESTED: ClassVar[dict[str, type[Part]]] = {
         "search": SearchRecord, "phases": Phase, "limits": Limits, "start": Start,
         "provenance": Provenance, "verified": Verified}
     OPEN: ClassVar[frozenset[str]] = frozenset({"timing", "scenario", "robot"})

@@ -14,6 +14,7 @@ fails when the committed file differs from `generate()`.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import types
 import typing
@@ -112,6 +113,8 @@ def _type_schema(tp: Any, extra: dict[str, Any]) -> dict[str, Any]:
         return schema
     if origin is Literal:
         return {"enum": list(args)}
+    if isinstance(tp, type) and issubclass(tp, enum.StrEnum):  # the file holds its strings
+        return {"enum": [member.value for member in tp]}
     if origin is tuple:
         items = extra.pop("items", None) or _type_schema(args[0], {})
         return {"type": "array", "items": items}

@@ -42,6 +42,7 @@ from planning.lattice_search import (
     stance_components,
 )
 from planning.search_cost import RegraspHeuristic, attach_cost, boom_hop_length, edge_cost
+from planning.search_outcome import Quality
 from rb_drake.feasibility_kernel import held_kernel_threads
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -255,8 +256,8 @@ def repair_route(scn: Scenario, result: CompleteResult, memo: LatticeMemo,
     cost = float(sum(e.cost for e in edges))
     if cost >= result.cost * (1.0 - 1e-12):
         return result
-    quality = "optimal" if cost <= result.lower_bound * (1.0 + 1e-12) else (
-        "bounded" if math.isfinite(result.lower_bound) else result.quality)
+    quality = Quality.OPTIMAL if cost <= result.lower_bound * (1.0 + 1e-12) else (
+        Quality.BOUNDED if math.isfinite(result.lower_bound) else result.quality)
     return result._replace(path=path, poses=[e.pose for e in edges],
                            probabilities=[e.p4 for e in edges],
                            alternatives=[e.alternatives for e in edges], goal_pose=goal_pose,

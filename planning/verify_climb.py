@@ -144,7 +144,7 @@ def _start(plan: Plan, scn: Scenario, fail) -> None:
     first = plan.phases[0]
     step = first.steps[0]
     held = list(first.stance)
-    if first.kind == "reach" and first.free_boom in range(4):
+    if first.kind == "reach" and first.free_boom is not None and first.free_boom in range(4):
         held[first.free_boom] = first.from_anchor
     if held != start_stance:
         fail("start", f"the climb starts in stance {held}, not the start stance "
@@ -208,15 +208,16 @@ def _stances(plan: Plan, scn: Scenario, fail) -> None:
                      k, n % len(phase.steps))
     for k in range(1, len(phases)):
         before, phase = phases[k - 1], phases[k]
-        if phase.kind == "reach" and before.kind == "body":
+        if phase.kind == "reach" and before.kind == "body" and phase.free_boom is not None:
             j = phase.free_boom
             if before.stance[j] != phase.from_anchor:
                 fail("stance", f"boom {j} leaves {phase.from_anchor} but held "
                      f"{before.stance[j]}", k)
             expected = [None if i == j else a for i, a in enumerate(before.stance)]
         elif phase.kind == "body" and before.kind == "reach":
-            j = before.free_boom
-            expected = [before.to_anchor if i == j else a for i, a in enumerate(before.stance)]
+            freed = before.free_boom
+            expected = [before.to_anchor if i == freed else a
+                        for i, a in enumerate(before.stance)]
         else:
             continue  # phase-order says what is wrong
         changed = [i for i in range(4) if expected[i] != phase.stance[i]]
@@ -258,7 +259,7 @@ def _times(plan: Plan, fail) -> None:
             if not gap > 0:
                 fail("time-order", f"t = {steps[n].t} does not follow t = "
                      f"{steps[n - 1].t}", k, n)
-            elif regular and abs(gap - dt) > TIME_TOL:
+            elif regular and dt is not None and abs(gap - dt) > TIME_TOL:
                 fail("time-order", f"{gap:.6g} s after the step before, not time_step {dt} s",
                      k, n)
 
@@ -361,7 +362,7 @@ def _check_ramp(plan: Plan, k: int, boom, order: list[int], rule: str, fail) -> 
         sa, sb = steps[a], steps[b]
         if not np.abs(np.subtract(sb.pose, pose)).max() <= POSE_TOL:
             fail(rule, "the body moves during the ramp", k, b)
-        share_a = sa.ramp.share
+        share_a = sa.ramp.share if sa.ramp is not None else 0.0
         share_b = sb.ramp.share if sb.ramp is not None else 0.0
         fa, fb = sa.tension[boom], sb.tension[boom]
         if fb is None or not (share_b <= share_a + SHARE_TOL and fb >= fa - TENSION_TOL):

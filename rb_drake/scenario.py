@@ -39,6 +39,8 @@ class ScenarioError(RbpInputError):
     """A scenario the planner refuses: `source` (file, also `file`), `field` (dotted path) and
     `reason`."""
 
+    field: str  # always given here
+
     def __init__(self, source: str, field: str, reason: str):
         super().__init__(reason, file=source, field=field)
         self.source = source

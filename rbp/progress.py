@@ -7,6 +7,7 @@ callback), then the phase being seeded and optimised. tqdm is imported only when
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Any
@@ -44,7 +45,7 @@ class SearchProgress:
             if bound is not None:
                 self.route_bound = bound
             text = f"{tested} transitions tested"
-            if self.route_bound is not None:
+            if self.route_bound is not None and math.isfinite(self.route_bound):
                 text += f", route within {self.route_bound:.2f}x of the best"
             elif nearest is not None:
                 text += f", nearest {nearest:.2f} m from the goal"

@@ -120,7 +120,7 @@ def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
     if len(steps) == 1:  # hold still for a second
         times = np.append(times, times[0] + 1.0)
         poses, tensions = np.repeat(poses, 2, axis=1), np.repeat(tensions, 2, axis=1)
-    return BodyPhase(scn, tuple(phase.stance),
+    return BodyPhase(scn, tuple(str(a) for a in phase.stance),  # each checked above
                      PiecewisePolynomial.FirstOrderHold(times, poses),
                      PiecewisePolynomial.FirstOrderHold(times, tensions),
                      float(times[0]), float(times[-1]))

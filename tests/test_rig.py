@@ -424,3 +424,14 @@ def test_bad_log_input(command: str, tmp_path: Path) -> None:
     with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: RIG_SETUP: no setup message')}"):
         handler(parse(command, str(junk), *extra))
     assert not (tmp_path / "f.png").exists(), "no figure from a bad log"
+
+
+def test_rbp_plan_plans_the_rig(tmp_path) -> None:
+    """The rig's goal is held in its start stance: a route of no regrasp, whose cost and proven
+    lower bound are both 0 (the anytime search's progress divided one by the other)."""
+    from tests.cli_helpers import run_rbp
+
+    result = run_rbp("plan", "rig", "-o", "rig.json", "--no-pictures", cwd=tmp_path)
+    assert result.returncode == 0, f"exit {result.returncode}: {result.stderr[-2000:]}"
+    assert "Traceback" not in result.stderr, result.stderr
+    assert "route optimal" in result.stdout, result.stdout

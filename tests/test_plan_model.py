@@ -133,9 +133,34 @@ def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None
     assert cli.main(["plan", "demo-shaft", "-o", str(out), "--no-pictures", "--quiet"]) == 0
     new, golden = read_plan(out), read_plan(GOLDEN / "demo-shaft.json")
     assert new.format == FORMAT and new.scenario_robot is None
-    assert dataclasses.replace(new.provenance, command="", scenario_source="") == \
+    added = _added_settings(new.provenance.config, golden.provenance.config)
+    assert all(value is None for value in added.values()), \
+        f"settings added since the golden plan must default to off (None): {added}"
+    assert dataclasses.replace(new.provenance, command="", scenario_source="",
+                               config=_without(new.provenance.config, added)) == \
         dataclasses.replace(golden.provenance, command="", scenario_source="")
     assert_close(_comparable(new), _comparable(golden))
+
+
+def _added_settings(config: dict, golden: dict, prefix: str = "") -> dict[str, object]:
+    """The settings of `config` that `golden` (an older plan's) lacks: dotted path -> value."""
+    added: dict[str, object] = {}
+    for key, value in config.items():
+        if key not in golden:
+            added[prefix + key] = value
+        elif isinstance(value, dict) and isinstance(golden[key], dict):
+            added.update(_added_settings(value, golden[key], f"{prefix}{key}."))
+    return added
+
+
+def _without(config: dict, paths: dict[str, object]) -> dict:
+    out = {}
+    for key, value in config.items():
+        inner = {p.split(".", 1)[1]: v for p, v in paths.items() if p.startswith(key + ".")}
+        if key in paths:
+            continue
+        out[key] = _without(value, inner) if isinstance(value, dict) and inner else value
+    return out
 
 
 def test_the_rig_plan_again_gives_its_golden_plan() -> None:

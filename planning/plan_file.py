@@ -18,6 +18,7 @@ from typing import Any
 
 from planning.plan_model import Plan
 from rb_drake.errors import RbpInputError
+from rb_drake.input_files import InputFileError, load_json, read_text
 
 VERIFIER = "rbp-verify/2"  # bump when the rules change: older stamps then no longer count
 
@@ -46,7 +47,10 @@ def _float(text: str) -> float | _Bad:
 def parse_plan_text(text: str) -> Any:
     """The JSON value of `text`; raises PlanFileError naming the first non-finite number's
     field, and json.JSONDecodeError for text that is not JSON."""
-    data = json.loads(text, parse_constant=_Bad, parse_float=_float)
+    try:
+        data = load_json(text, parse_constant=_Bad, parse_float=_float)
+    except InputFileError as e:
+        raise PlanFileError(e.field, e.reason) from None
     found = _find_bad(data, "")
     if found is not None:
         field, bad = found
@@ -72,14 +76,16 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
     ("(file)" when it cannot be read or is not JSON) and the reason."""
     from planning.plan_schema import schema_error
 
-    path = Path(path)
     try:
-        plan = parse_plan_text(path.read_text())
-    except FileNotFoundError:
-        raise PlanFileError("(file)", "no such file") from None
-    except IsADirectoryError:
-        raise PlanFileError("(file)", "is a directory, not a plan file") from None
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        text = read_text(path)  # a regular file within the size limit (rb_drake.input_files)
+    except InputFileError as e:
+        raise PlanFileError(e.field, e.reason) from None
+    try:
+        plan = parse_plan_text(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        if "reachbot-scenario/" in text[:4096]:
+            raise PlanFileError("(file)", "this is a scenario (a cave), not a plan: plan it "
+                                f"with `rbp plan {path}`") from None
         raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
     error = schema_error(plan)
     if error is not None:

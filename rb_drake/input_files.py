@@ -185,16 +185,18 @@ def _refuse_duplicate_keys(node: yaml.MappingNode) -> None:
             keys[name] = key
 
 
-def load_json(text: str) -> Any:
-    """The JSON value of `text`, with duplicate keys in an object refused (InputFileError); the
-    caller handles json.JSONDecodeError and RecursionError as today."""
+def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """json's `object_pairs_hook` that refuses a key repeated in an object (InputFileError)."""
+    result: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in result:
+            raise InputFileError("(file)", f"duplicate key {key!r} in a JSON object: which one "
+                                 "is meant?")
+        result[key] = value
+    return result
 
-    def no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-        result: dict[str, Any] = {}
-        for key, value in pairs:
-            if key in result:
-                raise InputFileError("(file)", f"duplicate key {key!r} in a JSON object")
-            result[key] = value
-        return result
 
-    return json.loads(text, object_pairs_hook=no_duplicates)
+def load_json(text: str, **options: Any) -> Any:
+    """The JSON value of `text` (json.loads with `options`), a key repeated in an object refused
+    (InputFileError); the caller handles json.JSONDecodeError and RecursionError."""
+    return json.loads(text, object_pairs_hook=no_duplicate_keys, **options)

@@ -199,3 +199,24 @@ def test_cli_refuses_hostile_files_in_one_line(tmp_path):
             assert "Traceback" not in result.stderr, result.stderr
             assert elapsed < 30, f"{command} {path} took {elapsed:.1f} s"
     assert not (tmp_path / "p.json").exists(), "a refused plan wrote its output file"
+
+
+def test_plan_readers_refuse_hostile_files_in_one_line(tmp_path):
+    """`rbp check` (and simulate and rig-run, through the same reader): exit 2 and one line
+    naming the file, for a device, a FIFO, a directory, a repeated key and a scenario."""
+    fifo = tmp_path / "plan.json"
+    os.mkfifo(fifo)
+    repeated = tmp_path / "repeated.json"
+    repeated.write_text('{"format": "reachbot-plan/2", "format": "reachbot-plan/1"}')
+    cases = [(fifo, "pipe"), (tmp_path, "directory"), (repeated, "duplicate key 'format'"),
+             (DEMO, "this is a scenario")]
+    if Path("/dev/zero").exists():
+        cases.append((Path("/dev/zero"), "device"))
+    for path, words in cases:
+        start = time.perf_counter()
+        result = run_rbp("check", str(path), cwd=tmp_path)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 2, (path, result.returncode, result.stderr)
+        assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
+            (path, result.stderr)
+        assert time.perf_counter() - start < 30, f"rbp check {path} took too long"

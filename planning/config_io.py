@@ -17,6 +17,7 @@ import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
+from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
 T = TypeVar("T")
@@ -59,7 +60,10 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
         if key not in fields:
             raise ConfigError(source, field, f"unknown key; expected one of {sorted(fields)}")
         changes[key] = _convert(value, hints[key], source, field, getattr(base, key))
-    return dataclasses.replace(base, **changes)
+    try:
+        return dataclasses.replace(base, **changes)
+    except RbpInputError as e:  # a dataclass that checks its own values (RepairConfig)
+        raise ConfigError(source, e.field or where, e.reason) from None
 
 
 def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
@@ -73,6 +77,8 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
         if value is None and type(None) in args:
             return None
         options = [a for a in args if a is not type(None)]
+        if len(options) == 1:  # X | None: X's own error, with its field
+            return _convert(value, options[0], source, field, current)
         reasons = []
         for option in options:
             try:

@@ -43,6 +43,7 @@ from planning.lattice_search import (
 )
 from planning.search_cost import RegraspHeuristic, attach_cost, boom_hop_length, edge_cost
 from planning.search_outcome import Quality
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility_kernel import held_kernel_threads
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -58,6 +59,13 @@ class RepairConfig:
     stride: int = 3
     window_expansions: int = 150
     passes: int = 3
+
+    def __post_init__(self) -> None:
+        for name in ("window", "stride", "window_expansions", "passes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise RbpInputError(f"must be a whole number of at least 1, got {value!r}",
+                                    field=f"footstep.repair.{name}")
 
 
 class _Edge:

@@ -271,6 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the route with the fewest regrasps whose predicted success (the "
                            "search's, exp(-cost)) is at least P, or the proof that none "
                            "reaches P (complete search, no expansion budget unless given)")
+    plan.add_argument("--repair", action="store_true",
+                      help="then improve the route window by window, each window searched to "
+                           "its optimum (planning.route_repair): routes nearer the most robust "
+                           "at about three times the footstep time (docs/benchmarks.md)")
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,

@@ -96,3 +96,27 @@ def test_repair_is_deterministic(demo: Scenario, first) -> None:
     b = repair_route(demo, again, fresh, RepairConfig(window=3, stride=2))
     assert [v[0] for v in a.path] == [v[0] for v in b.path], "a fresh memo changed the route"
     assert a.cost == pytest.approx(b.cost, rel=1e-12)
+
+
+def test_cli_repair_flag_and_config(tmp_path) -> None:
+    """`rbp plan --repair` records the repair in the plan's configuration and returns a route
+    no dearer than the default's; a bad repair setting gets one line naming its field."""
+    import json
+
+    from tests.cli_helpers import run_rbp
+
+    runs = {}
+    for name, extra in (("default", ()), ("repair", ("--repair",))):
+        result = run_rbp("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "-o",
+                         f"{name}.json", *extra, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr[-2000:]
+        runs[name] = json.loads((tmp_path / f"{name}.json").read_text())
+    repair = runs["repair"]["provenance"]["config"]["footstep"]["repair"]
+    assert repair is not None and repair["window"] >= 1, repair
+    assert runs["default"]["provenance"]["config"]["footstep"]["repair"] is None
+    assert runs["repair"]["search"]["cost"] <= runs["default"]["search"]["cost"] * (1 + 1e-9)
+    (tmp_path / "bad.yaml").write_text("footstep:\n  repair: {window: 0}\n")
+    bad = run_rbp("plan", "demo-shaft", "--footsteps-only", "--config", "bad.yaml", "-o",
+                  "bad.json", cwd=tmp_path)
+    assert bad.returncode == 2 and "footstep.repair.window" in bad.stderr, bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1, bad.stderr

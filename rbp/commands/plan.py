@@ -73,6 +73,10 @@ def plan_setup(args: argparse.Namespace):
         flags["search"], flags["min_success"] = "complete", args.min_success
         if args.max_expansions is None:
             flags["max_expansions"] = None
+    if getattr(args, "repair", False):
+        from planning.route_repair import RepairConfig
+
+        flags["repair"] = cfg.footstep.repair or RepairConfig()
     if args.time_limit is not None:
         flags["time_limit"] = args.time_limit
     if flags:

@@ -12,9 +12,47 @@ from pathlib import Path
 from typing import IO
 
 
-def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
-    """Call `write(f)` on a temporary binary file, then rename it to `path`."""
+IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".gif", ".webp")
+
+
+def output_target(path: str | Path) -> Path:
+    """Where writing `path` lands: a symlink's target (the link stays a link), else `path`.
+    Raises OSError for a symlink loop."""
     path = Path(path)
+    if not path.is_symlink():
+        return path
+    try:
+        return path.resolve(strict=False)
+    except RuntimeError as e:  # Python 3.11 says "Symlink loop" with a RuntimeError
+        raise OSError(f"{path}: a symlink loop") from e
+
+
+def output_problem(path: str | Path) -> str | None:
+    """Why `path` cannot be written as an output file, or None: checked before any work, so
+    that a plan of minutes is not computed for nothing. A symlink is followed to its target; a
+    missing folder is fine if it can be created."""
+    try:
+        target = output_target(path)
+    except OSError:
+        return "is a symlink loop"
+    if target.is_dir():
+        return "is a directory; give a file name"
+    if target.exists() and not target.is_file():
+        return "is not a regular file (a device or a pipe?)"
+    folder = target.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent  # the nearest existing folder must let us create the rest
+    if not folder.is_dir():
+        return f"{folder} is not a folder"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"the folder {folder} is not writable"
+    return None
+
+
+def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
+    """Call `write(f)` on a temporary binary file, then rename it to `path` (to a symlink's
+    target: the link stays)."""
+    path = output_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:

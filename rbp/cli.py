@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from rbp.commands.common import UserError, load_scenario_spec, read_plan
+from rbp.commands.common import UserError, check_output, load_scenario_spec, read_plan
 
 EXIT_STATUSES = """exit status:
   0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
@@ -41,6 +41,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     if not args.anchor_density > 0:
         raise UserError(f"--anchor-density: must be positive, got {args.anchor_density:g}")
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
+    check_output(args.output)
     try:
         scn = generate_cave(args.kind, args.seed, cfg)
     except RuntimeError as e:  # no feasible start stance in any draw
@@ -78,6 +79,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rb_drake.draw import scenario_figure
     from rb_drake.files import atomic_save_figure
 
+    check_output(args.output, picture=True)
     scn = load_scenario_spec(args.scenario, check_start=False)
     fig = scenario_figure(scn)
     atomic_save_figure(fig, args.output, dpi=args.dpi)
@@ -120,6 +122,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
     from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
+    check_output(args.output)
     scn, planner, cfg, motion = plan_setup(args)
     record = SearchRecord()
     plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record)

@@ -17,6 +17,22 @@ class UserError(RbpInputError):
     """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
 
 
+def check_output(path: str | Path, flag: str = "-o", picture: bool = False) -> Path:
+    """`path` as an output of option `flag`, refused (UserError naming the user's path) before
+    any work if it cannot be written; an image suffix is refused for a data file (`picture`
+    False), so that a plan and its picture never share a path."""
+    from rb_drake.files import IMAGE_SUFFIXES, output_problem
+
+    path = Path(path)
+    problem = output_problem(path)
+    if problem is None and not picture and path.suffix.lower() in IMAGE_SUFFIXES:
+        problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
+                   "beside it, named after it)")
+    if problem is not None:
+        raise UserError(f"{path}: {flag}: {problem}")
+    return path
+
+
 def load_scenario_spec(spec: str, check_start: bool = True):
     """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`)."""
     from rb_drake.scenario import bundled_caves, load_scenario

@@ -116,9 +116,10 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
 
 def cmd_rig_report(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure
-    from rbp.commands.common import UserError
+    from rbp.commands.common import UserError, check_output
     from systems.rig_interface import RigLcmConfig, report_figure
 
+    check_output(args.output, picture=True)
     log = _replay(args.log)
     if not len(log.replay.time):
         channel = RigLcmConfig().status_channel

@@ -72,8 +72,10 @@ def _progress(label: str):
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.commands.common import UserError
+    from rbp.commands.common import UserError, check_output
 
+    if args.json:
+        check_output(args.json, "--json")
     if args.trials < 0:
         raise UserError(f"--trials: must be 0 or more, got {args.trials}")
     if args.replan and args.trials == 0:

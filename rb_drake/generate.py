@@ -22,12 +22,13 @@ from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
 
 KINDS = ("shaft", "crevasse", "rockfall")
 MIN_LENGTH = 2.0  # m: start and goal sit 1 m from either end of a cave, so shorter has no climb
+MAX_LENGTH = 1000.0  # m: a longer cave is a typo (and 1e308 overflows)
 
 
 def length_problem(lo: float, hi: float) -> str | None:
     """Why (lo, hi) is no range of cave lengths to draw from, or None if it is one."""
-    if not MIN_LENGTH <= lo <= hi:
-        return f"need {MIN_LENGTH:g} <= MIN <= MAX, got {lo:g} {hi:g}"
+    if not MIN_LENGTH <= lo <= hi <= MAX_LENGTH:
+        return f"need {MIN_LENGTH:g} <= MIN <= MAX <= {MAX_LENGTH:g} (m), got {lo:g} {hi:g}"
     return None
 
 

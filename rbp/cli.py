@@ -30,6 +30,9 @@ EXIT_STATUSES = """exit status:
      `| head` does): no output file is left half-written"""
 
 
+MAX_ANCHOR_DENSITY = 20.0  # anchors per metre: one every 5 cm; denser caves take minutes to draw
+
+
 def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_write_text
     from rb_drake.generate import CaveConfig, generate_cave, length_problem
@@ -38,8 +41,11 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     lo, hi = args.length
     if (problem := length_problem(lo, hi)) is not None:
         raise UserError(f"--length: {problem}")
-    if not args.anchor_density > 0:
-        raise UserError(f"--anchor-density: must be positive, got {args.anchor_density:g}")
+    if not 0 < args.anchor_density <= MAX_ANCHOR_DENSITY:
+        raise UserError(f"--anchor-density: must be above 0 and at most {MAX_ANCHOR_DENSITY:g} "
+                        f"anchors per metre, got {args.anchor_density:g}")
+    if not 0 <= args.seed < 2**63:
+        raise UserError(f"--seed: must be 0 or more (below 2**63), got {args.seed}")
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
     check_output(args.output)
     try:
@@ -89,15 +95,22 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
 
 def cmd_scenario_list(args: argparse.Namespace) -> int:
     from rb_drake.scenario import bundled_caves
+    from systems.rig import RIG_SCENARIO
 
     for name, path in bundled_caves().items():
         print(f"{name:20s} {path}")
+    print(f"{'rig':20s} {RIG_SCENARIO}  (the lab rig's frame: rbp plan rig, rbp rig-run)")
     return EXIT_OK
 
 
 def _summary(plan: dict) -> str:
     if not plan["success"]:
-        return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s")
+        hint = ""
+        if (plan.get("search") or {}).get("stop") == "budget":
+            hint = ("; rbp plan --thorough searches on without a budget, --max-expansions N "
+                    "or --time-limit S sets another")
+        return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s"
+                + hint)
     grasps = f" (grasps alone {plan['p_grasps']:.4f})" if plan.get("p_grasps") is not None else ""
     return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}{grasps}, "
             f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s"
@@ -148,7 +161,8 @@ def _print_motion(plan: dict) -> None:
     better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in room)
     better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in inner)
     t = plan["timing"]
-    print(f"motion: {len(rows)} phases; SCP raised the mean P on {better_mean} of the "
+    phases = f"{len(rows)} phase{'' if len(rows) == 1 else 's'}"
+    print(f"motion: {phases}; SCP raised the mean P on {better_mean} of the "
           f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
           f"the {len(inner)} whose seed's minimum is not at a fixed end; seeds "
           f"{t['seed_body'] + t['seed_reach']:.2f} s, SCP {t['scp_body'] + t['scp_reach']:.2f} s")
@@ -307,10 +321,14 @@ def build_parser() -> argparse.ArgumentParser:
     scn = sub.add_parser("scenario", help="generate, check and show caves")
     ssub = scn.add_subparsers(dest="scenario_command", required=True)
     gen = ssub.add_parser("generate", help="a seeded random cave")
-    gen.add_argument("--kind", choices=("shaft", "crevasse", "rockfall"), default="shaft")
-    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("--kind", choices=("shaft", "crevasse", "rockfall"), default="shaft",
+                     help="a vertical shaft to climb, or a horizontal passage with a crevasse "
+                          "or a rockfall to cross (default shaft)")
+    gen.add_argument("--seed", type=int, default=0,
+                     help="random seed, 0 or more: the same seed gives the same cave (default 0)")
     gen.add_argument("--anchor-density", type=float, default=3.0,
-                     help="anchors per metre of rock surface (default 3.0)")
+                     help="anchors per metre of rock surface, above 0 and at most "
+                          "20 (default 3.0)")
     gen.add_argument("--length", type=float, nargs=2, default=(7.0, 9.0), metavar=("MIN", "MAX"),
                      help="shaft height or passage length, drawn in this range in m (default "
                           "7 9; the experiments use 4.5 5)")

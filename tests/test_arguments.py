@@ -1,0 +1,45 @@
+"""Arguments checked before the work, with a stated range, and messages that help (issue 32)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.cli_helpers import run_rbp
+
+
+@pytest.mark.parametrize(("args", "flag"), [
+    (("--seed", "-1"), "--seed"),
+    (("--length", "1e308", "1e308"), "--length"),
+    (("--anchor-density", "1e5"), "--anchor-density"),
+    (("--anchor-density", "0"), "--anchor-density"),
+])
+def test_generate_refuses_out_of_range_arguments_at_once(tmp_path: Path, args, flag) -> None:
+    start = time.perf_counter()
+    result = run_rbp("scenario", "generate", *args, "-o", "cave.yaml", cwd=tmp_path)
+    assert result.returncode == 2, (args, result.returncode, result.stderr[-1500:])
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and flag in lines[0], result.stderr
+    assert time.perf_counter() - start < 30, f"{args} was refused only after the work"
+    assert not (tmp_path / "cave.yaml").exists()
+
+
+def test_generate_help_explains_kind_and_seed(tmp_path: Path) -> None:
+    text = " ".join(run_rbp("scenario", "generate", "--help", cwd=tmp_path).stdout.split())
+    assert "a vertical shaft to climb" in text, text
+    assert "the same seed gives the same cave" in text, text
+
+
+def test_scenario_list_names_the_rig(tmp_path: Path) -> None:
+    names = [line.split()[0] for line in
+             run_rbp("scenario", "list", cwd=tmp_path).stdout.splitlines() if line.strip()]
+    assert "rig" in names and "demo-shaft" in names, names
+
+
+def test_a_budget_stop_says_how_to_search_on(tmp_path: Path) -> None:
+    result = run_rbp("plan", "demo-shaft", "--footsteps-only", "--max-expansions", "3",
+                     "--no-pictures", "-o", "p.json", cwd=tmp_path)
+    assert result.returncode == 1, result.stderr[-1500:]
+    assert "--thorough" in result.stdout and "--max-expansions" in result.stdout, result.stdout

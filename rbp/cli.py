@@ -136,6 +136,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
     check_output(args.output)
+    if args.phase_figure is not None:  # what can be refused before planning
+        if args.phase_figure < 0:
+            raise UserError(f"--phase-figure: must be 0 or more, got {args.phase_figure}")
+        if args.footsteps_only or args.no_pictures:
+            flag = "--footsteps-only" if args.footsteps_only else "--no-pictures"
+            raise UserError(f"--phase-figure: draws a phase's trajectory, which {flag} "
+                            "leaves out")
     scn, planner, cfg, motion = plan_setup(args)
     record = SearchRecord()
     plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record)

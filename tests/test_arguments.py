@@ -43,3 +43,23 @@ def test_a_budget_stop_says_how_to_search_on(tmp_path: Path) -> None:
                      "--no-pictures", "-o", "p.json", cwd=tmp_path)
     assert result.returncode == 1, result.stderr[-1500:]
     assert "--thorough" in result.stdout and "--max-expansions" in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (("--phase-figure", "-1"), "must be 0 or more"),
+    (("--phase-figure", "2", "--footsteps-only"), "--footsteps-only"),
+])
+def test_phase_figure_refused_before_planning(tmp_path: Path, args, words) -> None:
+    start = time.perf_counter()
+    result = run_rbp("plan", "demo-shaft", "-o", "p.json", *args, cwd=tmp_path)
+    assert result.returncode == 2 and words in result.stderr, result.stderr[-1500:]
+    assert time.perf_counter() - start < 30 and not (tmp_path / "p.json").exists()
+
+
+def test_phase_figure_beyond_the_plan_keeps_the_plan_and_its_picture(tmp_path: Path) -> None:
+    result = run_rbp("plan", "demo-shaft", "-o", "p.json", "--phase-figure", "999",
+                     cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    assert "phase 999 has no trajectory" in result.stderr, result.stderr
+    assert (tmp_path / "p.json").exists() and (tmp_path / "p.png").exists(), \
+        "the plan and its picture must be written before the phase is refused"

@@ -207,15 +207,17 @@ def write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str |
     from rbp.commands.common import UserError
 
     with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
-    if phase is not None and phase not in with_motion:
-        raise UserError(f"--phase-figure: phase {phase} has no trajectory; phases with one: "
-                        f"{with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
     picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
     print(f"wrote {picture}")
     if search is not None and not search.success:
         path = out.with_name(f"{out.stem}-search.png")
         atomic_save_figure(search_figure(scn, search), path, dpi=110)
         print(f"wrote {path}")
+    if phase is not None and phase not in with_motion:  # known only now: the plan is kept
+        count = len(plan["phases"])
+        raise UserError(f"--phase-figure: the plan has {count} phase{'' if count == 1 else 's'}"
+                        f" ({out} is written), and phase {phase} has no trajectory; phases "
+                        f"with one: {with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
     if phase is not None:
         fig = out.with_name(f"{out.stem}-phase{phase}.png")
         atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)

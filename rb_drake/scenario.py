@@ -234,6 +234,9 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     """Parse and validate a scenario mapping; raises ScenarioError."""
     rd = _Reader(source)
     data = rd.mapping("(top level)", data)
+    if str(data.get("format", "")).startswith("reachbot-plan/"):
+        raise rd.fail("format", f"this is a plan ({data['format']}), not a scenario: to plan "
+                      f"its cave again, rbp plan --from-plan {source} -o NEW.json")
     unknown = sorted(str(k) for k in set(data) - TOP_LEVEL)
     if unknown:
         raise rd.fail(str(unknown[0]), f"unknown field; expected one of {sorted(TOP_LEVEL)}")

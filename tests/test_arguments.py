@@ -63,3 +63,10 @@ def test_phase_figure_beyond_the_plan_keeps_the_plan_and_its_picture(tmp_path: P
     assert "phase 999 has no trajectory" in result.stderr, result.stderr
     assert (tmp_path / "p.json").exists() and (tmp_path / "p.png").exists(), \
         "the plan and its picture must be written before the phase is refused"
+
+
+def test_a_plan_given_as_a_scenario_points_to_from_plan(tmp_path: Path) -> None:
+    plan = Path(__file__).parent / "data" / "golden" / "demo-shaft.json"
+    result = run_rbp("plan", str(plan), "-o", "again.json", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    assert "this is a plan" in result.stderr and "--from-plan" in result.stderr, result.stderr

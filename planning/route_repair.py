@@ -222,7 +222,8 @@ def repair_route(scn: Scenario, result: CompleteResult, memo: LatticeMemo,
     hops = _HopTable(scn)
     goal_bound = RegraspHeuristic(scn)
     path = list(result.path)
-    others = result.alternatives or [None] * len(result.poses)
+    others: list[np.ndarray | None] = (list(result.alternatives) if result.alternatives
+                                       else [None] * len(result.poses))
     edges = [_Edge(np.asarray(pose, dtype=float), np.asarray(p4), alt,
                    edge_cost(scn, path[i][0], _boom(path[i][0], path[i + 1][0]),
                              path[i + 1][0][_boom(path[i][0], path[i + 1][0])], pose))
@@ -266,10 +267,11 @@ def repair_route(scn: Scenario, result: CompleteResult, memo: LatticeMemo,
         return result
     quality = Quality.OPTIMAL if cost <= result.lower_bound * (1.0 + 1e-12) else (
         Quality.BOUNDED if math.isfinite(result.lower_bound) else result.quality)
+    alternatives = [e.alternatives for e in edges if e.alternatives is not None]
     return result._replace(path=path, poses=[e.pose for e in edges],
                            probabilities=[e.p4 for e in edges],
-                           alternatives=[e.alternatives for e in edges], goal_pose=goal_pose,
-                           cost=cost, quality=quality)
+                           alternatives=alternatives if len(alternatives) == len(edges) else None,
+                           goal_pose=goal_pose, cost=cost, quality=quality)
 
 
 def _boom(a: tuple, b: tuple) -> int:

@@ -52,7 +52,7 @@ from planning.lattice_moves import (
     vertex_moves,
 )
 from planning.search_cost import DistanceHeuristic, RegraspHeuristic, edge_cost
-from rb_drake.feasibility_kernel import held_kernel_threads
+from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]

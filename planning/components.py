@@ -14,9 +14,9 @@ from typing import NamedTuple
 import numpy as np
 
 from planning.flood import grow_component, reach_box
+from planning.flood_kernel import component_arrays
 from planning.lattice import SPAN, LatticeConfig, poses_of, unpack
 from planning.transition import anchor_table, pack_rows
-from rb_drake.feasibility_kernel import component_arrays
 from rb_drake.scenario import Scenario
 
 INFEASIBLE = -1  # component_of / known_component: a pose no component holds

@@ -50,7 +50,7 @@ from planning.transition import (
     reachable_anchors,
     release_poses,
 )
-from rb_drake.feasibility_kernel import score_poses
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]

@@ -30,8 +30,9 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
+from planning.lattice_kernels import reach_violation
 from planning.transition import anchor_table, pack_rows
-from rb_drake.feasibility_kernel import reach_violation, score_rows
+from rb_drake.kernel.scoring import score_rows
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 

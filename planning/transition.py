@@ -22,13 +22,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from planning.lattice_kernels import reach_violation
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses, violation
-from rb_drake.feasibility_kernel import (
-    PackedStances,
-    reach_violation,
-    score_poses,
-    score_rows,
-)
+from rb_drake.kernel.scoring import PackedStances, score_poses, score_rows
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -180,7 +176,7 @@ def _score(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str | Non
     -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored).
 
     Every configuration at every pose is one row of one compiled call
-    (`feasibility_kernel.score_rows`); `_score_reference` is the same through check_poses and
+    (`kernel.scoring.score_rows`); `_score_reference` is the same through check_poses and
     violation."""
     if new_anchor is None and any(k in configs for k in ARRIVE):
         raise ValueError("the arrival configurations need the new anchor")

@@ -11,9 +11,12 @@ import math
 import numpy as np
 from numba import njit
 
+from rb_drake.kernel.cache_stamp import stamp_with_kernel
 from rb_drake.kernel.layout import ALL_BOOMS
 from rb_drake.kernel.threads import score_threads
 from rb_drake.params import NUM_BOOMS
+
+stamp_with_kernel(__file__)  # its cached code holds the pose kernel's
 
 
 @njit(cache=True, error_model="numpy")

@@ -15,6 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
+from rb_drake.kernel.cache_stamp import stamp_with_kernel
 from rb_drake.kernel.collision import segment_hits
 from rb_drake.kernel.layout import ALL_BOOMS, Param, robot_params
 from rb_drake.kernel.pose_kernel import score_kernel
@@ -24,6 +25,8 @@ from rb_drake.params import NUM_BOOMS, RobotParams
 _TWO_PI = 2.0 * math.pi
 _LARGEST_FLOAT = np.finfo(np.float64).max
 _CONFIGS = 4  # a transition's configurations: old 4-stance, 3-stance at either anchor, new
+
+stamp_with_kernel(__file__)  # its cached code holds the pose kernel's
 
 
 def reach_violation(robot: RobotParams, poses: np.ndarray, targets: np.ndarray,

@@ -456,3 +456,40 @@ def test_move_table_decides_reach_as_reach_rows_at_its_edges(
             np.testing.assert_array_equal(mine, want, err_msg=f"boom {boom}, target {k}")
             reached += 0 in want
         assert 0 < reached < len(targets), f"boom {boom}: edge targets all on one side"
+
+
+def test_kernel_cache_stamped_with_every_kernel_source(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """numba's cache entries of every compiled kernel, in rb_drake.kernel and beside the lattice
+    in planning, are stamped with the whole kernel's sources: an edit to one module (here
+    allocation's) changes the stamp of the others' (here pose_kernel's and the flood fill's),
+    whose cached code holds its compiled functions."""
+    import numba
+
+    import planning.flood_kernel
+    import planning.lattice_kernels
+    from rb_drake import kernel
+    from rb_drake.kernel import cache_stamp
+
+    modules = [getattr(kernel, name) for name in ("special", "algebra3", "collision",
+                                                   "allocation", "pose_kernel", "threads")]
+    modules += [planning.flood_kernel, planning.lattice_kernels]
+    dispatchers = [f for m in modules for f in vars(m).values()
+                   if isinstance(f, numba.core.registry.CPUDispatcher)]
+    assert len(dispatchers) > 30
+    for f in dispatchers:
+        assert isinstance(f._cache._impl.locator, cache_stamp.LOCATORS), f"{f.__name__} unstamped"
+
+    copy = tmp_path / "kernel"
+    copy.mkdir()
+    for path in cache_stamp.KERNEL_DIR.glob("*.py"):
+        (copy / path.name).write_bytes(path.read_bytes())
+    monkeypatch.setattr(cache_stamp, "KERNEL_DIR", copy)
+    flood_file = planning.flood_kernel.__file__
+    before = [cache_stamp.source_stamp(str(copy / "pose_kernel.py")),
+              cache_stamp.source_stamp(flood_file)]
+    with (copy / "allocation.py").open("a") as f:
+        f.write("# edited\n")
+    after = [cache_stamp.source_stamp(str(copy / "pose_kernel.py")),
+             cache_stamp.source_stamp(flood_file)]
+    assert before[0] != after[0] and before[1] != after[1], "an edit left a stamp unchanged"

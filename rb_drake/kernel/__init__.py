@@ -15,6 +15,7 @@ is used everywhere else. The modules, lowest first:
 - `pose_kernel`: the compiled loop that scores rows (`score_kernel`);
 - `threads`: the thread count and the rows shared over threads;
 - `scoring`: the Python entry points, `score_poses` and `score_rows`.
+- `cache_stamp`: numba's on-disk cache entries of all of them, stamped with every kernel source.
 
 The lattice search's compiled flood fill and moves, which call these, live beside the lattice
 they serve (`planning.flood_kernel`, `planning.lattice_kernels`).
@@ -30,6 +31,11 @@ pose within about that of a threshold.
 
 numba's on-disk cache (`cache=True`) keys a compiled function by its own file, while its cached
 code holds copies of the compiled functions it calls, from whatever module, and the values of
-the globals it reads. The constants that decide (limits, MIN_CONDITIONING, REGULARISATION, ...)
-reach the kernels as data (`layout.robot_params`), not as globals.
+the globals it reads: `cache_stamp` stamps the kernels' entries with every kernel source
+instead, so that none can go stale. The constants that decide (limits, MIN_CONDITIONING,
+REGULARISATION, ...) reach the kernels as data (`layout.robot_params`), not as globals.
 """
+
+from rb_drake.kernel import cache_stamp
+
+cache_stamp.install()  # before any kernel module defines its compiled functions

@@ -14,7 +14,8 @@ the feasibility kernel (`decide_only`), and the unvisited lattice neighbours of 
 poses make the next wave. A dense grid over the box every reachable pose lies in (each
 anchor's disc of radius boom length plus shoulder offset, every orientation) records what is
 visited. The compiled fill is `planning.flood_kernel.flood_kernel`; its cached code holds the
-pose kernel's, which numba's on-disk cache does not check (see `rb_drake.kernel`).
+pose kernel's, so its cache entries are stamped with the kernel's sources
+(`rb_drake.kernel.cache_stamp`).
 """
 
 from __future__ import annotations

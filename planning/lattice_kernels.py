@@ -17,7 +17,16 @@ from numba import njit
 
 from rb_drake.kernel.cache_stamp import stamp_with_kernel
 from rb_drake.kernel.collision import segment_hits
-from rb_drake.kernel.layout import ALL_BOOMS, Param, robot_params
+from rb_drake.kernel.layout import (
+    ALL_BOOMS,
+    P_CLEARANCE,
+    P_DIRECTION,
+    P_L_HI,
+    P_L_LO,
+    P_RANGE,
+    P_SHOULDER,
+    robot_params,
+)
 from rb_drake.kernel.pose_kernel import score_kernel
 from rb_drake.kernel.threads import score_threads
 from rb_drake.params import NUM_BOOMS, RobotParams
@@ -46,17 +55,17 @@ def reach_violation(robot: RobotParams, poses: np.ndarray, targets: np.ndarray,
 def _reach_kernel(poses, targets, booms, params):  # pragma: no cover - compiled
     P, K = poses.shape[0], targets.shape[0]
     out = np.empty((P, K))
-    lo, hi, rng = params[Param.L_LO], params[Param.L_HI], params[Param.RANGE]
+    lo, hi, rng = params[P_L_LO], params[P_L_HI], params[P_RANGE]
     for p in range(P):
         x, y, phi = poses[p, 0], poses[p, 1], poses[p, 2]
         c, s = math.cos(phi), math.sin(phi)
         for k in range(K):
             i = booms[k]
-            sx, sy = params[Param.SHOULDER + 2 * i], params[Param.SHOULDER + 2 * i + 1]
+            sx, sy = params[P_SHOULDER + 2 * i], params[P_SHOULDER + 2 * i + 1]
             dx = targets[k, 0] - (x + (c * sx - s * sy))
             dy = targets[k, 1] - (y + (s * sx + c * sy))
             length = math.sqrt(dx * dx + dy * dy)
-            w = ((math.atan2(dy, dx) - phi - params[Param.DIRECTION + i] + math.pi) % _TWO_PI
+            w = ((math.atan2(dy, dx) - phi - params[P_DIRECTION + i] + math.pi) % _TWO_PI
                  - math.pi)
             if w >= math.pi:
                 w -= _TWO_PI
@@ -76,18 +85,18 @@ def _decode(key, span, dx, dphi, n_phi):  # pragma: no cover - compiled
 @njit(cache=True)
 def _reaches(x, y, c, s, phi, tx, ty, i, params):  # pragma: no cover - compiled
     """Whether _reach_kernel's violation of boom i to (tx, ty) at pose (x, y, phi) is 0."""
-    sx, sy = params[Param.SHOULDER + 2 * i], params[Param.SHOULDER + 2 * i + 1]
+    sx, sy = params[P_SHOULDER + 2 * i], params[P_SHOULDER + 2 * i + 1]
     dx = tx - (x + (c * sx - s * sy))
     dy = ty - (y + (s * sx + c * sy))
     length = math.sqrt(dx * dx + dy * dy)
     # The violation, a sum of non-negative terms, is 0 exactly when each term is: the length's
     # first, so that a boom out of reach costs no atan2.
-    if length > params[Param.L_HI] or length < params[Param.L_LO]:
+    if length > params[P_L_HI] or length < params[P_L_LO]:
         return False
-    w = (math.atan2(dy, dx) - phi - params[Param.DIRECTION + i] + math.pi) % _TWO_PI - math.pi
+    w = (math.atan2(dy, dx) - phi - params[P_DIRECTION + i] + math.pi) % _TWO_PI - math.pi
     if w >= math.pi:
         w -= _TWO_PI
-    return abs(w) <= params[Param.RANGE]
+    return abs(w) <= params[P_RANGE]
 
 
 @njit(cache=True)
@@ -134,7 +143,7 @@ def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
     out = np.empty(rows.shape[0], dtype=np.int64)
     shoulders = np.empty((rows.shape[0], 2))
     n = 0
-    sx, sy = params[Param.SHOULDER + 2 * boom], params[Param.SHOULDER + 2 * boom + 1]
+    sx, sy = params[P_SHOULDER + 2 * boom], params[P_SHOULDER + 2 * boom + 1]
     for q in range(rows.shape[0]):
         r = rows[q]
         x, y, phi = _decode(keys[r], span, dx, dphi, n_phi)
@@ -143,7 +152,7 @@ def lattice_reach_rows(keys, rows, tx, ty, boom, params, span, dx, dphi, n_phi,
             out[n] = r
             shoulders[n, 0], shoulders[n, 1] = x + (c * sx - s * sy), y + (s * sx + c * sy)
             n += 1
-    kept = _keep_clear(out[:n].copy(), shoulders[:n], tx, ty, edges, params[Param.CLEARANCE], out,
+    kept = _keep_clear(out[:n].copy(), shoulders[:n], tx, ty, edges, params[P_CLEARANCE], out,
                        0)
     return out[:kept].copy()
 
@@ -183,16 +192,16 @@ def lattice_move_table(keys, release_rows, starts, targets, params, span, dx, dp
     offsets = np.zeros(NUM_BOOMS * K + 1, dtype=np.int64)
     out = np.empty(0, dtype=np.int64)
     n_out = 0
-    clearance = params[Param.CLEARANCE]
-    L_lo, L_hi, rng = params[Param.L_LO], params[Param.L_HI], params[Param.RANGE]
+    clearance = params[P_CLEARANCE]
+    L_lo, L_hi, rng = params[P_L_LO], params[P_L_HI], params[P_RANGE]
     # Clear-cut cases decided without the square root or atan2, by margins (1e-9) far beyond
     # their rounding; the rest by _reaches' own arithmetic, so the answer is its.
     far2 = (L_hi * (1.0 + 1e-9)) ** 2
     near2 = (L_lo * (1.0 - 1e-9)) ** 2
     cos_rng = math.cos(rng) if rng < math.pi else -2.0
     for j in range(NUM_BOOMS):
-        sx, sy = params[Param.SHOULDER + 2 * j], params[Param.SHOULDER + 2 * j + 1]
-        direction = params[Param.DIRECTION + j]
+        sx, sy = params[P_SHOULDER + 2 * j], params[P_SHOULDER + 2 * j + 1]
+        direction = params[P_DIRECTION + j]
         first, last = starts[j], starts[j + 1]
         # (target, row, shoulder) of every reaching pair, rows ascending within a target
         cap = 64

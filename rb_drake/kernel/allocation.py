@@ -18,7 +18,19 @@ from rb_drake.kernel.algebra3 import (
     solve3,
     solve_without,
 )
-from rb_drake.kernel.layout import Param
+from rb_drake.kernel.layout import (
+    P_BODY_MASS,
+    P_DENSITY,
+    P_GRAVITY,
+    P_GRIPPER_MASS,
+    P_LOG_P_MIN,
+    P_MAX_PULL,
+    P_MIN_CONDITIONING,
+    P_MOMENT_SCALE,
+    P_STATICS_TOL,
+    P_TORQUE_MAX,
+    P_Z_FLOOR,
+)
 from rb_drake.kernel.special import log_ndtr, mills_ratio
 from rb_drake.params import NUM_BOOMS
 
@@ -62,9 +74,9 @@ def without_column(A: np.ndarray, c: int, work: np.ndarray) -> None:
 def limb_load(x, y, L, sh, tg, j, prm, b):
     """geometry.limb_load: the cantilevered free limb j (its boom from the shoulder sh[j] to the
     gripper at tg[j]) added to the body's load b (in place); returns its shoulder torque."""
-    gx, gy = prm[Param.GRAVITY], prm[Param.GRAVITY + 1]
-    m_boom = prm[Param.DENSITY] * L[j]
-    m_grip = prm[Param.GRIPPER_MASS]
+    gx, gy = prm[P_GRAVITY], prm[P_GRAVITY + 1]
+    m_boom = prm[P_DENSITY] * L[j]
+    m_grip = prm[P_GRIPPER_MASS]
     tx, ty = tg[j, 0], tg[j, 1]
     px, py = sh[j, 0], sh[j, 1]
     mx, my = 0.5 * (px + tx), 0.5 * (py + ty)
@@ -195,11 +207,11 @@ def release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, f_lo, f_hi, ignore_
     and `rbp check` counts it; the 3-stance alone does not. `mu`
     and `sigma` are the 4-stance's allocation's (`allocate4`): each grasp's mean limit and
     spread."""
-    b3[0] = -prm[Param.BODY_MASS] * prm[Param.GRAVITY]
-    b3[1] = -prm[Param.BODY_MASS] * prm[Param.GRAVITY + 1]
+    b3[0] = -prm[P_BODY_MASS] * prm[P_GRAVITY]
+    b3[1] = -prm[P_BODY_MASS] * prm[P_GRAVITY + 1]
     b3[2] = 0.0
     torque = limb_load(x, y, L, sh, tg, j, prm, b3)
-    if abs(torque) > prm[Param.TORQUE_MAX]:  # the cheap tests first
+    if abs(torque) > prm[P_TORQUE_MAX]:  # the cheap tests first
         return math.nan
     rhs[0], rhs[1], rhs[2] = b3[0], b3[1], b3[2]
     ok = abs(solve_without(A, j, rhs, w)) > 1e-12
@@ -215,9 +227,9 @@ def release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, f_lo, f_hi, ignore_
             return math.nan
     if not ignore_grasps:  # every grasp's z >= Phi^-1(p_min), else r < log p_min (exact)
         for i in range(NUM_BOOMS):
-            if i != j and abs(psi[i]) < HALF_PI and (mu[i] - f[i]) / sigma[i] < prm[Param.Z_FLOOR]:
+            if i != j and abs(psi[i]) < HALF_PI and (mu[i] - f[i]) / sigma[i] < prm[P_Z_FLOOR]:
                 return math.nan
-        if mu[j] / sigma[j] < prm[Param.Z_FLOOR]:  # the freed grasp, unloaded (below)
+        if mu[j] / sigma[j] < prm[P_Z_FLOOR]:  # the freed grasp, unloaded (below)
             return math.nan
     residual = 0.0
     for r in range(3):
@@ -225,7 +237,7 @@ def release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, f_lo, f_hi, ignore_
         for i in range(NUM_BOOMS):
             acc += (A[r, i] if i != j else 0.0) * (f[i] if math.isfinite(f[i]) else 0.0)
         residual = max(residual, abs(acc - b3[r]))
-    statics_ok = residual < prm[Param.STATICS_TOL]
+    statics_ok = residual < prm[P_STATICS_TOL]
     r_sum = 0.0
     for i in range(NUM_BOOMS):
         if i != j:
@@ -242,24 +254,24 @@ def release_r(j, x, y, L, sh, tg, u, psi, A, prm, mu, sigma, f_lo, f_hi, ignore_
     robustness = r_sum if statics_ok else -math.inf
     if not ignore_grasps:
         for i in range(NUM_BOOMS):
-            if i != j and not abs(psi[i]) < prm[Param.MAX_PULL]:  # feasibility.pull_within
+            if i != j and not abs(psi[i]) < prm[P_MAX_PULL]:  # feasibility.pull_within
                 return math.nan
-    if abs(torque) > prm[Param.TORQUE_MAX]:
+    if abs(torque) > prm[P_TORQUE_MAX]:
         return math.nan
     if not statics_ok:
         return math.nan
-    if not ignore_grasps and robustness < prm[Param.LOG_P_MIN]:
+    if not ignore_grasps and robustness < prm[P_LOG_P_MIN]:
         return math.nan
     m = 0
     for i in range(NUM_BOOMS):
         if i != j:
             B[0, m] = A[0, i]
             B[1, m] = A[1, i]
-            B[2, m] = A[2, i] * prm[Param.MOMENT_SCALE]
+            B[2, m] = A[2, i] * prm[P_MOMENT_SCALE]
             m += 1
-    above = singular_value_above(B, m, prm[Param.MIN_CONDITIONING])
+    above = singular_value_above(B, m, prm[P_MIN_CONDITIONING])
     if above < 0:
-        above = int(smallest_singular_value(B, m) >= prm[Param.MIN_CONDITIONING])
+        above = int(smallest_singular_value(B, m) >= prm[P_MIN_CONDITIONING])
     if not above:
         return math.nan
     return robustness

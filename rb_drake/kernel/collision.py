@@ -12,8 +12,7 @@ import numpy as np
 from numba import njit
 
 from rb_drake.collision import Rock
-from rb_drake.feasibility import Reason
-from rb_drake.kernel.layout import BODY_SEGMENT
+from rb_drake.kernel.layout import BODY_SEGMENT, REASON_BODY_COLLISION, REASON_BOOM_COLLISION
 from rb_drake.params import NUM_BOOMS
 
 _ROCK_CACHE: weakref.WeakKeyDictionary[Rock, tuple[np.ndarray, np.ndarray, np.ndarray]] = (
@@ -99,7 +98,7 @@ def near_edges(poses, edges, reach) -> tuple[np.ndarray, np.ndarray]:
 @njit(cache=True, error_model="numpy")
 def collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance, edges, owner,
                     near_hit, near_ray, parity, vertices, collide) -> int:
-    """Reason.BODY_COLLISION, BOOM_COLLISION or 0 for the pose (x, y, phi = atan2(s, c)) whose
+    """REASON_BODY_COLLISION, BOOM_COLLISION or 0 for the pose (x, y, phi = atan2(s, c)) whose
     booms run from the shoulders sh to the targets tg along u (collision.Rock's tests), testing
     the segments of `collide`'s bits only (layout.ALL_SEGMENTS)."""
     if collide & BODY_SEGMENT:
@@ -115,14 +114,14 @@ def collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance,
         ex = tg[i, 0] - clearance * ux
         ey = tg[i, 1] - clearance * uy
         if segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
-            return Reason.BOOM_COLLISION
+            return REASON_BOOM_COLLISION
     return 0
 
 
 @njit(cache=True, error_model="numpy")
 def body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit, near_ray,
                    parity, vertices) -> int:
-    """Reason.BODY_COLLISION or 0 for the body square of the pose (x, y, phi = atan2(s, c)),
+    """REASON_BODY_COLLISION or 0 for the body square of the pose (x, y, phi = atan2(s, c)),
     its corners (body frame: corner_x, corner_y) placed into cx, cy: an edge crossed, a corner
     inside the rock, or a whole rock polygon inside the square."""
     for q in range(4):
@@ -132,7 +131,7 @@ def body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hi
         r = (q + 1) % 4
         if (segment_hits(cx[q], cy[q], cx[r], cy[r], edges, near_hit)
                 or _inside_rock(cx[q], cy[q], edges, owner, near_ray, parity)):
-            return Reason.BODY_COLLISION
+            return REASON_BODY_COLLISION
     for v in range(vertices.shape[0]):  # a whole rock polygon inside the body square
         inside = True
         for q in range(4):
@@ -143,6 +142,6 @@ def body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hi
                 inside = False
                 break
         if inside:
-            return Reason.BODY_COLLISION
+            return REASON_BODY_COLLISION
     return 0
 

@@ -11,12 +11,46 @@ import math
 import numpy as np
 from numba import njit
 
-from rb_drake.feasibility import Reason
 from rb_drake.grasp import HALF_PI
 from rb_drake.kernel.algebra3 import singular_value_above, smallest_singular_value, solve_without
 from rb_drake.kernel.allocation import allocate4, limb_load, mean_limit, release_r
 from rb_drake.kernel.collision import body_collision, collision_code, near_edges
-from rb_drake.kernel.layout import ALL_SEGMENTS, BODY_SEGMENT, BodyKnown, Param
+from rb_drake.kernel.layout import (
+    ALL_SEGMENTS,
+    BODY_CLEAR,
+    BODY_IN_ROCK,
+    BODY_SEGMENT,
+    BODY_UNKNOWN,
+    P_BODY_MASS,
+    P_CLEARANCE,
+    P_DIRECTION,
+    P_F_HI,
+    P_F_LO,
+    P_GRAVITY,
+    P_HEIGHT,
+    P_L_HI,
+    P_L_LO,
+    P_LOG_P_MIN,
+    P_MAX_PULL,
+    P_MIN_CONDITIONING,
+    P_MOMENT_SCALE,
+    P_RANGE,
+    P_REGULARISATION,
+    P_SHOULDER,
+    P_STATICS_TOL,
+    P_TORQUE_MAX,
+    P_WIDTH,
+    P_Z_FLOOR,
+    REASON_BODY_COLLISION,
+    REASON_BOOM_COLLISION,
+    REASON_BOOM_LENGTH,
+    REASON_PROBABILITY,
+    REASON_PULL_ANGLE,
+    REASON_SHOULDER_ANGLE,
+    REASON_SHOULDER_TORQUE,
+    REASON_SINGULAR,
+    REASON_STATICS,
+)
 from rb_drake.kernel.special import log_ndtr
 from rb_drake.params import NUM_BOOMS
 
@@ -68,18 +102,18 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
     allocation's tests, the conditioning last) and its violation is NaN: feasibility, and the
     robustness, log-probabilities and tensions of feasible rows, are as without it; the
     reason of an infeasible row is one failing test, not always the first."""
-    L_lo, L_hi, rng = prm[Param.L_LO], prm[Param.L_HI], prm[Param.RANGE]
-    f_lo, f_hi = prm[Param.F_LO], prm[Param.F_HI]
-    gx, gy = prm[Param.GRAVITY], prm[Param.GRAVITY + 1]
-    reg = prm[Param.REGULARISATION]
-    log_p_min = prm[Param.LOG_P_MIN]
-    half_w, half_h = prm[Param.WIDTH] / 2, prm[Param.HEIGHT] / 2
+    L_lo, L_hi, rng = prm[P_L_LO], prm[P_L_HI], prm[P_RANGE]
+    f_lo, f_hi = prm[P_F_LO], prm[P_F_HI]
+    gx, gy = prm[P_GRAVITY], prm[P_GRAVITY + 1]
+    reg = prm[P_REGULARISATION]
+    log_p_min = prm[P_LOG_P_MIN]
+    half_w, half_h = prm[P_WIDTH] / 2, prm[P_HEIGHT] / 2
     corner_x = np.array([half_w, -half_w, -half_w, half_w])
     corner_y = np.array([half_h, half_h, -half_h, -half_h])
     has_rock = edges.shape[0] > 0
     shoulder_reach = 0.0
     for i in range(NUM_BOOMS):
-        sx, sy = prm[Param.SHOULDER + 2 * i], prm[Param.SHOULDER + 2 * i + 1]
+        sx, sy = prm[P_SHOULDER + 2 * i], prm[P_SHOULDER + 2 * i + 1]
         shoulder_reach = max(shoulder_reach, math.sqrt(sx * sx + sy * sy))
     # Every segment tested for collision lies within this distance of its pose's centre (a
     # boom is tested only once its length is within bounds).
@@ -87,7 +121,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
     dir_cos = np.empty(NUM_BOOMS)
     dir_sin = np.empty(NUM_BOOMS)
     for i in range(NUM_BOOMS):
-        direction = prm[Param.DIRECTION + i]
+        direction = prm[P_DIRECTION + i]
         dir_cos[i], dir_sin[i] = math.cos(direction), math.sin(direction)
     # the shoulder test's limit as a cosine (-2: every direction is within a range of pi)
     cos_range = math.cos(rng + 1e-12) if rng + 1e-12 < math.pi else -2.0
@@ -136,7 +170,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         # -- geometry (geometry.boom_geometry, statics.statics_problem)
         reach_code = 0
         for i in range(NUM_BOOMS):
-            sx, sy = prm[Param.SHOULDER + 2 * i], prm[Param.SHOULDER + 2 * i + 1]
+            sx, sy = prm[P_SHOULDER + 2 * i], prm[P_SHOULDER + 2 * i + 1]
             off[i, 0], off[i, 1] = c * sx - s * sy, s * sx + c * sy
             sh[i, 0], sh[i, 1] = x + off[i, 0], y + off[i, 1]
             if att[i]:
@@ -148,7 +182,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
             u[i, 0], u[i, 1] = dx / L[i], dy / L[i]
             if decide_only:  # a boom out of reach decides the row: the rest is not needed
                 if L[i] < L_lo or L[i] > L_hi:
-                    reach_code = Reason.BOOM_LENGTH
+                    reach_code = REASON_BOOM_LENGTH
                     break
                 # The shoulder angle's cosine, clear of the limit's by 1e-9 (far beyond its
                 # rounding), decides without atan2; near the limit, atan2 as below.
@@ -157,15 +191,15 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
                 if cos_w > cos_range + 1e-9:
                     theta[i] = 0.0  # within range: its value is not needed with decide_only
                 elif cos_w < cos_range - 1e-9:
-                    reach_code = Reason.SHOULDER_ANGLE
+                    reach_code = REASON_SHOULDER_ANGLE
                     break
                 else:
-                    theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[Param.DIRECTION + i])
+                    theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[P_DIRECTION + i])
                     if abs(theta[i]) > rng + 1e-12:
-                        reach_code = Reason.SHOULDER_ANGLE
+                        reach_code = REASON_SHOULDER_ANGLE
                         break
             else:
-                theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[Param.DIRECTION + i])
+                theta[i] = _wrap(math.atan2(dy, dx) - phi - prm[P_DIRECTION + i])
             if att[i]:
                 nx, ny = normals[sk, i, 0], normals[sk, i, 1]
                 vx, vy = -u[i, 0], -u[i, 1]
@@ -178,8 +212,8 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         if reach_code:
             _reject(row, reach_code, reason_out, r_out, lp_out, f_out, v_out)
             continue
-        b[0] = -prm[Param.BODY_MASS] * gx
-        b[1] = -prm[Param.BODY_MASS] * gy
+        b[0] = -prm[P_BODY_MASS] * gx
+        b[1] = -prm[P_BODY_MASS] * gy
         b[2] = 0.0
         torque = 0.0
         if free >= 0:  # the cantilevered free limb
@@ -188,26 +222,26 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         code = 0
         for i in range(NUM_BOOMS):
             if L[i] < L_lo or L[i] > L_hi:
-                code = Reason.BOOM_LENGTH
+                code = REASON_BOOM_LENGTH
                 break
         if code == 0:
             for i in range(NUM_BOOMS):
                 if abs(theta[i]) > rng + 1e-12:
-                    code = Reason.SHOULDER_ANGLE
+                    code = REASON_SHOULDER_ANGLE
                     break
         if decide_only and code == 0:  # the grasp tests that need no tensions, first
             if not ignore_grasps:
                 for i in range(NUM_BOOMS):
-                    if att[i] and not abs(psi[i]) < prm[Param.MAX_PULL]:  # as below
-                        code = Reason.PULL_ANGLE
+                    if att[i] and not abs(psi[i]) < prm[P_MAX_PULL]:  # as below
+                        code = REASON_PULL_ANGLE
                         break
-            if code == 0 and free >= 0 and abs(torque) > prm[Param.TORQUE_MAX]:
-                code = Reason.SHOULDER_TORQUE
+            if code == 0 and free >= 0 and abs(torque) > prm[P_TORQUE_MAX]:
+                code = REASON_SHOULDER_TORQUE
         # -- collisions (only where they decide the reason; with decide_only after the
         # allocation's tests, which reject more poses for less)
         if code == 0 and has_rock and not decide_only:
             code = collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
-                                   prm[Param.CLEARANCE], edges, owner, near_hit, near_ray, parity,
+                                   prm[P_CLEARANCE], edges, owner, near_hit, near_ray, parity,
                                    vertices, ALL_SEGMENTS)
         if decide_only and code != 0:
             _reject(row, code, reason_out, r_out, lp_out, f_out, v_out)
@@ -233,7 +267,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
             else:
                 ten = 100.0
         else:
-            z_floor = prm[Param.Z_FLOOR] if decide_only and not ignore_grasps else -math.inf
+            z_floor = prm[P_Z_FLOOR] if decide_only and not ignore_grasps else -math.inf
             ok, regular, short = allocate4(A, b, psi, fn, ft, sn, st, f_lo, f_hi, reg, f, fp,
                                             minors, vec, work, rhs, w, z_floor)
             ten = 100.0
@@ -250,11 +284,11 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
                             total += max(0.0, f_lo - fi) + max(0.0, fi - f_hi)
                         ten = min(ten, total)
             if short:  # decide_only: no member of the family is robust enough
-                code = Reason.PROBABILITY
+                code = REASON_PROBABILITY
         if decide_only and code == 0:  # tensions out of bounds fail statics whatever follows
             for i in range(NUM_BOOMS):
                 if att[i] and not (math.isfinite(f[i]) and f_lo - 1e-9 <= f[i] <= f_hi + 1e-9):
-                    code = Reason.STATICS
+                    code = REASON_STATICS
                     break
         if decide_only and code != 0:
             _reject(row, code, reason_out, r_out, lp_out, f_out, v_out)
@@ -265,7 +299,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
             for i in range(NUM_BOOMS):
                 acc += A[r, i] * (f[i] if math.isfinite(f[i]) else 0.0)
             residual = max(residual, abs(acc - b[r]))
-        statics_ok = residual < prm[Param.STATICS_TOL]
+        statics_ok = residual < prm[P_STATICS_TOL]
         r_sum = 0.0
         for i in range(NUM_BOOMS):
             if att[i]:
@@ -289,29 +323,29 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         # -- the grasp and statics tests (feasibility.check_poses' order)
         if code == 0 and not ignore_grasps:
             for i in range(NUM_BOOMS):
-                if att[i] and not abs(psi[i]) < prm[Param.MAX_PULL]:  # feasibility.pull_within
-                    code = Reason.PULL_ANGLE
+                if att[i] and not abs(psi[i]) < prm[P_MAX_PULL]:  # feasibility.pull_within
+                    code = REASON_PULL_ANGLE
                     break
-        if code == 0 and free >= 0 and abs(torque) > prm[Param.TORQUE_MAX]:
-            code = Reason.SHOULDER_TORQUE
+        if code == 0 and free >= 0 and abs(torque) > prm[P_TORQUE_MAX]:
+            code = REASON_SHOULDER_TORQUE
         if decide_only:  # the cheap tests first, the conditioning only where they all pass
             if code == 0 and not statics_ok:
-                code = Reason.STATICS
+                code = REASON_STATICS
             if code == 0 and not ignore_grasps and robustness < log_p_min:
-                code = Reason.PROBABILITY
+                code = REASON_PROBABILITY
             if code == 0 and has_rock:
                 segments = collide
                 if body_known.shape[0] and collide & BODY_SEGMENT:  # shared by stances
-                    if body_known[row] == BodyKnown.UNKNOWN:
-                        body_known[row] = BodyKnown.IN_ROCK if body_collision(
+                    if body_known[row] == BODY_UNKNOWN:
+                        body_known[row] = BODY_IN_ROCK if body_collision(
                             x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit,
-                            near_ray, parity, vertices) else BodyKnown.CLEAR
-                    if body_known[row] == BodyKnown.IN_ROCK:
-                        code = Reason.BODY_COLLISION
+                            near_ray, parity, vertices) else BODY_CLEAR
+                    if body_known[row] == BODY_IN_ROCK:
+                        code = REASON_BODY_COLLISION
                     segments = collide & ~BODY_SEGMENT
                 if code == 0:
                     code = collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
-                                           prm[Param.CLEARANCE], edges, owner, near_hit, near_ray,
+                                           prm[P_CLEARANCE], edges, owner, near_hit, near_ray,
                                            parity, vertices, segments)
             if code != 0:
                 reason_out[row] = code
@@ -322,21 +356,21 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
             if att[i]:
                 B[0, m] = A[0, i]
                 B[1, m] = A[1, i]
-                B[2, m] = A[2, i] * prm[Param.MOMENT_SCALE]
+                B[2, m] = A[2, i] * prm[P_MOMENT_SCALE]
                 m += 1
         if decide_only:  # only kappa < MIN_CONDITIONING matters: decided cheaply if clear-cut
-            above = singular_value_above(B, m, prm[Param.MIN_CONDITIONING])
+            above = singular_value_above(B, m, prm[P_MIN_CONDITIONING])
             if above < 0:
-                above = int(smallest_singular_value(B, m) >= prm[Param.MIN_CONDITIONING])
+                above = int(smallest_singular_value(B, m) >= prm[P_MIN_CONDITIONING])
             kappa = math.inf if above else 0.0
         else:
             kappa = smallest_singular_value(B, m)
-        if code == 0 and kappa < prm[Param.MIN_CONDITIONING]:
-            code = Reason.SINGULAR
+        if code == 0 and kappa < prm[P_MIN_CONDITIONING]:
+            code = REASON_SINGULAR
         if code == 0 and not statics_ok:
-            code = Reason.STATICS
+            code = REASON_STATICS
         if code == 0 and not ignore_grasps and robustness < log_p_min:
-            code = Reason.PROBABILITY
+            code = REASON_PROBABILITY
         reason_out[row] = code
         if decide_only:
             v_out[row] = math.nan
@@ -353,17 +387,17 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         for i in range(NUM_BOOMS):
             v += (max(0.0, L[i] - L_hi) + max(0.0, L_lo - L[i])
                   + max(0.0, abs(theta[i]) - rng))
-        if code in (Reason.BODY_COLLISION, Reason.BOOM_COLLISION):
+        if code in (REASON_BODY_COLLISION, REASON_BOOM_COLLISION):
             v += 1.0
         v += ten / 10.0
         if free >= 0:
-            v += max(0.0, abs(torque) - prm[Param.TORQUE_MAX]) / max(prm[Param.TORQUE_MAX], 1e-9)
-        v += max(0.0, prm[Param.MIN_CONDITIONING] - kappa) / prm[Param.MIN_CONDITIONING]
+            v += max(0.0, abs(torque) - prm[P_TORQUE_MAX]) / max(prm[P_TORQUE_MAX], 1e-9)
+        v += max(0.0, prm[P_MIN_CONDITIONING] - kappa) / prm[P_MIN_CONDITIONING]
         if not ignore_grasps:
             pull = 0.0
             for i in range(NUM_BOOMS):
                 if att[i]:
-                    pull += max(0.0, abs(psi[i]) - (prm[Param.MAX_PULL] - 1e-3))
+                    pull += max(0.0, abs(psi[i]) - (prm[P_MAX_PULL] - 1e-3))
             v += pull
             r = robustness if math.isfinite(robustness) else log_p_min - 1.0
             if statics_ok:

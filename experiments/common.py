@@ -83,7 +83,7 @@ def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
     from planning.footsteps import plan_footsteps
     from planning.pipeline import PipelineConfig, plan_climb
     from planning.plan import build_plan
-    from rb_drake.feasibility_kernel import kernel_threads
+    from rb_drake.kernel.threads import kernel_threads
 
     config = PipelineConfig(footstep=footstep_config(planner, max_expansions, oracle_seconds))
     name = "naive" if planner == "naive" else "rbp"

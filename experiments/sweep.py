@@ -164,7 +164,7 @@ class ProgressDisplay:
 
 def _share_cores(threads: int) -> None:
     """A pool worker's share of the cores for the complete search's compiled kernels
-    (`feasibility_kernel.kernel_threads`): workers do not oversubscribe the machine."""
+    (`rb_drake.kernel.threads.kernel_threads`): workers do not oversubscribe the machine."""
     os.environ.setdefault("RBP_THREADS", str(threads))
 
 

@@ -14,9 +14,9 @@ from typing import NamedTuple
 import numpy as np
 
 from planning.flood import grow_component, reach_box
+from planning.flood_kernel import component_arrays
 from planning.lattice import SPAN, LatticeConfig, poses_of, unpack
 from planning.transition_score import pack_rows
-from rb_drake.feasibility_kernel import component_arrays
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 

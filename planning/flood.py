@@ -13,8 +13,9 @@ The fill runs in waves, all inside one compiled call: each wave's poses are scor
 the feasibility kernel (`decide_only`), and the unvisited lattice neighbours of its feasible
 poses make the next wave. A dense grid over the box every reachable pose lies in (each
 anchor's disc of radius boom length plus shoulder offset, every orientation) records what is
-visited. The compiled fill lives beside the kernel (`feasibility_kernel.flood_kernel`): numba's
-on-disk cache notices changes to a compiled function's own file only.
+visited. The compiled fill is `planning.flood_kernel.flood_kernel`; its cached code holds the
+pose kernel's, so its cache entries are stamped with the kernel's sources
+(`rb_drake.kernel.cache_stamp`).
 """
 
 from __future__ import annotations
@@ -23,15 +24,12 @@ import weakref
 
 import numpy as np
 
+from planning.flood_kernel import flood_kernel
 from planning.lattice import LatticeConfig
-from rb_drake.feasibility_kernel import (
-    ALL_SEGMENTS,
-    PackedStances,
-    _packed_rock,
-    _robot_params,
-    flood_kernel,
-    kernel_threads,
-)
+from rb_drake.kernel.collision import packed_rock
+from rb_drake.kernel.layout import ALL_SEGMENTS, robot_params
+from rb_drake.kernel.scoring import PackedStances
+from rb_drake.kernel.threads import kernel_threads
 from rb_drake.scenario import Scenario
 
 
@@ -77,8 +75,8 @@ def grow_component(scn: Scenario, stances: PackedStances, seed: np.ndarray,
     n = cfg.angle_count
     if (seed[:2] < box[0]).any() or (seed[:2] > box[1]).any() or not -n // 2 <= seed[2] < n // 2:
         return np.zeros((0, 3), np.int64), np.zeros(0), np.zeros((0, 4)), seed[None]
-    edges, owner, vertices = _packed_rock(scn.rock)
-    prm = _robot_params(scn.robot, scn.gravity_vector)
+    edges, owner, vertices = packed_rock(scn.rock)
+    prm = robot_params(scn.robot, scn.gravity_vector)
     body, origin = body_cache(scn, cfg)
     return flood_kernel(seed, np.ascontiguousarray(box), float(cfg.position_step),
                          float(cfg.angle_step), int(n), prm, *stances,

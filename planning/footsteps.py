@@ -55,7 +55,7 @@ from planning.transition import (
     release_poses,
 )
 from rb_drake.errors import RbpInputError
-from rb_drake.feasibility_kernel import score_poses
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 

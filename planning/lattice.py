@@ -28,8 +28,8 @@ import math
 import numpy as np
 from numba import njit
 
+from planning.lattice_kernels import reach_violation
 from rb_drake.errors import RbpInputError
-from rb_drake.feasibility_kernel import reach_violation
 from rb_drake.params import RobotParams
 
 

@@ -20,17 +20,17 @@ import numpy as np
 
 from planning.components import UNKNOWN, Component, StanceComponents
 from planning.lattice import SPAN, LatticeConfig, pack
-from rb_drake.feasibility import body_in_rock
-from rb_drake.feasibility_kernel import (
-    _packed_rock,
-    _robot_params,
-    kernel_threads,
+from planning.lattice_kernels import (
     lattice_move_kernel,
     lattice_move_table,
     lattice_reach_rows,
     reach_violation,
-    score_poses,
 )
+from rb_drake.feasibility import body_in_rock
+from rb_drake.kernel.collision import packed_rock
+from rb_drake.kernel.layout import robot_params
+from rb_drake.kernel.scoring import score_poses
+from rb_drake.kernel.threads import kernel_threads
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
@@ -52,7 +52,7 @@ def _lattice_grid(cfg: LatticeConfig) -> tuple:
 
 def _lattice_args(scn: Scenario, cfg: LatticeConfig) -> tuple:
     """The robot and lattice arguments of the compiled reach kernels."""
-    return (_robot_params(scn.robot, _NO_GRAVITY), *_lattice_grid(cfg))
+    return (robot_params(scn.robot, _NO_GRAVITY), *_lattice_grid(cfg))
 
 
 _NO_GRAVITY = np.zeros(2)  # the reach tests' robot parameters need none
@@ -65,7 +65,7 @@ def move_rows(scn: Scenario, lat: Component, boom: int, anchor: str) -> np.ndarr
     target = scn.anchor_positions[scn.anchor_index[anchor]]
     return lattice_reach_rows(lat.keys, lat.boom_release_rows(boom), float(target[0]),
                               float(target[1]), int(boom), *_lattice_args(scn, lat.lattice),
-                              _packed_rock(scn.rock)[0])
+                              packed_rock(scn.rock)[0])
 
 
 def lattice_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, anchor: str,
@@ -123,10 +123,10 @@ def _scored_transition(scn: Scenario, lat: Component, stance: tuple, boom: int, 
     # is a necessary condition of it, and it decided the freed boom's segment).
     kept, arrive, r_new = lattice_move_kernel(
         lat.keys, np.ascontiguousarray(rows, dtype=np.int64), int(boom),
-        *_lattice_grid(lat.lattice), _robot_params(scn.robot, scn.gravity_vector),
+        *_lattice_grid(lat.lattice), robot_params(scn.robot, scn.gravity_vector),
         table.positions, table.normals, table.f_normal, table.f_lateral, table.sigma_normal,
         table.sigma_lateral, stance_rows, np.array([table.row[anchor], free], dtype=np.int64),
-        *_packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
+        *packed_rock(scn.rock), bool(ignore_grasps), True, 0, kernel_threads())
     r4 = np.empty((len(kept), 4))
     r4[:, 0], r4[:, 1], r4[:, 2], r4[:, 3] = (lat.robustness[kept], lat.release_r[kept, boom],
                                               arrive, r_new)
@@ -157,7 +157,7 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
     rows, offsets = lattice_move_table(lat.keys, lat.release_rows, lat.release_starts,
                                        np.ascontiguousarray(pts[near]),
                                        *_lattice_args(scn, lat.lattice),
-                                       _packed_rock(scn.rock)[0])
+                                       packed_rock(scn.rock)[0])
     K = len(near)
     at, anchors = offsets.tolist(), near.tolist()  # Python ints: numpy scalars cost 10x
     return [[(anchors[k], rows[at[j * K + k]:at[j * K + k + 1]])

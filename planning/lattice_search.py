@@ -27,7 +27,7 @@ from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, unpack
 from planning.lattice_moves import LatticeTransition
 from planning.search_outcome import Quality, Stop
-from rb_drake.feasibility_kernel import held_kernel_threads
+from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]

@@ -44,7 +44,7 @@ from planning.lattice_search import (
 from planning.search_cost import RegraspHeuristic, attach_cost, boom_hop_length, edge_cost
 from planning.search_outcome import Quality
 from rb_drake.errors import RbpInputError
-from rb_drake.feasibility_kernel import held_kernel_threads
+from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 

@@ -24,12 +24,9 @@ import math
 
 import numpy as np
 
-from rb_drake.feasibility_kernel import (
-    ALL_SEGMENTS,
-    _packed_rock,
-    _robot_params,
-    transition_boom_costs,
-)
+from planning.lattice_kernels import transition_boom_costs
+from rb_drake.kernel.collision import packed_rock
+from rb_drake.kernel.layout import ALL_SEGMENTS, robot_params
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario
 
@@ -55,9 +52,9 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
     rows[2, boom] = target
     return transition_boom_costs(
         np.ascontiguousarray(pose, dtype=float).reshape(3),
-        _robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
+        robot_params(scn.robot, scn.gravity_vector), table.positions, table.normals,
         table.f_normal, table.f_lateral, table.sigma_normal, table.sigma_lateral, rows,
-        np.array([held[boom], target], dtype=np.int64), *_packed_rock(scn.rock), False, False,
+        np.array([held[boom], target], dtype=np.int64), *packed_rock(scn.rock), False, False,
         ALL_SEGMENTS)
 
 

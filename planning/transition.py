@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from planning.lattice_kernels import reach_violation
 from planning.transition_score import (
     ALL,
     ARRIVE,
@@ -30,7 +31,7 @@ from planning.transition_score import (
     score_configurations,
 )
 from rb_drake.feasibility import REASON_TEXT, Reason
-from rb_drake.feasibility_kernel import reach_violation, score_poses
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance

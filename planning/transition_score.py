@@ -6,7 +6,7 @@ Boom j moves from anchor a to anchor b. The four configurations (`CONFIG_NAMES`)
 4-stance, the 3-stance with the free gripper at a and at b, and the new 4-stance; the first two
 do not depend on b (`RELEASE`), the last two do (`ARRIVE`). `score_configurations` packs them
 as kernel stances and evaluates every configuration at every pose in one compiled call
-(`feasibility_kernel.score_rows`); a pose's key orders the search: its worst robustness where
+(`rb_drake.kernel.scoring.score_rows`); a pose's key orders the search: its worst robustness where
 all hold, below -`VIOLATION_OFFSET` by their summed violation where some do not.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rb_drake.feasibility_kernel import PackedStances, score_rows
+from rb_drake.kernel.scoring import PackedStances, score_rows
 from rb_drake.scenario import AnchorTable, Scenario
 
 CONFIG_NAMES = ("old 4-stance", "3-stance, gripper at old anchor",
@@ -84,7 +84,7 @@ def score_configurations(scn: Scenario, old: tuple[str, ...], boom: int,
     -VIOLATION_OFFSET, where not (0 for all feasible poses when grasps are ignored).
 
     Every configuration at every pose is one row of one compiled call
-    (`feasibility_kernel.score_rows`); the tests' `score_reference` is the same through
+    (`rb_drake.kernel.scoring.score_rows`); the tests' `score_reference` is the same through
     check_poses and violation."""
     if new_anchor is None and any(k in configs for k in ARRIVE):
         raise ValueError("the arrival configurations need the new anchor")

@@ -177,7 +177,7 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
 def pull_within(robot: RobotParams, psi: np.ndarray) -> np.ndarray:
     """Where a grasp's pull angle passes the planner's limit: |psi| < robot.max_pull_angle
     (NaN, a free boom's, passes). The one definition of the PULL_ANGLE test, which
-    feasibility_kernel, SCP and the verifier repeat."""
+    rb_drake.kernel, SCP and the verifier repeat."""
     return np.abs(np.nan_to_num(psi)) < robot.max_pull_angle
 
 

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.special import erfcx, log_ndtr
 
 HALF_PI = 0.5 * math.pi
-_SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
-_INV_SQRT2 = 1.0 / math.sqrt(2.0)
+SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
+INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
 def mean_limit(psi: np.ndarray, f_normal: np.ndarray, f_lateral: np.ndarray) -> np.ndarray:
@@ -77,7 +77,7 @@ def prob(force: np.ndarray, psi: np.ndarray, f_normal: np.ndarray, f_lateral: np
 def mills_ratio(z: np.ndarray) -> np.ndarray:
     """lambda(z) = phi(z) / Phi(z) = d log Phi / dz, computed in log space (no underflow)."""
     # phi/Phi = sqrt(2/pi) / erfcx(-z/sqrt 2): stable in both tails and cheaper than log_ndtr.
-    return _SQRT_2_OVER_PI / erfcx(-np.asarray(z, dtype=float) * _INV_SQRT2)
+    return SQRT_2_OVER_PI / erfcx(-np.asarray(z, dtype=float) * INV_SQRT2)
 
 
 def log_ndtr_derivatives(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

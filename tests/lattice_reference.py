@@ -17,9 +17,10 @@ from scipy import ndimage
 
 from planning.components import Component
 from planning.lattice import LatticeConfig, pack, poses_of, reachable_lattice
+from planning.lattice_kernels import lattice_reached_anchors
 from planning.lattice_moves import _lattice_args, _near_anchors
 from planning.transition_score import pack_rows
-from rb_drake.feasibility_kernel import lattice_reached_anchors, score_rows
+from rb_drake.kernel.scoring import score_rows
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 

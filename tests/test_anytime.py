@@ -18,6 +18,7 @@ from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.lattice import LatticeConfig, poses_of
+from planning.lattice_kernels import reach_violation
 from planning.plan import build_plan, validate
 from planning.search_cost import (
     ORIENTATION_CELLS,
@@ -26,7 +27,6 @@ from planning.search_cost import (
     edge_cost,
     goal_targets,
 )
-from rb_drake.feasibility_kernel import reach_violation
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 
 COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)

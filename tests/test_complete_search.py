@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 import pytest
+from kernel_helpers import pack_stances
 from lattice_reference import candidate_anchors, stance_lattice
 
 from planning.complete import complete_search
@@ -24,6 +25,7 @@ from planning.complete_config import CompleteConfig
 from planning.components import INFEASIBLE, UNKNOWN, StanceComponents
 from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
 from planning.lattice import LatticeConfig, pack, poses_of, reachable_lattice
+from planning.lattice_kernels import reach_violation
 from planning.lattice_moves import (
     goal_is_holdable,
     lattice_transition,
@@ -34,9 +36,11 @@ from planning.lattice_moves import (
 from planning.lattice_search import LatticeMemo
 from planning.plan import build_plan
 from planning.transition import transition_stances
-from rb_drake import feasibility_kernel as fk
 from rb_drake.feasibility import check_poses
-from rb_drake.feasibility_kernel import pack_stances, reach_violation, score_poses, score_rows
+from rb_drake.kernel.collision import packed_rock
+from rb_drake.kernel.layout import ALL_BOOMS, ALL_SEGMENTS, robot_params
+from rb_drake.kernel.scoring import score_poses, score_rows
+from rb_drake.kernel.threads import score_threads
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario, scenario_from_dict
 from rb_drake.stance import Stance
 from rb_drake.statics import statics_problem
@@ -426,15 +430,15 @@ def test_rows_scored_on_threads_equal_one_thread(demo: Scenario) -> None:
     poses = poses_of(idx, COARSE)[:997]  # an odd count: threads get unequal shares
     P = len(poses)
     packed = pack_stances(demo.stance(stance))
-    prm = fk._robot_params(demo.robot, demo.gravity_vector)
+    prm = robot_params(demo.robot, demo.gravity_vector)
     rows, zeros = np.arange(P), np.zeros(P, np.int64)
 
     def scored(threads: int) -> list[np.ndarray]:
         out = [np.empty(P, np.int64), np.empty(P), np.empty((P, 4)), np.empty((P, 4)),
                np.empty(P), np.full((P, 4), np.nan), np.zeros(P, np.int8)]
-        fk._score_threads(threads, poses, prm, *packed, np.full((1, 2), np.nan), rows, zeros,
-                          zeros, *fk._packed_rock(demo.rock), False, True,
-                          int(fk.ALL_SEGMENTS), *out, 15)
+        score_threads(threads, poses, prm, *packed, np.full((1, 2), np.nan), rows, zeros,
+                      zeros, *packed_rock(demo.rock), False, True, int(ALL_SEGMENTS), *out,
+                      int(ALL_BOOMS))
         return out
 
     one, three = scored(1), scored(3)

@@ -1,4 +1,4 @@
-"""The compiled feasibility kernel (rb_drake.feasibility_kernel) against the numpy reference.
+"""The compiled feasibility kernel (rb_drake.kernel) against the numpy reference.
 
 `score_poses` must reproduce `check_poses(..., full=True)` followed by `violation`: the same
 feasibility and first-failure reason at every pose, and robustness, log-probabilities, tensions
@@ -30,17 +30,23 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 from conftest import build_shaft
+from kernel_helpers import pack_stances
 from scipy.special import erfcx, log_ndtr
 from transition_reference import score_reference
 
 from planning import transition, transition_score
 from planning.footsteps import candidate_moves, edge_rng
+from planning.lattice_kernels import lattice_move_table, lattice_reach_rows, reach_violation
 from planning.transition import find_transition
 from planning.transition_score import NaiveWorld, score_configurations
-from rb_drake import feasibility_kernel as fk
 from rb_drake.feasibility import Reason, check_poses, violation
 from rb_drake.generate import generate_cave
 from rb_drake.grasp import mills_ratio
+from rb_drake.kernel import special
+from rb_drake.kernel.allocation import NEWTON_STEPS
+from rb_drake.kernel.layout import robot_params
+from rb_drake.kernel.pose_kernel import score_kernel
+from rb_drake.kernel.scoring import KernelCheck, score_poses, score_rows
 from rb_drake.scenario import Scenario, load_scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
@@ -84,17 +90,17 @@ class Case(NamedTuple):
 
 class Compared(NamedTuple):
     case: Case
-    kernel: fk.KernelCheck
-    reference: fk.KernelCheck
+    kernel: KernelCheck
+    reference: KernelCheck
 
 
 def _reference_check(world, stance: Stance, poses: np.ndarray, free_tip: np.ndarray | None,
-                     ignore_grasps: bool) -> fk.KernelCheck:
+                     ignore_grasps: bool) -> KernelCheck:
     """What score_poses stands for: check_poses(full=True) and violation, in numpy."""
     check = check_poses(world, stance, poses, free_tip, full=True, ignore_grasps=ignore_grasps)
     v = violation(world, stance, poses, check, free_tip, ignore_grasps)
     a = check.allocation
-    return fk.KernelCheck(check.feasible, check.reason, a.robustness, a.log_probs, a.tensions, v)
+    return KernelCheck(check.feasible, check.reason, a.robustness, a.log_probs, a.tensions, v)
 
 
 def _rng(*key: object) -> np.random.Generator:
@@ -160,7 +166,7 @@ def scenarios() -> dict[str, Scenario]:
 def compared(scenarios: dict[str, Scenario]) -> dict[str, list[Compared]]:
     out = {}
     for name, scn in scenarios.items():
-        out[name] = [Compared(c, fk.score_poses(c.world, c.stance, c.poses, c.tip,
+        out[name] = [Compared(c, score_poses(c.world, c.stance, c.poses, c.tip,
                                                 c.ignore_grasps),
                               _reference_check(c.world, c.stance, c.poses, c.tip,
                                                c.ignore_grasps))
@@ -225,16 +231,16 @@ def test_results_depend_only_on_each_pose(compared: dict[str, list[Compared]]) -
     """Repeated calls are bit-identical, and a pose scores the same in any batch."""
     for cave in ("demo-crevasse", "hard-shaft"):
         for c in compared[cave]:
-            again = fk.score_poses(c.case.world, c.case.stance, c.case.poses, c.case.tip,
+            again = score_poses(c.case.world, c.case.stance, c.case.poses, c.case.tip,
                                    c.case.ignore_grasps)
-            for name, a, b in zip(fk.KernelCheck._fields, again, c.kernel, strict=True):
+            for name, a, b in zip(KernelCheck._fields, again, c.kernel, strict=True):
                 np.testing.assert_array_equal(a, b, err_msg=f"{c.case.label}: {name} changed")
             rows = _rng(cave, c.case.label).permutation(len(c.case.poses))[:37]
             stance = c.case.stance.take(rows)
             tip = c.case.tip if c.case.tip is None or c.case.tip.ndim == 1 else c.case.tip[rows]
-            part = fk.score_poses(c.case.world, stance, c.case.poses[rows], tip,
+            part = score_poses(c.case.world, stance, c.case.poses[rows], tip,
                                   c.case.ignore_grasps)
-            for name, a, b in zip(fk.KernelCheck._fields, part, c.kernel, strict=True):
+            for name, a, b in zip(KernelCheck._fields, part, c.kernel, strict=True):
                 if b is None:  # release_r: only asked for by the lattice search
                     assert a is None, name
                     continue
@@ -245,7 +251,7 @@ def test_results_depend_only_on_each_pose(compared: dict[str, list[Compared]]) -
 def test_special_functions_match_scipy() -> None:
     z = np.concatenate([np.linspace(-60.0, 40.0, 20001), -np.logspace(-8, 1.7, 500),
                         np.logspace(-8, 1.6, 500), [0.0, -1.0, 1.0]])
-    got = np.array([fk.log_ndtr(v) for v in z])
+    got = np.array([special.log_ndtr(v) for v in z])
     want = log_ndtr(z)
     normal = np.abs(want) >= 1e-300  # below, both are subnormal or zero
     rel = np.abs(got - want)[normal] / np.abs(want[normal])
@@ -254,11 +260,11 @@ def test_special_functions_match_scipy() -> None:
     assert np.abs(got - want)[~normal].max(initial=0.0) <= 1e-300, "log_ndtr far tail"
     assert np.array_equal(got == 0.0, want == 0.0), "log_ndtr rounds to 0 elsewhere than scipy"
     x = np.linspace(-26.6, 60.0, 20001)
-    got = np.array([fk.erfcx(v) for v in x])
+    got = np.array([special.erfcx(v) for v in x])
     rel = np.abs(got - erfcx(x)) / erfcx(x)
     assert rel.max() <= SPECIAL_RTOL, f"erfcx: relative error {rel.max():.2e}"
-    assert fk.erfcx(-27.0) == math.inf and erfcx(-27.0) == math.inf, "erfcx overflow"
-    got = np.array([fk.mills_ratio(v) for v in z])
+    assert special.erfcx(-27.0) == math.inf and erfcx(-27.0) == math.inf, "erfcx overflow"
+    got = np.array([special.mills_ratio(v) for v in z])
     want = mills_ratio(z)
     pos = want > 0
     rel = np.abs(got - want)[pos] / want[pos]
@@ -267,7 +273,7 @@ def test_special_functions_match_scipy() -> None:
 
 
 def test_score_matches_reference_path(scenarios: dict[str, Scenario]) -> None:
-    """score_configurations (one compiled call for all configurations) and score_reference
+    """transition._score (one compiled call for all configurations) and _score_reference
     (check_poses + violation per stance kind) on the same poses."""
     scn = scenarios["wide-shaft"]
     move = _transition(scn)
@@ -300,12 +306,12 @@ def test_rejects_what_check_poses_rejects(scenarios: dict[str, Scenario]) -> Non
     stance = scn.stance(scn.start_stance)
     pose = np.asarray(scn.start_pose, dtype=float)
     with pytest.raises(ValueError, match="free gripper"):
-        fk.score_poses(scn, stance.without(0), pose)
+        score_poses(scn, stance.without(0), pose)
     with pytest.raises(ValueError, match="3 or 4 anchors"):
-        fk.score_poses(scn, stance.without(0).without(1), pose, stance.positions[0])
-    empty = fk.score_poses(scn, stance, np.zeros((0, 3)))
+        score_poses(scn, stance.without(0).without(1), pose, stance.positions[0])
+    empty = score_poses(scn, stance, np.zeros((0, 3)))
     assert all(len(a) == 0 for a in empty if a is not None), "no poses, no results"
-    one = fk.score_poses(scn, stance, pose)
+    one = score_poses(scn, stance, pose)
     assert one.feasible.shape == (1,) and one.log_probs.shape == (1, 4), "a (3,) pose is P = 1"
 
 
@@ -321,32 +327,30 @@ def test_rows_of_several_stances_equal_one_call_per_stance(
     pose_row = np.tile(np.arange(P), 3)
     stance_row = np.repeat([0, 1, 2], P)
     tip_row = np.repeat([1, 0, 1], P)  # the 4-stance's tip is ignored
-    got = fk.score_rows(scn, fk.pack_stances(*stances), tips, poses, pose_row, stance_row,
+    got = score_rows(scn, pack_stances(*stances), tips, poses, pose_row, stance_row,
                         tip_row)
     for n, (stance, tip) in enumerate(zip(stances, (None, tips[0], tips[1]), strict=True)):
-        want = fk.score_poses(scn, stance, poses, tip)
-        for name, a, b in zip(fk.KernelCheck._fields, got, want, strict=True):
+        want = score_poses(scn, stance, poses, tip)
+        for name, a, b in zip(KernelCheck._fields, got, want, strict=True):
             if a is None and b is None:  # release_r, not asked for
                 continue
             np.testing.assert_array_equal(a[n * P:(n + 1) * P], b,
                                           err_msg=f"stance {n}: {name} differs")
     with pytest.raises(ValueError, match="free-gripper"):
-        fk.score_rows(scn, fk.pack_stances(*stances), np.full((1, 2), np.nan), poses,
+        score_rows(scn, pack_stances(*stances), np.full((1, 2), np.nan), poses,
                       pose_row, stance_row, np.zeros_like(tip_row))
 
 
 def test_constants_mirror_the_reference() -> None:
-    """The compiled code's literals: Reason codes and allocate's Newton step count."""
-    codes = [fk._BOOM_LENGTH, fk._SHOULDER_ANGLE, fk._BODY_COLLISION, fk._BOOM_COLLISION,
-             fk._PULL_ANGLE, fk._SHOULDER_TORQUE, fk._SINGULAR, fk._STATICS, fk._PROBABILITY]
-    assert codes == [int(r) for r in Reason if r != Reason.FEASIBLE], "Reason codes moved"
+    """The compiled allocation takes allocate's Newton step count (the kernel's Reason codes
+    are feasibility.Reason itself)."""
     default = inspect.signature(allocate).parameters["newton_steps"].default
-    assert default == fk.NEWTON_STEPS, f"allocate takes {default} Newton steps"
+    assert default == NEWTON_STEPS, f"allocate takes {default} Newton steps"
 
 
 def test_compiled_once(compared: dict[str, list[Compared]]) -> None:
     """Every entry point hands the kernel the same array types: one compilation serves all."""
-    sigs = fk._score_kernel.signatures
+    sigs = score_kernel.signatures
     differ = [[f"{a} / {b}" for a, b in zip(sigs[0], s, strict=True) if a != b] for s in sigs[1:]]
     assert len(sigs) == 1, f"compiled again for: {differ}"
 
@@ -364,7 +368,7 @@ def test_reach_violation_matches_geometry(scenarios: dict[str, Scenario], cave: 
                              rng.uniform(-4.0, 4.0, 4000)])
     booms = rng.integers(0, 4, len(scn.anchor_positions))
     expected = geometry.reach(scn.robot, poses, scn.anchor_positions, booms).violation
-    got = fk.reach_violation(scn.robot, poses, scn.anchor_positions, booms)
+    got = reach_violation(scn.robot, poses, scn.anchor_positions, booms)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12,
                                err_msg=f"{cave}: reach violation differs from geometry.reach")
     assert np.array_equal(got == 0.0, expected == 0.0), f"{cave}: reachability differs"
@@ -391,7 +395,7 @@ def test_pull_angle_limit_decided_alike_at_its_edge(scenarios: dict[str, Scenari
             robot = base.robot.replace(max_pull_angle_deg=math.degrees(limit))
             assert robot.max_pull_angle == pytest.approx(limit, abs=1e-14)
             scn = dataclasses.replace(base, robot=robot)
-            got = fk.score_poses(scn, stance, poses)
+            got = score_poses(scn, stance, poses)
             want = _reference_check(scn, stance, poses, None, False)
             label = f"pose {k}, limit {math.degrees(limit):.9f} deg"
             np.testing.assert_array_equal(got.reason, want.reason, err_msg=f"{label}: reasons")
@@ -414,7 +418,7 @@ def test_move_table_decides_reach_as_reach_rows_at_its_edges(
 
     scn = scenarios["demo-crevasse"]
     cfg = LatticeConfig()
-    params = fk._robot_params(scn.robot, np.zeros(2))
+    params = robot_params(scn.robot, np.zeros(2))
     rng = _rng("move table edges")
     idx = np.column_stack([rng.integers(-40, 40, 300), rng.integers(-40, 40, 300),
                            rng.integers(-cfg.angle_count // 2, cfg.angle_count // 2, 300)])
@@ -443,14 +447,51 @@ def test_move_table_decides_reach_as_reach_rows_at_its_edges(
         starts = np.array([0, 0, 0, 0, 0])
         starts[boom + 1:] = len(keys)
         grid = (SPAN, float(cfg.position_step), float(cfg.angle_step), int(cfg.angle_count))
-        got, offsets = fk.lattice_move_table(keys, rows, starts, targets, params, *grid,
-                                             np.zeros((0, 4)))
+        got, offsets = lattice_move_table(keys, rows, starts, targets, params, *grid,
+                                          np.zeros((0, 4)))
         reached = 0
         for k, (tx, ty) in enumerate(targets):
-            want = fk.lattice_reach_rows(keys, rows, float(tx), float(ty), boom, params, *grid,
-                                         np.zeros((0, 4)))
+            want = lattice_reach_rows(keys, rows, float(tx), float(ty), boom, params, *grid,
+                                      np.zeros((0, 4)))
             K = len(targets)
             mine = got[offsets[boom * K + k]:offsets[boom * K + k + 1]]
             np.testing.assert_array_equal(mine, want, err_msg=f"boom {boom}, target {k}")
             reached += 0 in want
         assert 0 < reached < len(targets), f"boom {boom}: edge targets all on one side"
+
+
+def test_kernel_cache_stamped_with_every_kernel_source(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """numba's cache entries of every compiled kernel, in rb_drake.kernel and beside the lattice
+    in planning, are stamped with the whole kernel's sources: an edit to one module (here
+    allocation's) changes the stamp of the others' (here pose_kernel's and the flood fill's),
+    whose cached code holds its compiled functions."""
+    import numba
+
+    import planning.flood_kernel
+    import planning.lattice_kernels
+    from rb_drake import kernel
+    from rb_drake.kernel import cache_stamp
+
+    modules = [getattr(kernel, name) for name in ("special", "algebra3", "collision",
+                                                   "allocation", "pose_kernel", "threads")]
+    modules += [planning.flood_kernel, planning.lattice_kernels]
+    dispatchers = [f for m in modules for f in vars(m).values()
+                   if isinstance(f, numba.core.registry.CPUDispatcher)]
+    assert len(dispatchers) > 30
+    for f in dispatchers:
+        assert isinstance(f._cache._impl.locator, cache_stamp.LOCATORS), f"{f.__name__} unstamped"
+
+    copy = tmp_path / "kernel"
+    copy.mkdir()
+    for path in cache_stamp.KERNEL_DIR.glob("*.py"):
+        (copy / path.name).write_bytes(path.read_bytes())
+    monkeypatch.setattr(cache_stamp, "KERNEL_DIR", copy)
+    flood_file = planning.flood_kernel.__file__
+    before = [cache_stamp.source_stamp(str(copy / "pose_kernel.py")),
+              cache_stamp.source_stamp(flood_file)]
+    with (copy / "allocation.py").open("a") as f:
+        f.write("# edited\n")
+    after = [cache_stamp.source_stamp(str(copy / "pose_kernel.py")),
+             cache_stamp.source_stamp(flood_file)]
+    assert before[0] != after[0] and before[1] != after[1], "an edit left a stamp unchanged"

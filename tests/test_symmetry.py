@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from rb_drake.feasibility import check_poses
-from rb_drake.feasibility_kernel import score_poses
 from rb_drake.generate import CaveConfig, generate_cave
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.scenario import Scenario
 
 MIRROR_BOOM = np.array([1, 0, 3, 2])  # boom i's mirror image is boom MIRROR_BOOM[i]

@@ -342,7 +342,7 @@ def test_boom_costs_are_the_four_configurations_worst_log_p() -> None:
     from experiments.common import make_cave
     from planning.search_cost import boom_costs
     from planning.transition_score import pack_rows
-    from rb_drake.feasibility_kernel import score_rows
+    from rb_drake.kernel.scoring import score_rows
 
     scn = make_cave("rockfall", 12, (4.5, 5.0))
     table = scn.anchor_table

@@ -1,0 +1,83 @@
+"""numba's on-disk cache of the compiled kernels, stamped with every kernel source.
+
+numba keys a compiled function's cache entry by its own file's content, but the cached code
+also holds copies of the compiled functions it calls and the values of the globals it reads,
+from whatever module: an edit to `allocation` would leave `pose_kernel.score_kernel`'s cached
+code stale, and an edit to `pose_kernel` the lattice search's kernels in `planning/`. So the
+kernels' entries are stamped instead with the contents of every module of this package, the
+function's own file, and the values of the constants they read from other modules
+(`_BAKED_CONSTANTS`: add any new one there): any edit to them recompiles every kernel, once.
+
+A module outside this package whose njit functions call the kernel registers its file
+(`stamp_with_kernel(__file__)`) before defining them. `install()` (run by the package's
+`__init__`, before any kernel is defined) puts the stamping locators first in numba's list.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from functools import lru_cache
+from pathlib import Path
+
+from numba.core import caching
+
+from rb_drake.feasibility import Reason
+from rb_drake.grasp import HALF_PI, INV_SQRT2, SQRT_2_OVER_PI
+from rb_drake.params import NUM_BOOMS
+
+KERNEL_DIR = Path(__file__).resolve().parent
+_BAKED_CONSTANTS = (tuple((m.name, int(m)) for m in Reason), NUM_BOOMS, HALF_PI, INV_SQRT2,
+                    SQRT_2_OVER_PI)
+_CALLERS: set[Path] = set()
+
+
+def stamp_with_kernel(py_file: str) -> None:
+    """Stamp the cache entries of `py_file`'s compiled functions, which call the kernel, with
+    the kernel's sources too (call it before they are defined)."""
+    _CALLERS.add(Path(py_file).resolve())
+
+
+def _is_stamped(py_file: str) -> bool:
+    path = Path(py_file).resolve()
+    return path.parent == KERNEL_DIR or path in _CALLERS
+
+
+def source_stamp(py_file: str) -> bytes:
+    """The stamp of `py_file`'s cache entries: its contents, the kernel package's and the
+    constants the kernels read from other modules."""
+    paths = sorted({*KERNEL_DIR.glob("*.py"), Path(py_file).resolve()})
+    return _stamp(tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in paths))
+
+
+@lru_cache(maxsize=64)
+def _stamp(files: tuple[tuple[str, int, int], ...]) -> bytes:
+    digest = hashlib.sha256(repr(_BAKED_CONSTANTS).encode())
+    for path, _, _ in files:  # modification times and sizes key the memo only
+        digest.update(path.encode())
+        digest.update(Path(path).read_bytes())
+    return digest.digest()
+
+
+def _stamping(base: type) -> type:
+    class Stamping(base):  # type: ignore[valid-type, misc]
+        @classmethod
+        def from_function(cls, py_func, py_file):  # numba calls it to choose a locator
+            return super().from_function(py_func, py_file) if _is_stamped(py_file) else None
+
+        def get_source_stamp(self) -> bytes:
+            return source_stamp(self._py_file)
+
+    Stamping.__name__ = Stamping.__qualname__ = f"Kernel{base.__name__}"
+    return Stamping
+
+
+LOCATORS = tuple(_stamping(base) for base in (
+    caching.UserProvidedCacheLocator, caching.InTreeCacheLocator,
+    caching.UserWideCacheLocator))
+
+
+def install() -> None:
+    """Put the stamping locators first in numba's list (once)."""
+    classes = caching.CacheImpl._locator_classes
+    if not any(c in classes for c in LOCATORS):
+        classes[:0] = LOCATORS

@@ -1,0 +1,85 @@
+"""The kernel on several threads: how many the compiled searches use (`kernel_threads`,
+`held_kernel_threads`), and rows scored on them (`score_threads`) by the complete search's
+flood fills and moves (`planning.flood_kernel`, `planning.lattice_kernels`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from rb_drake.kernel.pose_kernel import score_kernel
+
+MIN_ROWS_PER_THREAD = 12  # fewer: one thread scores them (a launch and join cost a few us)
+
+
+def kernel_threads() -> int:
+    """Threads the complete search's compiled flood fills and moves use: RBP_THREADS if set,
+    else numba's count (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker
+    pool gives each worker its share of the cores (`experiments.sweep`). Results are the
+    same, row for row, on any number of threads. Inside `held_kernel_threads`, the count read
+    as the block began."""
+    if _HELD_THREADS:
+        return _HELD_THREADS[-1]
+    value = os.environ.get("RBP_THREADS", "").strip()
+    threads = int(value) if value else numba.config.NUMBA_NUM_THREADS
+    return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+_HELD_THREADS: list[int] = []
+
+
+@contextmanager
+def held_kernel_threads() -> Iterator[int]:
+    """`kernel_threads()` read once and held for a block: a search asks for it thousands of
+    times, and reading the environment each time cost 1 % of a proof."""
+    _HELD_THREADS.append(kernel_threads())
+    try:
+        yield _HELD_THREADS[-1]
+    finally:
+        _HELD_THREADS.pop()
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def score_interleaved(threads, poses, prm, positions, normals, f_normal, f_lateral,
+                      sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
+                      tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
+                      reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
+                      release_booms) -> None:  # pragma: no cover - compiled
+    """`score_kernel` with thread t scoring chunks t, t + threads, t + 2 threads, ... of
+    ROW_CHUNK rows: the same outputs, row for row (each row is scored on its own and writes its
+    own entries), and feasible and infeasible rows, which differ fivefold in cost, shared
+    evenly."""
+    for t in prange(threads):
+        score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
+                     owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                     lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(t),
+                     threads)
+
+
+@njit(cache=True, error_model="numpy")
+def score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                  sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
+                  vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out,
+                  f_out, v_out, release_out, body_known,
+                  release_booms) -> None:  # pragma: no cover - compiled
+    """`score_kernel`, on up to `threads` threads where the rows are many enough."""
+    use = min(threads, pose_row.shape[0] // MIN_ROWS_PER_THREAD)
+    if use > 1:
+        score_interleaved(use, poses, prm, positions, normals, f_normal, f_lateral,
+                          sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
+                          tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
+                          reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
+                          release_booms)
+    else:
+        score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
+                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
+                     owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                     lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(0),
+                     np.int64(1))

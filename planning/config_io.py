@@ -114,9 +114,13 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
             return float(value)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise fail("a number")
-        if math.isnan(value):
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond the float range
+            raise fail("a number within the float range") from None
+        if math.isnan(number):
             raise fail("a number (not nan)")
-        return float(value)
+        return number
     if tp is str:
         if not isinstance(value, str):
             raise fail("a string")

@@ -156,7 +156,7 @@ def test_list(tmp_path):
     assert_ok(proc)
     names = [line.split()[0] for line in proc.stdout.splitlines() if line.strip()]
     assert "demo-shaft" in names, f"demo-shaft not listed:\n{proc.stdout}"
-    assert set(names) == set(bundled_caves()), f"listed {names}"
+    assert set(names) == {*bundled_caves(), "rig"}, f"listed {names}"  # the caves and the rig
 
 
 def test_help(tmp_path):

@@ -495,3 +495,27 @@ def test_kernel_cache_stamped_with_every_kernel_source(tmp_path: Path,
     after = [cache_stamp.source_stamp(str(copy / "pose_kernel.py")),
              cache_stamp.source_stamp(flood_file)]
     assert before[0] != after[0] and before[1] != after[1], "an edit left a stamp unchanged"
+
+
+def test_numba_cache_files_are_locked_between_processes(tmp_path) -> None:
+    """Saving and loading a compiled function's cache entry hold a lock on its index (two
+    processes compiling one function at once could otherwise pair one's index with the other's
+    code: a segmentation fault in the next process)."""
+    import fcntl
+
+    from numba.core import caching
+
+    from rb_drake.kernel import cache_stamp
+
+    cache_stamp.install()  # a second call changes nothing
+    cache_file = caching.IndexDataCacheFile
+    assert getattr(cache_file.save, "__rbp_locked__", False), "save is not wrapped"
+    assert getattr(cache_file.load, "__rbp_locked__", False), "load is not wrapped"
+    assert not getattr(cache_file.save.__wrapped__, "__rbp_locked__", False), "wrapped twice"
+    entry = cache_file(str(tmp_path), "f-1.py311", b"stamp")
+    entry.save(("sig", "target"), {"code": 1})
+    assert entry.load(("sig", "target")) == {"code": 1}
+    lock = tmp_path / "f-1.py311.nbi.lock"
+    assert lock.exists(), "no lock file beside the index"
+    with open(lock) as handle:  # nothing holds it once save and load are done
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -15,9 +15,18 @@ A module outside this package whose njit functions call the kernel registers its
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
+from collections.abc import Callable, Iterator
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
+
+try:
+    import fcntl
+except ImportError:  # not on POSIX: no lock (numba's own behaviour)
+    fcntl = None  # type: ignore[assignment]
 
 from numba.core import caching
 
@@ -76,8 +85,47 @@ LOCATORS = tuple(_stamping(base) for base in (
     caching.UserWideCacheLocator))
 
 
+@contextlib.contextmanager
+def _index_lock(cache_file: Any, exclusive: bool) -> Iterator[None]:
+    """A lock on one function's cache index, shared between processes (flock on a file beside
+    the index): none where the cache folder cannot hold one."""
+    handle = None
+    if fcntl is not None:
+        with contextlib.suppress(OSError):
+            handle = open(str(cache_file._index_path) + ".lock", "a+")  # noqa: SIM115
+    try:
+        if handle is not None:
+            fcntl.flock(handle, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        yield
+    finally:
+        if handle is not None:
+            handle.close()  # releases the lock
+
+
+def _locked(method: Callable[..., Any], exclusive: bool) -> Callable[..., Any]:
+    @functools.wraps(method)
+    def locked(self: Any, *args: Any) -> Any:
+        with _index_lock(self, exclusive):
+            return method(self, *args)
+
+    locked.__rbp_locked__ = True  # type: ignore[attr-defined]
+    return locked
+
+
 def install() -> None:
-    """Put the stamping locators first in numba's list (once)."""
+    """Put the stamping locators first in numba's list, and make numba's cache files safe for
+    several processes (once).
+
+    numba saves an entry by reading the index, choosing a data file name, writing the index and
+    then the data: two processes compiling different signatures of one function at the same
+    time (a sweep's workers, a test's subprocess beside a user's run on a fresh cache) can both
+    choose `.1.nbc`, and the index of one then names the other's code, which crashes the next
+    process that loads it (a segmentation fault, seen in `rbp plan rig` after such a race).
+    Saving under an exclusive lock and loading under a shared one, per function, rules it out."""
     classes = caching.CacheImpl._locator_classes
     if not any(c in classes for c in LOCATORS):
         classes[:0] = LOCATORS
+    cache_file = caching.IndexDataCacheFile
+    if not getattr(cache_file.save, "__rbp_locked__", False):
+        cache_file.save = _locked(cache_file.save, exclusive=True)
+        cache_file.load = _locked(cache_file.load, exclusive=False)

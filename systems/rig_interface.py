@@ -88,8 +88,9 @@ def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
     plan = plan_of(plan)
     phases = plan.phases
     if not 0 <= index < len(phases):
-        raise RigInputError(f"phases[{index}]", f"no such phase; the plan has {len(phases)} "
-                            f"phases (0..{len(phases) - 1})")
+        have = ("no phases" if not phases else "1 phase (0)" if len(phases) == 1
+                else f"{len(phases)} phases (0..{len(phases) - 1})")
+        raise RigInputError(f"phases[{index}]", f"no such phase; the plan has {have}")
     phase = phases[index]
     where = f"phases[{index}]"
     if phase.kind != "body":

@@ -76,7 +76,8 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     for p in problems[:20]:
         print(f"error: {path}: {p}", file=sys.stderr)
     if problems:
-        more = f" ({len(problems) - 20} more not shown)" if len(problems) > 20 else ""
-        print(f"error: {path}: the plan fails verification ({len(problems)} problems{more}); "
+        count = f"{len(problems)} problem{'' if len(problems) == 1 else 's'}"
+        shown = ", the first 20 shown above" if len(problems) > 20 else ""
+        print(f"error: {path}: the plan fails verification ({count}{shown}); "
               f"refused (rbp check {path} lists them all)", file=sys.stderr)
     return bool(problems)

@@ -146,8 +146,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             failed = mc.trials - mc.successes
             print(f"replanning ({r.strategy}): {r.saved} of {failed} failed climbs saved "
                   f"({r.attempted} still held on 3 booms, {r.replans} replans); rate "
-                  f"{r.rate:.4f}, 95% CI [{r.ci95[0]:.4f}, {r.ci95[1]:.4f}]; others: "
-                  f"{r.outcomes}")
+                  f"{r.rate:.4f}, 95% CI [{r.ci95[0]:.4f}, {r.ci95[1]:.4f}]"
+                  + (("; the others: " + ", ".join(f"{n} {what}" for what, n in
+                                                   sorted(r.outcomes.items())))
+                     if r.outcomes else ""))
         results |= mc.to_json()
         results["plan"], results["tracking"] = str(path), tracking
     if args.json:

@@ -41,7 +41,13 @@ from planning.lattice_search import (
     goal_pose_of,
     stance_components,
 )
-from planning.search_cost import RegraspHeuristic, attach_cost, boom_hop_length, edge_cost
+from planning.search_cost import (
+    RegraspHeuristic,
+    attach_cost,
+    edge_cost,
+    hop_graph,
+    hops_from,
+)
 from planning.search_outcome import Quality
 from rb_drake.errors import RbpInputError
 from rb_drake.kernel.threads import held_kernel_threads
@@ -69,8 +75,8 @@ class RepairConfig:
 
 
 class _Edge:
-    """One edge of a route: the vertex it leaves, the move, its pose, the four configurations'
-    P there, its alternative poses and its cost."""
+    """One edge of a route: its transition pose, the four configurations' P there, its
+    alternative poses and its cost."""
 
     __slots__ = ("alternatives", "cost", "p4", "pose")
 
@@ -80,14 +86,11 @@ class _Edge:
 
 
 class _HopTable:
-    """Regrasps each boom needs between two anchors in the relaxed hop graph (breadth-first
-    from each target anchor, on demand)."""
+    """Regrasps each boom needs to reach an anchor in the relaxed hop graph
+    (`planning.search_cost.hop_graph`), counted from each target anchor on demand."""
 
     def __init__(self, scn: Scenario):
-        pts = scn.anchor_positions
-        hop = boom_hop_length(scn.robot) * (1.0 + 1e-9) + 1e-9
-        diff = pts[:, None, :] - pts[None, :, :]
-        self.adjacent = np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
+        self.adjacent = hop_graph(scn)
         self.row = scn.anchor_index
         self._from: dict[int, np.ndarray] = {}
 
@@ -95,15 +98,9 @@ class _HopTable:
         target = self.row[anchor]
         table = self._from.get(target)
         if table is None:
-            table = np.full(len(self.adjacent), np.inf)
-            frontier = np.zeros(len(self.adjacent), dtype=bool)
-            frontier[target] = True
-            level = 0
-            while frontier.any():
-                table[frontier] = level
-                level += 1
-                frontier = self.adjacent[frontier].any(axis=0) & np.isinf(table)
-            self._from[target] = table
+            sources = np.zeros(len(self.adjacent), dtype=bool)
+            sources[target] = True
+            table = self._from[target] = hops_from(self.adjacent, sources)
         return table
 
 
@@ -224,11 +221,12 @@ def repair_route(scn: Scenario, result: CompleteResult, memo: LatticeMemo,
     path = list(result.path)
     others: list[np.ndarray | None] = (list(result.alternatives) if result.alternatives
                                        else [None] * len(result.poses))
-    edges = [_Edge(np.asarray(pose, dtype=float), np.asarray(p4), alt,
-                   edge_cost(scn, path[i][0], _boom(path[i][0], path[i + 1][0]),
-                             path[i + 1][0][_boom(path[i][0], path[i + 1][0])], pose))
-             for i, (pose, p4, alt) in enumerate(zip(result.poses, result.probabilities, others,
-                                                     strict=True))]
+    edges = []
+    for (a, _), (b, _), pose, p4, alt in zip(path[:-1], path[1:], result.poses,
+                                            result.probabilities, others, strict=True):
+        j = _boom(a, b)
+        edges.append(_Edge(np.asarray(pose, dtype=float), np.asarray(p4), alt,
+                           edge_cost(scn, a, j, b[j], pose)))
     goal_pose = result.goal_pose
     settled: set[tuple] = set()  # segments searched without a cheaper one found: skip them
     with held_kernel_threads():

@@ -109,6 +109,27 @@ def boom_hop_length(robot: RobotParams) -> float:
     return robot.boom_length[1] * max(1.0, 2.0 * math.sin(spread / 2.0))
 
 
+def hop_graph(scn: Scenario) -> np.ndarray:
+    """(anchors, anchors) bool: the relaxed graph's edges, anchors at most `boom_hop_length`
+    apart (every move of a boom joins two of them)."""
+    pts = scn.anchor_positions
+    hop = boom_hop_length(scn.robot) * (1.0 + 1e-9) + 1e-9
+    diff = pts[:, None, :] - pts[None, :, :]
+    return np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
+
+
+def hops_from(adjacent: np.ndarray, sources: np.ndarray) -> np.ndarray:
+    """The fewest edges of `adjacent` from any anchor of `sources` (bool) to each anchor
+    (breadth-first; inf where none leads)."""
+    hops = np.full(len(adjacent), np.inf)
+    frontier, level = sources, 0
+    while frontier.any():
+        hops[frontier] = level
+        level += 1
+        frontier = adjacent[frontier].any(axis=0) & np.isinf(hops)
+    return hops
+
+
 ORIENTATION_CELLS = 36  # the goal pose's orientation, in cells of 10 deg (RegraspHeuristic)
 
 
@@ -171,21 +192,13 @@ class RegraspHeuristic:
     def __init__(self, scn: Scenario, cells: int = ORIENTATION_CELLS) -> None:
         self.scn = scn
         self.c_attach = attach_cost(scn.robot)
-        pts = scn.anchor_positions
-        hop = boom_hop_length(scn.robot) * (1.0 + 1e-9) + 1e-9
-        diff = pts[:, None, :] - pts[None, :, :]
-        adjacent = np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
+        adjacent = hop_graph(scn)
         targets = goal_targets(scn, cells)
         # hops[k, j, a]; boom j's tables differ between cells only through their targets
         self.hops = np.full(targets.shape, np.inf)
         for k in range(cells):
             for j in range(NUM_BOOMS):
-                frontier = targets[k, j]
-                level = 0
-                while frontier.any():
-                    self.hops[k, j, frontier] = level
-                    level += 1
-                    frontier = adjacent[frontier].any(axis=0) & np.isinf(self.hops[k, j])
+                self.hops[k, j] = hops_from(adjacent, targets[k, j])
         self._booms = np.arange(NUM_BOOMS)
         self._row = scn.anchor_index
         self._cache: dict[tuple, float] = {}

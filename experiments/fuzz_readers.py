@@ -116,24 +116,15 @@ def plan_reader() -> tuple[Any, Callable[[Any], Any], tuple[type[BaseException],
     import json
     from pathlib import Path
 
-    from planning.plan_file import PlanFileError
+    from planning.plan_file import PlanFileError, parse_plan_text, validated
     from planning.plan_model import Plan, plan_scenario
-    from planning.plan_schema import schema_error
     from rb_drake.errors import RbpInputError
 
     golden = Path(__file__).resolve().parents[1] / "tests" / "data" / "golden" / "rig.json"
     base = json.loads(golden.read_text())
 
     def read(doc: Any) -> Any:
-        text = json.dumps(doc, allow_nan=True)
-        from planning.plan_file import parse_plan_text
-
-        parsed = parse_plan_text(text)
-        error = schema_error(parsed)
-        if error is not None:
-            raise PlanFileError("/".join(str(p) for p in error.absolute_path) or "(top level)",
-                                error.message)
-        plan = Plan.from_dict(parsed)
+        plan = Plan.from_dict(validated(parse_plan_text(json.dumps(doc, allow_nan=True))))
         plan_scenario(plan, "fuzz.json")
         return plan
 

@@ -74,8 +74,6 @@ def _find_bad(value: Any, path: str) -> tuple[str, _Bad] | None:
 def read_plan_file(path: str | Path) -> dict[str, Any]:
     """A plan file parsed and validated against the schema; raises PlanFileError with the field
     ("(file)" when it cannot be read or is not JSON) and the reason."""
-    from planning.plan_schema import schema_error
-
     try:
         text = read_text(path)  # a regular file within the size limit (rb_drake.input_files)
     except InputFileError as e:
@@ -87,6 +85,13 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
             raise PlanFileError("(file)", "this is a scenario (a cave), not a plan: plan it "
                                 f"with `rbp plan {path}`") from None
         raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
+    return validated(plan)
+
+
+def validated(plan: Any) -> dict[str, Any]:
+    """A parsed plan checked against the schema; raises PlanFileError with the field."""
+    from planning.plan_schema import schema_error
+
     error = schema_error(plan)
     if error is not None:
         field = "/".join(str(p) for p in error.absolute_path) or "(top level)"

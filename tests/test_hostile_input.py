@@ -49,7 +49,9 @@ def test_alias_bomb_refused_quickly_in_little_memory():
         load_yaml(text)
     elapsed = time.perf_counter() - start
     grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
-    assert elapsed < 1.0, f"the alias bomb took {elapsed:.2f} s to refuse (limit 1 s)"
+    # milliseconds when refused; expanding it would take minutes: a bound far from both, so that
+    # a loaded machine cannot fail it
+    assert elapsed < 10.0, f"the alias bomb took {elapsed:.2f} s to refuse"
     assert grown_mb < 50, f"refusing the alias bomb grew the peak memory by {grown_mb:.0f} MB"
 
 
@@ -130,7 +132,7 @@ def test_directory_and_fifo_refused(tmp_path):
     start = time.perf_counter()
     with pytest.raises(InputFileError, match="pipe"):
         read_text(fifo)
-    assert time.perf_counter() - start < 1.0, "a FIFO with no writer must not block"
+    assert time.perf_counter() - start < 10.0, "a FIFO with no writer must not block"
 
 
 def test_symlink_loop_refused(tmp_path):

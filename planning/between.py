@@ -60,6 +60,7 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
                          axis=1).reshape(-1, 3)
     seq_tips = None
     if tips is not None:
+        assert mid_tips is not None  # between(tips) above
         seq_tips = np.concatenate([tips[:-1, None], mid_tips.reshape(N - 1, n_between, 2),
                                    tips[1:, None]], axis=1).reshape(-1, 2)
     A = statics_problem(world.robot, world.gravity_vector, seq, stance, seq_tips).A

@@ -15,12 +15,15 @@ import math
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")  # a configuration dataclass
 
 
 class ConfigError(ScenarioError):
@@ -70,7 +73,7 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
     def fail(expected: str) -> ConfigError:
         return ConfigError(source, field, f"expected {expected}, got {_describe(value)}")
 
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):  # a hint: a class, not an instance
         return config_from_dict(tp, value, source, base=current, prefix=field)
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):

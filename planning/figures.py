@@ -20,14 +20,14 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
     """The robot at successive stances (one panel per body phase's end), grasped anchors' normals
     in red, the body's path so far dotted blue, booms coloured by grasp probability."""
     body = [p for p in plan["phases"] if p["kind"] == "body"]
-    picks = np.unique(np.linspace(0, len(body) - 1, min(max_panels, len(body))).round().astype(int)
-                      ) if body else []
+    picks: np.ndarray | list[int] = np.unique(
+        np.linspace(0, len(body) - 1, min(max_panels, len(body))).round().astype(int)
+    ) if body else []
     n = max(1, len(picks))
     cols = min(4, n)
     rows = math.ceil(n / cols)
     fig = draw.new_figure(figsize=(4.0 * cols, 4.4 * rows))
     axes = fig.subplots(rows, cols, squeeze=False)
-    path = np.array([s["pose"][:2] for p in plan["phases"] for s in p["steps"]]) if body else None
     for ax in axes.flat[n:]:
         ax.axis("off")
     if not body:
@@ -37,6 +37,7 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         title = f"{plan['planner']}: no plan ({plan['reason']})"
         ax.set_title("\n".join(textwrap.wrap(title, 60)), fontsize=8)
         return fig
+    path = np.array([s["pose"][:2] for p in plan["phases"] for s in p["steps"]])
     for ax, k in zip(axes.flat, picks, strict=False):
         phase = body[k]
         step = phase["steps"][-1]

@@ -241,7 +241,8 @@ class PhaseProgram(SubproblemProgram):
                 break
             cand, cev = self._trial(sub)
             corrected = False
-            margins = None if cev is None or cev.feasible else self.violations(cand)
+            margins = (None if cand is None or cev is None or cev.feasible
+                       else self.violations(cand))
             if margins is not None and all(np.isfinite(m).all() for m in margins):
                 # Second-order correction: tighten the limits the trial point broke by twice
                 # its violation and solve the same model once more.
@@ -260,6 +261,7 @@ class PhaseProgram(SubproblemProgram):
             elif not accept or ratio < 0.5:
                 self.curvature_scale = min(1.0, 2.0 * self.curvature_scale)
             if accept:
+                assert cand is not None and cev is not None  # accepted: a feasible trial point
                 it, ev = cand, cev
                 note = "second-order correction" if corrected else ""
                 if gain >= cfg.grow_ratio * sub.predicted_gain:
@@ -326,6 +328,7 @@ def _limb_controls(scn: Scenario, stance: Stance, poses: np.ndarray,
     j = stance.free_boom
     if j is None:
         return None, None
+    assert tips is not None, "a reach phase (a free boom) has the free gripper's path"
     robot, g = scn.robot, scn.gravity_vector
     load = geometry.limb_load(robot, poses, j, tips, g)
     d = tips - geometry.shoulder_positions(robot, poses)[:, j]

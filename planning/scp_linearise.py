@@ -119,6 +119,7 @@ def linearisation(robot: RobotParams, stance: Stance, gravity: np.ndarray, targe
     torque_dq = np.zeros((N, 3))
     if st.free_boom is not None:
         j = st.free_boom
+        assert tips is not None, "a reach phase (a free boom) has the free gripper's path"
         load = geometry.limb_load(robot, q, j, tips, g)
         e[:, :2] += load.force
         e[:, 2] += load.moment

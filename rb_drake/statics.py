@@ -81,6 +81,7 @@ def statics_problem(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, 
     b[:, :2] = -robot.body_mass * g
     torque = np.zeros(P)
     if j is not None:
+        assert free_tip is not None  # a 3-stance without it raised above
         load = geometry.limb_load(robot, poses, j, free_tip, g)
         b[:, :2] -= load.force
         b[:, 2] -= load.moment

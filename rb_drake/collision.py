@@ -70,7 +70,8 @@ class Rock:
         lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
         hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
         near = np.all((self.edge_hi >= lo) & (self.edge_lo <= hi), axis=1)
-        hit = _segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]).any(axis=1)
+        hit: np.ndarray = np.any(  # (I,): numpy types ndarray.any(axis=) as maybe a scalar
+            _segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]), axis=1)
         if inside:
             hit |= self.contains(a2)
         return hit.reshape(shape)

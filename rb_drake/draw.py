@@ -12,6 +12,7 @@ import math
 
 import matplotlib
 import numpy as np
+import numpy.typing as npt
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection, PolyCollection
@@ -39,7 +40,7 @@ def new_figure(**kwargs) -> Figure:
     return fig
 
 
-def nines(p: np.ndarray) -> np.ndarray:
+def nines(p: npt.ArrayLike) -> np.ndarray:
     """-log10(1 - P): 1 for 0.9, 2 for 0.99, ..."""
     return -np.log10(np.clip(1.0 - np.asarray(p, dtype=float), 1e-12, 1.0))
 
@@ -78,7 +79,9 @@ def draw_cave(ax, scn: Scenario, highlight: tuple[str | None, ...] = (),
                                              edgecolors="#4292c6", linewidths=0.5, alpha=0.55,
                                              zorder=2))
         segments = np.stack([p, p + 0.25 * n], axis=1)
-        ax.add_collection(LineCollection(segments, colors=np.where(is_held, "red", "black"),
+        # LineCollection takes an (n, 2, 2) array, where matplotlib's stub says a Sequence
+        ax.add_collection(LineCollection(segments,  # type: ignore[arg-type]
+                                         colors=np.where(is_held, "red", "black"),
                                          linewidths=np.where(is_held, 1.6, 0.9), zorder=3))
         for mask, colour in ((~is_held, "black"), (is_held, "red")):
             if mask.any():
@@ -115,9 +118,10 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
     if not booms:
         return
     tips_arr = np.array(tips, dtype=float)
-    ax.add_collection(LineCollection(np.stack([sh[booms], tips_arr], axis=1), colors=colours,
-                                     linewidths=2.6, linestyles=styles, alpha=alpha, zorder=7,
-                                     capstyle="round"))
+    segments = np.stack([sh[booms], tips_arr], axis=1)
+    ax.add_collection(LineCollection(segments,  # type: ignore[arg-type]  # as in draw_cave
+                                     colors=colours, linewidths=2.6, linestyles=styles,
+                                     alpha=alpha, zorder=7, capstyle="round"))
     ax.scatter(tips_arr[:, 0], tips_arr[:, 1], marker="s", s=16, c=colours, alpha=alpha,
                zorder=8, linewidths=0)
     if label_booms:

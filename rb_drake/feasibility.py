@@ -241,10 +241,10 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
                                                                  end[i])[()]:
                 out.append(f"boom {i}: collides with rock")
     alloc = check.allocation
-    for i in np.flatnonzero(stance.attached):
-        psi = np.degrees(alloc.pull_angles[0, i])
+    for b in np.flatnonzero(stance.attached):
+        psi = np.degrees(alloc.pull_angles[0, b])
         if not abs(psi) < robot.max_pull_angle_deg:
-            out.append(f"boom {i}: anchor {stance.ids[i]} pulled at {psi:+.1f} deg from its "
+            out.append(f"boom {b}: anchor {stance.ids[b]} pulled at {psi:+.1f} deg from its "
                        f"normal (must be within +-{robot.max_pull_angle_deg})")
     j = stance.free_boom
     if j is not None and abs(alloc.shoulder_torque[0]) > robot.shoulder_torque_max:

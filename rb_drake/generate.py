@@ -239,7 +239,8 @@ def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
         if found is None:
             continue
         pose, ids, _ = found
-        return dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
+        return dataclasses.replace(scn, start_pose=(float(pose[0]), float(pose[1]),
+                                                    float(pose[2])),
                                    start_stance=ids)
     raise CaveGenerationError(f"no cave of kind {kind!r} with a feasible start stance after "
                               f"{cfg.max_redraws} draws from seed {seed}; loosen the CaveConfig")

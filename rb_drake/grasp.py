@@ -24,8 +24,10 @@ SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
 INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
-def mean_limit(psi: np.ndarray, f_normal: np.ndarray, f_lateral: np.ndarray) -> np.ndarray:
-    """mu(psi): the expected force the grasp sustains when pulled at angle psi."""
+def mean_limit(psi: np.ndarray, f_normal: np.ndarray | float,
+               f_lateral: np.ndarray | float) -> np.ndarray:
+    """mu(psi): the expected force the grasp sustains when pulled at angle psi (one anchor's
+    F_n and F_t, or a stance's)."""
     c, s = np.cos(psi), np.sin(psi)
     return f_normal * f_lateral / np.sqrt((f_lateral * c) ** 2 + (f_normal * s) ** 2)
 

@@ -24,6 +24,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import (
     AddMultibodyPlantSceneGraph,
@@ -130,8 +131,8 @@ class ReachBotPlant:
     holds: list[MultibodyConstraintId] = dataclasses.field(default_factory=list)
 
     @staticmethod
-    def canonical_q(pose: Sequence[float], shoulder_angles: Sequence[float],
-                    lengths: Sequence[float]) -> np.ndarray:
+    def canonical_q(pose: npt.ArrayLike, shoulder_angles: npt.ArrayLike,
+                    lengths: npt.ArrayLike) -> np.ndarray:
         """The canonical q = [x, y, phi, theta_0, L_0, ..., theta_3, L_3]."""
         joints = np.stack([np.asarray(shoulder_angles, dtype=float),
                            np.asarray(lengths, dtype=float)], axis=-1).reshape(-1)
@@ -157,7 +158,7 @@ class ReachBotPlant:
             joint.Lock(context)
             self.plant.SetConstraintActiveStatus(context, hold, anchor is not None)
 
-    def set_boom_masses(self, context: Context, masses: Sequence[float]) -> None:
+    def set_boom_masses(self, context: Context, masses: Sequence[float] | np.ndarray) -> None:
         """Give boom i the mass masses[i] (kg), half at its tip (with the gripper) and half at
         its shoulder (with the arm link): the weight, its moment about the shoulder and about
         any point equal a uniform boom's of that length (and mass). 0 restores the URDF's."""
@@ -168,7 +169,7 @@ class ReachBotPlant:
 
 
 
-def build_plant(robot: RobotParams, gravity: Sequence[float] = (0.0, -3.71),
+def build_plant(robot: RobotParams, gravity: Sequence[float] | np.ndarray = (0.0, -3.71),
                 time_step: float = 0.0, builder: DiagramBuilder | None = None, *,
                 hold_tips: bool = False, live_outputs: bool = False,
                 joint_limits: bool = True) -> ReachBotPlant:

@@ -359,7 +359,7 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     if rock.polygons and (gap := float(rock.distance(p))) > ANCHOR_GAP_TOL and not rock.contains(p):
         raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is off its wall: "
                       f"{gap:.3f} m from the nearest rock surface (at most {ANCHOR_GAP_TOL} m)")
-    return Anchor(aid, pos, normal, fn, ft, sn, st)
+    return Anchor(aid, (pos[0], pos[1]), normal, fn, ft, sn, st)
 
 
 def _check_goal(rd: _Reader, rock: Rock, goal: np.ndarray, tolerance: float) -> None:

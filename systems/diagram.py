@@ -332,6 +332,7 @@ class ClimbSimulator:
             tension = self.controller.GetOutputPort("tension").Eval(ctl)
         else:
             return True
+        assert j is not None  # opening or closing: phase k or k - 1 has a free boom
         if tension is None or tension[j] <= RELEASE_TENSION:
             return True
         t = self.context.get_time()
@@ -386,6 +387,7 @@ class ClimbSimulator:
         limb = plan.carried_limb(min(max(t, plan.phases[k].start), plan.phases[k].end - 1e-9))
         if limb[5] >= 0:
             masses[int(limb[5])] = limb[4]
+        assert self.robot_plant is not None  # called for the full plant only
         self.robot_plant.set_boom_masses(
             self.plant.GetMyMutableContextFromRoot(context or self.context), masses)
 
@@ -395,6 +397,7 @@ class ClimbSimulator:
         anchor, the free boom's mass (if any) at its planned length."""
         phase = plan.phases[k]
         context = context or self.context
+        assert self.robot_plant is not None  # called for the full plant only
         self.robot_plant.hold_tips(self.plant.GetMyMutableContextFromRoot(context), [
             p if a else None for a, p in zip(phase.stance.attached, phase.stance.positions,
                                              strict=True)])
@@ -421,6 +424,7 @@ class ClimbSimulator:
         tip_rates = np.zeros((NUM_BOOMS, 2))
         j = phase.stance.free_boom
         if j is not None:
+            assert phase.free_tip is not None and phase.free_tip_rate is not None  # a reach phase
             targets[j] = phase.free_tip.value(t).ravel()
             tip_rates[j] = phase.free_tip_rate.value(t).ravel()
         pose, rates = body_state[:3], body_state[3:6]
@@ -457,7 +461,8 @@ class ClimbSimulator:
                                 grasp_log[:, 2 * NUM_BOOMS:], failure, data.get("joints"))
 
 
-def _selector(plant: MultibodyPlant, rows_q: Sequence[int], rows_v: Sequence[int]) -> MatrixGain:
+def _selector(plant: MultibodyPlant, rows_q: Sequence[int] | np.ndarray,
+              rows_v: Sequence[int] | np.ndarray) -> MatrixGain:
     """A (C++) gain picking entries of the plant's state [q; v]: q[rows_q], then v[rows_v]."""
     nq = plant.num_positions()
     rows = [*map(int, rows_q), *(nq + int(r) for r in rows_v)]

@@ -82,12 +82,15 @@ class RigCommandSource(LeafSystem):
         if memory.boom_length is not None and self.last_status_time_port.HasValue(context):
             silence = context.get_time() - self.last_status_time_port.Eval(context)[0]
             if silence > self._status_timeout:
+                assert memory.tension is not None  # stored with boom_length
                 return memory.boom_length, memory.tension, "held"
         pose = self._pose.value(t).ravel()
         length = geometry.boom_geometry(self._robot, pose, self._anchors).length[0]
         tension = self._tension.value(t).ravel()
         if not (np.all(np.isfinite(length)) and np.all(np.isfinite(tension))):
-            return memory.boom_length, memory.tension, "refused"  # the first one is finite
+            # the first one is finite (__init__ checks it), so a command was sent before
+            assert memory.boom_length is not None and memory.tension is not None
+            return memory.boom_length, memory.tension, "refused"
         safe_length = np.clip(length, *self._robot.boom_length)
         safe_tension = np.clip(tension, *self._robot.boom_tension)
         # A plan on a limit may miss it by round-off: that is not worth reporting.

@@ -67,8 +67,8 @@ def _stamp(files: tuple[tuple[str, int, int], ...]) -> bytes:
     return digest.digest()
 
 
-def _stamping(base: type) -> type:
-    class Stamping(base):  # type: ignore[valid-type, misc]
+def _stamping(base: type) -> type[Any]:  # a subclass of base, which no static type names
+    class Stamping(base):
         @classmethod
         def from_function(cls, py_func, py_file):  # numba calls it to choose a locator
             return super().from_function(py_func, py_file) if _is_stamped(py_file) else None
@@ -127,5 +127,6 @@ def install() -> None:
         classes[:0] = LOCATORS
     cache_file = caching.IndexDataCacheFile
     if not getattr(cache_file.save, "__rbp_locked__", False):
-        cache_file.save = _locked(cache_file.save, exclusive=True)
-        cache_file.load = _locked(cache_file.load, exclusive=False)
+        # numba's methods replaced on purpose (the docstring says why), which mypy refuses
+        cache_file.save = _locked(cache_file.save, exclusive=True)  # type: ignore[method-assign]
+        cache_file.load = _locked(cache_file.load, exclusive=False)  # type: ignore[method-assign]

@@ -399,7 +399,7 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
                 if att[i]:
                     pull += max(0.0, abs(psi[i]) - (prm[P_MAX_PULL] - 1e-3))
             v += pull
-            r = robustness if math.isfinite(robustness) else log_p_min - 1.0
+            rob = robustness if math.isfinite(robustness) else log_p_min - 1.0
             if statics_ok:
-                v += max(0.0, log_p_min - r)
+                v += max(0.0, log_p_min - rob)
         v_out[row] = 0.0 if code == 0 else max(v, 1e-6)

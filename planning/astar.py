@@ -15,9 +15,11 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections.abc import Callable, Hashable, Iterable, Sequence
-from typing import Any, NamedTuple
+from typing import Any, Generic, NamedTuple, TypeVar
 
 import networkx as nx
+
+N = TypeVar("N", bound=Hashable)  # a node of the searched graph
 
 
 class Edge(NamedTuple):
@@ -25,9 +27,9 @@ class Edge(NamedTuple):
     data: Any
 
 
-class SearchResult(NamedTuple):
+class SearchResult(NamedTuple, Generic[N]):
     success: bool
-    path: list[Hashable]           # nodes from start to goal
+    path: list[N]                  # nodes from start to goal
     edges: list[Any]               # edge data along the path
     goal_data: Any                 # what the goal test returned for the goal node
     cost: float
@@ -35,21 +37,21 @@ class SearchResult(NamedTuple):
     evaluations: int
     graph: nx.DiGraph              # every evaluated feasible edge
     reason: str
-    expanded: Sequence[Hashable] = ()  # nodes in expansion order (the start first)
+    expanded: Sequence[N] = ()     # nodes in expansion order (the start first)
     node_data: Any = None          # dict: the data each reached node was last reached with
 
 
 def lazy_astar(
-    start: Hashable,
-    successors: Callable[[Hashable, Any], Iterable[tuple[Hashable, Any, float]]],
-    evaluate: Callable[[Hashable, Hashable, Any, Any], Edge | None],
-    heuristic: Callable[[Hashable], float],
-    is_goal: Callable[[Hashable, Any], Any],
+    start: N,
+    successors: Callable[[N, Any], Iterable[tuple[N, Any, float]]],
+    evaluate: Callable[[N, N, Any, Any], Edge | None],
+    heuristic: Callable[[N], float],
+    is_goal: Callable[[N, Any], Any],
     weight: float = 1.0,
     max_expansions: int = 1000,
     start_data: Any = None,
-    on_expand: Callable[[int, Hashable], None] | None = None,
-) -> SearchResult:
+    on_expand: Callable[[int, N], None] | None = None,
+) -> SearchResult[N]:
     """Search from `start` to the first node for which `is_goal(node, node_data)` is truthy.
 
     successors(node, node_data) yields (child, edge_key, lower_bound_cost);
@@ -59,15 +61,15 @@ def lazy_astar(
     tie = itertools.count()
     graph = nx.DiGraph()
     graph.add_node(start)
-    g_best: dict[Hashable, float] = {start: 0.0}
-    parent: dict[Hashable, tuple[Hashable, Any]] = {}
-    node_data: dict[Hashable, Any] = {start: start_data}
-    closed: dict[Hashable, float] = {}  # expanded nodes and the g they were expanded with
+    g_best: dict[N, float] = {start: 0.0}
+    parent: dict[N, tuple[N, Any]] = {}
+    node_data: dict[N, Any] = {start: start_data}
+    closed: dict[N, float] = {}  # expanded nodes and the g they were expanded with
     # entries: (f, tie, g, node, parent, edge_key, evaluated, edge_data); for an unevaluated
     # entry g is the parent's g plus the edge's lower bound.
     open_list: list = [(weight * heuristic(start), next(tie), 0.0, start, None, None, True, None)]
     expansions = evaluations = 0
-    order: list[Hashable] = []
+    order: list[N] = []
     while open_list:
         _, _, g, node, par, key, evaluated, data = heapq.heappop(open_list)
         if node in closed and g >= closed[node] - 1e-15:

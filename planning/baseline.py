@@ -21,6 +21,7 @@ from planning.footsteps import (
     edge_rng,
     goal_pose_in,
 )
+from planning.lattice_search import Stance4, stance4
 from planning.search_outcome import Stop
 from planning.transition import find_transition
 from rb_drake.scenario import Scenario
@@ -31,11 +32,13 @@ def plan_naive(scn: Scenario, config: FootstepConfig | None = None,
     cfg = config or FootstepConfig()
     tcfg = dataclasses.replace(cfg.transition, ignore_grasps=True)
     t0 = time.perf_counter()
-    stance = tuple(scn.start_stance)
+    stance = stance4(scn.start_stance)
     pose = np.asarray(scn.start_pose, dtype=float)
     goal_rng = np.random.default_rng([cfg.seed, 2])
     goal = np.asarray(scn.goal_position)
-    stances, steps, seen = [stance], [], {stance}
+    stances: list[Stance4] = [stance]
+    steps: list[Step] = []
+    seen = {stance}
     tested = 0
     for _ in range(max_steps):
         goal_pose = goal_pose_in(scn, stance, goal_rng, cfg.goal_samples, ignore_grasps=True)
@@ -46,13 +49,14 @@ def plan_naive(scn: Scenario, config: FootstepConfig | None = None,
         moves.sort(key=lambda m: float(np.linalg.norm(
             scn.anchor_positions[scn.anchor_index[m[1]]] - goal)))
         for j, anchor in moves:
-            new = tuple(anchor if i == j else a for i, a in enumerate(stance))
+            new = stance4(anchor if i == j else a for i, a in enumerate(stance))
             if new in seen:
                 continue
             tested += 1
             tr = find_transition(scn, stance, j, anchor, edge_rng(cfg.seed, stance, j, anchor),
                                  guess=pose, config=tcfg)
             if tr.feasible:
+                assert tr.pose is not None and tr.probabilities is not None  # feasible
                 steps.append(Step(j, stance[j], anchor, tr.pose, tr.probabilities))
                 stance, pose = new, tr.pose
                 stances.append(stance)

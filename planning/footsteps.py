@@ -34,7 +34,7 @@ from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
-from planning.lattice_search import LatticeMemo, Stance4, search_result
+from planning.lattice_search import LatticeMemo, Stance4, search_result, stance4
 from planning.ramps import ramp_ends_hold
 from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import (
@@ -128,7 +128,7 @@ class FootstepPlan(NamedTuple):
     expansions: int
     transitions_tested: int
     seconds: float
-    search: SearchResult | None = None
+    search: SearchResult[Stance4] | None = None
     transitions: dict | None = None   # every transition tested: (stance, boom, anchor) -> result
     # Why the search stopped (planning.search_outcome.Stop): a route was found, the budget was
     # reached, every stance it could reach was expanded (no proof unless the search is
@@ -244,7 +244,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     t0 = time.perf_counter()
     c_attach = attach_cost(scn.robot)
     distance_heuristic = DistanceHeuristic(scn)
-    start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
+    start = stance4(scn.start_stance)
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cache, releases = memo.transitions, memo.releases
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
@@ -253,7 +253,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
 
     def successors(node: Stance4, pose: np.ndarray):
         for j, anchor in candidate_moves(scn, node, pose, cfg.candidates_per_boom, cfg.seed):
-            child = tuple(anchor if i == j else a for i, a in enumerate(node))
+            child = stance4(anchor if i == j else a for i, a in enumerate(node))
             yield child, (j, anchor), c_attach
 
     def evaluate(node: Stance4, child: Stance4, key: tuple[int, str], pose: np.ndarray):
@@ -274,6 +274,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         tr = cache[ck]
         if not tr.feasible:
             return None
+        assert tr.pose is not None  # a feasible transition's
         return Edge(edge_cost(scn, node, j, anchor, tr.pose), tr.pose)
 
     def heuristic(node: Stance4) -> float:
@@ -296,8 +297,8 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                         start_data=start_pose, on_expand=on_expand)
     seconds = time.perf_counter() - t0
     if not result.success:
-        nearest = min(centroid_distance(scn, n) for n in result.graph.nodes)
-        reason = (f"{result.reason}; the nearest stance reached is {nearest:.2f} m from the "
+        closest = min(centroid_distance(scn, n) for n in result.graph.nodes)
+        reason = (f"{result.reason}; the nearest stance reached is {closest:.2f} m from the "
                   f"goal (the start is {centroid_distance(scn, start):.2f} m)")
         budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
         if budget:
@@ -310,8 +311,9 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
     steps = []
     for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
         j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
-        steps.append(polished_step(scn, cfg, a, j, b[j], pose,
-                                   cache[(a, j, b[j])].probabilities))
+        probabilities = cache[(a, j, b[j])].probabilities
+        assert probabilities is not None  # the path's transitions are feasible
+        steps.append(polished_step(scn, cfg, a, j, b[j], pose, probabilities))
     seconds = time.perf_counter() - t0
     explored, frontier = explored_stances(scn, result, start_pose)
     return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
@@ -367,7 +369,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                 for k, (v, p) in enumerate(result.expanded)]
     frontier = [Explored(v[0], np.asarray(p, dtype=float), -1, goal_distance(scn, v[0]))
                 for v, p in result.frontier]
-    start = tuple(scn.start_stance)
+    start = stance4(scn.start_stance)
     if not result.success:
         reason = result.reason
         if explored:
@@ -379,7 +381,8 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                             result.stop, explored, frontier, memo, min_success=cfg.min_success)
     stances = [v[0] for v in result.path]
     steps = []
-    others = result.alternatives or [None] * len(result.poses)
+    no_alternatives: list[np.ndarray | None] = [None] * len(result.poses)
+    others = result.alternatives or no_alternatives
     for a, b, pose, probabilities, alternatives in zip(stances[:-1], stances[1:], result.poses,
                                                        result.probabilities, others,
                                                        strict=True):
@@ -394,7 +397,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                         result.quality, cfg.min_success)
 
 
-def explored_stances(scn: Scenario, result: SearchResult,
+def explored_stances(scn: Scenario, result: SearchResult[Stance4],
                      start_pose: np.ndarray) -> tuple[list[Explored], list[Explored]]:
     """The expanded stances in order, and the frontier (reached by a feasible transition but
     never expanded), each with the pose it was reached at."""

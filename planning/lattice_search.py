@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
 
 import networkx as nx
@@ -33,6 +33,12 @@ from rb_drake.scenario import Scenario
 Stance4 = tuple[str, str, str, str]
 Vertex = tuple[Stance4, int]  # (stance, component)
 ALTERNATIVES = 32  # transition poses kept per edge of the path, best first
+
+
+def stance4(ids: Iterable[str]) -> Stance4:
+    """Four anchor ids, one per boom, as a Stance4 (a ValueError for any other number)."""
+    a, b, c, d = ids
+    return a, b, c, d
 
 
 @dataclasses.dataclass
@@ -110,7 +116,7 @@ def threads_held(search: Callable[..., CompleteResult]) -> Callable[..., Complet
     return held
 
 
-def search_result(result: CompleteResult) -> SearchResult:
+def search_result(result: CompleteResult) -> SearchResult[Stance4]:
     """The result in `planning.astar`'s form, stances as nodes."""
     graph = nx.DiGraph()
     for (a, _), b in result.graph.edges():

@@ -51,7 +51,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     out = Path(args.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     rbp = [sys.executable, "-m", "rbp"]
-    variants = [("plan", None, []), ("plan --no-pictures", None, ["--no-pictures"])]
+    variants: list[tuple[str, str | None, list[str]]] = [
+        ("plan", None, []), ("plan --no-pictures", None, ["--no-pictures"])]
     if args.before:
         variants.insert(0, ("before: plan", str(Path(args.before).resolve()), []))
     rows = []

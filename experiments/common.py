@@ -131,7 +131,7 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
     counts as a failure of every planner, with the generator's reason."""
     start = time.perf_counter()
     try:
-        scn = make_cave(kind, seed, tuple(length), anchor_density, gravity, p_min,
+        scn = make_cave(kind, seed, (length[0], length[1]), anchor_density, gravity, p_min,
                         gripper_scale)
     except RuntimeError as e:
         failed = {"success": False, "reason": f"no cave: {e}", "p_path": None,
@@ -244,7 +244,7 @@ def variant_config(variant: str, time_limit: float | None):
 
     limit = 600.0 if time_limit is None else time_limit
     exhaustive = AnytimeConfig(improve_factor=None)
-    settings: dict[str, Any] = {
+    table: dict[str, dict[str, Any]] = {
         "default": {},
         "first": {"anytime": None},
         "sampled": {"search": "sampled"},
@@ -260,8 +260,8 @@ def variant_config(variant: str, time_limit: float | None):
                       "heuristic_weight": 1.0},
         "repair": {"anytime": None, "repair": RepairConfig()},
         "default-repair": {"repair": RepairConfig()},
-    }[variant]
-    return FootstepConfig(**settings)
+    }
+    return FootstepConfig(**table[variant])
 
 
 def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | None]

@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     def median(values: list[float]) -> float | None:
         return quantiles(values)["median"]
 
-    summary = {side: {"median_wall": median([r[side]["wall"] for r in rows]),
+    summary: dict[str, Any] = {side: {"median_wall": median([r[side]["wall"] for r in rows]),
                       "median_cpu": median([r[side]["cpu"] for r in rows])}
                for side in ("old", "new")}
     summary["ratio_median"] = median([r["ratio"] for r in rows])

@@ -19,6 +19,7 @@ import multiprocessing
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     caves: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
+        done: Iterator[dict[str, Any]]
         if args.workers > 1:
             pool = stack.enter_context(multiprocessing.get_context("spawn").Pool(args.workers))
             done = pool.imap_unordered(run_job, jobs)

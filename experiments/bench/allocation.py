@@ -4,6 +4,7 @@ ReachBot code's cvxpy formulation and scipy SLSQP on the exact objective (see th
 
 from __future__ import annotations
 
+import functools
 import math
 import statistics
 import time
@@ -36,6 +37,11 @@ class AllocationCase(NamedTuple):
     pose: np.ndarray              # (3,)
     free_tip: np.ndarray | None   # (2,) in a 3-stance
 
+    def tip(self) -> np.ndarray:
+        """The free gripper's position, of a 3-stance case."""
+        assert self.free_tip is not None, "a 4-stance case has no free gripper"
+        return self.free_tip
+
 
 def allocation_cases(count: int, seed: int = 0, batch: int = 64,
                      max_rounds: int = 200) -> list[AllocationCase]:
@@ -61,7 +67,7 @@ def allocation_cases(count: int, seed: int = 0, batch: int = 64,
             break
         for name, scn in caves:
             if any(wants(name, g) for g in quota):
-                _sample_cave(scn, name, rng, batch, lambda g, name=name: wants(name, g),
+                _sample_cave(scn, name, rng, batch, functools.partial(wants, name),
                              cases.append)
     return cases
 
@@ -76,7 +82,8 @@ def _sample_cave(scn: Scenario, name: str, rng: np.random.Generator, batch: int,
     reachable = np.stack([geometry.reach(robot, poses, pos, np.full(len(pos), i)).violation == 0
                           for i in range(NUM_BOOMS)], axis=1)         # (batch, 4, anchors)
     for p, pose in enumerate(poses):
-        ids, used = [""] * 4, []
+        ids: list[str] = [""] * 4
+        used: list[int] = []
         for i in rng.permutation(4):  # booms in a random order, each a distinct anchor
             free = np.setdiff1d(np.flatnonzero(reachable[p, i]), used)
             if not len(free):
@@ -257,7 +264,7 @@ def batch_allocate(cases: list[AllocationCase], repeats: int = 3) -> tuple[np.nd
                              *(np.stack([getattr(s, field) for s in stances])
                                for field in Stance._fields[2:]))
             poses = np.stack([cases[k].pose for k in rows])
-            tips = None if free is None else np.stack([cases[k].free_tip for k in rows])
+            tips = None if free is None else np.stack([cases[k].tip() for k in rows])
             t0 = time.perf_counter()
             alloc = allocate(robot, np.asarray(gravity), poses, stacked, tips)
             total += time.perf_counter() - t0
@@ -323,7 +330,7 @@ def _score_case(case: AllocationCase, answers: dict[str, Answer]) -> dict[str, A
     A, b, psi = prob.A[0], prob.b[0], prob.pull_angles[0]
     lo, hi = case.scn.robot.boom_tension
     att = case.stance.attached
-    scored = {}
+    scored: dict[str, dict[str, Any]] = {}  # per method, the JSON record
     for name, ans in answers.items():
         f = ans.tensions
         fa = f[att]
@@ -340,6 +347,7 @@ def _score_case(case: AllocationCase, answers: dict[str, Answer]) -> dict[str, A
     fb = np.array(scored[best]["tensions"] if best else [np.nan] * 4, dtype=float)
     for s in scored.values():
         if s["ok"]:
+            assert best is not None  # an ok answer is valid, so there is a best
             f = np.array(s["tensions"], dtype=float)
             s["J_gap"] = scored[best]["J"] - s["J"]
             s["r_error"] = abs(scored[best]["r"] - s["r"])

@@ -3,6 +3,7 @@ bundled caves, each phase with the pipeline's seed."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import numpy as np
@@ -28,6 +29,17 @@ class Segment(NamedTuple):
         return st if self.boom is None else st.without(self.boom)
 
 
+@dataclasses.dataclass(eq=False)
+class _Climb:
+    """A greedy climb of `scp_segments` so far: where it stands and the stances it has held."""
+
+    name: str
+    scn: Scenario
+    stance: tuple[str, ...]
+    pose: np.ndarray
+    seen: set[tuple[str, ...]]
+
+
 def scp_segments(moves: int, seed: int = 0, min_steps: int = 3) -> list[Segment]:
     """The phases of the first `moves` regrasps of greedy climbs on the bundled caves (round
     robin): from the current stance the first feasible move toward the goal (as the footstep
@@ -43,15 +55,16 @@ def scp_segments(moves: int, seed: int = 0, min_steps: int = 3) -> list[Segment]
     climbs = []
     for name, path in sorted(bundled_caves().items()):
         scn = load_scenario(path)
-        climbs.append([name, scn, tuple(scn.start_stance), np.asarray(scn.start_pose, float),
-                       {tuple(scn.start_stance)}])
+        climbs.append(_Climb(name, scn, tuple(scn.start_stance),
+                             np.asarray(scn.start_pose, float), {tuple(scn.start_stance)}))
     segments: list[Segment] = []
     done = 0
     while done < moves and climbs:
         for climb in list(climbs):
             if done >= moves:
                 break
-            name, scn, stance, pose, seen = climb
+            name, scn, stance, pose = climb.name, climb.scn, climb.stance, climb.pose
+            seen = climb.seen
             step = None
             for j, anchor in candidate_moves(scn, stance, pose, per_boom=3, seed=seed):
                 new = tuple(anchor if i == j else a for i, a in enumerate(stance))
@@ -60,6 +73,7 @@ def scp_segments(moves: int, seed: int = 0, min_steps: int = 3) -> list[Segment]
                 tr = find_transition(scn, stance, j, anchor, edge_rng(seed, stance, j, anchor),
                                      guess=pose)
                 if tr.feasible:
+                    assert tr.pose is not None  # a feasible transition's
                     step = (j, anchor, new, tr.pose)
                     break
             if step is None:
@@ -72,7 +86,7 @@ def scp_segments(moves: int, seed: int = 0, min_steps: int = 3) -> list[Segment]
                 segments.append(Segment(name, "body", scn, stance, None, body.poses, None))
             if reach.success and len(reach.poses) >= min_steps:
                 segments.append(Segment(name, "reach", scn, stance, j, reach.poses, reach.tips))
-            climb[2], climb[3] = new, np.asarray(goal, dtype=float)
+            climb.stance, climb.pose = new, np.asarray(goal, dtype=float)
             seen.add(new)
             done += 1
     return segments

@@ -44,6 +44,7 @@ def run_scp(moves: int, seed: int, ipopt_iterations: int = 1000) -> dict[str, An
         if seg.boom is None:
             res = optimise_body(scn, seg.stance_ids, seg.poses, dt, cfg)
         else:
+            assert seg.tips is not None  # a reach phase's free gripper path
             res = optimise_reach(scn, seg.stance_ids, seg.boom, seg.poses, seg.tips, dt, cfg)
         ours_seconds = time.perf_counter() - t
         ours = _score_trajectory(program, seg, Iterate(res.poses, res.velocities,

@@ -76,8 +76,8 @@ def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = O
 
 def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
               oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
-    """The plan-file object (`plan_dict`): the whole pipeline with `motion`, else the footstep stage only
-    (the naive baseline always stops after its footsteps). Its timing also holds the
+    """The plan-file object (`plan_dict`): the whole pipeline with `motion`, else the footstep
+    stage only (the naive baseline always stops after its footsteps). Its timing also holds the
     footstep search's CPU seconds (`footstep_cpu`, every thread) and the threads its
     compiled kernels used."""
     from planning.footsteps import plan_footsteps

@@ -19,6 +19,7 @@ from pathlib import Path
 from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
+from planning.plan_model import plan_dict
 from rb_drake.errors import EXIT_OK
 from rb_drake.files import atomic_write_text
 from rb_drake.generate import KINDS, CaveConfig, generate_cave
@@ -49,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             fp = run(scn, cfg)
             seconds = time.perf_counter() - t0
-            plan = build_plan(scn, fp, name)
+            plan = plan_dict(build_plan(scn, fp, name))
             records.append({"seed": seed, "kind": kind, "planner": name,
                             "success": plan["success"], "seconds": seconds,
                             "p_path": plan["p_path"], "p_min": plan["p_min"],

@@ -79,6 +79,7 @@ def calibration_trial(cave: dict[str, Any], runs: int, mc_seed: int,
     from planning.check import check_plan
     from planning.footsteps import FootstepConfig
     from planning.pipeline import PipelineConfig, plan_climb
+    from planning.plan_model import plan_dict
     from systems.diagram import ClimbSimulator
     from systems.montecarlo import monte_carlo
     from systems.trajectory import PlanTrajectory
@@ -86,7 +87,8 @@ def calibration_trial(cave: dict[str, Any], runs: int, mc_seed: int,
     start = time.perf_counter()
     scn = make_cave(cave)
     budget = int(cave.get("expansions", max_expansions))
-    plan = plan_climb(scn, "rbp", PipelineConfig(footstep=FootstepConfig(max_expansions=budget)))
+    plan = plan_dict(plan_climb(scn, "rbp",
+                               PipelineConfig(footstep=FootstepConfig(max_expansions=budget))))
     timing = {"plan": time.perf_counter() - start}
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
               "p_grasps": plan["p_grasps"], "regrasps": plan["regrasps"],

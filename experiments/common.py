@@ -76,25 +76,26 @@ def footstep_config(planner: str, max_expansions: int, oracle_seconds: float = O
 
 def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
               oracle_seconds: float = ORACLE_SECONDS) -> dict[str, Any]:
-    """The plan dictionary: the whole pipeline with `motion`, else the footstep stage only
-    (the naive baseline always stops after its footsteps). Its timing also holds the
+    """The plan-file object (`plan_dict`): the whole pipeline with `motion`, else the footstep
+    stage only (the naive baseline always stops after its footsteps). Its timing also holds the
     footstep search's CPU seconds (`footstep_cpu`, every thread) and the threads its
     compiled kernels used."""
     from planning.footsteps import plan_footsteps
     from planning.pipeline import PipelineConfig, plan_climb
     from planning.plan import build_plan
+    from planning.plan_model import plan_dict
     from rb_drake.kernel.threads import kernel_threads
 
     config = PipelineConfig(footstep=footstep_config(planner, max_expansions, oracle_seconds))
     name = "naive" if planner == "naive" else "rbp"
     if (motion and planner != "oracle") or planner == "naive":  # the oracle labels footsteps
-        return plan_climb(scn, name, config)
+        return plan_dict(plan_climb(scn, name, config))
     start, cpu = time.perf_counter(), time.process_time()
     fp = plan_footsteps(scn, config.footstep)
-    return build_plan(scn, fp, name, {"footstep": fp.seconds,
-                                      "footstep_cpu": time.process_time() - cpu,
-                                      "threads": kernel_threads(),
-                                      "total": time.perf_counter() - start})
+    return plan_dict(build_plan(scn, fp, name, {"footstep": fp.seconds,
+                                                "footstep_cpu": time.process_time() - cpu,
+                                                "threads": kernel_threads(),
+                                                "total": time.perf_counter() - start}))
 
 
 
@@ -103,6 +104,7 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
     whether `rbp check`'s verifier finds it sound (`verified`; a failed plan is not)."""
     from planning.check import check_plan
     from planning.pipeline import motion_summary
+    from planning.plan_model import plan_of
 
     kinds = [p["kind"] for p in plan["phases"]]
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
@@ -111,7 +113,7 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
               "regrasps": plan["regrasps"],
               "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
               "verified": bool(plan["success"]) and not check_plan(plan)}
-    rows = motion_summary(plan)
+    rows = motion_summary(plan_of(plan))
     if rows:
         record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
                                                "seed_mean", "mean", "seed_min_at_end", "room",
@@ -268,6 +270,7 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
              ) -> dict[str, Any]:
     from planning.footsteps import plan_footsteps
     from planning.plan import build_plan
+    from planning.plan_model import plan_dict
     from planning.search_cost import edge_cost
 
     kind, seed, length, variants, limit = job
@@ -278,7 +281,7 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
         t0 = time.perf_counter()
         fp = plan_footsteps(scn, config)
         seconds = time.perf_counter() - t0
-        plan = build_plan(scn, fp, "rbp")
+        plan = plan_dict(build_plan(scn, fp, "rbp"))
         cost = None
         if fp.success:
             cost = sum(edge_cost(scn, a, s.boom, s.to_anchor,

@@ -21,6 +21,7 @@ import numpy as np
 
 from planning.pipeline import plan_climb
 from planning.plan_faults import FAULTS, judge, random_fault
+from planning.plan_model import plan_dict
 from rb_drake.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE
 from rb_drake.files import atomic_write_text
 from rb_drake.scenario import bundled_caves, load_scenario
@@ -45,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--faults: must be at least 1, got {args.faults}")
     plans = {}
     for name in names:
-        plan = plan_climb(load_scenario(caves[name]))
+        plan = plan_dict(plan_climb(load_scenario(caves[name])))
         if not plan["success"]:
             print(f"{name}: no plan ({plan['reason']})", file=sys.stderr)
             return EXIT_USAGE

@@ -27,6 +27,7 @@ def rbp_body_plan(scn) -> dict[str, Any]:
     from planning.footsteps import FootstepPlan
     from planning.pipeline import PipelineConfig, phase_motions
     from planning.plan import build_motion_plan, build_plan
+    from planning.plan_model import plan_dict
 
     start = np.asarray(scn.start_pose, dtype=float)
     goal = np.array([*scn.goal_position, start[2]])
@@ -36,12 +37,10 @@ def rbp_body_plan(scn) -> dict[str, Any]:
     timing: dict[str, float] = {}
     motions, failure = phase_motions(scn, fp, config, timing)
     if failure:
-        plan = build_plan(scn, fp, "rbp", timing)
-        plan["success"], plan["reason"] = False, f"motion planning failed: {failure}"
-        plan["p_path"] = plan["p_min"] = None
-        return plan
+        return plan_dict(build_plan(scn, fp, "rbp", timing).replace(
+            success=False, reason=f"motion planning failed: {failure}", p_path=None, p_min=None))
     timing["total"] = sum(timing.values())
-    return build_motion_plan(scn, fp, motions, "rbp", timing, config.dt)
+    return plan_dict(build_motion_plan(scn, fp, motions, "rbp", timing, config.dt))
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

@@ -100,10 +100,11 @@ def scp_figure(rows: list[dict[str, Any]]):
 def best_phases(plan: dict[str, Any]) -> dict[str, int]:
     """Per kind, the phase where SCP raised the mean probability most."""
     from planning.pipeline import motion_summary
+    from planning.plan_model import plan_of
 
     best: dict[str, int] = {}
     for kind in KINDS:
-        rows = [r for r in motion_summary(plan) if r["kind"] == kind]
+        rows = [r for r in motion_summary(plan_of(plan)) if r["kind"] == kind]
         if rows:
             best[kind] = max(rows, key=lambda r: r["mean"] - r["seed_mean"])["phase"]
     return best

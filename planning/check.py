@@ -186,7 +186,7 @@ def _check_configuration(scn, stance, pose, tip, step: Step, fail):
     if not _same(p_success, step.p_success):
         fail("recorded-value", f"p_success {step.p_success} but recomputed {p_success}")
     p_grasp = [float(np.exp(v)) if att[i] else None for i, v in enumerate(lp)]
-    for i, (mine, theirs) in enumerate(zip(p_grasp, step.p_grasp, strict=True)):
+    for b, (mine, theirs) in enumerate(zip(p_grasp, step.p_grasp, strict=True)):
         if (mine is None) != (theirs is None) or (mine is not None and not _same(mine, theirs)):
-            fail("recorded-value", f"p_grasp[{i}] {theirs} but recomputed {mine}")
+            fail("recorded-value", f"p_grasp[{b}] {theirs} but recomputed {mine}")
     return p_grasp, p_success, float(fa[att].sum())

@@ -18,12 +18,13 @@ each end adds EASE_STEPS / 2 time steps.
 
 from __future__ import annotations
 
-import copy
-from typing import Any, NamedTuple
+import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
 from planning.between import BETWEEN_DIP, between_steps
+from planning.plan_model import Phase, Plan
 from planning.plan_steps import steps_with_tensions
 from planning.ramps import CONTROL_TENSION_FLOOR
 from rb_drake import geometry
@@ -63,59 +64,55 @@ def _interpolate(values: np.ndarray, s: np.ndarray) -> np.ndarray:
     return (1.0 - w) * values[k] + w * values[k + 1]
 
 
-def ease_phase(scn: Scenario, phase: dict[str, Any], dt: float, t0: float,
-               ease: int = EASE_STEPS, slow: int = 1) -> dict[str, Any] | None:
+def ease_phase(scn: Scenario, phase: Phase, dt: float, t0: float,
+               ease: int = EASE_STEPS, slow: int = 1) -> Phase | None:
     """The phase re-timed to start and stop gently, its first step at t0, cruising at 1 /
     `slow` of its planned speed (None when its path is too short to ease or an interpolated
     configuration is infeasible). The phase's last step is its dwell (a repeat of the one
     before), kept. `motion.inertial_excess` records `inertial_excess` of the result."""
-    steps = phase["steps"]
-    path = steps[:-1]  # the dwell is added again below
+    path = phase.steps[:-1]  # the dwell is added again below
     intervals = len(path) - 1
     ease = min(ease, 2 * (intervals // 2))
     if ease < 2 or intervals < ease:
         return None
-    poses = np.array([s["pose"] for s in path], dtype=float)
-    reach = phase["kind"] == "reach"
-    tips = np.array([s["free_tip"] for s in path], dtype=float) if reach else None
+    poses = np.array([s.pose for s in path], dtype=float)
+    reach = phase.kind == "reach"
     s = np.concatenate([[0.0], _progress(intervals, ease, slow)])
     exact = np.abs(s - np.round(s)) < 1e-9
     new_poses = _interpolate(poses, s)
     new_poses[exact] = poses[np.round(s[exact]).astype(int)]
     new_tips = None
     if reach:
+        tips = np.array([s.free_tip for s in path], dtype=float)
         new_tips = _interpolate(tips, s)
         new_tips[exact] = tips[np.round(s[exact]).astype(int)]
-    stance = scn.stance(tuple(phase["stance"]))
+    stance = scn.stance(tuple(phase.stance))
     check = check_poses(scn, stance, new_poses, new_tips, full=True)
     if not check.feasible.all():
         return None
     tensions = check.allocation.tensions.copy()
-    planned = np.array([[np.nan if v is None else v for v in st["tension"]] for st in path])
+    planned = np.array([[np.nan if v is None else v for v in st.tension] for st in path])
     tensions[exact] = planned[np.round(s[exact]).astype(int)]
-    new = steps_with_tensions(scn, tuple(phase["stance"]), new_poses, tensions, new_tips, t0,
-                              dt)
-    new.append(dict(new[-1], t=round(t0 + len(new) * dt, 6)))
+    new = steps_with_tensions(scn, tuple(phase.stance), new_poses, tensions, new_tips, t0, dt)
+    new.append(new[-1].replace(t=round(t0 + len(new) * dt, 6)))
     load = inertial_load(scn, stance, new_poses, tensions, new_tips, dt)
-    out = copy.deepcopy(phase)
-    out["steps"] = new
-    motion = out.get("motion")
+    motion = phase.motion
     if motion is not None:  # the seed's record on the same path, for SCP's statistics
         m = len(path)
-        seed_p = _interpolate(np.array(motion["seed_p_success"][:m], dtype=float)[:, None], s)
+        seed_p = _interpolate(np.array(motion.seed_p_success[:m], dtype=float)[:, None], s)
         seed_f = _interpolate(np.array([[np.nan if v is None else v for v in row]
-                                        for row in motion["seed_tension"][:m]]), s)
+                                        for row in motion.seed_tension[:m]]), s)
         seed_p, seed_f = np.vstack([seed_p, seed_p[-1:]]), np.vstack([seed_f, seed_f[-1:]])
-        motion["seed_p_success"] = [float(v) for v in seed_p[:, 0]]
-        motion["seed_tension"] = [[None if np.isnan(v) else float(v) for v in row]
-                                  for row in seed_f]
-        motion["seed_effort"] = [float(np.nansum(row)) for row in seed_f]
-        motion["effort"] = [float(sum(v for v in st["tension"] if v is not None)) for st in new]
-        motion["eased"] = ease
-        motion["slowed"] = slow
-        motion["inertial_excess"] = float(load.excess.max())
-        motion["inertial_dip"] = float(load.dip.max())
-    return out
+        motion = dataclasses.replace(
+            motion,
+            seed_p_success=tuple(float(v) for v in seed_p[:, 0]),
+            seed_tension=tuple(tuple(None if np.isnan(v) else float(v) for v in row)
+                               for row in seed_f),
+            seed_effort=tuple(float(np.nansum(row)) for row in seed_f),
+            effort=tuple(float(sum(v for v in st.tension if v is not None)) for st in new),
+            eased=ease, slowed=slow,
+            inertial_excess=float(load.excess.max()), inertial_dip=float(load.dip.max()))
+    return dataclasses.replace(phase, steps=tuple(new), motion=motion)
 
 
 class Inertial(NamedTuple):
@@ -188,39 +185,43 @@ def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np
     return Inertial(np.where(ok, out, np.inf) if P else out, np.where(ok, dip, np.inf))
 
 
-def _motion_score(scn: Scenario, phase: dict[str, Any]) -> tuple[bool, float, float]:
+def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:
     """(whether the motion between the steps fails `between_steps`, the inertial excess, the
     inertial dip beyond BETWEEN_DIP): the smaller the better; (False, 0.0, 0.0) passes."""
-    steps = phase["steps"]
-    stance = scn.stance(tuple(phase["stance"]))
-    poses = np.array([st["pose"] for st in steps], dtype=float)
-    tips = (np.array([st["free_tip"] for st in steps], dtype=float)
-            if phase["kind"] == "reach" else None)
+    steps = phase.steps
+    stance = scn.stance(tuple(phase.stance))
+    poses = np.array([st.pose for st in steps], dtype=float)
+    tips = (np.array([st.free_tip for st in steps], dtype=float)
+            if phase.kind == "reach" else None)
     with np.errstate(divide="ignore"):
-        lp = np.log(np.array([[1.0 if p is None else p for p in st["p_grasp"]] for st in steps]))
+        lp = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp] for st in steps]))
     failed = between_steps(scn, stance, poses, lp, tips)
-    motion = phase["motion"]
-    return (bool(failed), max(0.0, float(motion["inertial_excess"])),
-            max(0.0, float(motion["inertial_dip"]) - BETWEEN_DIP))
+    motion = phase.motion
+    if motion is None or motion.inertial_excess is None or motion.inertial_dip is None:
+        raise ValueError("an eased phase without its inertial record")
+    return (bool(failed), max(0.0, float(motion.inertial_excess)),
+            max(0.0, float(motion.inertial_dip) - BETWEEN_DIP))
 
 
-def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) -> dict[str, Any]:
+def ease_motions(plan: Plan, scn: Scenario, ease: int = EASE_STEPS) -> Plan:
     """The plan with every trajectory phase (body and reach) eased (`ease_phase`) where it can
     be, later steps shifted in time. Plans without a time step (end poses only) are left as
     they are: their two-step phases are executed rest to rest at minimum-jerk timing already."""
-    dt = plan.get("time_step")
+    dt = plan.time_step
     if not dt:
         return plan
-    plan = copy.deepcopy(plan)
+    phases = []
     shift = 0.0
-    for phase in plan["phases"]:
+    for phase in plan.phases:
         if shift:
-            for step in phase["steps"]:
-                step["t"] = round(float(step["t"]) + shift, 6)
-        if "motion" not in phase:
+            phase = dataclasses.replace(phase, steps=tuple(
+                step.replace(t=round(float(step.t) + shift, 6)) for step in phase.steps))
+        if phase.motion is None:
+            phases.append(phase)
             continue
-        t0 = float(phase["steps"][0]["t"])
-        eased, best = None, (True, np.inf, np.inf)
+        t0 = float(phase.steps[0].t)
+        eased: Phase | None = None
+        best: tuple[bool, float, float] = (True, np.inf, np.inf)
         for slow in SLOW_FACTORS:  # slower where the motion between steps or its inertia fails
             candidate = None
             for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
@@ -235,8 +236,8 @@ def ease_motions(plan: dict[str, Any], scn: Scenario, ease: int = EASE_STEPS) ->
             if best == (False, 0.0, 0.0):
                 break
         if eased is None:
+            phases.append(phase)
             continue
-        shift += float(eased["steps"][-1]["t"]) - float(phase["steps"][-1]["t"])
-        phase.clear()
-        phase.update(eased)
-    return plan
+        shift += float(eased.steps[-1].t) - float(phase.steps[-1].t)
+        phases.append(eased)
+    return dataclasses.replace(plan, phases=tuple(phases))

@@ -24,6 +24,7 @@ from planning.baseline import plan_naive
 from planning.between import between_steps
 from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
 from planning.plan import build_motion_plan, build_plan, step_limits
+from planning.plan_model import PhaseKind, Plan
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
 from rb_drake.feasibility import check_poses
@@ -47,7 +48,7 @@ class PipelineConfig:
 class PhaseMotion(NamedTuple):
     """One phase's trajectory, with its seed for comparison."""
 
-    kind: str                        # "body" | "reach"
+    kind: PhaseKind
     stance: tuple[str | None, ...]   # the anchors held (None for the free boom)
     free_boom: int | None
     from_anchor: str | None
@@ -60,7 +61,7 @@ class PhaseMotion(NamedTuple):
         return self.result.poses if self.result is not None else self.seed.poses
 
     @property
-    def tensions(self) -> np.ndarray:
+    def tensions(self) -> np.ndarray | None:
         return self.result.tensions if self.result is not None else None
 
 
@@ -78,6 +79,8 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
     timing = timing if timing is not None else {}
     seed_value = cfg.footstep.seed
     motions: list[PhaseMotion] = []
+    if fp.goal_pose is None:
+        raise ValueError("phase_motions: a footstep plan without its goal pose (no route)")
     ends = [s.pose for s in fp.steps] + [fp.goal_pose]
     found = [s.found_pose if s.found_pose is not None else s.pose for s in fp.steps]
     found_ends = [*found, fp.goal_pose]
@@ -138,12 +141,16 @@ def phase_motions(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
             progress(f"phase {len(motions) + 1}/{n_phases}: boom {step.boom} "
                      f"{step.from_anchor} -> {step.to_anchor}")
         three = tuple(None if i == step.boom else a for i, a in enumerate(stance))
+        if reach is None:  # seeded above: k < len(fp.steps) here
+            raise ValueError(f"phase_motions: reach {k} was not seeded")
         seed = reach
         if not seed.success:
             return motions, (f"reach phase {len(motions)} (boom {step.boom} {step.from_anchor} "
                              f"-> {step.to_anchor}): {seed.reason}")
         result = None
         if cfg.optimise:
+            if seed.tips is None:
+                raise ValueError(f"phase_motions: reach {k}'s seed has no free tips")
             t0 = time.perf_counter()
             result = optimise_reach(scn, three, step.boom, seed.poses, seed.tips, cfg.dt, cfg.scp)
             clock("scp_reach", t0)
@@ -186,6 +193,8 @@ def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | N
     j = reach.free_boom
     three = scn.stance(reach.stance)
     tips = reach.seed.tips  # SCP keeps the free tip's path
+    if tips is None:
+        raise ValueError("a reach phase's seed without its free tips")
     for name, ids, n in (("release", before, 0), ("attach", after, -1)):
         pose = reach.poses[n]
         f = allocate(robot, g, pose, three, tips[n]).tensions[0]
@@ -202,8 +211,8 @@ def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | N
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
                progress: Progress | None = None,
                footstep_progress: Callable[..., None] | None = None,
-               footsteps_done: Callable[[FootstepPlan], None] | None = None) -> dict[str, Any]:
-    """The whole plan-file dictionary (`reachbot-plan/2`) for a scenario.
+               footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+    """The whole plan (`reachbot-plan/2`) for a scenario.
 
     `footsteps_done` is called with each footstep plan (the search's, then any retry's): a
     caller can picture where a failed search went."""
@@ -249,10 +258,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         motions, failure = phase_motions(scn, fp, cfg, timing, progress)
     if failure:
         timing["total"] = time.perf_counter() - t_start
-        plan = build_plan(scn, fp, planner, timing)
-        plan["success"], plan["reason"] = False, f"motion planning failed: {failure}"
-        plan["p_path"] = plan["p_min"] = None
-        return plan
+        return build_plan(scn, fp, planner, timing).replace(
+            success=False, reason=f"motion planning failed: {failure}", p_path=None, p_min=None)
     timing["total"] = time.perf_counter() - t_start
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
                              step_limits(cfg.seed.step, cfg.seed.turn_step))
@@ -270,28 +277,28 @@ def failed_move(fp: FootstepPlan, done: int) -> tuple[tuple[str, ...], int, str]
 ROOM = 1e-4  # a phase whose seed's mean P is within this of 1 leaves SCP nothing to gain
 
 
-def motion_summary(plan: dict[str, Any]) -> list[dict[str, Any]]:
+def motion_summary(plan: Plan) -> list[dict[str, Any]]:
     """Per phase: the seed's and the optimum's minimum and mean probability and effort.
 
     SCP keeps a phase's first and last pose fixed (the transition poses), so it cannot raise a
     minimum that sits there: `seed_min_at_end` says whether the seed's does, and `room` whether
     the seed's mean P leaves anything to gain (below 1 - ROOM)."""
     rows = []
-    for k, phase in enumerate(plan["phases"]):
-        motion = phase.get("motion")
+    for k, phase in enumerate(plan.phases):
+        motion = phase.motion
         if motion is None:
             continue
-        p = np.array([s["p_success"] for s in phase["steps"]])
-        p_seed = np.array(motion["seed_p_success"])
-        poses = np.array([s["pose"] for s in phase["steps"]])
+        p = np.array([s.p_success for s in phase.steps])
+        p_seed = np.array(motion.seed_p_success)
+        poses = np.array([s.pose for s in phase.steps])
         at = poses[int(np.argmin(p_seed))]
         at_end = bool(np.allclose(at, poses[0], atol=1e-9) or np.allclose(at, poses[-1],
                                                                           atol=1e-9))
-        rows.append({"phase": k, "kind": phase["kind"], "steps": len(p),
+        rows.append({"phase": k, "kind": phase.kind, "steps": len(p),
                      "seed_min": float(p_seed.min()), "min": float(p.min()),
                      "seed_mean": float(p_seed.mean()), "mean": float(p.mean()),
                      "seed_min_at_end": at_end, "room": bool(p_seed.mean() < 1.0 - ROOM),
-                     "seed_effort": float(np.mean(motion["seed_effort"])),
-                     "effort": float(np.mean(motion["effort"])),
-                     "improved": bool(motion["improved"]), "status": motion["scp_status"]})
+                     "seed_effort": float(np.mean(motion.seed_effort)),
+                     "effort": float(np.mean(motion.effort)),
+                     "improved": bool(motion.improved), "status": motion.scp_status})
     return rows

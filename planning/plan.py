@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,15 +24,19 @@ from planning.easing import ease_motions
 from planning.plan_model import (
     FORMAT,
     STAGES,
+    Limits,
     Motion,
+    Phase,
     Plan,
     SearchPoint,
     SearchRecord,
+    Step,
     plan_dict,
+    planner_of,
 )
 from planning.plan_schema import schema, validate  # noqa: F401 (re-exported)
 from planning.plan_steps import allocation_step, steps_with_tensions
-from planning.probability import Configuration, PathProbability, path_probability
+from planning.probability import Configuration, path_probability
 from planning.ramps import add_ramps
 from planning.verify_climb import DEFAULT_LIMITS, STEP_STRETCH
 from rb_drake.feasibility import check_poses
@@ -40,6 +45,7 @@ from rb_drake.scenario import Scenario
 
 if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write a plan
     from planning.footsteps import FootstepPlan
+    from planning.pipeline import PhaseMotion
 
 BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
 TURN_SPEED = 0.2      # rad/s
@@ -47,7 +53,7 @@ REACH_DURATION = 5.0  # s for the free gripper to travel between anchors
 
 
 def _configuration(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
-                   free_tip: np.ndarray | None, t: float) -> dict[str, Any]:
+                   free_tip: np.ndarray | None, t: float) -> Step:
     stance = scn.stance(stance_ids)
     check = check_poses(scn, stance, pose, free_tip, full=True)
     return allocation_step(stance, check.allocation, 0, round(float(t), 6), pose, free_tip)
@@ -75,10 +81,10 @@ def search_record(fp: FootstepPlan) -> SearchRecord:
 
 
 def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
-               timing: dict[str, float] | None = None) -> dict[str, Any]:
-    """The plan-file dictionary for a footstep plan (phases at the footstep stage)."""
+               timing: dict[str, float] | None = None) -> Plan:
+    """The plan for a footstep plan (phases at the footstep stage)."""
     plan = plan_header(scn, planner, bool(fp.success), fp.reason, timing, search_record(fp))
-    plan["regrasps"] = len(fp.steps)
+    phases: list[Phase] = []
     t = 0.0
     poses = [fp.start_pose] + [s.pose for s in fp.steps]
     ends = [s.pose for s in fp.steps] + ([fp.goal_pose] if fp.goal_pose is not None else [])
@@ -87,45 +93,40 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
             a, b = np.asarray(poses[k]), np.asarray(ends[k])
             duration = max(1.0, float(np.linalg.norm(b[:2] - a[:2])) / BODY_SPEED,
                            abs(float(b[2] - a[2])) / TURN_SPEED)
-            plan["phases"].append({
-                "kind": "body", "stance": list(stance), "free_boom": None,
-                "steps": [_configuration(scn, stance, a, None, t),
-                          _configuration(scn, stance, b, None, t + duration)]})
+            phases.append(Phase(
+                kind="body", stance=tuple(stance), free_boom=None,
+                steps=(_configuration(scn, stance, a, None, t),
+                       _configuration(scn, stance, b, None, t + duration))))
             t += duration
         if k < len(fp.steps):
             step = fp.steps[k]
             three = tuple(None if i == step.boom else x for i, x in enumerate(stance))
             old = np.array(scn.anchors[scn.anchor_index[step.from_anchor]].position)
             new = np.array(scn.anchors[scn.anchor_index[step.to_anchor]].position)
-            plan["phases"].append({
-                "kind": "reach", "stance": list(three), "free_boom": step.boom,
-                "from_anchor": step.from_anchor, "to_anchor": step.to_anchor,
-                "steps": [_configuration(scn, three, step.pose, old, t),
-                          _configuration(scn, three, step.pose, new, t + REACH_DURATION)]})
+            phases.append(Phase(
+                kind="reach", stance=three, free_boom=step.boom,
+                from_anchor=step.from_anchor, to_anchor=step.to_anchor,
+                steps=(_configuration(scn, three, step.pose, old, t),
+                       _configuration(scn, three, step.pose, new, t + REACH_DURATION))))
             t += REACH_DURATION
-    plan = add_ramps(plan, scn)
+    plan = add_ramps(plan.replace(regrasps=len(fp.steps), phases=tuple(phases)), scn)
     if fp.success:
-        score_plan(plan, scn.robot.attach_failure)
+        plan = score_plan(plan, scn.robot.attach_failure)
     return plan
 
 
 def plan_header(scn: Scenario, planner: str, success: bool, reason: str,
                 timing: dict[str, float] | None = None,
-                search: SearchRecord | None = None) -> dict[str, Any]:
+                search: SearchRecord | None = None) -> Plan:
     """A plan without phases, in the current format: what every producer of a plan (the
     pipeline, the naive baseline, the rig's plan) starts from. The robot is stored once, at the
     top level (`scenario` is the cave without it); the summary is unset (`score_plan`)."""
-    plan: dict[str, Any] = {
-        "format": FORMAT, "planner": planner, "success": success, "reason": reason,
-        "p_min": None, "p_path": None, "p_grasps": None, "regrasps": 0,
-        "timing": {k: 0.0 for k in STAGES} | (timing or {}),
-    }
-    if search is not None:
-        plan["search"] = search.to_dict()
     scenario = scn.to_dict(resolved=True)
     del scenario["robot"]
-    plan |= {"scenario": scenario, "robot": scn.robot.to_dict(), "phases": []}
-    return plan
+    return Plan(format=FORMAT, planner=planner_of(planner), success=success, reason=reason,
+                p_min=None, p_path=None, p_grasps=None, regrasps=0,
+                timing={k: 0.0 for k in STAGES} | (timing or {}), search=search,
+                scenario=scenario, robot=scn.robot.to_dict(), phases=())
 
 
 def step_limits(step: float, turn_step: float) -> dict[str, float]:
@@ -144,10 +145,10 @@ def within_limits(poses: np.ndarray, tips: np.ndarray | None, limits: dict[str, 
     return bool(ok)
 
 
-def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: str,
-                      timing: dict[str, float], dt: float,
-                      limits: dict[str, float] | None = None) -> dict[str, Any]:
-    """The plan-file dictionary with full trajectories (`pipeline.PhaseMotion`s), one step
+def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: Sequence[PhaseMotion],
+                      planner: str, timing: dict[str, float], dt: float,
+                      limits: dict[str, float] | None = None) -> Plan:
+    """The plan with full trajectories (`pipeline.PhaseMotion`s), one step
     every `dt` seconds, and a dwell of dt at the end of each phase. Each phase also records
     its seed (`motion`): method, per-step probability and effort, and what SCP made of it.
 
@@ -155,15 +156,15 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
     between successive configurations and are recorded in the plan; an SCP result that breaks
     them is not used (the seed, within them, stands)."""
     plan = build_plan(scn, fp, planner, timing)
-    plan["time_step"] = dt
-    plan["limits"] = limits = dict(limits or DEFAULT_LIMITS)
+    limits = dict(limits or DEFAULT_LIMITS)
     phases = []
     t = 0.0
     for m in motions:
-        used = m.result is not None and within_limits(m.result.poses, m.seed.tips, limits)
-        if used:
-            poses, tensions = m.result.poses, m.result.tensions
-            seed_tensions = m.result.seed_tensions
+        used = (m.result if m.result is not None
+                and within_limits(m.result.poses, m.seed.tips, limits) else None)
+        if used is not None:
+            poses, tensions = used.poses, used.tensions
+            seed_tensions = used.seed_tensions
         else:  # the seed with its robust allocation (per-row tips in a reach phase)
             poses = m.seed.poses
             check = check_poses(scn, scn.stance(m.stance), poses, m.seed.tips, full=True)
@@ -173,17 +174,12 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
         # Each phase ends with a dwell of dt in its last configuration (the gripper engaging or
         # letting go): the next phase starts when it ends, and an execution that switches
         # stance at the boundary still spends time in every configuration the plan lists.
-        steps.append(dict(steps[-1], t=round(t, 6)))
-        phase: dict[str, Any] = {"kind": m.kind, "stance": list(m.stance),
-                                 "free_boom": m.free_boom}
-        if m.kind == "reach":
-            phase["from_anchor"], phase["to_anchor"] = m.from_anchor, m.to_anchor
-        phase["steps"] = steps
+        steps.append(steps[-1].replace(t=round(t, 6)))
         # per step, like `steps` (the dwell repeats the last)
         seed_lp = np.append(m.seed.log_probs, m.seed.log_probs[-1])
         seed_tensions = np.vstack([seed_tensions, seed_tensions[-1:]])
         tensions = np.vstack([tensions, tensions[-1:]])
-        phase["motion"] = Motion(
+        motion = Motion(
             seed_method=m.seed.method,
             seed_p_success=tuple(float(np.exp(v)) for v in seed_lp),
             seed_tension=tuple(tuple(None if np.isnan(v) else float(v) for v in f)
@@ -191,31 +187,34 @@ def build_motion_plan(scn: Scenario, fp: FootstepPlan, motions: list, planner: s
             seed_effort=tuple(float(np.nansum(f)) for f in seed_tensions),
             effort=tuple(float(np.nansum(f)) for f in tensions),
             optimised=m.result is not None,
-            improved=bool(used and m.result.improved),
-            scp_status=(m.result.status if used else "not run" if m.result is None
+            improved=bool(used is not None and used.improved),
+            scp_status=(used.status if used is not None else "not run" if m.result is None
                         else "seed kept: SCP's steps exceed the plan's limits"),
             scp_iterations=int(m.result.iterations) if m.result is not None else 0,
-        ).to_dict()
-        phases.append(phase)
-    plan["phases"] = phases
+        )
+        reach = m.kind == "reach"
+        phases.append(Phase(kind=m.kind, stance=tuple(m.stance), free_boom=m.free_boom,
+                            from_anchor=m.from_anchor if reach else None,
+                            to_anchor=m.to_anchor if reach else None,
+                            steps=tuple(steps), motion=motion))
+    plan = plan.replace(time_step=dt, phases=tuple(phases),
+                        limits=Limits(step=limits["step"], turn_step=limits["turn_step"]))
     plan = add_ramps(ease_motions(plan, scn), scn)
-    score_plan(plan, scn.robot.attach_failure)
-    return plan
+    return score_plan(plan, scn.robot.attach_failure)
 
 
-def score_plan(plan: dict[str, Any], attach_failure: float) -> PathProbability:
-    """Set the plan's p_path, p_grasps, p_min and regrasps from its configurations."""
+def score_plan(plan: Plan, attach_failure: float) -> Plan:
+    """The plan with its p_path, p_grasps, p_min and regrasps set from its configurations."""
     prob = path_probability(plan_configurations(plan), attach_failure)
-    plan.update(p_path=prob.p_path, p_grasps=prob.p_grasps, p_min=prob.p_min,
-                regrasps=prob.regrasps)
-    return prob
+    return plan.replace(p_path=prob.p_path, p_grasps=prob.p_grasps, p_min=prob.p_min,
+                        regrasps=prob.regrasps)
 
 
-def plan_configurations(plan: dict[str, Any]):
-    """Every configuration of a plan file, in time order, for `path_probability`."""
-    for phase in plan["phases"]:
-        for step in phase["steps"]:
-            yield Configuration(phase["stance"], step["p_grasp"], step["p_success"])
+def plan_configurations(plan: Plan) -> Iterator[Configuration]:
+    """Every configuration of a plan, in time order, for `path_probability`."""
+    for phase in plan.phases:
+        for step in phase.steps:
+            yield Configuration(phase.stance, step.p_grasp, step.p_success)
 
 
 def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:

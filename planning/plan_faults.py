@@ -22,27 +22,38 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.plan import score_plan
+from planning.plan_model import Plan
 from planning.verify_climb import step_limits
 
-Plan = dict[str, Any]
+# The faults damage plan files (NaN in a number, a robot under `scenario`, steps out of
+# order), much of which the typed model (planning.plan_model) cannot hold: they work on the
+# plan-file object, the dict a plan file parses to.
+PlanFile = dict[str, Any]
 Rng = np.random.Generator
+
+
+def _rescore(plan: PlanFile) -> None:
+    """Set the summary of a (schema-valid) damaged plan file from its configurations."""
+    scored = score_plan(Plan.from_dict(plan), plan["robot"]["attach_failure"])
+    plan.update(p_path=scored.p_path, p_grasps=scored.p_grasps, p_min=scored.p_min,
+                regrasps=scored.regrasps)
 
 
 class Fault(NamedTuple):
     kind: str
-    plan: Plan
+    plan: PlanFile
     rules: frozenset[str]  # a verifier that rejects it reports at least one of these
     phase: int | None      # the phase a local fault is in (its problem names it or a neighbour)
     what: str              # in words, for messages
     bad_number: bool = False  # plan holds NaN or inf: it must be refused when read
 
 
-def _phase(plan: Plan, rng: Rng, min_steps: int = 1) -> int | None:
+def _phase(plan: PlanFile, rng: Rng, min_steps: int = 1) -> int | None:
     ks = [k for k, p in enumerate(plan["phases"]) if len(p["steps"]) >= min_steps]
     return int(rng.choice(ks)) if ks else None
 
 
-def step_removed(plan: Plan, rng: Rng) -> Fault | None:
+def step_removed(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng, 2)
     if k is None:
         return None
@@ -54,7 +65,7 @@ def step_removed(plan: Plan, rng: Rng) -> Fault | None:
                  k, f"phases[{k}] step {n} deleted")
 
 
-def step_duplicated(plan: Plan, rng: Rng) -> Fault | None:
+def step_duplicated(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
     steps = out["phases"][k]["steps"]
@@ -64,7 +75,7 @@ def step_duplicated(plan: Plan, rng: Rng) -> Fault | None:
                  f"phases[{k}] step {n} duplicated")
 
 
-def phase_duplicated(plan: Plan, rng: Rng) -> Fault | None:
+def phase_duplicated(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
     out["phases"].insert(k, copy.deepcopy(out["phases"][k]))
@@ -72,7 +83,7 @@ def phase_duplicated(plan: Plan, rng: Rng) -> Fault | None:
                  f"phases[{k}] duplicated")
 
 
-def steps_reversed(plan: Plan, rng: Rng) -> Fault | None:
+def steps_reversed(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng, 2)
     if k is None:
         return None
@@ -82,7 +93,7 @@ def steps_reversed(plan: Plan, rng: Rng) -> Fault | None:
                  f"phases[{k}] steps reversed")
 
 
-def step_replaced(plan: Plan, rng: Rng) -> Fault | None:
+def step_replaced(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng, 2)
     if k is None:
         return None
@@ -95,7 +106,7 @@ def step_replaced(plan: Plan, rng: Rng) -> Fault | None:
                  f"phases[{k}] step {n} replaced by step {m}")
 
 
-def step_moved(plan: Plan, rng: Rng) -> Fault | None:
+def step_moved(plan: PlanFile, rng: Rng) -> Fault | None:
     """A pose moved (or turned), its tensions and values left: a jump, or a wrong statics."""
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
@@ -118,7 +129,7 @@ def step_moved(plan: Plan, rng: Rng) -> Fault | None:
                  k, f"phases[{k}] step {n} {what}")
 
 
-def time_changed(plan: Plan, rng: Rng) -> Fault | None:
+def time_changed(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
     steps = out["phases"][k]["steps"]
@@ -137,7 +148,7 @@ def time_changed(plan: Plan, rng: Rng) -> Fault | None:
                  f"phases[{k}] step {n} t {t} -> {steps[n]['t']}")
 
 
-def start_moved(plan: Plan, rng: Rng) -> Fault | None:
+def start_moved(plan: PlanFile, rng: Rng) -> Fault | None:
     out = copy.deepcopy(plan)
     start = out["scenario"]["start"]
     if rng.random() < 0.7:
@@ -156,7 +167,7 @@ def start_moved(plan: Plan, rng: Rng) -> Fault | None:
     return Fault("start-moved", out, frozenset({"start"}), None, what)
 
 
-def goal_moved(plan: Plan, rng: Rng) -> Fault | None:
+def goal_moved(plan: PlanFile, rng: Rng) -> Fault | None:
     out = copy.deepcopy(plan)
     end = np.array(plan["phases"][-1]["steps"][-1]["pose"][:2]) if plan["phases"] else None
     if end is None or not plan["success"]:
@@ -180,7 +191,7 @@ ROBOT_EDITS = ("body_mass", "gripper_mass", "boom_linear_density", "shoulder_tor
                "p_min", "attach_failure", "boom_tension", "boom_length")
 
 
-def robot_edited(plan: Plan, rng: Rng) -> Fault | None:
+def robot_edited(plan: PlanFile, rng: Rng) -> Fault | None:
     """One parameter of the robot under `scenario` (or, half the time, at the top level)
     changed by 10 % to 100 %, so the two robots differ."""
     out = copy.deepcopy(plan)
@@ -199,7 +210,7 @@ def robot_edited(plan: Plan, rng: Rng) -> Fault | None:
                  f"{value}")
 
 
-def value_changed(plan: Plan, rng: Rng) -> Fault | None:
+def value_changed(plan: PlanFile, rng: Rng) -> Fault | None:
     """One recorded per-step value (a grasp's P, P, shoulder torque, effort, a tension)."""
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
@@ -213,6 +224,7 @@ def value_changed(plan: Plan, rng: Rng) -> Fault | None:
         choices.append("effort")
     name = str(rng.choice(choices))
     rules = frozenset({"recorded-value"})
+    key: int | str
     if name in ("p_grasp", "tension"):
         i = int(rng.choice([i for i, v in enumerate(step[name]) if v is not None]))
         holder, key = step[name], i
@@ -233,7 +245,7 @@ def value_changed(plan: Plan, rng: Rng) -> Fault | None:
     return Fault("value-changed", out, rules, k, f"phases[{k}] step {n} {name} {old} -> {new}")
 
 
-def summary_edited(plan: Plan, rng: Rng) -> Fault | None:
+def summary_edited(plan: PlanFile, rng: Rng) -> Fault | None:
     if not plan["success"]:
         return None
     out = copy.deepcopy(plan)
@@ -249,7 +261,7 @@ def summary_edited(plan: Plan, rng: Rng) -> Fault | None:
                  f"{name} {plan[name]} -> {out[name]}")
 
 
-def phases_truncated(plan: Plan, rng: Rng) -> Fault | None:
+def phases_truncated(plan: PlanFile, rng: Rng) -> Fault | None:
     """The first phases kept, the summary recomputed: a climb that stops short of the goal."""
     if not plan["success"] or len(plan["phases"]) < 2:
         return None
@@ -263,12 +275,12 @@ def phases_truncated(plan: Plan, rng: Rng) -> Fault | None:
     m = int(rng.choice(cuts))
     out = copy.deepcopy(plan)
     out["phases"] = out["phases"][:m]
-    score_plan(out, plan["robot"]["attach_failure"])
+    _rescore(out)
     return Fault("phases-truncated", out, frozenset({"goal", "phase-order"}), None,
                  f"only the first {m} of {len(plan['phases'])} phases kept")
 
 
-def anchor_swapped(plan: Plan, rng: Rng) -> Fault | None:
+def anchor_swapped(plan: PlanFile, rng: Rng) -> Fault | None:
     k = _phase(plan, rng)
     out = copy.deepcopy(plan)
     stance = out["phases"][k]["stance"]
@@ -292,7 +304,7 @@ def _number_paths(value: Any, path: tuple = ()) -> list[tuple]:
     return [p for key, item in items for p in _number_paths(item, (*path, key))]
 
 
-def bad_number(plan: Plan, rng: Rng) -> Fault | None:
+def bad_number(plan: PlanFile, rng: Rng) -> Fault | None:
     """NaN, Infinity or -Infinity in one number of the file (write it with allow_nan=True)."""
     out = copy.deepcopy(plan)
     paths = _number_paths(out)
@@ -306,7 +318,7 @@ def bad_number(plan: Plan, rng: Rng) -> Fault | None:
                  f"{holder[path[-1]]}", bad_number=True)
 
 
-def _ramps(plan: Plan) -> list[tuple[int, list[int]]]:
+def _ramps(plan: PlanFile) -> list[tuple[int, list[int]]]:
     """(phase, the indices of its ramp steps) of every release and attach ramp."""
     out = []
     for k, phase in enumerate(plan["phases"]):
@@ -317,7 +329,7 @@ def _ramps(plan: Plan) -> list[tuple[int, list[int]]]:
     return out
 
 
-def ramp_removed(plan: Plan, rng: Rng) -> Fault | None:
+def ramp_removed(plan: PlanFile, rng: Rng) -> Fault | None:
     """A release or attach ramp taken out, everything after it moved earlier by its length
     and the phase's motion record kept one entry per step: a gripper that opens (or closes)
     on a loaded boom, with time, joins and records all in order."""
@@ -340,13 +352,13 @@ def ramp_removed(plan: Plan, rng: Rng) -> Fault | None:
         later = later + other["steps"]
     for step in later:
         step["t"] = round(step["t"] - span, 6)
-    score_plan(out, out["robot"]["attach_failure"])
+    _rescore(out)
     return Fault("ramp-removed", out, frozenset({"release", "attach"}), k,
                  f"phases[{k}]: the {'attach' if lead else 'release'} ramp (steps {run}) "
                  "removed")
 
 
-def release_loaded(plan: Plan, rng: Rng) -> Fault | None:
+def release_loaded(plan: PlanFile, rng: Rng) -> Fault | None:
     """The ramped boom still pulls (1 to 5 N more) when its gripper opens or closes."""
     ramps = _ramps(plan)
     if not ramps:
@@ -363,7 +375,7 @@ def release_loaded(plan: Plan, rng: Rng) -> Fault | None:
                  "gripper's contact")
 
 
-FAULTS: dict[str, Callable[[Plan, Rng], Fault | None]] = {
+FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "step-removed": step_removed,
     "step-duplicated": step_duplicated,
     "steps-reversed": steps_reversed,
@@ -384,7 +396,7 @@ FAULTS: dict[str, Callable[[Plan, Rng], Fault | None]] = {
 }
 
 
-def random_fault(plan: Plan, rng: Rng, kind: str | None = None) -> Fault:
+def random_fault(plan: PlanFile, rng: Rng, kind: str | None = None) -> Fault:
     """One fault of class `kind` (or of a random applicable class) in `plan`."""
     kinds = [kind] if kind is not None else list(FAULTS)
     for _ in range(100):

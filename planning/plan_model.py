@@ -356,6 +356,15 @@ class Plan(Part):
         return dataclasses.replace(self, format=FORMAT, scenario_robot=None)
 
 
+def planner_of(name: str) -> Planner:
+    """`name` as a plan's planner ("rbp" or "naive"); another name raises ValueError."""
+    if name == "rbp":
+        return "rbp"
+    if name == "naive":
+        return "naive"
+    raise ValueError(f"planner must be one of ('rbp', 'naive'), got {name!r}")
+
+
 def plan_of(plan: Plan | Mapping[str, Any]) -> Plan:
     """`plan` as a Plan: a plan-file object (schema-valid) is converted, a Plan returned as is.
     For the stages that still accept either while their callers move to the model."""

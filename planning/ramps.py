@@ -33,12 +33,14 @@ gives the measurements.
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from planning.plan_model import Phase, Plan, Ramp, Step
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import StaticsProblem, statics_problem
@@ -82,84 +84,93 @@ def ramp_ends_hold(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: st
     return True
 
 
-def ramp_probabilities(scn: Scenario, stance_ids: list, step: dict[str, Any]) -> None:
-    """Set a 4-stance step's p_grasp and p_success from its tensions (as `rbp check`)."""
+def ramp_probabilities(scn: Scenario, stance_ids: Sequence[str | None], step: Step) -> Step:
+    """A 4-stance step with its p_grasp and p_success set from its tensions (as `rbp check`)."""
     stance = scn.stance(tuple(stance_ids))
-    prob = statics_problem(scn.robot, scn.gravity_vector, np.asarray(step["pose"]), stance)
-    f = np.array(step["tension"], dtype=float)
+    prob = statics_problem(scn.robot, scn.gravity_vector, np.asarray(step.pose), stance)
+    f = np.array(step.tension, dtype=float)
     lp = stance.log_prob(f, np.nan_to_num(prob.pull_angles[0]))
-    step["p_grasp"] = [float(np.exp(v)) for v in lp]
-    step["p_success"] = float(np.exp(lp.sum()))
+    return step.replace(p_grasp=tuple(float(np.exp(v)) for v in lp),
+                        p_success=float(np.exp(lp.sum())))
 
 
-def _blend(a: dict[str, Any], b: dict[str, Any], s: float, boom: int, t: float,
-           scn: Scenario, stance_ids: list) -> dict[str, Any]:
+def _blend(a: Step, b: Step, s: float, boom: int, t: float, scn: Scenario,
+           stance_ids: Sequence[str | None]) -> Step:
     """The configuration (1 - s) a + s b (b the 3-stance end, its free boom's tension 0), as a
     4-stance ramp step carrying the share s of boom `boom`'s limb."""
-    fa = np.array([0.0 if v is None else v for v in a["tension"]])
-    fb = np.array([0.0 if v is None else v for v in b["tension"]])
+    fa = np.array([0.0 if v is None else v for v in a.tension])
+    fb = np.array([0.0 if v is None else v for v in b.tension])
     f = (1.0 - s) * fa + s * fb
     f[boom] = max(f[boom], 0.0)
-    step = {"t": round(float(t), 6), "pose": list(a["pose"]),
-            "tension": [float(v) for v in f], "p_grasp": [], "p_success": 0.0,
-            "ramp": {"boom": int(boom), "share": float(s)}}
-    ramp_probabilities(scn, stance_ids, step)
-    return step
+    step = Step(t=round(float(t), 6), pose=tuple(a.pose), tension=tuple(float(v) for v in f),
+                p_grasp=(), p_success=0.0, ramp=Ramp(boom=int(boom), share=float(s)))
+    return ramp_probabilities(scn, stance_ids, step)
 
 
-def _shift(phases: list[dict[str, Any]], first: int, dt: float) -> None:
-    for phase in phases[first:]:
-        for step in phase["steps"]:
-            step["t"] = round(float(step["t"]) + dt, 6)
+def _shift(phases: list[Phase], first: int, dt: float) -> None:
+    """Shift the steps of phases[first:] by dt in time (the list's phases replaced)."""
+    for k in range(first, len(phases)):
+        phases[k] = dataclasses.replace(phases[k], steps=tuple(
+            step.replace(t=round(float(step.t) + dt, 6)) for step in phases[k].steps))
 
 
-def _extend_motion(phase: dict[str, Any], steps: list[dict[str, Any]], at_start: bool) -> None:
-    """Keep a trajectory phase's `motion` record one entry per step: a ramp step is its own
-    seed."""
-    motion = phase.get("motion")
+def _extend_motion(phase: Phase, steps: list[Step], at_start: bool) -> Phase:
+    """The phase with its trajectory's `motion` record kept one entry per step: a ramp step is
+    its own seed."""
+    motion = phase.motion
     if motion is None:
-        return
-    rows = {"seed_p_success": [s["p_success"] for s in steps],
-            "seed_tension": [list(s["tension"]) for s in steps],
-            "seed_effort": [float(sum(s["tension"])) for s in steps],
-            "effort": [float(sum(s["tension"])) for s in steps]}
-    for name, new in rows.items():
-        motion[name] = new + motion[name] if at_start else motion[name] + new
+        return phase
+    efforts = tuple(float(sum(v or 0.0 for v in s.tension)) for s in steps)
+    rows: dict[str, tuple[Any, ...]] = {
+        "seed_p_success": tuple(s.p_success for s in steps),
+        "seed_tension": tuple(tuple(s.tension) for s in steps),
+        "seed_effort": efforts, "effort": efforts}
+    changes = {name: new + getattr(motion, name) if at_start else getattr(motion, name) + new
+               for name, new in rows.items()}
+    return dataclasses.replace(phase, motion=dataclasses.replace(motion, **changes))
 
 
-def add_ramps(plan: dict[str, Any], scn: Scenario, duration: float = RAMP_DURATION
-              ) -> dict[str, Any]:
+def add_ramps(plan: Plan, scn: Scenario, duration: float = RAMP_DURATION) -> Plan:
     """The plan with a release ramp at the end of every body phase that a reach phase follows
     and an attach ramp at the start of every body phase that follows a reach phase, where they
     are missing; later steps are shifted in time. Ramp steps come every `time_step` in a plan
     with one (at least `duration` in all), else RAMP_STEPS of them over `duration`. The plan's
     scores are left to the caller (`plan.score_plan`): a ramp's P never falls below its ends'."""
-    plan = copy.deepcopy(plan)
-    dt = plan.get("time_step")
+    dt = plan.time_step
     n = max(1, math.ceil(duration / dt - 1e-9)) if dt else RAMP_STEPS
     step_dt = dt if dt else duration / RAMP_STEPS
-    phases = plan["phases"]
-    for k, phase in enumerate(phases):
-        if phase["kind"] != "body":
+    phases = list(plan.phases)
+    for k in range(len(phases)):
+        if phases[k].kind != "body":
             continue
         before = phases[k - 1] if k > 0 else None
-        if before is not None and before["kind"] == "reach" and "ramp" not in phase["steps"][0]:
-            j, end = before["free_boom"], before["steps"][-1]
-            first = phase["steps"][0]
-            t0 = float(first["t"])
-            ramp = [_blend(first, end, (n - m) / n, j, t0 + m * step_dt, scn, phase["stance"])
+        if (before is not None and before.kind == "reach"
+                and phases[k].steps[0].ramp is None):
+            j, end = _free_boom(before), before.steps[-1]
+            first = phases[k].steps[0]
+            t0 = float(first.t)
+            ramp = [_blend(first, end, (n - m) / n, j, t0 + m * step_dt, scn, phases[k].stance)
                     for m in range(n)]
             _shift(phases, k, n * step_dt)
-            phase["steps"] = ramp + phase["steps"]
-            _extend_motion(phase, ramp, at_start=True)
+            phase = phases[k]
+            phases[k] = _extend_motion(dataclasses.replace(phase, steps=(*ramp, *phase.steps)),
+                                       ramp, at_start=True)
         after = phases[k + 1] if k + 1 < len(phases) else None
-        if after is not None and after["kind"] == "reach" and "ramp" not in phase["steps"][-1]:
-            j, start = after["free_boom"], after["steps"][0]
-            last = phase["steps"][-1]
-            t0 = float(last["t"])
-            ramp = [_blend(last, start, m / n, j, t0 + m * step_dt, scn, phase["stance"])
+        if (after is not None and after.kind == "reach"
+                and phases[k].steps[-1].ramp is None):
+            j, start = _free_boom(after), after.steps[0]
+            last = phases[k].steps[-1]
+            t0 = float(last.t)
+            ramp = [_blend(last, start, m / n, j, t0 + m * step_dt, scn, phases[k].stance)
                     for m in range(1, n + 1)]
             _shift(phases, k + 1, n * step_dt)
-            phase["steps"] = phase["steps"] + ramp
-            _extend_motion(phase, ramp, at_start=False)
-    return plan
+            phase = phases[k]
+            phases[k] = _extend_motion(dataclasses.replace(phase, steps=(*phase.steps, *ramp)),
+                                       ramp, at_start=False)
+    return dataclasses.replace(plan, phases=tuple(phases))
+
+
+def _free_boom(reach: Phase) -> int:
+    if reach.free_boom is None:
+        raise ValueError("a reach phase without a free boom")
+    return reach.free_boom

@@ -15,10 +15,13 @@ import os
 import sys
 import threading
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from rbp.commands.common import UserError, check_output, load_scenario_spec, read_plan
+
+if TYPE_CHECKING:
+    from planning.plan_model import Plan
 
 EXIT_STATUSES = """exit status:
   0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
@@ -103,18 +106,19 @@ def cmd_scenario_list(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _summary(plan: dict) -> str:
-    if not plan["success"]:
+def _summary(plan: Plan) -> str:
+    search = plan.search.to_dict() if plan.search is not None else {}
+    if not plan.success:
         hint = ""
-        if (plan.get("search") or {}).get("stop") == "budget":
+        if search.get("stop") == "budget":
             hint = ("; rbp plan --thorough searches on without a budget, --max-expansions N "
                     "or --time-limit S sets another")
-        return (f"success: false ({plan['reason']}), time {plan['timing']['total']:.2f} s"
+        return (f"success: false ({plan.reason}), time {plan.timing['total']:.2f} s"
                 + hint)
-    grasps = f" (grasps alone {plan['p_grasps']:.4f})" if plan.get("p_grasps") is not None else ""
-    return (f"success: true, p_min {plan['p_min']:.4f}, p_path {plan['p_path']:.4f}{grasps}, "
-            f"regrasps {plan['regrasps']}, time {plan['timing']['total']:.2f} s"
-            + _route_quality(plan.get("search") or {}))
+    grasps = f" (grasps alone {plan.p_grasps:.4f})" if plan.p_grasps is not None else ""
+    return (f"success: true, p_min {plan.p_min:.4f}, p_path {plan.p_path:.4f}{grasps}, "
+            f"regrasps {plan.regrasps}, time {plan.timing['total']:.2f} s"
+            + _route_quality(search))
 
 
 def _route_quality(search: dict) -> str:
@@ -146,7 +150,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     scn, planner, cfg, motion = plan_setup(args)
     record = SearchRecord()
     plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record)
-    plan["provenance"] = provenance(scn, planner, cfg, motion, getattr(args, "argv", None))
+    plan = plan.replace(provenance=provenance(scn, planner, cfg, motion,
+                                              getattr(args, "argv", None)))
     out = Path(args.output)
     write_plan(plan, out)
     print(f"wrote {out}")
@@ -154,10 +159,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         write_pictures(scn, plan, out, args.phase_figure, args.animate, search=record.last)
     _print_motion(plan)
     print(_summary(plan))
-    return EXIT_OK if plan["success"] else EXIT_FAILED
+    return EXIT_OK if plan.success else EXIT_FAILED
 
 
-def _print_motion(plan: dict) -> None:
+def _print_motion(plan: Plan) -> None:
     from planning.pipeline import motion_summary
 
     rows = motion_summary(plan)
@@ -167,7 +172,7 @@ def _print_motion(plan: dict) -> None:
     inner = [r for r in rows if not r["seed_min_at_end"]]
     better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in room)
     better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in inner)
-    t = plan["timing"]
+    t = plan.timing
     phases = f"{len(rows)} phase{'' if len(rows) == 1 else 's'}"
     print(f"motion: {phases}; SCP raised the mean P on {better_mean} of the "
           f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
@@ -186,9 +191,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     if problems:
         print(f"{path}: {len(problems)} problems")
         return EXIT_FAILED
-    n = sum(len(p["steps"]) for p in plan["phases"])
-    print(f"{path}: ok: {len(plan['phases'])} phases, {n} configurations verified; "
-          + _summary(plan))
+    from planning.plan_model import Plan
+
+    model = Plan.from_dict(plan)
+    n = sum(len(p.steps) for p in model.phases)
+    print(f"{path}: ok: {len(model.phases)} phases, {n} configurations verified; "
+          + _summary(model))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp
@@ -234,7 +242,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
         cfg = PipelineConfig(footstep=FootstepConfig(seed=0, max_expansions=400))
         plan = run_planner(scn, "rbp", cfg)
-        plan["provenance"] = provenance(scn, "rbp", cfg, True, getattr(args, "argv", None))
+        plan = plan.replace(provenance=provenance(scn, "rbp", cfg, True,
+                                                  getattr(args, "argv", None)))
         write_plan(plan, out / "plan.json")
         print(f"wrote {out / 'plan.json'}")
         from planning.pipeline import motion_summary
@@ -245,7 +254,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         write_pictures(scn, plan, out / "plan.json", best, None)
         _print_motion(plan)
         print(_summary(plan))
-        if not plan["success"]:
+        if not plan.success:
             return EXIT_FAILED
     return EXIT_OK
 

@@ -21,7 +21,7 @@ def interactive(quiet: bool = False) -> bool:
 class SearchProgress:
     """A context manager whose `search(expansions, tested)` and `phase(text)` update one line."""
 
-    def __init__(self, label: str, budget: int, quiet: bool = False):
+    def __init__(self, label: str, budget: int | None, quiet: bool = False):
         self.label = label
         self.budget = budget
         self.bar: Any = None

@@ -43,7 +43,6 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
-from planning.plan_model import plan_dict
 from rb_drake import grasp
 from systems.diagram import ClimbSimulator, SimulationRecord
 from systems.monitors import Cause
@@ -81,8 +80,9 @@ def strength_limit(record: SimulationRecord, sample: int, boom: int, u: float) -
     psi = float(record.pull_angle[sample, boom])
     if not abs(psi) < grasp.HALF_PI:
         return None
-    mu = grasp.mean_limit(psi, stance.f_normal[boom], stance.f_lateral[boom])
-    sigma = grasp.sigma_limit(psi, stance.sigma_normal[boom], stance.sigma_lateral[boom])
+    mu = grasp.mean_limit(np.asarray(psi), stance.f_normal[boom], stance.f_lateral[boom])
+    sigma = grasp.sigma_limit(np.asarray(psi), stance.sigma_normal[boom],
+                              stance.sigma_lateral[boom])
     return float(mu + sigma * ndtri(1.0 - u))
 
 
@@ -165,6 +165,8 @@ def describe_failures(record: SimulationRecord, first: FirstFailures, quantiles:
         s, h = int(first.sample[trial]), int(first.holding[trial])
         if first.cause[trial] == Cause.HANDOVER:
             stop = record.failure
+            if stop is None:
+                raise ValueError("a handover failure without the simulation's failure record")
             out.append(TrialFailure(
                 int(trial), offset + stop.time, stop.phase, record.plan.phases[stop.phase].kind,
                 stop.boom, stop.anchor, "handover", 1.0, 0.0, stop.draw, None, 0.0))
@@ -265,7 +267,7 @@ class _Replanning:
         key = (record.plan.content_key, float(record.times[sample]),
                record.state[sample].tobytes(), boom, cause)
         if key not in self.cache:
-            request = ReplanRequest(scn, plan_dict(record.plan.plan), k,
+            request = ReplanRequest(scn, record.plan.plan, k,
                                     float(record.times[sample]), pose.copy(), stance, boom,
                                     anchor, cause)
             new_plan = self.replanner(request)
@@ -336,7 +338,7 @@ def monte_carlo(record: SimulationRecord, trials: int, seed: int,
         summary = ReplanSummary(strategy, len(failed) - outcomes.get("fell", 0),
                                 len(rp.cache), saved, total, total / trials,
                                 wilson_interval(total, trials), dict(outcomes))
-    p_path = record.plan.model.p_path
+    p_path = record.plan.plan.p_path
     return MonteCarloResult(trials, successes, successes / trials,
                             wilson_interval(successes, trials), p_path,
                             record.implied_p_path(), seed, failures, summary)

@@ -11,14 +11,14 @@ there (10-60 s per call on a whole cave).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from planning.plan import score_plan
+from planning.plan_model import Phase, Plan, Start, Step
 from planning.plan_steps import allocation_step
 from planning.ramps import add_ramps
 from rb_drake.feasibility import check_poses
@@ -32,7 +32,7 @@ class ReplanRequest(NamedTuple):
     `stance` (the failed boom free, its gripper at `anchor`)."""
 
     scenario: Scenario
-    plan: dict[str, Any]   # the plan being executed
+    plan: Plan             # the plan being executed
     phase: int             # index of the phase that failed, in that plan
     time: float            # s, in that plan's time
     pose: np.ndarray       # (3,)
@@ -42,8 +42,8 @@ class ReplanRequest(NamedTuple):
     cause: str
 
 
-Replanner = Callable[[ReplanRequest], dict[str, Any] | None]
-"""A new plan (`reachbot-plan/1` phases, times from 0) starting at the request's pose and
+Replanner = Callable[[ReplanRequest], Plan | None]
+"""A new plan (times from 0) starting at the request's pose and
 3-stance, or None when it finds none."""
 
 
@@ -58,7 +58,7 @@ def still_holds(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarray,
 
 
 def configuration(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarray,
-                  free_tip: np.ndarray | None, t: float) -> tuple[dict[str, Any], bool]:
+                  free_tip: np.ndarray | None, t: float) -> tuple[Step, bool]:
     """A plan step at `pose` with the robust allocation (as planning.plan writes them), and
     whether the configuration is feasible."""
     s = scn.stance(stance)
@@ -67,56 +67,58 @@ def configuration(scn: Scenario, stance: tuple[str | None, ...], pose: np.ndarra
     return step, bool(check.feasible[0])
 
 
-def shifted_phases(phases: list[dict[str, Any]], dt: float) -> list[dict[str, Any]]:
-    out = copy.deepcopy(phases)
-    for phase in out:
-        for step in phase["steps"]:
-            step["t"] = float(step["t"] + dt)
-    return out
+def shifted_phases(phases: Sequence[Phase], dt: float) -> list[Phase]:
+    """The phases with their steps dt later."""
+    return [dataclasses.replace(phase, steps=tuple(step.replace(t=float(step.t + dt))
+                                                   for step in phase.steps))
+            for phase in phases]
 
 
-def _finish_plan(request: ReplanRequest, phases: list[dict[str, Any]],
-                 planned: dict[str, Any] | None = None) -> dict[str, Any]:
+def _finish_plan(request: ReplanRequest, phases: Sequence[Phase],
+                 planned: Plan | None = None) -> Plan:
     """The continuation: the executed plan's fields with these phases; `planned`, the new
     plan they come from, if any, gives its time step and step limits (its trajectories')."""
-    plan = {k: v for k, v in request.plan.items()
-            if k not in ("phases", "verified", "time_step", "limits")}
-    for key in ("time_step", "limits"):
-        source = request.plan if planned is None else planned
-        if key in source:
-            plan[key] = source[key]
-    plan["phases"] = phases
+    source = request.plan if planned is None else planned
     # The continuation starts where the grasp failed, not at the scenario's start.
-    held = [request.anchor if i == request.boom else a for i, a in enumerate(request.stance)]
-    plan["start"] = {"pose": [float(v) for v in request.pose], "stance": held}
+    held = _held(tuple(request.anchor if i == request.boom else a
+                       for i, a in enumerate(request.stance)))
+    plan = request.plan.replace(
+        phases=tuple(phases), verified=None, time_step=source.time_step, limits=source.limits,
+        start=Start(pose=tuple(float(v) for v in request.pose), stance=held))
     plan = add_ramps(plan, request.scenario)  # the new phases' attach and release
-    score_plan(plan, request.scenario.robot.attach_failure)
-    return plan
+    return score_plan(plan, request.scenario.robot.attach_failure)
 
 
-def retry_replanner(request: ReplanRequest) -> dict[str, Any] | None:
+def _held(stance: tuple[str | None, ...]) -> tuple[str, ...]:
+    """A 4-stance's anchors (every boom holds one)."""
+    anchors = tuple(a for a in stance if a is not None)
+    if len(anchors) != len(stance):
+        raise ValueError(f"a 4-stance with a free boom: {list(stance)}")
+    return anchors
+
+
+def retry_replanner(request: ReplanRequest) -> Plan | None:
     """Re-grasp the failed anchor from where the body is (a fresh grasp: new strength and
     attach draws), finish the failed body phase from here and go on with the plan."""
     scn, plan, k = request.scenario, request.plan, request.phase
-    phase = plan["phases"][k]
-    if phase["kind"] != "body":
+    phase = plan.phases[k]
+    if phase.kind != "body":
         return None
     tip = np.array(scn.anchors[scn.anchor_index[request.anchor]].position)
     pose = np.asarray(request.pose, dtype=float)
     a, ok_a = configuration(scn, request.stance, pose, tip, 0.0)
     b, ok_b = configuration(scn, request.stance, pose, tip, RETRY_DURATION)
-    start, ok_c = configuration(scn, tuple(phase["stance"]), pose, None, RETRY_DURATION)
-    end_step = phase["steps"][-1]
-    remaining = max(1.0, float(end_step["t"]) - request.time)
-    end, ok_d = configuration(scn, tuple(phase["stance"]), np.array(end_step["pose"]), None,
+    start, ok_c = configuration(scn, tuple(phase.stance), pose, None, RETRY_DURATION)
+    end_step = phase.steps[-1]
+    remaining = max(1.0, float(end_step.t) - request.time)
+    end, ok_d = configuration(scn, tuple(phase.stance), np.array(end_step.pose), None,
                               RETRY_DURATION + remaining)
     if not (ok_a and ok_b and ok_c and ok_d):
         return None
-    reach = {"kind": "reach", "stance": list(request.stance), "free_boom": request.boom,
-             "from_anchor": request.anchor, "to_anchor": request.anchor, "steps": [a, b]}
-    body = {"kind": "body", "stance": list(phase["stance"]), "free_boom": None,
-            "steps": [start, end]}
-    rest = shifted_phases(plan["phases"][k + 1:], end["t"] - float(end_step["t"]))
+    reach = Phase(kind="reach", stance=tuple(request.stance), free_boom=request.boom,
+                  from_anchor=request.anchor, to_anchor=request.anchor, steps=(a, b))
+    body = Phase(kind="body", stance=tuple(phase.stance), free_boom=None, steps=(start, end))
+    rest = shifted_phases(plan.phases[k + 1:], end.t - float(end_step.t))
     return _finish_plan(request, [reach, body, *rest])
 
 
@@ -135,7 +137,7 @@ class FootstepReplanner:
     seed: int = 0
     optimise: bool = True  # False: the continuation keeps its seed trajectories (no SCP)
 
-    def __call__(self, request: ReplanRequest) -> dict[str, Any] | None:
+    def __call__(self, request: ReplanRequest) -> Plan | None:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig, plan_climb
         from planning.plan import REACH_DURATION
@@ -162,16 +164,17 @@ class FootstepReplanner:
             if not (ok_a and ok_b and ok_c):
                 continue
             tried += 1
-            start = dataclasses.replace(scn, start_pose=tuple(float(v) for v in pose),
-                                        start_stance=four)
+            start = dataclasses.replace(
+                scn, start_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
+                start_stance=_held(four))
             config = PipelineConfig(footstep=FootstepConfig(seed=self.seed,
                                                             max_expansions=self.max_expansions),
                                     optimise=self.optimise)
             plan = plan_climb(start, "rbp", config)
-            if not plan["success"]:
+            if not plan.success:
                 continue
-            reach = {"kind": "reach", "stance": list(request.stance), "free_boom": j,
-                     "from_anchor": request.anchor, "to_anchor": new.id, "steps": [a, b]}
-            rest = shifted_phases(plan["phases"], REACH_DURATION)
+            reach = Phase(kind="reach", stance=tuple(request.stance), free_boom=j,
+                          from_anchor=request.anchor, to_anchor=new.id, steps=(a, b))
+            rest = shifted_phases(plan.phases, REACH_DURATION)
             return _finish_plan(request, [reach, *rest], plan)
         return None

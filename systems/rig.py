@@ -17,6 +17,7 @@ import numpy as np
 
 import rb_drake
 from planning.plan import BODY_SPEED, TURN_SPEED, plan_header, score_plan, validate
+from planning.plan_model import Phase, plan_dict
 from planning.plan_steps import allocation_step
 from rb_drake import geometry
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
@@ -60,12 +61,13 @@ def rig_plan(scn: Scenario, goal_pose: np.ndarray | None = None,
               f"{REASON_TEXT[Reason(check.reason[bad[0]])]}")
     goal_scn = dataclasses.replace(scn, goal_position=(float(goal[0]), float(goal[1])))
     plan = plan_header(goal_scn, "rbp", not len(bad), reason)  # the plan ends at its goal
-    plan["phases"] = [{"kind": "body", "stance": list(stance_ids), "free_boom": None,
-                       "steps": steps}]
-    if plan["success"]:
-        score_plan(plan, scn.robot.attach_failure)
-    validate(plan)
-    return plan
+    plan = plan.replace(phases=(Phase(kind="body", stance=stance_ids, free_boom=None,
+                                      steps=tuple(steps)),))
+    if plan.success:
+        plan = score_plan(plan, scn.robot.attach_failure)
+    out = plan_dict(plan)  # the rig's code and its callers take the plan-file object
+    validate(out)
+    return out
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
 from planning.plan_file import content_hash
-from planning.plan_model import Phase, Plan, Step, plan_dict, plan_of
+from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
@@ -43,6 +43,16 @@ class PlanError(RbpInputError):
         self.reason = reason
 
 
+Refine = tuple[int, np.ndarray, np.ndarray]
+
+
+def _ramp_boom(step: Step) -> int:
+    """The boom of a ramp step."""
+    if step.ramp is None:
+        raise ValueError("a ramp's step without its ramp record")
+    return int(step.ramp.boom)
+
+
 class PhaseTrajectory(NamedTuple):
     kind: str
     start: float
@@ -54,8 +64,10 @@ class PhaseTrajectory(NamedTuple):
     # (4,) the share of each boom's limb its shoulder carries: 1 for the free boom, between 0
     # and 1 for a boom in a release or attach ramp (planning.ramps), else 0
     share: PiecewisePolynomial | None = None
-    ramps: tuple = ()  # (t0, t1, boom) of each release or attach ramp in the phase
-    grid: tuple | None = None  # the tensions' grid and values, and what refine_tensions needs
+    ramps: tuple[tuple[float, float, int], ...] = ()  # (t0, t1, boom) of each ramp in the phase
+    # the tensions' grid and values, and what _refine_tensions needs (its first row, the step
+    # times and tensions; None: nothing to refine)
+    grid: tuple[np.ndarray, np.ndarray, Refine | None] | None = None
 
 
 def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
@@ -192,15 +204,14 @@ class PlanTrajectory:
 
     def __init__(self, plan: Plan | dict[str, Any], scn: Scenario,
                  resample: float | None = 0.05):
-        self.plan = plan  # as given: the replanners continue it (systems.replanning)
-        self.model = plan_of(plan)
+        self.plan = plan_of(plan)  # the replanners continue it (systems.replanning)
         self.scenario = scn
         self.phases: list[PhaseTrajectory] = []
         knots_t: list[np.ndarray] = []
         knots_q: list[np.ndarray] = []
         knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
         previous_end = None
-        for k, phase in enumerate(self.model.phases):
+        for k, phase in enumerate(self.plan.phases):
             traj, t, q, v = self._phase(k, phase, scn, previous_end, resample)
             self.phases.append(traj)
             if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
@@ -236,7 +247,7 @@ class PlanTrajectory:
     def content_key(self) -> str:
         """The plan's content hash (`plan_file.content_hash`): equal for equal plans, for
         caches that outlive a trajectory (`systems.montecarlo`'s replans)."""
-        return content_hash(plan_dict(self.plan))
+        return content_hash(self.plan.to_dict())
 
     @staticmethod
     def _phase(k: int, phase: Phase, scn: Scenario, previous_end: float | None,
@@ -351,9 +362,9 @@ class PlanTrajectory:
         grid = np.concatenate(sections_t)
         ramps = []
         if lead:
-            ramps.append((float(times[0]), float(times[a]), int(steps[0].ramp.boom)))
+            ramps.append((float(times[0]), float(times[a]), _ramp_boom(steps[0])))
         if trail:
-            ramps.append((float(times[b - 1]), end, int(steps[-1].ramp.boom)))
+            ramps.append((float(times[b - 1]), end, _ramp_boom(steps[-1])))
         traj = PhaseTrajectory(phase.kind, start, end, stance,
                                _hold(grid, np.vstack(sections_f)), free_tip, _rate(free_tip),
                                _hold(grid, np.vstack(sections_s)), tuple(ramps),
@@ -367,6 +378,8 @@ class PlanTrajectory:
         every step. Linear interpolation of the steps' tensions alone is out of equilibrium
         between them, and the controller's correction nearest it can load one grasp well past
         both ends where a step turns the body (by 0.7 N and 0.007 in P on a shaft plan)."""
+        if phase.grid is None:
+            return phase
         grid, values, refine = phase.grid
         if refine is None:
             return phase
@@ -404,6 +417,8 @@ class PlanTrajectory:
         share = phase.share.value(t).ravel() if phase.share is not None else np.zeros(4)
         j = free_boom(phase.stance)
         if j is not None:
+            if phase.free_tip is None or phase.free_tip_rate is None:
+                raise ValueError("a reach phase's trajectory without its free tip")
             tip = phase.free_tip.value(t).ravel()
             out[2:4] = phase.free_tip_rate.value(t).ravel()
             s = 1.0

@@ -103,13 +103,15 @@ MUTATION_CAVES = ("demo-shaft", "demo-crevasse", "rockfall-3")
 @pytest.fixture(scope="session")
 def cave_plans() -> dict[str, dict]:
     """Full plans (`rbp plan`'s pipeline) of three bundled caves, planned once per session:
-    the valid plans the verifier tests damage. Tests deep-copy before changing one."""
+    the valid plans the verifier tests damage, as plan-file objects (what a file holds).
+    Tests deep-copy before changing one."""
     from planning.pipeline import plan_climb
+    from planning.plan_model import plan_dict
     from rb_drake.scenario import bundled_caves, load_scenario
 
     plans = {}
     for name in MUTATION_CAVES:
-        plan = plan_climb(load_scenario(bundled_caves()[name]))
+        plan = plan_dict(plan_climb(load_scenario(bundled_caves()[name])))
         assert plan["success"], f"{name}: {plan['reason']}"
         plans[name] = plan
     return plans

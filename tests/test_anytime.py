@@ -20,6 +20,7 @@ from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.lattice import LatticeConfig, poses_of
 from planning.lattice_kernels import reach_violation
 from planning.plan import build_plan, validate
+from planning.plan_model import plan_dict
 from planning.search_cost import (
     ORIENTATION_CELLS,
     RegraspHeuristic,
@@ -195,7 +196,7 @@ def test_plan_file_records_cost_and_bound(demo: Scenario, optimal) -> None:
     first, its bound and history in the plan file, and the same plan twice (work, not time)."""
     config = FootstepConfig(lattice=COARSE, polish_rounds=0)
     fp = plan_footsteps(demo, config)
-    plan = build_plan(demo, fp, "rbp")
+    plan = plan_dict(build_plan(demo, fp, "rbp"))
     validate(plan)
     search = plan["search"]
     assert search["quality"] in ("optimal", "bounded")

@@ -16,6 +16,7 @@ from planning.baseline import plan_naive
 from planning.check import check_plan
 from planning.footsteps import FootstepConfig, FootstepPlan, goal_pose_in
 from planning.plan import build_plan, plan_configurations, validate
+from planning.plan_model import plan_dict, plan_of
 from planning.probability import path_probability
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
 from rb_drake.generate import CaveConfig, generate_cave
@@ -44,7 +45,7 @@ def naive(seed: int) -> tuple[Scenario, FootstepPlan, dict[str, Any]]:
     if seed not in _CACHE:
         scn = small_shaft(seed)
         fp = plan_naive(scn, CONFIG)
-        _CACHE[seed] = scn, fp, build_plan(scn, fp, "naive")
+        _CACHE[seed] = scn, fp, plan_dict(build_plan(scn, fp, "naive"))
     return _CACHE[seed]
 
 
@@ -113,7 +114,7 @@ def test_an_improbable_naive_plan_is_reported_as_such() -> None:
 @pytest.mark.parametrize("seed", [SEED, 2, 3])
 def test_naive_plan_scored_with_the_same_model(seed: int) -> None:
     scn, _, plan = naive(seed)
-    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
+    prob = path_probability(plan_configurations(plan_of(plan)), scn.robot.attach_failure)
     assert plan["p_path"] == pytest.approx(prob.p_path, rel=1e-12, abs=1e-15), (
         f"plan p_path {plan['p_path']}, recomputed from its steps {prob.p_path}")
     assert plan["p_min"] == pytest.approx(prob.p_min, rel=1e-12, abs=1e-15)
@@ -143,7 +144,7 @@ def test_naive_is_deterministic(seed: int) -> None:
     for a, b in zip(again.steps, first.steps, strict=True):
         np.testing.assert_array_equal(a.pose, b.pose)
     np.testing.assert_array_equal(again.goal_pose, first.goal_pose)
-    rebuilt = build_plan(scn, again, "naive")
+    rebuilt = plan_dict(build_plan(scn, again, "naive"))
     assert rebuilt["phases"] == plan["phases"]
     assert rebuilt["p_path"] == plan["p_path"]
 

@@ -398,7 +398,7 @@ def test_a_cave_cut_in_two_has_no_route(demo: Scenario) -> None:
     top = float(demo.stance(demo.start_stance).positions[:, 1].max()) + 0.4
     assert all(p[1] < top for _, p in result.expanded), "a pose above the slab was reached"
     fp = plan_footsteps(cave, FootstepConfig(search="complete"), memo=memo)  # replays it
-    assert fp.stop == "noroute" and build_plan(cave, fp, "rbp")["search"]["stop"] == "noroute"
+    assert fp.stop == "noroute" and build_plan(cave, fp, "rbp").search.stop == "noroute"
 
 
 def test_goal_in_rock_is_no_route_at_once(demo: Scenario) -> None:

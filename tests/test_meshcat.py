@@ -31,6 +31,7 @@ from pydrake.geometry import Rgba
 from test_simulation import hand_plan
 
 from planning.plan import BODY_SPEED, FORMAT, plan_configurations, validate
+from planning.plan_model import plan_of
 from planning.probability import path_probability
 from rb_drake.generate import CaveConfig, generate_cave
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
@@ -96,8 +97,8 @@ def passage_record() -> SimulationRecord:
     steps = []
     for s in np.linspace(0.0, 1.0, 5):
         step, ok = configuration(scn, stance, start + s * (end - start), None, s * duration)
-        assert ok, f"the passage climb's pose {step['pose']} is infeasible"
-        steps.append(step)
+        assert ok, f"the passage climb's pose {step.pose} is infeasible"
+        steps.append(step.to_dict())
     plan = {"format": FORMAT, "planner": "rbp", "success": True, "reason": "", "p_min": None,
             "p_path": None, "regrasps": 0,
             "timing": dict.fromkeys(("footstep", "seed_body", "scp_body", "seed_reach",
@@ -105,7 +106,7 @@ def passage_record() -> SimulationRecord:
             "scenario": scn.to_dict(resolved=True), "robot": scn.robot.to_dict(),
             "phases": [{"kind": "body", "stance": list(stance), "free_boom": None,
                         "steps": steps}]}
-    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
+    prob = path_probability(plan_configurations(plan_of(plan)), scn.robot.attach_failure)
     plan["p_path"], plan["p_min"] = prob.p_path, prob.p_min
     validate(plan)
     scn = plan_scenario(plan)

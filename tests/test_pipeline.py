@@ -16,6 +16,7 @@ from planning.pipeline import (
     plan_climb,
 )
 from planning.plan import build_motion_plan, validate
+from planning.plan_model import Plan, plan_dict, plan_of
 from rb_drake.scenario import Scenario, bundled_caves, load_scenario
 
 TOL = 1e-9
@@ -43,7 +44,9 @@ def motions(demo, footsteps):
 @pytest.fixture(scope="module")
 def plan(demo, footsteps, motions):
     timing = {"footstep": footsteps.seconds, "total": footsteps.seconds}
-    return build_motion_plan(demo, footsteps, motions, "rbp", timing, PipelineConfig().dt)
+    built = build_motion_plan(demo, footsteps, motions, "rbp", timing, PipelineConfig().dt)
+    assert isinstance(built, Plan) and all(p.motion is not None for p in built.phases)
+    return plan_dict(built)  # the tests below read the plan as its file holds it
 
 
 def test_plan_verifies_from_scratch(plan):
@@ -96,7 +99,7 @@ def test_time_steps_are_uniform_and_increasing(plan):
 
 
 def test_scp_never_worse_than_its_seed(plan):
-    rows = motion_summary(plan)
+    rows = motion_summary(plan_of(plan))
     assert len(rows) == len(plan["phases"]), "a phase without a motion record"
     for r in rows:
         assert r["min"] >= r["seed_min"] - TOL, (
@@ -114,7 +117,7 @@ def test_motion_records_align_with_steps(plan):
 
 
 def test_scp_improves_some_phase(plan):
-    rows = motion_summary(plan)
+    rows = motion_summary(plan_of(plan))
     gains = [r["mean"] - r["seed_mean"] for r in rows]
     assert max(gains) > 1e-4, f"SCP raised no phase's mean probability: gains {gains}"
 
@@ -130,13 +133,13 @@ def test_seeds_only_plan_verifies(demo, footsteps):
     cfg = PipelineConfig(optimise=False)
     motions, failure = phase_motions(demo, footsteps, cfg)
     assert failure == "", failure
-    plan = build_motion_plan(demo, footsteps, motions, "rbp", {}, cfg.dt)
+    plan = plan_dict(build_motion_plan(demo, footsteps, motions, "rbp", {}, cfg.dt))
     assert check_plan(plan) == [], "the seeds-only plan does not verify"
     assert all(not p["motion"]["optimised"] for p in plan["phases"])
 
 
 def test_naive_plan_stops_at_footsteps(demo):
-    plan = plan_climb(demo, "naive")
+    plan = plan_dict(plan_climb(demo, "naive"))
     validate(plan)
     assert all("motion" not in p for p in plan["phases"]), "naive phases hold trajectories"
     assert plan["timing"]["footstep"] > 0
@@ -162,7 +165,7 @@ def test_figures(demo, plan, tmp_path):
 
 def test_scp_raises_the_mean_where_there_is_room(plan):
     """SCP raises the mean P on most phases whose seed leaves room (mean below 1 - ROOM)."""
-    rows = [r for r in motion_summary(plan) if r["room"]]
+    rows = [r for r in motion_summary(plan_of(plan)) if r["room"]]
     assert rows, "no phase with room to improve: the test needs another cave"
     raised = [r["phase"] for r in rows if r["mean"] > r["seed_mean"] + 1e-9]
     assert len(raised) > len(rows) / 2, (

@@ -23,6 +23,7 @@ from cli_helpers import run_rbp
 from planning.check import check_plan
 from planning.footsteps import FootstepConfig, FootstepPlan, plan_footsteps
 from planning.plan import FORMAT, build_plan, plan_configurations, schema, validate, write_plan
+from planning.plan_model import Plan, plan_dict, plan_of
 from planning.probability import path_probability
 from rb_drake.feasibility import check_poses
 from rb_drake.generate import CaveConfig, generate_cave
@@ -59,7 +60,10 @@ def fp(scn: Scenario) -> FootstepPlan:
 
 @pytest.fixture(scope="module")
 def plan(scn: Scenario, fp: FootstepPlan) -> dict[str, Any]:
-    return build_plan(scn, fp, "rbp")
+    """The plan as its file holds it (the tests below tamper with it)."""
+    built = build_plan(scn, fp, "rbp")
+    assert isinstance(built, Plan)
+    return plan_dict(built)
 
 
 @pytest.fixture
@@ -229,7 +233,7 @@ def test_p_path_matches_hand_recomputation(plan: dict[str, Any], scn: Scenario) 
     assert plan["regrasps"] == regrasps
     assert plan["p_path"] == pytest.approx(hand, rel=1e-12, abs=1e-15), (
         f"plan p_path {plan['p_path']}, hand recomputation {hand}")
-    library = path_probability(plan_configurations(plan), af)
+    library = path_probability(plan_configurations(plan_of(plan)), af)
     assert library.p_path == pytest.approx(hand, rel=1e-12, abs=1e-15)
     assert library.regrasps == regrasps
     p_min = min(step["p_success"] for _, _, _, step in all_steps(plan))
@@ -371,7 +375,7 @@ def test_no_route_gives_failure_with_reason(unreachable: Scenario, tmp_path: Pat
     fp = plan_footsteps(unreachable, FootstepConfig(max_expansions=5))
     assert not fp.success, "a goal 50 m away cannot be reached in 5 expansions"
     assert fp.reason, "a failed plan must say why"
-    plan = build_plan(unreachable, fp, "rbp")
+    plan = plan_dict(build_plan(unreachable, fp, "rbp"))
     assert plan["success"] is False and plan["reason"] == fp.reason
     assert plan["p_path"] is None and plan["p_min"] is None
     validate(plan)

@@ -15,6 +15,7 @@ from planning.check import verify_plan
 from planning.easing import _progress
 from planning.plan import plan_configurations
 from planning.plan_faults import ramp_removed, release_loaded
+from planning.plan_model import plan_of
 from planning.probability import path_probability
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION, ramp_statics
 from rb_drake.statics import STATICS_TOL
@@ -108,7 +109,7 @@ def test_no_ramp_lowers_a_grasp_so_p_path_covers_them(cave_plans, cave: str) -> 
                 low = min(e["p_grasp"][i] for e in ends)
                 assert p >= low - 1e-12, f"{cave} phases[{k}] step {n} boom {i}: {p} < {low}"
     steps = (s for ph in plan["phases"] for s in ph["steps"])
-    without = [c for c, s in zip(plan_configurations(plan), steps, strict=True)
+    without = [c for c, s in zip(plan_configurations(plan_of(plan)), steps, strict=True)
                if "ramp" not in s]
     alone = path_probability(without, plan["robot"]["attach_failure"])
     assert alone.p_path == pytest.approx(plan["p_path"], rel=1e-12), (alone.p_path,

@@ -34,6 +34,7 @@ from planning.plan import (
     plan_configurations,
     validate,
 )
+from planning.plan_model import Plan, plan_dict, plan_of
 from planning.probability import path_probability
 from planning.ramps import RELEASE_TENSION, add_ramps
 from rb_drake.feasibility import check_poses
@@ -135,7 +136,8 @@ def _plan(scn: Scenario, phases: list, boom: int, a: str, b: str) -> dict[str, A
                  configuration(scn, stance, q, None if tips is None else tips[1], t + dt)]
         assert all(ok for _, ok in steps), f"an infeasible configuration in {stance}"
         phase = {"kind": "body" if tips is None else "reach", "stance": list(stance),
-                 "free_boom": None if tips is None else boom, "steps": [s for s, _ in steps]}
+                 "free_boom": None if tips is None else boom,
+                 "steps": [s.to_dict() for s, _ in steps]}
         if tips is not None:
             phase |= {"from_anchor": a, "to_anchor": b}
         out.append(phase)
@@ -146,9 +148,10 @@ def _plan(scn: Scenario, phases: list, boom: int, a: str, b: str) -> dict[str, A
                                      "scp_reach", "total"), 0.0),
             "scenario": scn.to_dict(resolved=True), "robot": scn.robot.to_dict(),
             "phases": out}
-    plan = add_ramps(plan, scn)
-    prob = path_probability(plan_configurations(plan), scn.robot.attach_failure)
-    plan["p_path"], plan["p_min"], plan["regrasps"] = prob.p_path, prob.p_min, prob.regrasps
+    ramped = add_ramps(Plan.from_dict(plan), scn)
+    prob = path_probability(plan_configurations(ramped), scn.robot.attach_failure)
+    plan = plan_dict(ramped.replace(p_path=prob.p_path, p_min=prob.p_min,
+                                    regrasps=prob.regrasps))
     validate(plan)
     return plan
 
@@ -265,7 +268,7 @@ def _one_phase_through(good_plan: dict[str, Any], scn: Scenario, path: list[np.n
     before the last motion."""
     first = good_plan["phases"][0]
     stance = tuple(first["stance"])
-    steps = [configuration(scn, stance, q, None, k * dt)[0] for k, q in enumerate(path)]
+    steps = [configuration(scn, stance, q, None, k * dt)[0].to_dict() for k, q in enumerate(path)]
     steps.append(dict(steps[-1], t=len(path) * dt))
     plan = copy.deepcopy(good_plan)
     plan["phases"] = [dict(first, steps=steps)]
@@ -512,13 +515,13 @@ def test_simulated_probability_matches_plan(good: SimulationRecord,
 
 
 def _configurations(plan: dict[str, Any]):
-    return plan_configurations(plan)
+    return plan_configurations(plan_of(plan))
 
 
 def test_straight_line_plan_is_exposed(straight: SimulationRecord) -> None:
     """A footstep plan whose body phase crosses poses no tensions hold: the simulation shows it
     (the plan's p_path only sees the phases' end configurations)."""
-    p_path, p_sim = straight.plan.plan["p_path"], straight.implied_p_path()
+    p_path, p_sim = straight.plan.plan.p_path, straight.implied_p_path()
     assert p_path > 0.9 and p_sim < p_path - 0.5, f"p_path {p_path}, simulated {p_sim}"
 
 
@@ -602,7 +605,7 @@ def test_near_zero_plan_fails_nearly_always(good: SimulationRecord,
 
 def test_failures_report_where_and_why(straight: SimulationRecord) -> None:
     res = monte_carlo(straight, 300, 1)
-    assert res.ci95[1] < straight.plan.plan["p_path"] - 0.3, "the straight line should fail"
+    assert res.ci95[1] < straight.plan.plan.p_path - 0.3, "the straight line should fail"
     U, A = draw_strengths(np.random.default_rng(1), 300, len(straight.plan.holdings))
     for f in res.failures:
         s = int(np.flatnonzero(np.isclose(straight.times, f.time, atol=1e-9))[0])
@@ -631,11 +634,11 @@ def test_failures_report_where_and_why(straight: SimulationRecord) -> None:
 # Replanning
 
 
-def _retry_then_stop(request: ReplanRequest) -> dict[str, Any] | None:
+def _retry_then_stop(request: ReplanRequest) -> Plan | None:
     """A cheap fake replanner: re-grasp the failed anchor and finish the failed phase only."""
     plan = retry_replanner(request)
     if plan is not None:
-        plan["phases"] = plan["phases"][:2]
+        plan = plan.replace(phases=plan.phases[:2])
     return plan
 
 
@@ -656,7 +659,7 @@ def test_replanning_is_pluggable_and_counts_saved_climbs(good: SimulationRecord,
     assert len(calls) == r.replans <= r.attempted, "one call per distinct failure state"
     for req in calls:
         assert sum(a is None for a in req.stance) == 1 and req.stance[req.boom] is None
-        assert req.plan["phases"][req.phase]["kind"] == "body"
+        assert req.plan.phases[req.phase].kind == "body"
     fake = monte_carlo(good, trials, 8, _retry_then_stop, "retry-then-stop", sim)
     r = fake.replanning
     assert fake.successes == base.successes and fake.failures == base.failures
@@ -685,7 +688,8 @@ def _failure_at_first_release(good: SimulationRecord) -> ReplanRequest:
     plan = good.plan.plan
     s = int(np.flatnonzero(good.phase == 0)[-1])
     ids = good.plan.phases[0].stance.ids
-    boom = plan["phases"][1]["free_boom"]
+    boom = plan.phases[1].free_boom
+    assert boom is not None
     three = tuple(None if i == boom else a for i, a in enumerate(ids))
     return ReplanRequest(good.plan.scenario, plan, 0, float(good.times[s]),
                          good.state[s, :3].copy(), three, boom, ids[boom], "overload")
@@ -694,11 +698,12 @@ def _failure_at_first_release(good: SimulationRecord) -> ReplanRequest:
 def test_retry_replanner_builds_a_continuing_plan(good: SimulationRecord) -> None:
     """From a failure in a body phase: re-grasp the same anchor where the body is, finish the
     phase, go on with the plan (times shifted). From a reach phase: nothing (two booms left)."""
-    plan, scn = good.plan.plan, good.plan.scenario
+    plan, scn = plan_dict(good.plan.plan), good.plan.scenario
     request = _failure_at_first_release(good)
     ids, boom = good.plan.phases[0].stance.ids, request.boom
-    new = retry_replanner(request)
-    assert new is not None, "the 3-stance holds here: retrying must give a plan"
+    continued = retry_replanner(request)
+    assert continued is not None, "the 3-stance holds here: retrying must give a plan"
+    new = plan_dict(continued)
     validate(new)
     first, second = new["phases"][:2]
     assert first["kind"] == "reach" and first["free_boom"] == boom
@@ -729,8 +734,9 @@ def test_footstep_replanner_continues_with_a_full_verified_plan(good: Simulation
     scn = good.plan.scenario
     request = _failure_at_first_release(good)
     ids, boom = good.plan.phases[0].stance.ids, request.boom
-    new = FootstepReplanner()(request)
-    assert new is not None, "the 3-stance holds here and the shaft is short: expected a plan"
+    continued = FootstepReplanner()(request)
+    assert continued is not None, "the 3-stance holds here and the shaft is short: expected a plan"
+    new = plan_dict(continued)
     validate(new)
     first = new["phases"][0]
     assert first["kind"] == "reach" and first["free_boom"] == boom

@@ -19,6 +19,7 @@ def run_footstep(caves: int, max_expansions: int, seed: int) -> dict[str, Any]:
     from planning.baseline import plan_naive
     from planning.footsteps import FootstepConfig, plan_footsteps
     from planning.plan import build_plan
+    from planning.plan_model import plan_dict
     from rb_drake.generate import CaveConfig, generate_cave
 
     print(f"\nfootstep: {caves} caves of length {SHORT_CAVE} m, max_expansions "
@@ -34,7 +35,7 @@ def run_footstep(caves: int, max_expansions: int, seed: int) -> dict[str, Any]:
             t = time.perf_counter()
             fp = planner(scn, cfg)
             seconds = time.perf_counter() - t
-            plan = build_plan(scn, fp, name)
+            plan = plan_dict(build_plan(scn, fp, name))
             rows.append({"cave": scn.name, "planner": name, "seconds": seconds,
                          "success": bool(plan["success"]), "p_path": plan["p_path"],
                          "regrasps": plan["regrasps"], "reason": plan["reason"]})

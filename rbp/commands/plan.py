@@ -14,7 +14,13 @@ import dataclasses
 import shlex
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from planning.footsteps import FootstepPlan
+    from planning.pipeline import PipelineConfig
+    from planning.plan_model import Plan, Provenance
+    from rb_drake.scenario import Scenario
 
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
@@ -43,8 +49,8 @@ def plan_setup(args: argparse.Namespace):
             raise UserError(f"{args.scenario}: (argument): give a scenario or --from-plan, "
                             "not both (the plan holds its scenario)")
         scn, recorded, cfg = _from_plan(Path(args.from_plan))
-        planner = args.planner or recorded["planner"]
-        motion = recorded["motion"] and not args.footsteps_only
+        planner = args.planner or recorded.planner
+        motion = recorded.motion and not args.footsteps_only
     elif args.scenario is None:
         raise UserError("scenario: (argument): give a scenario file or bundled cave name, or "
                         "--from-plan PLAN")
@@ -126,16 +132,16 @@ def anytime_problem(anytime) -> str:
     return ""
 
 
-def _from_plan(path: Path):
+def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig]:
     """The scenario, provenance and configuration a plan file was planned with."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
-    from planning.plan_model import plan_scenario
+    from planning.plan_model import Plan, plan_scenario
     from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
 
-    plan = read_plan(path)
-    recorded = plan.get("provenance")
+    plan = Plan.from_dict(read_plan(path))
+    recorded = plan.provenance
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
                         "(written by an older rbp), so it cannot be repeated")
@@ -144,39 +150,37 @@ def _from_plan(path: Path):
     except ScenarioError as e:
         raise ScenarioError(f"{e.source}: scenario", e.field.removeprefix("scenario."),
                             e.reason) from None
-    cfg = config_from_dict(PipelineConfig, recorded["config"], str(path),
+    cfg = config_from_dict(PipelineConfig, recorded.config, str(path),
                            prefix="provenance.config")
     return scn, recorded, cfg
 
 
-def provenance(scn, planner: str, cfg, motion: bool, argv: list[str] | None) -> dict[str, Any]:
+def provenance(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool,
+               argv: list[str] | None) -> Provenance:
     """How a plan was made: enough to make it again (`rbp plan --from-plan`)."""
     from planning.config_io import config_to_dict
+    from planning.plan_model import Provenance, planner_of
 
-    return {
-        "rbp_version": rbp_version(),
-        "command": shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
-        "planner": planner,
-        "motion": motion,
-        "seed": cfg.footstep.seed,
-        "scenario_source": scn.source,
-        "config": config_to_dict(cfg),
-    }
+    return Provenance(
+        rbp_version=rbp_version(),
+        command=shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
+        planner=planner_of(planner), motion=motion, seed=cfg.footstep.seed,
+        scenario_source=scn.source, config=config_to_dict(cfg))
 
 
 class SearchRecord:
     """Keeps the footstep plans a run produced (the last one explains a failed search)."""
 
     def __init__(self) -> None:
-        self.last = None
+        self.last: FootstepPlan | None = None
 
-    def __call__(self, fp) -> None:
+    def __call__(self, fp: FootstepPlan) -> None:
         self.last = fp
 
 
-def run_planner(scn, planner: str, cfg, motion: bool = True, quiet: bool = False,
-                record: SearchRecord | None = None) -> dict[str, Any]:
-    """The whole pipeline (footsteps, then seeds and SCP per phase) -> plan dictionary."""
+def run_planner(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool = True,
+                quiet: bool = False, record: SearchRecord | None = None) -> Plan:
+    """The whole pipeline (footsteps, then seeds and SCP per phase) -> the plan."""
     from planning.footsteps import expansion_budget
     from planning.pipeline import plan_climb
     from rbp.progress import SearchProgress
@@ -198,15 +202,17 @@ def run_planner(scn, planner: str, cfg, motion: bool = True, quiet: bool = False
                           footsteps_done=record)
 
 
-def write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str | None,
-                   search=None) -> None:
+def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
+                   animate: str | None, search: FootstepPlan | None = None) -> None:
     """The snapshots (PLAN.png), the failed search's picture (PLAN-search.png) when the
     footstep search failed, Fig. 6 of phase `phase`, and the animation."""
     from planning.figures import animate_plan, phase_figure, search_figure, snapshots_figure
+    from planning.plan_model import plan_dict
     from rb_drake.files import atomic_save_figure
     from rbp.commands.common import UserError
 
-    with_motion = [k for k, p in enumerate(plan["phases"]) if "motion" in p]
+    plan = plan_dict(model)  # planning.figures draws the plan-file object
+    with_motion = [k for k, p in enumerate(model.phases) if p.motion is not None]
     picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
     print(f"wrote {picture}")
     if search is not None and not search.success:
@@ -214,7 +220,7 @@ def write_pictures(scn, plan: dict, out: Path, phase: int | None, animate: str |
         atomic_save_figure(search_figure(scn, search), path, dpi=110)
         print(f"wrote {path}")
     if phase is not None and phase not in with_motion:  # known only now: the plan is kept
-        count = len(plan["phases"])
+        count = len(model.phases)
         raise UserError(f"--phase-figure: the plan has {count} phase{'' if count == 1 else 's'}"
                         f" ({out} is written), and phase {phase} has no trajectory; phases "
                         f"with one: {with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")

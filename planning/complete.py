@@ -107,10 +107,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     max_expansions, time_limit = config.max_expansions, config.time_limit
     ignore_grasps = config.ignore_grasps
     memo = memo if memo is not None else LatticeMemo()
-    if memo.config is None:
-        memo.config = cfg
-    elif memo.config != cfg:
-        raise ValueError(f"a memo of lattice {memo.config} cannot serve lattice {cfg}")
+    memo.bind(scn, cfg, ignore_grasps)
     t0 = time.perf_counter()
     distance_heuristic = DistanceHeuristic(scn)
     c_attach = distance_heuristic.c_attach
@@ -169,15 +166,16 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
 
     # Entries: (f, tie, g, kind, child stance, payload). Entry.REACHED: a stance reached by an
     # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
-    # transition, parent's g, alternatives, edge cost); Entry.MOVE: a move to evaluate, payload
-    # ((parent vertex, boom, anchor), rows), g the parent's g plus the least an edge costs.
+    # the transition's rows it may use (None: all), parent's g, edge cost); Entry.MOVE: a move
+    # to evaluate, payload (parent vertex, boom, anchor) (its rows are in `memo.move_table`), g
+    # the parent's g plus the least an edge costs.
     start_pose = np.asarray(scn.start_pose, dtype=float)
 
     def start_entries() -> list:
         if not math.isfinite(bound(start)):
             return []
         return sorted((heuristic(start), next(tie), 0.0, Entry.REACHED, start,
-                       ((start, comp), None, start_pose, None, None, 0.0, None, 0.0))
+                       ((start, comp), None, start_pose, None, None, 0.0, 0.0))
                       for comp in joined)
 
     open_list: list = start_entries()
@@ -208,19 +206,20 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         proven = max(proven, lo)
         return proven
 
-    def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition, pick: np.ndarray,
-                   child: Stance4, comp: int | None) -> tuple:
-        """An open-list entry for the child reached through the most robust pose of `pick`."""
+    def edge_entry(g_parent: float, move: tuple, tr: LatticeTransition,
+                   pick: np.ndarray | None, child: Stance4, comp: int | None) -> tuple:
+        """An open-list entry for the child reached through the most robust pose of `pick`
+        (None: every pose of `tr`). It keeps the transition's memo key, not the transition:
+        most entries are never popped, and transitions are most of their memory."""
         (stance, _), j, anchor = move
-        poses, p4 = best_poses(tr, pick, cfg)
-        pose = poses[0]
+        poses, p4 = best_poses(tr, _rows(tr, pick), cfg)
+        pose = poses[0].copy()  # not a view: it would keep all the alternatives alive
         cost = edge_cost(scn, stance, j, anchor, pose)
         g_child = g_parent + cost
         data = graph.edges[move[0], child]
         data["cost"] = min(data.get("cost", math.inf), cost)
         return (g_child + heuristic(child), next(tie), g_child, Entry.REACHED, child,
-                ((child, comp), move, pose, p4, tr, g_parent, poses,
-                 cost))
+                ((child, comp), move, pose, p4, pick, g_parent, cost))
 
     def beaten(g: float, stance: tuple) -> bool:
         """Whether nothing through `stance` at `g` can beat the best route (or reach the goal)."""
@@ -245,13 +244,14 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if beaten(g, child_stance):
             continue
         if kind == Entry.MOVE:
-            move, rows = payload
+            move = payload
             (stance, comp), j, anchor = move
             child: Stance4 = child_stance
             key = (stance, comp, j, anchor)
             tr = memo.transitions.get(key)
             if tr is None:
                 lat = memo.components[stance].components[comp]
+                rows = memo.move_table((stance, comp))[(j, scn.anchor_index[anchor])]
                 known = memo.components.get(child)
                 labels = None if known is None else known.known_component(lat.keys[rows])
                 if labels is not None and _adds_nothing(labels, child, closed,
@@ -270,11 +270,12 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             graph.add_edge((stance, comp), child, boom=j, anchor=anchor)
             # The child's lattice (and so which of its components the move enters) waits until
             # the child is popped: most children are never expanded.
-            heapq.heappush(open_list, edge_entry(g - c_attach, move, tr,
-                                                 np.arange(len(tr.keys)), child, None))
+            heapq.heappush(open_list, edge_entry(g - c_attach, move, tr, None, child, None))
             continue
-        (child, comp), move, pose, p4, tr, g_parent, alternatives, cost = payload
+        (child, comp), move, pose, p4, pick, g_parent, cost = payload
+        tr = None if move is None else memo.transitions[_transition_key(move)]
         if comp is None:  # entered through a move: split among the child's components
+            assert tr is not None
             comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             if (comps < 0).any():  # the kernel is deterministic: never expected
                 raise RuntimeError("a transition pose is missing from the new stance's lattice")
@@ -295,6 +296,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if redundant(vertex, g, popped):
             continue
         closed[vertex] = g
+        alternatives = None if tr is None else best_poses(tr, _rows(tr, pick), cfg)[0]
         parent[vertex] = (move, pose, p4, alternatives, cost)
         expanded.append((vertex, pose))
         expansions += 1
@@ -363,11 +365,14 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if best is not None and anytime is not None and \
                 expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
-        for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):
+        # A move's rows stay in the memo's move table (bounded), not in the open list: most
+        # moves are never evaluated, and their rows are most of a search's memory otherwise.
+        for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
+                                                memo.move_table(vertex)):
             if not beaten(g + c_attach, child):
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
                                            g + c_attach, Entry.MOVE, child,
-                                           ((vertex, j, anchor), rows)))
+                                           (vertex, j, anchor)))
         current = math.inf  # its successors are in the open list
     if best is not None:
         lo = lower()
@@ -388,6 +393,17 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph)
+
+
+def _rows(tr: LatticeTransition, pick: np.ndarray | None) -> np.ndarray:
+    """The rows `pick` of transition `tr` (None: all of them)."""
+    return np.arange(len(tr.keys)) if pick is None else pick
+
+
+def _transition_key(move: tuple) -> tuple:
+    """The memo key of a move ((stance, component), boom, anchor)'s transition."""
+    (stance, comp), j, anchor = move
+    return (stance, comp, j, anchor)
 
 
 def _ratio(cost: float, lower_bound: float) -> float:

@@ -70,6 +70,25 @@ class StanceComponents:
         self.components: list[Component] = []
         self._keys = np.zeros(0, dtype=np.int64)    # every pose scored, sorted
         self._labels = np.zeros(0, dtype=np.int32)  # its component (INFEASIBLE if none)
+        # the key each flood fill started from, in order: growing from them again gives the
+        # same components with the same numbers (`replay`: a bounded memo drops and rebuilds)
+        self.seeds: list[int] = []
+
+    @classmethod
+    def replay(cls, scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
+               ignore_grasps: bool, seeds: list[int]) -> StanceComponents:
+        """The components grown from `seeds` (another's `seeds`), in their order: the same
+        components, numbered the same, and the same poses known infeasible."""
+        out = cls(scn, stance, cfg, ignore_grasps)
+        for key in seeds:
+            out._grow(key)
+        return out
+
+    @property
+    def nbytes(self) -> int:
+        """The bytes of its arrays."""
+        return self._keys.nbytes + self._labels.nbytes + sum(
+            sum(v.nbytes for v in c if isinstance(v, np.ndarray)) for c in self.components)
 
     def component_of(self, keys: np.ndarray) -> np.ndarray:
         """The component holding each lattice key (INFEASIBLE where the pose is infeasible),
@@ -91,6 +110,7 @@ class StanceComponents:
 
     def _grow(self, key: int) -> None:
         """Grow the component of lattice key `key` (or learn that its pose is infeasible)."""
+        self.seeds.append(key)
         n = self._cfg.angle_count
         seed = unpack(np.array([key]), n)[0]
         idx, r, release_r, infeasible = grow_component(self._scn, self._stances, seed,

@@ -74,6 +74,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     max_expansions, time_limit = config.max_expansions, config.time_limit
     ignore_grasps = config.ignore_grasps
     memo = memo if memo is not None else LatticeMemo(config=cfg)
+    memo.bind(scn, cfg, ignore_grasps)
     t0 = time.perf_counter()
     budget = -math.log(min_success)
     slack = budget * (1.0 + 1e-12)

@@ -34,7 +34,13 @@ from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
-from planning.lattice_search import LatticeMemo, Stance4, search_result, stance4
+from planning.lattice_search import (
+    DEFAULT_MEMORY_MB,
+    LatticeMemo,
+    Stance4,
+    search_result,
+    stance4,
+)
 from planning.ramps import ramp_ends_hold
 from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import (
@@ -87,6 +93,10 @@ class FootstepConfig:
     repair: RepairConfig | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
+    # complete search: at most this many MiB of lattice work kept for reuse (components and
+    # transitions; past it the least recently used are decided again when needed, with the same
+    # answers: planning.bounded_cache); None: no cap
+    search_memory_mb: float | None = DEFAULT_MEMORY_MB
     # complete search: the budget grows with the climb, to at least this many expansions per
     # metre from the start pose to the goal (a 20 m climb needs about ten times a 2 m one's
     # search, not the same); 0: max_expansions as given
@@ -96,6 +106,12 @@ class FootstepConfig:
     polish_rounds: int = 8   # local search rounds per transition pose of the found path
     seed: int = 0
     transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
+
+    def __post_init__(self) -> None:
+        mb = self.search_memory_mb
+        if mb is not None and not (isinstance(mb, int | float) and 1.0 <= mb < math.inf):
+            raise RbpInputError(f"must be a number of MiB of at least 1 (or null: no cap), "
+                                f"got {mb!r}", field="footstep.search_memory_mb")
 
     def complete_config(self) -> CompleteConfig:
         """The complete (or constrained) search's part of this configuration."""
@@ -355,6 +371,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     t0 = time.perf_counter()
     start_pose = np.asarray(scn.start_pose, dtype=float)
     cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
+    memo.lattice.set_memory(cfg.search_memory_mb)
     if cfg.min_success is not None:
         result = constrained_search(scn, cfg.min_success, cfg.complete_config(),
                                     exclude=exclude, memo=memo.lattice, progress=progress)

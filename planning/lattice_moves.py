@@ -165,17 +165,27 @@ def move_table(scn: Scenario, lat: Component, stance: tuple) -> list[list[tuple[
             for j in range(NUM_BOOMS)]
 
 
+MoveTable = dict[tuple[int, int], np.ndarray]  # (boom, anchor index) -> its `move_rows`
+
+
+def move_dict(scn: Scenario, lat: Component, stance: tuple) -> MoveTable:
+    """`move_table` as one dict, boom by boom in its order: (boom, anchor index) -> rows."""
+    return {(j, k): rows for j, moves in enumerate(move_table(scn, lat, stance))
+            for k, rows in moves}
+
+
 def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
-                 excluded: Collection[tuple[tuple, int, str]] = ()
+                 excluded: Collection[tuple[tuple, int, str]] = (),
+                 table: MoveTable | None = None
                  ) -> Iterator[tuple[int, str, np.ndarray, tuple]]:
-    """Every move of component `lat` of `stance` (`move_table`'s) but the `excluded` ones
-    (stance, boom, anchor): (boom, anchor id, its `move_rows`, the child stance)."""
-    for j, moves in enumerate(move_table(scn, lat, stance)):
-        for k, rows in moves:
-            anchor = scn.anchors[k].id
-            if (stance, j, anchor) not in excluded:
-                yield j, anchor, rows, tuple(anchor if i == j else a
-                                             for i, a in enumerate(stance))
+    """Every move of component `lat` of `stance` (`move_table`'s, or `table` if given) but the
+    `excluded` ones (stance, boom, anchor): (boom, anchor id, its `move_rows`, the child
+    stance)."""
+    for (j, k), rows in (move_dict(scn, lat, stance) if table is None else table).items():
+        anchor = scn.anchors[k].id
+        if (stance, j, anchor) not in excluded:
+            yield j, anchor, rows, tuple(anchor if i == j else a
+                                         for i, a in enumerate(stance))
 
 
 def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,

@@ -13,7 +13,6 @@ robust poses (`best_poses`), and the kernel's thread count held for a whole sear
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Callable, Iterable
@@ -23,9 +22,10 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
+from planning.bounded_cache import BoundedCache, array_bytes
 from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, unpack
-from planning.lattice_moves import LatticeTransition
+from planning.lattice_moves import LatticeTransition, MoveTable, lattice_transition, move_dict
 from planning.search_outcome import Quality, Stop
 from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.scenario import Scenario
@@ -41,13 +41,78 @@ def stance4(ids: Iterable[str]) -> Stance4:
     return a, b, c, d
 
 
-@dataclasses.dataclass
-class LatticeMemo:
-    """Stance components and transitions already decided on one scenario (same lattice)."""
+DEFAULT_MEMORY_MB = 1024.0  # the memo's cap: one search per core of a 24 GB machine, with room
+# shares of the cap: stances' components, moves' transitions, vertices' move tables
+SHARES = {"components": 0.6, "transitions": 0.2, "moves": 0.2}
 
-    components: dict[tuple, StanceComponents] = dataclasses.field(default_factory=dict)
-    transitions: dict[tuple, LatticeTransition] = dataclasses.field(default_factory=dict)
-    config: LatticeConfig | None = None  # the lattice all of it was decided on
+
+class LatticeMemo:
+    """Stance components and transitions already decided on one scenario (same lattice), in
+    at most `memory_mb` MiB (None: no cap): past it the least recently used are dropped and
+    decided again when asked for, with the same answers (`planning.bounded_cache`)."""
+
+    def __init__(self, config: LatticeConfig | None = None,
+                 memory_mb: float | None = DEFAULT_MEMORY_MB) -> None:
+        self.config = config  # the lattice all of it was decided on
+        self._scn: Scenario | None = None
+        self._ignore_grasps = False
+        self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
+            lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds)
+        self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
+            array_bytes, self._transition_again)
+        self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
+            lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again)
+        self.set_memory(memory_mb)
+
+    def set_memory(self, memory_mb: float | None) -> None:
+        """Cap what it holds at `memory_mb` MiB (None: no cap)."""
+        cap = None if memory_mb is None else float(memory_mb) * 2.0 ** 20
+        self.memory_mb = memory_mb
+        for name, share in SHARES.items():
+            getattr(self, name).cap_bytes = None if cap is None else share * cap
+
+    def move_table(self, vertex: Vertex) -> MoveTable:
+        """Vertex (stance, component)'s moves: (boom, anchor index) -> its `move_rows`."""
+        table = self.moves.get(vertex)
+        if table is None:
+            table = self.moves[vertex] = self._moves_again(vertex, None)
+        return table
+
+    def bind(self, scn: Scenario, cfg: LatticeConfig, ignore_grasps: bool) -> None:
+        """Serve searches of `scn` on lattice `cfg`: what it drops is decided again there."""
+        if self.config is None:
+            self.config = cfg
+        elif self.config != cfg:
+            raise ValueError(f"a memo of lattice {self.config} cannot serve lattice {cfg}")
+        if self._scn is not None and (self._scn is not scn
+                                      or self._ignore_grasps != ignore_grasps):
+            raise ValueError("a memo serves the searches of one scenario, with or without "
+                             "grasps, not both")
+        self._scn, self._ignore_grasps = scn, ignore_grasps
+
+    def stats(self) -> dict[str, dict[str, float]]:
+        """What each cache holds, held at most, dropped and rebuilt (`BoundedCache.stats`)."""
+        return {name: getattr(self, name).stats() for name in SHARES}
+
+    def _bound(self) -> tuple[Scenario, LatticeConfig]:
+        if self._scn is None or self.config is None:
+            raise RuntimeError("a memo drops entries only once bound to a scenario")
+        return self._scn, self.config
+
+    def _components_again(self, stance: tuple, seeds: list[int]) -> StanceComponents:
+        scn, cfg = self._bound()
+        return StanceComponents.replay(scn, stance, cfg, self._ignore_grasps, seeds)
+
+    def _moves_again(self, vertex: Vertex, _: object) -> MoveTable:
+        scn, _cfg = self._bound()
+        stance, comp = vertex
+        return move_dict(scn, self.components[stance].components[comp], stance)
+
+    def _transition_again(self, key: tuple, _: object) -> LatticeTransition:
+        scn, _cfg = self._bound()
+        stance, comp, boom, anchor = key
+        lat = self.components[stance].components[comp]
+        return lattice_transition(scn, lat, stance, boom, anchor, self._ignore_grasps)
 
 
 class CompleteResult(NamedTuple):
@@ -80,6 +145,7 @@ class CompleteResult(NamedTuple):
 def stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
                       ignore_grasps: bool) -> StanceComponents:
     """The components of `stance`'s feasible lattice poses, decided once per memo."""
+    memo.bind(scn, cfg, ignore_grasps)
     hit = memo.components.get(stance)
     if hit is None:
         hit = memo.components[stance] = StanceComponents(scn, stance, cfg, ignore_grasps)

@@ -1,0 +1,129 @@
+"""A dictionary of recomputable values that holds at most a given number of bytes.
+
+The footstep search keeps, per stance it meets, the connected components of its feasible
+lattice poses, and per move it evaluates, the lattice poses that hold it (`LatticeMemo`). Kept
+forever, they grow by about 60 kB per expanded vertex: a long proof or a 20 m climb would fill
+the machine. Both are pure functions of their key (and of the scenario and lattice), so they
+can be dropped and decided again when asked for: `BoundedCache` drops the least recently used
+entries once its values exceed `cap_bytes`, and rebuilds a dropped entry when it is asked for
+again. What it keeps of a dropped entry (its *tombstone*, from `tombstone(value)`) is what the
+rebuild needs to give back the same value: for a stance's components, the lattice poses its
+components were grown from, in order, so that they are numbered as before (a search's vertex
+names its component by number).
+
+To the code that uses it the cache is a dict that never forgets: `get` and `[]` rebuild a
+dropped key, `in` counts it, and the search's decisions do not change
+(tests/test_bounded_cache.py, and the benchmark of docs/benchmarks.md: the same routes capped
+and uncapped). The `PROTECTED` most recently used entries are never dropped, so that an entry a
+caller is still working on is not rebuilt beside it.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Iterator
+from typing import Any, Generic, TypeVar
+
+import numpy as np
+
+K = TypeVar("K", bound=Hashable)
+V = TypeVar("V")
+
+PROTECTED = 16  # the most recently used entries, never dropped
+_MISSING = object()
+
+
+def array_bytes(value: Any) -> int:
+    """The bytes of the numpy arrays a value holds (a NamedTuple or a sequence of fields)."""
+    return sum(v.nbytes for v in value if isinstance(v, np.ndarray))
+
+
+class BoundedCache(Generic[K, V]):
+    """A dict of at most `cap_bytes` of values (`size(value)`: its bytes; None: no cap) that
+    rebuilds a dropped entry with `rebuild(key, tombstone)` (module doc)."""
+
+    def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
+                 tombstone: Callable[[V], Any] = lambda value: None,
+                 cap_bytes: float | None = None) -> None:
+        self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
+        self.cap_bytes = cap_bytes
+        self.protected = PROTECTED  # the most recently used entries, never dropped
+        self._live: OrderedDict[K, V] = OrderedDict()
+        self._bytes: dict[K, int] = {}
+        self._dropped: dict[K, Any] = {}
+        self.total_bytes = 0
+        self.peak_bytes = 0
+        self.drops = 0
+        self.rebuilds = 0
+
+    def __len__(self) -> int:
+        return len(self._live) + len(self._dropped)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._live or key in self._dropped
+
+    def __iter__(self) -> Iterator[K]:
+        yield from list(self._live)
+        yield from list(self._dropped)
+
+    def keys(self) -> list[K]:
+        return list(self)
+
+    def items(self) -> Iterator[tuple[K, V]]:
+        for key in list(self):
+            yield key, self[key]
+
+    def values(self) -> Iterator[V]:
+        for _, value in self.items():
+            yield value
+
+    def get(self, key: K, default: Any = None) -> Any:
+        if key in self._live:
+            value = self._live[key]
+            self._live.move_to_end(key)
+            self._account(key, value)  # a value may have grown since it was stored
+            return value
+        if key in self._dropped:
+            tomb = self._dropped.pop(key)
+            value = self._rebuild(key, tomb)
+            self.rebuilds += 1
+            self._store(key, value)
+            return value
+        return default
+
+    def __getitem__(self, key: K) -> V:
+        value = self.get(key, _MISSING)
+        if value is _MISSING:
+            raise KeyError(key)
+        return value
+
+    def __setitem__(self, key: K, value: V) -> None:
+        self._dropped.pop(key, None)
+        self._store(key, value)
+
+    def _store(self, key: K, value: V) -> None:
+        self._live[key] = value
+        self._live.move_to_end(key)
+        self._account(key, value)
+
+    def _account(self, key: K, value: V) -> None:
+        size = self._size(value)
+        self.total_bytes += size - self._bytes.get(key, 0)
+        self._bytes[key] = size
+        if self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
+            self._shrink()
+        self.peak_bytes = max(self.peak_bytes, self.total_bytes)
+
+    def _shrink(self) -> None:
+        assert self.cap_bytes is not None
+        while self.total_bytes > self.cap_bytes and len(self._live) > self.protected:
+            key, value = self._live.popitem(last=False)
+            self.total_bytes -= self._bytes.pop(key)
+            self._dropped[key] = self._tombstone(value)
+            self.drops += 1
+
+    def stats(self) -> dict[str, float]:
+        """Bytes held now and at most, entries held and dropped, drops and rebuilds."""
+        return {"bytes": self.total_bytes, "peak_bytes": self.peak_bytes,
+                "live": len(self._live), "dropped": len(self._dropped),
+                "drops": self.drops, "rebuilds": self.rebuilds}

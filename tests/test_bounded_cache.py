@@ -1,0 +1,87 @@
+"""The search's bounded memo (planning.bounded_cache, issue 31): a dropped entry comes back the
+same when asked for, and a search under a tiny cap, which drops and rebuilds its lattice work
+all the time, decides exactly as one with no cap."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planning.bounded_cache import PROTECTED, BoundedCache
+from planning.complete import complete_search
+from planning.complete_config import AnytimeConfig, CompleteConfig
+from planning.components import StanceComponents
+from planning.lattice import LatticeConfig
+from planning.lattice_search import LatticeMemo
+from rb_drake.scenario import bundled_caves, load_scenario
+
+COARSE = LatticeConfig(position_step=0.05, angle_step_deg=5.0)
+
+
+def test_dropped_entries_are_rebuilt_from_their_tombstones() -> None:
+    built: list[int] = []
+
+    def rebuild(key: int, tomb: int) -> np.ndarray:
+        built.append(key)
+        return np.full(tomb, key, dtype=np.int64)
+
+    cache: BoundedCache[int, np.ndarray] = BoundedCache(
+        lambda v: v.nbytes, rebuild, tombstone=len, cap_bytes=8 * 10 * (PROTECTED + 2))
+    for key in range(3 * PROTECTED):
+        cache[key] = np.full(10, key, dtype=np.int64)
+        assert cache.total_bytes <= max(cache.cap_bytes, 8 * 10 * PROTECTED), \
+            f"{cache.total_bytes} bytes held after storing key {key}, cap {cache.cap_bytes}"
+    assert cache.drops > 0, "a cache over its cap dropped nothing"
+    assert len(cache) == 3 * PROTECTED and all(k in cache for k in range(3 * PROTECTED)), \
+        "a dropped key is no longer counted as held"
+    again = cache[0]
+    assert built == [0], f"rebuilt {built}, expected only the dropped key 0"
+    assert np.array_equal(again, np.full(10, 0)), "a rebuilt value differs from the dropped one"
+    assert cache.get(10**6) is None and 10**6 not in cache
+    with pytest.raises(KeyError):
+        cache[10**6]
+
+
+@pytest.mark.parametrize(("cave", "anytime"), [("demo-shaft", None),
+                                               ("demo-shaft", AnytimeConfig()),
+                                               ("shaft-1", AnytimeConfig())],
+                         ids=["demo-first", "demo-anytime", "shaft-1-anytime"])
+def test_a_capped_search_decides_as_an_uncapped_one(cave: str,
+                                                    anytime: AnytimeConfig | None) -> None:
+    scn = load_scenario(bundled_caves()[cave])
+    config = CompleteConfig(COARSE, anytime=anytime)
+    free = complete_search(scn, config, memo=LatticeMemo(memory_mb=None))
+    capped_memo = LatticeMemo(memory_mb=0.05)  # 50 kB: a few stances' lattice work
+    for cache in (capped_memo.components, capped_memo.transitions, capped_memo.moves):
+        cache.protected = 2  # a search this small would otherwise stay within the protected
+    capped = complete_search(scn, config, memo=capped_memo)
+    stats = capped_memo.stats()
+    assert stats["components"]["drops"] > 0 and stats["components"]["rebuilds"] > 0, \
+        f"the cap never bit, so the test tests nothing: {stats}"
+    assert free.success and capped.success, (free.reason, capped.reason)
+    assert capped.path == free.path, "a capped search found another route"
+    assert capped.expansions == free.expansions and \
+        capped.transitions_tested == free.transitions_tested, \
+        (f"expansions {capped.expansions} vs {free.expansions}, transitions "
+         f"{capped.transitions_tested} vs {free.transitions_tested}")
+    assert capped.cost == pytest.approx(free.cost, rel=0, abs=0), "the route's cost differs"
+    for a, b in zip(capped.poses, free.poses, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg="a transition pose differs")
+
+
+def test_a_replayed_stance_numbers_its_components_as_before() -> None:
+    scn = load_scenario(bundled_caves()["shaft-1"])  # several stances of several components
+    memo = LatticeMemo(memory_mb=None)
+    complete_search(scn, CompleteConfig(COARSE), memo=memo)
+    several = 0
+    for stance, found in memo.components.items():
+        again = StanceComponents.replay(scn, stance, COARSE, False, list(found.seeds))
+        assert len(again.components) == len(found.components), stance
+        several += len(found.components) > 1
+        for a, b in zip(again.components, found.components, strict=True):
+            np.testing.assert_array_equal(a.keys, b.keys, err_msg=f"{stance}: a component's "
+                                          "poses or its number changed when replayed")
+            np.testing.assert_array_equal(a.release_r, b.release_r)
+        np.testing.assert_array_equal(again.known_component(found._keys), found._labels,
+                                      err_msg=f"{stance}: what is known of its poses changed")
+    assert several > 0, "no stance with several components: the numbering is not tested"

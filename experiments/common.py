@@ -10,6 +10,7 @@ and the summaries of the planners' records.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 from typing import Any
@@ -226,7 +227,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
-            "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair")
+            "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -239,7 +240,9 @@ def variant_config(variant: str, time_limit: float | None):
     route, then better ones for K times its time), "oracle" (`rbp plan --thorough`: to the
     proven optimum, or `--time-limit`) and "oracle-a*" (A* on the admissible bound from the
     start), "repair" (the first route repaired window by window: planning.route_repair) and
-    "default-repair" (today's default, then repaired)."""
+    "default-repair" (today's default, then repaired); "default-quarter" is today's default with
+    its memo capped at a quarter of the most the "default" variant kept on the same cave
+    (`route_variants`: run "default" first)."""
     from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
@@ -277,7 +280,13 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
     scn = make_cave(kind, seed, length)
     out: dict[str, Any] = {"kind": kind, "seed": seed}
     for variant in variants:
-        config = variant_config(variant, limit)
+        if variant == "default-quarter":
+            if "default" not in out:
+                raise ValueError("the variant default-quarter needs default before it")
+            config = dataclasses.replace(variant_config("default", limit), search_memory_mb=max(
+                1.0, out["default"]["kept_memory_mb"] / 4.0))
+        else:
+            config = variant_config(variant, limit)
         t0 = time.perf_counter()
         fp = plan_footsteps(scn, config)
         seconds = time.perf_counter() - t0
@@ -294,6 +303,9 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
                         "p_grasps": plan.get("p_grasps"),
                         "bound": search.get("bound"), "lower_bound": search.get("lower_bound"),
                         "expansions": int(fp.expansions), "seconds": seconds,
+                        "peak_memory_mb": fp.peak_memory_mb,
+                        "kept_memory_mb": fp.kept_memory_mb,
+                        "memo": fp.memo.lattice.stats() if fp.memo is not None else None,
                         "stances": [list(s) for s in fp.stances] if fp.success else None}
     return out
 

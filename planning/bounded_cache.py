@@ -20,6 +20,8 @@ caller is still working on is not rebuilt beside it.
 
 from __future__ import annotations
 
+import resource
+import sys
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Iterator
 from typing import Any, Generic, TypeVar
@@ -31,6 +33,12 @@ V = TypeVar("V")
 
 PROTECTED = 16  # the most recently used entries, never dropped
 _MISSING = object()
+
+
+def peak_memory_mb() -> float:
+    """The process's peak resident memory so far, MiB."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2.0 ** 20 if sys.platform == "darwin" else peak / 1024.0  # bytes there, kB here
 
 
 def array_bytes(value: Any) -> int:

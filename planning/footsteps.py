@@ -30,6 +30,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.astar import Edge, SearchResult, lazy_astar
+from planning.bounded_cache import peak_memory_mb
 from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
@@ -164,6 +165,10 @@ class FootstepPlan(NamedTuple):
     # --min-success P: the route has the fewest regrasps of those with exp(-cost) >= P (or,
     # with stop "noroute", none reaches P)
     min_success: float | None = None
+    # MiB: the process's peak resident memory when the search ended, and the most lattice work
+    # its memo kept at once (planning.bounded_cache; at most FootstepConfig.search_memory_mb)
+    peak_memory_mb: float = math.nan
+    kept_memory_mb: float = math.nan
 
 
 class Explored(NamedTuple):
@@ -382,6 +387,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
             result = repair_route(scn, result, memo.lattice, cfg.repair,
                                   cfg.transition.ignore_grasps, exclude)
     search = search_result(result)
+    peak, kept = _memory(memo)
     explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))
                 for k, (v, p) in enumerate(result.expanded)]
     frontier = [Explored(v[0], np.asarray(p, dtype=float), -1, goal_distance(scn, v[0]))
@@ -395,7 +401,8 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                        f"start is {centroid_distance(scn, start):.2f} m)")
         return FootstepPlan(False, reason, [start], [], start_pose, None, result.expansions,
                             result.transitions_tested, time.perf_counter() - t0, search, None,
-                            result.stop, explored, frontier, memo, min_success=cfg.min_success)
+                            result.stop, explored, frontier, memo, min_success=cfg.min_success,
+                            peak_memory_mb=peak, kept_memory_mb=kept)
     stances = [v[0] for v in result.path]
     steps = []
     no_alternatives: list[np.ndarray | None] = [None] * len(result.poses)
@@ -411,7 +418,13 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                         time.perf_counter() - t0, search, None, Stop.ROUTE, explored, frontier,
                         memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
-                        result.quality, cfg.min_success)
+                        result.quality, cfg.min_success, peak, kept)
+
+
+def _memory(memo: FootstepMemo) -> tuple[float, float]:
+    """FootstepPlan's peak_memory_mb and kept_memory_mb, as the search ends."""
+    kept = sum(s["peak_bytes"] for s in memo.lattice.stats().values())
+    return peak_memory_mb(), kept / 2.0 ** 20
 
 
 def explored_stances(scn: Scenario, result: SearchResult[Stance4],

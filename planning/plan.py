@@ -77,7 +77,12 @@ def search_record(fp: FootstepPlan) -> SearchRecord:
         quality=fp.quality if anytime else None,
         history=(tuple(SearchPoint(seconds=float(t), cost=float(c), lower_bound=float(lo),
                                    expansions=int(n)) for t, c, lo, n in fp.history or [])
-                 if anytime else None))
+                 if anytime else None),
+        peak_memory_mb=_finite(fp.peak_memory_mb), kept_memory_mb=_finite(fp.kept_memory_mb))
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,

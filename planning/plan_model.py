@@ -214,6 +214,11 @@ class SearchRecord(Part):
                                            "this times the optimum's")
     quality: Quality | None = spec(None)
     history: tuple[SearchPoint, ...] | None = spec(None)
+    peak_memory_mb: float | None = spec(None, minimum=0, description="the planning process's "
+                                        "peak resident memory when the search ended, MiB")
+    kept_memory_mb: float | None = spec(None, minimum=0, description="the most lattice work the "
+                                        "search kept at once, MiB (capped by "
+                                        "footstep.search_memory_mb)")
     NESTED: ClassVar[dict[str, type[Part]]] = {"history": SearchPoint}
     DESCRIPTION: ClassVar[str] = "how the footstep search ended (optional)"
 

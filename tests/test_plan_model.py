@@ -121,6 +121,8 @@ def _comparable(plan: Plan) -> dict[str, Any]:
         data.pop(key, None)
     for point in (data.get("search") or {}).get("history", []):
         point.pop("seconds")
+    for key in ("peak_memory_mb", "kept_memory_mb"):
+        (data.get("search") or {}).pop(key, None)
     return data
 
 

@@ -187,3 +187,27 @@ def test_an_absent_p_grasps_stays_absent_and_null_is_not_absent() -> None:
     assert verify_plan(older) == []
     problems = verify_plan(data | {"p_grasps": None})
     assert [p.rule for p in problems] == ["summary"] and "p_grasps" in problems[0].text
+
+
+def test_the_scenario_and_robot_sub_schemas_name_what_their_readers_accept() -> None:
+    """The plan schema's scenario and robot parts are written in planning.plan_schema_gen, not
+    generated from a dataclass (the scenario reader is hand-written too): they must name
+    exactly the fields the readers know, so that a field added to one is added to the other."""
+    from rb_drake.params import RobotParams
+    from rb_drake.scenario import TOP_LEVEL, bundled_caves, load_scenario
+
+    defs = json.loads(SCHEMA_FILE.read_text())["$defs"]
+    robot = defs["robot"]
+    assert set(robot["properties"]) == set(RobotParams().to_dict()), (
+        f"robot schema {sorted(robot['properties'])} vs RobotParams "
+        f"{sorted(RobotParams().to_dict())}")
+    assert robot["additionalProperties"] is False
+    scenario = defs["scenario"]
+    assert set(scenario["properties"]) == TOP_LEVEL, (
+        f"scenario schema {sorted(scenario['properties'])} vs the reader's {sorted(TOP_LEVEL)}")
+    assert scenario["additionalProperties"] is False
+    anchor = scenario["properties"]["anchors"]["items"]
+    written = load_scenario(bundled_caves()["demo-shaft"]).to_dict()["anchors"][0]
+    assert set(anchor["properties"]) == set(written), (
+        f"anchor schema {sorted(anchor['properties'])} vs a written anchor {sorted(written)}")
+    assert anchor["additionalProperties"] is False

@@ -228,10 +228,12 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     def finished(vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
         path, poses, probs, others, cost = [vertex], [], [], [], 0.0
         while parent[path[-1]][0] is not None:
-            (pv, _j, _a), pz, pp, alt, c = parent[path[-1]]
+            move, pz, pp, pick, c = parent[path[-1]]
+            pv = move[0]
+            tr = memo.transitions[_transition_key(move)]
             poses.append(pz)
             probs.append(pp)
-            others.append(alt)
+            others.append(best_poses(tr, _rows(tr, pick), cfg)[0])
             path.append(pv)
             cost += c
         return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], goal_pose,
@@ -296,8 +298,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if redundant(vertex, g, popped):
             continue
         closed[vertex] = g
-        alternatives = None if tr is None else best_poses(tr, _rows(tr, pick), cfg)[0]
-        parent[vertex] = (move, pose, p4, alternatives, cost)
+        # the edge's alternative poses are found again for the route's edges only (`finished`)
+        parent[vertex] = (move, pose, p4, pick, cost)
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex

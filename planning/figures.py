@@ -106,7 +106,7 @@ def phase_figure(plan: dict[str, Any], k: int):
                              for f in motion["seed_tension"]])
     p = np.array([s["p_success"] for s in phase["steps"]])
     p_seed = np.array(motion["seed_p_success"])
-    fig = draw.new_figure(figsize=(6.4, 5.6))
+    fig = draw.new_figure(figsize=(8.0, 5.8), layout="constrained")
     top, bottom = fig.subplots(2, 1, sharex=True)
     for i in range(NUM_BOOMS):
         if np.all(np.isnan(tension[:, i])):
@@ -117,7 +117,8 @@ def phase_figure(plan: dict[str, Any], k: int):
     top.plot([], [], "k:", label="seed")
     top.plot([], [], "k-", label="optimised")
     top.set_ylabel("tension [N]")
-    top.legend(fontsize=8, ncol=3)
+    outside = dict(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+    top.legend(**outside)
     # Failure probability on a log axis: configurations hold with P between 0.99 and
     # 0.999999, where a linear axis of P shows seed and optimum as one line.
     floor = 1e-12
@@ -126,16 +127,15 @@ def phase_figure(plan: dict[str, Any], k: int):
     bottom.semilogy(t, np.maximum(1.0 - p, floor), "-", color="#2171b5", lw=1.8,
                     label="optimised")
     bottom.axhline(1.0 - plan["robot"]["p_min"], color="#cb181d", lw=1, ls="--",
-                   label="1 - p_min")
-    bottom.set_ylabel("probability of failure 1 - P")
+                   label=f"1 - the robot's p_min\n(least P allowed: {plan['robot']['p_min']:g})")
+    bottom.set_ylabel("1 - P (P: all grasps hold)")
     bottom.set_xlabel("time in phase [s]")
-    bottom.legend(fontsize=8)
+    bottom.legend(**outside)
     what = "body movement" if phase["kind"] == "body" else (
         f"boom {phase['free_boom']} {phase['from_anchor']} -> {phase['to_anchor']}")
     title = (f"phase {k} ({what}): seed {motion['seed_method']}; SCP "
              f"{motion['scp_status']}")
     top.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8)
-    fig.tight_layout()
     return fig
 
 

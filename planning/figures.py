@@ -139,20 +139,19 @@ def phase_figure(plan: dict[str, Any], k: int):
     return fig
 
 
-def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
-                 max_frames: int = 400) -> None:
-    """An animation of the whole climb (GIF through Pillow, or MP4 through ffmpeg, by the
-    file's suffix), written atomically."""
-    from matplotlib.animation import FuncAnimation
-
-    from rb_drake.files import atomic_write
-
+def animation_figure(scn: Scenario, plan: dict[str, Any], max_frames: int = 400):
+    """The animation's figure, a function drawing frame n into it, and the frame count. Fixed
+    margins (in inches: a title line above, tick labels and an axis label below and left)
+    hold the axes still from frame to frame without solving a layout for each."""
     frames = [(phase, step) for phase in plan["phases"] for step in phase["steps"]]
     if not frames:
         raise RbpInputError("the plan has no configurations to animate", field="phases")
     frames = [frames[i] for i in np.unique(np.linspace(0, len(frames) - 1,
                                                        min(max_frames, len(frames))).astype(int))]
-    fig = draw.new_figure(figsize=(6, 6))
+    size = 6.4
+    fig = draw.new_figure(figsize=(size, size))
+    fig.subplots_adjust(left=0.75 / size, right=1.0 - 0.15 / size, bottom=0.6 / size,
+                        top=1.0 - 0.4 / size)
     ax = fig.subplots()
 
     def draw_frame(n: int):
@@ -165,11 +164,24 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
         draw.draw_robot(ax, scn.robot, np.array(step["pose"]), stance, probs, free_tip=tip,
                         label_booms=False)
         draw.frame_axes(ax, scn)
-        ax.set_title(f"t = {step['t']:.1f} s, P = {draw.format_prob(step['p_success'])}",
-                     fontsize=9)
+        ax.set_title(f"{scn.name}: t = {step['t']:.1f} s, P (all grasps hold) = "
+                     f"{draw.format_prob(step['p_success'])}", fontsize=9)
         return []
 
-    anim = FuncAnimation(fig, draw_frame, frames=len(frames), blit=False)
+    draw_frame(0)
+    return fig, draw_frame, len(frames)
+
+
+def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
+                 max_frames: int = 400) -> None:
+    """An animation of the whole climb (GIF through Pillow, or MP4 through ffmpeg, by the
+    file's suffix), written atomically."""
+    from matplotlib.animation import FuncAnimation
+
+    from rb_drake.files import atomic_write
+
+    fig, draw_frame, count = animation_figure(scn, plan, max_frames)
+    anim = FuncAnimation(fig, draw_frame, frames=count, blit=False)
     suffix = str(path).rsplit(".", 1)[-1].lower()
     writer = "pillow" if suffix == "gif" else "ffmpeg"
 

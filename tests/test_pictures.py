@@ -166,8 +166,33 @@ def test_failure_pictures(capture, tmp_path: Path, flags: list[str]) -> None:
     assert f"{stated.group(1)} m" in legend, (reason, legend)
 
 
-def test_rig_pictures(capture, tmp_path: Path) -> None:
-    assert run("plan", "rig", "-q", "--phase-figure", "0", "-o", str(tmp_path / "r.json")) == 0
+def test_rig_pictures(capture, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import planning.figures
+
+    make = planning.figures.animation_figure
+    calls: list[tuple[Any, ...]] = []
+
+    def keep(*args: Any, **kwargs: Any):
+        calls.append(args)
+        return make(*args, **kwargs)
+
+    monkeypatch.setattr(planning.figures, "animation_figure", keep)
+    animation = tmp_path / "r.gif"
+    assert run("plan", "rig", "-q", "--phase-figure", "0", "--animate", str(animation),
+               "-o", str(tmp_path / "r.json")) == 0
+    assert [Path(p).name for p, _ in capture] == ["r.png", "r-phase0.png"]
+    assert animation.stat().st_size > 1000 and len(calls) == 1
+    # the animation's first and last frames, drawn again as the writer drew them
+    first, _, _ = make(*calls[0])
+    last, draw_frame, count = make(*calls[0])
+    draw_frame(count - 1)
+    check_all([*capture, ("animation, first frame", first), ("animation, last frame", last)])
+    assert "stance 1 of 1" in all_text(capture[0][1])
+
+
+def test_demo_picture(capture, tmp_path: Path) -> None:
+    assert run("demo", "--no-plan", "--out", str(tmp_path)) == 0
+    assert [Path(p).name for p, _ in capture] == ["cave.png"]
     check_all(capture)
 
 

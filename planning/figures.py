@@ -30,14 +30,10 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
     n = max(1, len(picks))
     cols = min(4, n)
     rows = math.ceil(n / cols)
-    fig = draw.new_figure(figsize=(max(4.0 * cols, 6.0) + 1.0, 4.4 * rows + 1.6),
-                          layout="constrained")
-    axes = fig.subplots(rows, cols, squeeze=False)
-    for ax in axes.flat[n:]:
-        ax.axis("off")
     handles = draw.cave_legend_handles(scn, glyphs=not body)
     if not body:
-        ax = axes.flat[0]
+        fig = draw.new_figure(figsize=(7.0, 6.0), layout="constrained")
+        ax = fig.subplots()
         draw.draw_cave(ax, scn, highlight=tuple(scn.start_stance))
         draw.frame_axes(ax, scn)
         title = f"{scn.name} — {plan['planner']}: no plan ({plan['reason']})"
@@ -45,6 +41,29 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         handles[1].set_label("anchor of the start stance (its normal in red)")
         fig.legend(handles=handles, loc="outside lower center", fontsize=7, frameon=False)
         return fig
+    # Fixed margins in inches (a solved layout, constrained or tight, measures every tick
+    # label of every panel: it would double the figure's time): the suptitle's lines above,
+    # two-line panel titles, tick labels and the legend's rows below, the colour scale right.
+    if plan["p_path"] is None:
+        summary = f"no plan: {plan['reason']}"
+    else:
+        summary = (f"p_path = {plan['p_path']:.4f}, p_min = {plan['p_min']:.4f} (the lowest "
+                   "P over every pose of the plan)")
+    width = max(4.0 * cols, 6.0) + 0.5 + 1.45
+    lines = [f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
+             "each panel: the robot at the last pose of its stance's body move (where the next "
+             "boom lets go); P (all grasps hold) at the move's first pose → at that pose"]
+    heading = [w for line in lines for w in textwrap.wrap(line, int(width * 11.5))]
+    ncol = min(cols, 3)
+    top = 0.2 + 0.19 * len(heading) + 0.45
+    bottom = 0.35 + 0.2 * math.ceil((len(handles) + 2) / ncol) + 0.1
+    height = top + 4.4 * rows + bottom
+    fig = draw.new_figure(figsize=(width, height))
+    fig.subplots_adjust(left=0.5 / width, right=1.0 - 1.45 / width, bottom=bottom / height,
+                        top=1.0 - top / height, wspace=0.45 / 3.6, hspace=0.75 / 3.9)
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.axis("off")
     path = np.array([s["pose"][:2] for p in plan["phases"] for s in p["steps"]])
     for ax, k in zip(axes.flat, picks, strict=False):
         phase = body[k]
@@ -65,24 +84,18 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
                      f"P {first} → {draw.format_prob(step['p_success'])}", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.locator_params(nbins=5)  # fewer ticks: their labels are most of the drawing time
-    if plan["p_path"] is None:
-        summary = f"no plan: {plan['reason']}"
-    else:
-        summary = (f"p_path = {plan['p_path']:.4f}, p_min = {plan['p_min']:.4f} (the lowest "
-                   "P over every pose of the plan)")
-    lines = [f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
-             "each panel: the robot at the last pose of its stance's body move (where the next "
-             "boom lets go); P (all grasps hold) at the move's first pose → at that pose"]
-    chars = int(fig.get_size_inches()[0] * 11.5)  # what a line of 10 pt text holds
-    fig.suptitle("\n".join(w for line in lines for w in textwrap.wrap(line, chars)),
-                 fontsize=10)
-    draw.add_probability_colourbar(fig, axes)
+    fig.suptitle("\n".join(heading), fontsize=10, y=1.0 - 0.15 / height, va="top")
+    bar = draw.add_probability_colourbar(
+        fig, axes, cax=fig.add_axes((1.0 - 1.3 / width, bottom / height, 0.15 / width,
+                                     1.0 - (top + bottom) / height)))
+    bar.ax.tick_params(labelsize=8)
+    bar.set_label(bar.ax.get_ylabel(), fontsize=9)
     handles.append(Line2D([], [], ls=":", color="#2171b5", lw=1.5,
                           label="the body's path so far"))
     handles.append(Line2D([], [], color=draw.prob_colour(0.9999), lw=2.6,
                           label="boom, coloured by its grasp's P (scale on the right)"))
-    fig.legend(handles=handles, loc="outside lower center", fontsize=8, frameon=False,
-               ncol=min(cols, 3))
+    fig.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.05 / height),
+               fontsize=8, frameon=False, ncol=ncol)
     return fig
 
 

@@ -161,13 +161,16 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
 
-def add_probability_colourbar(fig, ax) -> None:
+def add_probability_colourbar(fig, ax, cax=None):
+    """The grasp probability's colour scale beside `ax` (or in `cax`, if given)."""
     sm = ScalarMappable(norm=NINES, cmap=CMAP)
-    bar = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02)
+    bar = (fig.colorbar(sm, cax=cax) if cax is not None
+           else fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02))
     ticks = np.arange(1, 6)
     bar.set_ticks(ticks)
     bar.set_ticklabels([f"{1 - 10.0**-k:.{k}f}" for k in ticks])
     bar.set_label("grasp probability of holding")
+    return bar
 
 
 def frame_axes(ax, scn: Scenario, margin: float = 0.3) -> None:

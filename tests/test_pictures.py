@@ -4,7 +4,8 @@ The commands run in this process (`rbp.cli.main`) with `rb_drake.files.atomic_sa
 wrapped to keep each Figure it saves, so the test sees exactly the pictures a user gets: a
 bundled success (`rbp plan demo-shaft`, budget-capped so that it takes seconds, with a phase's
 Fig. 6), two failures (a budget stop and a proof of no route, each with its search picture),
-the rig (`rbp plan rig`), `rbp scenario show` and `rbp demo`. For each figure, after a draw:
+the rig (`rbp plan rig` with its animation's first and last frames, `rbp rig-report`),
+`rbp scenario show` and `rbp demo`. For each figure, after a draw:
 every visible text and legend lies inside the figure (a pixel of tolerance), no legend covers
 an axis label, a title or a tick label, and no two titles or labels overlap. The comparison's
 histogram (experiments.baseline_comparison) is checked on made-up records: its bars add up to
@@ -188,6 +189,15 @@ def test_rig_pictures(capture, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     draw_frame(count - 1)
     check_all([*capture, ("animation, first frame", first), ("animation, last frame", last)])
     assert "stance 1 of 1" in all_text(capture[0][1])
+
+
+def test_rig_report_picture(capture, tmp_path: Path) -> None:
+    plan, log = tmp_path / "r.json", tmp_path / "rig.lcm"
+    assert run("plan", "rig", "-q", "--no-pictures", "-o", str(plan)) == 0
+    assert run("rig-run", str(plan), "--phase", "0", "--sim-rig", "--log", str(log)) == 0
+    assert run("rig-report", str(log), "-o", str(tmp_path / "report.png")) == 0
+    assert [Path(p).name for p, _ in capture] == ["report.png"]
+    check_all(capture)
 
 
 def test_demo_picture(capture, tmp_path: Path) -> None:

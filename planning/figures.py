@@ -279,6 +279,10 @@ def search_figure(scn: Scenario, fp):
     ax.plot([], [], ls="none", label=f"search {why}")
     draw.frame_axes(ax, scn)
     handles, labels = ax.get_legend_handles_labels()
+    marks = draw.cave_legend_handles(scn, glyphs=False, held=False)  # the goal's among them
+    keep = [k for k, text in enumerate(labels) if text != "goal"]
+    handles = marks + [handles[k] for k in keep]
+    labels = [h.get_label() for h in marks] + [labels[k] for k in keep]
     wrap = max(40, int(7.0 * 72 / 4.2 * (max(width, 6.0) - 0.6) / 7.0))  # chars a line holds
     labels = ["\n".join(textwrap.wrap(text, wrap)) for text in labels]
     fig.legend(handles, labels, loc="outside lower center", fontsize=7, frameon=False)

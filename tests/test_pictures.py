@@ -147,6 +147,13 @@ def test_success_pictures(capture, tmp_path: Path) -> None:
     # The panels say which pose their P is at: the stance's first pose (for the first, the
     # start pose, as `rbp scenario show` gives it) and the drawn one (its release pose).
     assert "stance 1 of 8" in snapshots, snapshots
+    from rb_drake.draw import scenario_figure
+    from rbp.commands.common import load_scenario_spec
+
+    cave = all_text(scenario_figure(load_scenario_spec("demo-shaft")))
+    start = re.search(r"start pose: P\(all grasps hold\) = (.+?)  ", cave)
+    assert start, cave
+    assert f"P {start.group(1)} → " in snapshots, (start.group(1), snapshots)
 
 
 @pytest.mark.parametrize("flags", [["--max-expansions", "3"], []],

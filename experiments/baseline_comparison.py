@@ -108,41 +108,54 @@ def _seconds(x: float | None) -> str:
 
 
 def baseline_figure(records: list[dict[str, Any]], planners: list[str]):
-    """Fig. 4: histograms of p_path (failures at 0) and the share of trials above each p, for
-    p_path (solid) and p_grasps (dashed)."""
-    import matplotlib.pyplot as plt
+    """Fig. 4: histograms of p_path over the plans found, failed plans in a hatched column of
+    their own (left of 0), and the share of trials above each p, for p_path (solid) and
+    p_grasps (dashed), a failed plan counting 0. The legends, below the plots, give the
+    counts the bars add up to."""
     import numpy as np
     from matplotlib.ticker import MaxNLocator
 
+    from rb_drake import draw
+
     colours = {"rbp": "#2171b5", "rbp-sampled": "#6baed6", "naive": "#cb181d"}
-    fig, (hist, tail) = plt.subplots(1, 2, figsize=(10.0, 4.0))
+    fig = draw.new_figure(figsize=(11.0, 5.2), layout="constrained")
+    hist, tail = fig.subplots(1, 2)
     bins = np.linspace(0.0, 1.0, 21)
+    step = bins[1] - bins[0]
+    width = step / max(1, len(planners))
+    failed_at = -3.0 * step  # the failed plans' column, left of p = 0
     for k, planner in enumerate(planners):
-        p = np.array(path_probabilities(records, planner))
-        width = (bins[1] - bins[0]) / len(planners)
+        ok = [r["result"][planner] for r in records if r["result"][planner]["success"]]
+        p = np.array([o["p_path"] for o in ok], dtype=float)
         counts, _ = np.histogram(p, bins)
-        plans = sum(r["result"][planner]["success"] for r in records)
-        hist.bar(bins[:-1] + k * width, counts, width, align="edge",
-                 color=colours.get(planner), label=f"{planner} ({plans} plans)")
+        failed = len(records) - len(ok)
+        colour = colours.get(planner)
+        hist.bar(bins[:-1] + k * width, counts, width, align="edge", color=colour,
+                 label=f"{planner}: {len(ok)} plans, by p_path")
+        hist.bar([failed_at + k * width], [failed], width, align="edge", color="white",
+                 edgecolor=colour, hatch="///", label=f"{planner}: {failed} failed (no plan)")
         grid = np.linspace(0.0, 1.0, 1001)
         for key, style in (("p_path", "-"), ("p_grasps", "--")):
             q = np.array(path_probabilities(records, planner, key))
             over = [f"{int(np.sum(q > t))} > {t:.2f}" for t in THRESHOLDS]
             tail.plot(grid, (q[None, :] > grid[:, None]).mean(axis=1), style,
-                      color=colours.get(planner), label=f"{planner} {key}: {', '.join(over)}")
+                      color=colour, label=f"{planner} {key}: {', '.join(over)}")
     for t in THRESHOLDS:
         tail.axvline(t, color="grey", lw=0.8, ls="--")
-    hist.set_xlabel("path success probability p_path (failed plan: 0)")
+    ticks = [failed_at + step / 2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
+    hist.set_xticks(ticks, ["failed"] + [f"{t:.1f}" for t in ticks[1:]])
+    hist.set_xlim(failed_at - step / 2, 1.0 + step / 2)
+    hist.set_xlabel("path success probability p_path of the plans found")
     hist.set_ylabel("trials")
     hist.yaxis.set_major_locator(MaxNLocator(integer=True))
-    hist.legend(fontsize=8)
+    hist.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2,
+                frameon=False)
     tail.set_xlabel("p")
-    tail.set_ylabel("share of trials above p")
+    tail.set_ylabel("share of trials above p (a failed plan: 0)")
     tail.set_xlim(0.0, 1.0)
     tail.set_ylim(0.0, 1.02)
-    tail.legend(fontsize=8)
+    tail.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), frameon=False)
     fig.suptitle(f"footstep planners over {len(records)} randomised caves", fontsize=11)
-    fig.tight_layout()
     return fig
 
 

@@ -318,14 +318,16 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                         start_data=start_pose, on_expand=on_expand)
     seconds = time.perf_counter() - t0
     if not result.success:
-        closest = min(centroid_distance(scn, n) for n in result.graph.nodes)
+        explored, frontier = explored_stances(scn, result, start_pose)
+        # the expanded stances, as the complete search measures them (and the search picture)
+        closest = min((centroid_distance(scn, e.stance) for e in explored),
+                      default=centroid_distance(scn, start))
         reason = (f"{result.reason}; the nearest stance reached is {closest:.2f} m from the "
                   f"goal (the start is {centroid_distance(scn, start):.2f} m)")
         budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
         if budget:
             reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
         stop = Stop.BUDGET if budget else Stop.EXHAUSTED
-        explored, frontier = explored_stances(scn, result, start_pose)
         return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache, stop, explored,
                             frontier, memo)

@@ -18,6 +18,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon
 
 from rb_drake import geometry, grasp
@@ -45,9 +46,14 @@ def nines(p: npt.ArrayLike) -> np.ndarray:
     return -np.log10(np.clip(1.0 - np.asarray(p, dtype=float), 1e-12, 1.0))
 
 
-def format_prob(p: float) -> str:
-    """0.9731 as is; 0.99999963 as '1 - 3.7e-07', so that near-certain grasps stay distinct."""
-    return f"{p:.4f}" if p < 0.9999 else f"1 - {1.0 - p:.1e}"
+def format_prob(p: float, log_p: float | None = None) -> str:
+    """0.9731 as is; 0.99999963 as '1 - 3.7e-07', so that near-certain grasps stay distinct.
+    Given log P (`log_p`), 1 - P comes from it (-expm1), exact where 1 - P itself rounds to
+    0; a P that is 1 to double precision reads '1 - <1e-16', never '1 - 0.0e+00'."""
+    if not p >= 0.9999:  # nan too
+        return f"{p:.4f}"
+    failure = -math.expm1(log_p) if log_p is not None else 1.0 - p
+    return f"1 - {failure:.1e}" if failure > 0.0 else "1 - <1e-16"
 
 
 def prob_colour(p: float):
@@ -92,6 +98,27 @@ def draw_cave(ax, scn: Scenario, highlight: tuple[str | None, ...] = (),
     ax.plot(gx, gy, "*", color="#2171b5", ms=12, zorder=5, label="goal")
 
 
+def cave_legend_handles(scn: Scenario, glyphs: bool = True, held: bool = True) -> list:
+    """Legend entries for what draw_cave draws: anchors and their normals (red: held by the
+    stance drawn), the limit glyphs, the goal and its tolerance."""
+    from matplotlib.patches import Patch
+
+    handles: list = [
+        Line2D([], [], color="black", marker="o", ms=3, lw=0.9,
+               label="anchor; its line: the wall's normal (0.25 m)"),
+    ]
+    if held:
+        handles.append(Line2D([], [], color="red", marker="o", ms=3, lw=1.6,
+                              label="anchor held by a boom (its normal in red)"))
+    if glyphs:
+        handles.append(Patch(facecolor="#9ecae1", edgecolor="#4292c6", alpha=0.55,
+                             label=f"grasp limit glyph: mean limit per pull direction "
+                                   f"({GLYPH_SCALE * 1000:g} mm per N)"))
+    handles.append(Line2D([], [], color="#2171b5", marker="*", ms=10, ls="--", lw=1.2,
+                          label=f"goal, within {scn.goal_tolerance:g} m (dashed)"))
+    return handles
+
+
 def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
                probabilities: np.ndarray | None = None, free_tip: np.ndarray | None = None,
                alpha: float = 1.0, label_booms: bool = True) -> None:
@@ -129,18 +156,21 @@ def draw_robot(ax, robot: RobotParams, pose: np.ndarray, stance: Stance,
             mid = 0.5 * (sh[i] + tip)
             text = f"{i}"
             if probabilities is not None and stance.attached[i]:
-                text += f": P = {format_prob(probabilities[i])}"
+                text += f": P = {format_prob(float(probabilities[i]))}"
             ax.annotate(text, mid, fontsize=7, zorder=9, ha="center", va="center",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
 
-def add_probability_colourbar(fig, ax) -> None:
+def add_probability_colourbar(fig, ax, cax=None):
+    """The grasp probability's colour scale beside `ax` (or in `cax`, if given)."""
     sm = ScalarMappable(norm=NINES, cmap=CMAP)
-    bar = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02)
+    bar = (fig.colorbar(sm, cax=cax) if cax is not None
+           else fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02))
     ticks = np.arange(1, 6)
     bar.set_ticks(ticks)
     bar.set_ticklabels([f"{1 - 10.0**-k:.{k}f}" for k in ticks])
     bar.set_label("grasp probability of holding")
+    return bar
 
 
 def frame_axes(ax, scn: Scenario, margin: float = 0.3) -> None:
@@ -155,28 +185,36 @@ def frame_axes(ax, scn: Scenario, margin: float = 0.3) -> None:
 
 
 def scenario_figure(scn: Scenario):
-    """The cave with the robot in its start stance, booms coloured by grasp probability."""
+    """The cave with the robot in its start stance, booms coloured by grasp probability, and a
+    legend (below the cave) for the anchors, their normals, glyphs and the goal."""
     from rb_drake.feasibility import check_poses, diagnose_pose
 
     stance = scn.stance(scn.start_stance)
     pose = np.array(scn.start_pose)
     check = check_poses(scn, stance, pose)
-    probs = np.exp(check.allocation.log_probs[0])
+    log_probs = check.allocation.log_probs[0]
+    probs = np.exp(log_probs)
     extent = np.ptp(np.vstack([scn.anchor_positions, [scn.goal_position]]), axis=0) + 1.6
     height = 8.0
     width = float(np.clip(height * extent[0] / extent[1], 5.0, 16.0)) + 1.5
-    fig = new_figure(figsize=(width, height))
+    fig = new_figure(figsize=(width, height + 1.2), layout="constrained")
     ax = fig.subplots()
     draw_cave(ax, scn, highlight=stance.ids)
     draw_robot(ax, scn.robot, pose, stance, probs)
     frame_axes(ax, scn)
     add_probability_colourbar(fig, ax)
     if check.feasible[0]:
-        status = (f"start stance P = {format_prob(check.probability[0])}"
-                  f"  (r = log P = {check.allocation.robustness[0]:.2e})")
+        r = float(check.allocation.robustness[0])
+        status = (f"start pose: P(all grasps hold) = {format_prob(float(np.exp(r)), r)}"
+                  f"  (r = log P = {r:.2e})")
     else:
         status = "start pose infeasible: " + "; ".join(diagnose_pose(scn, stance, pose))
     ax.set_title(f"{scn.name}: {len(scn.anchors)} anchors, gravity "
                  f"{np.linalg.norm(scn.gravity_vector):.2f} m/s²\n{status}", fontsize=10)
-    fig.tight_layout()
+    handles = cave_legend_handles(scn)
+    handles.append(Line2D(
+        [], [], color=prob_colour(0.9999), lw=2.6,
+        label="boom, coloured by its grasp's P (scale on the right); label: boom: P"))
+    fig.legend(handles=handles, loc="outside lower center", fontsize=8,
+               ncol=2 if width >= 10 else 1, frameon=False)
     return fig

@@ -22,15 +22,17 @@ def failed(shaft):
 
 
 def legend_texts(fig) -> list[str]:
-    return [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().texts]
+    """The legend's entries (below the cave, in the figure), each on one line."""
+    legends = fig.legends + [ax.get_legend() for ax in fig.axes if ax.get_legend()]
+    return [t.get_text().replace("\n", " ") for legend in legends for t in legend.texts]
 
 
 def test_search_picture_is_written(shaft, failed, tmp_path: Path) -> None:
     fig = search_figure(shaft, failed)
     texts = legend_texts(fig)
     assert any(STOP_REASONS[failed.stop] in t for t in texts), f"{failed.stop!r}: {texts}"
-    assert any(t.startswith("nearest the goal") for t in texts), texts
-    assert any(t == "goal" for t in texts), texts
+    assert any(t.startswith("nearest stance reached: ") for t in texts), texts
+    assert any(t.startswith("goal, within ") for t in texts), texts
     path = atomic_save_figure(fig, tmp_path / "search.png", dpi=60)
     assert path.stat().st_size > 1000, f"{path} is tiny"
 

@@ -293,11 +293,14 @@ class Plan(Part):
     planner: Planner = spec()
     success: bool = spec()
     reason: str = spec(description="why the plan failed; empty on success")
-    p_min: float | None = spec(minimum=0, maximum=1)
-    p_path: float | None = spec(minimum=0, maximum=1)
+    p_min: float | None = spec(minimum=0, maximum=1, description="the lowest configuration "
+                               "probability of the climb; null when the plan failed")
+    p_path: float | None = spec(minimum=0, maximum=1, description="the climb's success "
+                                "probability; null when the plan failed")
     p_grasps: float | None = spec(None, nullable=True, minimum=0, maximum=1,
                                   description="p_path without the per-regrasp attach term "
-                                              "(optional)")
+                                              "(optional); null when the plan failed, as "
+                                              "p_path is")
     regrasps: int = spec(minimum=0)
     timing: dict[str, float] = spec(required=list(STAGES),
                                     additionalProperties={"type": "number", "minimum": 0},
@@ -355,6 +358,13 @@ class Plan(Part):
 
     def replace(self, **changes: Any) -> Plan:
         return dataclasses.replace(self, **changes)
+
+    def failed(self, reason: str) -> Plan:
+        """This plan as a failure for `reason`: its summary probabilities (p_path, p_min,
+        p_grasps) null, since a failed plan is not climbed; `regrasps` stays the count of the
+        route's regrasps, and the phases stay for a picture of where it went."""
+        return dataclasses.replace(self, success=False, reason=reason, p_path=None, p_min=None,
+                                   p_grasps=None)
 
     def upgraded(self) -> Plan:
         """This plan in the current format: the robot stored once (`robot`)."""

@@ -70,3 +70,23 @@ def test_a_plan_given_as_a_scenario_points_to_from_plan(tmp_path: Path) -> None:
     result = run_rbp("plan", str(plan), "-o", "again.json", cwd=tmp_path)
     assert result.returncode == 2, result.stderr[-1500:]
     assert "this is a plan" in result.stderr and "--from-plan" in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("dt", ["1e-6", "0", "-1", "1e9", "nan"])
+def test_dt_refused_up_front_with_its_range(tmp_path: Path, dt: str) -> None:
+    """--dt 1e-6 ran past 120 s printing the solver's numerical errors."""
+    start = time.perf_counter()
+    result = run_rbp("plan", "demo-shaft", "--dt", dt, "-o", "p.json", cwd=tmp_path)
+    assert result.returncode == 2, (dt, result.returncode, result.stderr[-1500:])
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: --dt:"), result.stderr
+    assert "at least 0.01" in lines[0] and "at most 60" in lines[0], lines[0]
+    assert time.perf_counter() - start < 30 and not (tmp_path / "p.json").exists()
+
+
+def test_dt_of_a_configuration_file_names_the_file(tmp_path: Path) -> None:
+    (tmp_path / "fast.yaml").write_text("dt: 1.0e-6\n")
+    result = run_rbp("plan", "demo-shaft", "--config", "fast.yaml", "-o", "p.json",
+                     cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    assert result.stderr.startswith("error: fast.yaml: dt:"), result.stderr

@@ -22,6 +22,12 @@ if TYPE_CHECKING:
     from planning.plan_model import Plan, Provenance
     from rb_drake.scenario import Scenario
 
+# --dt's range: a step of the plan is at least one of the simulator's plant steps
+# (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as 1/dt^2 and its solver fails,
+# and the plan's time stamps, rounded to 1 us, cannot keep the steps apart), and a 5 cm step
+# takes at most a minute
+MIN_DT, MAX_DT = 0.01, 60.0
+
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
 
@@ -91,8 +97,12 @@ def plan_setup(args: argparse.Namespace):
         cfg = dataclasses.replace(cfg, dt=args.dt)
     if args.no_scp:
         cfg = dataclasses.replace(cfg, optimise=False)
-    if not cfg.dt > 0:
-        raise UserError(f"--dt: must be positive, got {cfg.dt}")
+    if not MIN_DT <= cfg.dt <= MAX_DT:
+        source = "--dt" if args.dt is not None else (
+            f"{args.config or args.from_plan or '(configuration)'}: dt")
+        raise UserError(f"{source}: seconds between trajectory steps must be at least "
+                        f"{MIN_DT:g} (the simulator's plant step) and at most {MAX_DT:g}, "
+                        f"got {cfg.dt:g}")
     budget = cfg.footstep.max_expansions
     if budget is not None and not budget >= 1:
         raise UserError(f"--max-expansions: must be 1 or more, got {budget}")

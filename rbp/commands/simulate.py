@@ -70,6 +70,14 @@ def _progress(label: str):
     return show, done
 
 
+def _simulation_failed(path: Path, error: Exception, where: str) -> int:
+    """One line on stderr for a simulation whose solver failed (`SimulationError`, naming the
+    phase and time), never a traceback; exit status 1, a failed execution."""
+    print(f"error: {path}: {error}{where}; rbp check {path} tells whether the plan fits its "
+          "cave and robot", file=sys.stderr)
+    return EXIT_FAILED
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
     from rbp.commands.common import UserError, check_output
@@ -86,7 +94,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return EXIT_FAILED
 
     from rb_drake.files import atomic_write_text
-    from systems.diagram import ClimbSimulator
+    from systems.diagram import ClimbSimulator, SimulationError
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanError, PlanTrajectory, plan_scenario
 
@@ -98,7 +106,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     simulator = ClimbSimulator(scn)
     show, done = _progress("simulating")
     start = time.perf_counter()
-    record = simulator.run(traj, progress=lambda k, n, t: show(f"phase {k}/{n}, t = {t:.1f} s"))
+    try:
+        record = simulator.run(traj, progress=lambda k, n, t: show(f"phase {k}/{n}, "
+                                                                   f"t = {t:.1f} s"))
+    except SimulationError as e:
+        done()
+        return _simulation_failed(path, e, "")
     done()
     wall = time.perf_counter() - start
     import numpy as np
@@ -127,8 +140,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         elif args.replan == "footsteps":
             replanner, strategy = FootstepReplanner(seed=args.seed), "footsteps"
         show, done = _progress("replanning failed climbs")
-        mc = monte_carlo(record, args.trials, args.seed, replanner, strategy, simulator,
-                         progress=lambda i, n: show(f"trial {i}/{n}"))
+        try:
+            mc = monte_carlo(record, args.trials, args.seed, replanner, strategy, simulator,
+                             progress=lambda i, n: show(f"trial {i}/{n}"))
+        except SimulationError as e:
+            done()
+            return _simulation_failed(path, e, " (a Monte Carlo trial's or a replan's run)")
         done()
         lo, hi = mc.ci95
         inside = "inside" if lo <= p_path <= hi else "OUTSIDE"

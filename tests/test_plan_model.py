@@ -138,9 +138,12 @@ def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None
     added = _added_settings(new.provenance.config, golden.provenance.config)
     assert all(value is None for value in added.values()), \
         f"settings added since the golden plan must default to off (None): {added}"
-    assert dataclasses.replace(new.provenance, command="", scenario_source="",
+    assert new.provenance.threads >= 1 and new.provenance.cores >= 1, new.provenance
+    assert new.provenance.load is None or new.provenance.load >= 0, new.provenance
+    machine = {"threads": None, "cores": None, "load": None}  # what it ran under
+    assert dataclasses.replace(new.provenance, command="", scenario_source="", **machine,
                                config=_without(new.provenance.config, added)) == \
-        dataclasses.replace(golden.provenance, command="", scenario_source="")
+        dataclasses.replace(golden.provenance, command="", scenario_source="", **machine)
     assert_close(_comparable(new), _comparable(golden))
 
 

@@ -167,15 +167,17 @@ def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig]:
 
 def provenance(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool,
                argv: list[str] | None) -> Provenance:
-    """How a plan was made: enough to make it again (`rbp plan --from-plan`)."""
+    """How a plan was made: enough to make it again (`rbp plan --from-plan`), and the threads
+    and load it ran under (its times depend on them)."""
     from planning.config_io import config_to_dict
     from planning.plan_model import Provenance, planner_of
+    from rb_drake.kernel.threads import run_conditions
 
     return Provenance(
         rbp_version=rbp_version(),
         command=shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
         planner=planner_of(planner), motion=motion, seed=cfg.footstep.seed,
-        scenario_source=scn.source, config=config_to_dict(cfg))
+        scenario_source=scn.source, config=config_to_dict(cfg), **run_conditions())
 
 
 class SearchRecord:

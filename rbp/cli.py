@@ -182,10 +182,12 @@ def _print_motion(plan: Plan) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.check import check_plan
+    from rbp.progress import CheckProgress
 
     path = Path(args.plan)
     plan = read_plan(path)
-    problems = check_plan(plan, str(path))
+    with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
+        problems = check_plan(plan, str(path), progress=bar)
     for p in problems:
         print(f"{path}: {p}")
     if problems:
@@ -333,6 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--stamp", action="store_true",
                        help="when the plan verifies, write into it a stamp (a hash of its "
                             "content) so simulate and rig-run need not verify it again")
+    check.add_argument("-q", "--quiet", action="store_true",
+                       help="no progress line (shown only when stderr is a terminal and the "
+                            "check takes over a second)")
     check.set_defaults(func=cmd_check)
 
     scn = sub.add_parser("scenario", help="generate, check and show caves")

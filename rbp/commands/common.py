@@ -72,7 +72,10 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
         return False
     if has_valid_stamp(plan):
         return False
-    problems = check_plan(plan, str(path))
+    from rbp.progress import CheckProgress
+
+    with CheckProgress(f"verifying {path}") as bar:
+        problems = check_plan(plan, str(path), progress=bar)
     for p in problems[:20]:
         print(f"error: {path}: {p}", file=sys.stderr)
     if problems:

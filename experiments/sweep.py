@@ -154,7 +154,8 @@ class ProgressDisplay:
         finished = self.skipped + self.done
         if self.bar is not None:
             if self.errors:
-                self.bar.set_postfix_str(f"{self.errors} errors", refresh=False)
+                errors = f"{self.errors} error{'' if self.errors == 1 else 's'}"
+                self.bar.set_postfix_str(errors, refresh=False)
             self.bar.update(1)
         else:
             status = "ERROR " + record["error"].splitlines()[0] if record["error"] else "done"

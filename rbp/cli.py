@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from rbp.commands.common import UserError, check_output, load_scenario_spec, read_plan
+from rbp.commands.common import UserError, check_output, load_scenario_spec, plural, read_plan
 
 if TYPE_CHECKING:
     from planning.plan_model import Plan
@@ -173,7 +173,7 @@ def _print_motion(plan: Plan) -> None:
     better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in room)
     better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in inner)
     t = plan.timing
-    phases = f"{len(rows)} phase{'' if len(rows) == 1 else 's'}"
+    phases = plural(len(rows), "phase")
     print(f"motion: {phases}; SCP raised the mean P on {better_mean} of the "
           f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
           f"the {len(inner)} whose seed's minimum is not at a fixed end; seeds "
@@ -191,13 +191,14 @@ def cmd_check(args: argparse.Namespace) -> int:
     for p in problems:
         print(f"{path}: {p}")
     if problems:
-        print(f"{path}: {len(problems)} problems")
+        print(f"{path}: {plural(len(problems), 'problem')}")
         return EXIT_FAILED
     from planning.plan_model import Plan
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
-    print(f"{path}: ok: {len(model.phases)} phases, {n} configurations verified; "
+    print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
+          f"{plural(n, 'configuration')} verified; "
           + _summary(model))
     if args.stamp:
         from planning.plan import write_plan

@@ -195,3 +195,15 @@ def test_simulate_no_verify_on_another_caves_plan_ends_in_one_line(tmp_path: Pat
     assert len(lines) == 2 and lines[0].startswith("WARNING:"), proc.stderr
     assert lines[1].startswith("error: crossed.json: the simulation failed in phase "), lines
     assert " at t = " in lines[1] and "rbp check crossed.json" in lines[1], lines[1]
+
+
+def test_counts_read_right_in_the_singular(tmp_path: Path) -> None:
+    """'1 phase', '1 problem', '1 configuration' (issue 32: 'motion: 1 phases')."""
+    from rbp.commands.common import plural
+
+    assert [plural(n, "phase") for n in (0, 1, 2)] == ["0 phases", "1 phase", "2 phases"]
+    golden = Path(__file__).parent / "data" / "golden" / "rig.json"
+    proc = run_rbp("check", str(golden), cwd=tmp_path)
+    assert_ok(proc)
+    n = len(json.loads(golden.read_text())["phases"])
+    assert f"ok: {plural(n, 'phase')}, " in proc.stdout, proc.stdout

@@ -48,7 +48,7 @@ def test_sweep_progress_bar_on_a_terminal() -> None:
     progress.close()
     text = term.getvalue()
     assert text.startswith("resuming: 1 of 4 trials already finished"), repr(text)
-    assert "3/4" in text and "1 errors" in text, repr(text)
+    assert "3/4" in text and "1 error" in text and "1 errors" not in text, repr(text)
 
 
 def test_sweep_progress_lines_in_a_log() -> None:

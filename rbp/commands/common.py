@@ -13,6 +13,11 @@ from pathlib import Path
 from rb_drake.errors import RbpInputError
 
 
+def plural(n: int, word: str) -> str:
+    """'1 phase', '2 phases', '0 phases' (words whose plural adds an s)."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 class UserError(RbpInputError):
     """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
 
@@ -79,7 +84,7 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     for p in problems[:20]:
         print(f"error: {path}: {p}", file=sys.stderr)
     if problems:
-        count = f"{len(problems)} problem{'' if len(problems) == 1 else 's'}"
+        count = plural(len(problems), "problem")
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
         print(f"error: {path}: the plan fails verification ({count}{shown}); "
               f"refused (rbp check {path} lists them all)", file=sys.stderr)

@@ -80,7 +80,7 @@ def _simulation_failed(path: Path, error: Exception, where: str) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.commands.common import UserError, check_output
+    from rbp.commands.common import UserError, check_output, plural
 
     if args.json:
         check_output(args.json, "--json")
@@ -121,7 +121,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 "rms_position_error": float(np.sqrt(np.mean(err**2))),
                 "max_heading_error": float(heading.max())}
     p_path, p_sim = plan["p_path"], record.implied_p_path()
-    print(f"{path}: simulated {traj.end_time:.1f} s, {len(traj.phases)} phases, in {wall:.1f} s; "
+    print(f"{path}: simulated {traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}, in "
+          f"{wall:.1f} s; "
           f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
           f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
     worst = record.holding_minimum()

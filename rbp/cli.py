@@ -18,7 +18,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from rbp.commands.common import UserError, check_output, load_scenario_spec, plural, read_plan
+from rbp.commands.common import (
+    UserError,
+    check_dpi,
+    check_output,
+    check_seed,
+    load_scenario_spec,
+    plural,
+    read_plan,
+)
 
 if TYPE_CHECKING:
     from planning.plan_model import Plan
@@ -47,8 +55,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     if not 0 < args.anchor_density <= MAX_ANCHOR_DENSITY:
         raise UserError(f"--anchor-density: must be above 0 and at most {MAX_ANCHOR_DENSITY:g} "
                         f"anchors per metre, got {args.anchor_density:g}")
-    if not 0 <= args.seed < 2**63:
-        raise UserError(f"--seed: must be 0 or more (below 2**63), got {args.seed}")
+    check_seed(args.seed)
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
     check_output(args.output)
     try:
@@ -88,6 +95,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rb_drake.draw import scenario_figure
     from rb_drake.files import atomic_save_figure
 
+    check_dpi(args.dpi)
     check_output(args.output, picture=True)
     scn = load_scenario_spec(args.scenario, check_start=False)
     fig = scenario_figure(scn)
@@ -289,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--from-plan", metavar="PLAN",
                       help="repeat the plan PLAN was made with: its scenario, planner, "
                            "configuration and seed (flags given override them)")
-    plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
+    plan.add_argument("--seed", type=int,
+                      help="seed of the planner's sampling, 0 or more (default 0)")
     plan.add_argument("--max-expansions", type=int,
                       help="give up after expanding this many stances (default 1000, or 300 "
                            "per metre from the start to the goal if more)")
@@ -363,7 +372,8 @@ def build_parser() -> argparse.ArgumentParser:
     show = ssub.add_parser("show", help="draw a scenario with the robot in its start stance")
     show.add_argument("scenario")
     show.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
-    show.add_argument("--dpi", type=int, default=120)
+    show.add_argument("--dpi", type=int, default=120,
+                      help="the picture's resolution, 20 to 600 dots per inch (default 120)")
     show.set_defaults(func=cmd_scenario_show)
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)

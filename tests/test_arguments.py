@@ -90,3 +90,32 @@ def test_dt_of_a_configuration_file_names_the_file(tmp_path: Path) -> None:
                      cwd=tmp_path)
     assert result.returncode == 2, result.stderr[-1500:]
     assert result.stderr.startswith("error: fast.yaml: dt:"), result.stderr
+
+
+GOLDEN = Path(__file__).parent / "data" / "golden"
+
+
+@pytest.mark.parametrize(("args", "flag"), [
+    (("plan", "demo-shaft", "--seed", "-1", "-o", "p.json"), "--seed"),
+    (("plan", "demo-shaft", "--config", "seed.yaml", "-o", "p.json"), "seed.yaml: footstep.seed"),
+    (("simulate", str(GOLDEN / "demo-shaft.json"), "--seed", "-1"), "--seed"),
+    (("rig-run", str(GOLDEN / "rig.json"), "--sim-rig", "--seed", "-1"), "--seed"),
+    (("rig-run", str(GOLDEN / "rig.json"), "--sim-rig", "--period", "1e-9"), "--period"),
+    (("rig-run", str(GOLDEN / "rig.json"), "--sim-rig", "--period", "0"), "--period"),
+    (("scenario", "show", "demo-shaft", "-o", "s.png", "--dpi", "0"), "--dpi"),
+    (("scenario", "show", "demo-shaft", "-o", "s.png", "--dpi", "100000"), "--dpi"),
+    (("rig-report", "missing.lcm", "-o", "r.png", "--dpi", "-5"), "--dpi"),
+])
+def test_seeds_periods_and_resolutions_refused_with_their_range(tmp_path: Path, args,
+                                                                 flag: str) -> None:
+    """A negative seed ended in numpy's traceback, --dpi 0 in matplotlib's and --dpi 100000
+    in a MemoryError, and rig-run --period 1e-9 sent commands without end: each is refused
+    before any work with one line naming the flag and its range."""
+    (tmp_path / "seed.yaml").write_text("footstep: {seed: -1}\n")
+    start = time.perf_counter()
+    result = run_rbp(*args, cwd=tmp_path)
+    assert result.returncode == 2, (args, result.returncode, result.stderr[-1500:])
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {flag}: must be "), result.stderr
+    assert time.perf_counter() - start < 60, f"{args} was refused only after the work"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seed.yaml"], "an output was written"

@@ -22,6 +22,24 @@ class UserError(RbpInputError):
     """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
 
 
+MAX_SEED = 2**63 - 1  # numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
+MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels
+
+
+def check_seed(seed: int, flag: str = "--seed") -> None:
+    """A seed within 0..MAX_SEED, or a UserError naming `flag` (a negative seed ended in
+    numpy's traceback)."""
+    if not 0 <= seed <= MAX_SEED:
+        raise UserError(f"{flag}: must be 0 or more (at most 2**63 - 1), got {seed}")
+
+
+def check_dpi(dpi: int) -> None:
+    """A picture's --dpi within MIN_DPI..MAX_DPI (0 ended in matplotlib's traceback, 100000 in
+    a MemoryError)."""
+    if not MIN_DPI <= dpi <= MAX_DPI:
+        raise UserError(f"--dpi: must be {MIN_DPI} to {MAX_DPI} dots per inch, got {dpi}")
+
+
 def check_output(path: str | Path, flag: str = "-o", picture: bool = False) -> Path:
     """`path` as an output of option `flag`, refused (UserError naming the user's path) before
     any work if it cannot be written; an image suffix is refused for a data file (`picture`

@@ -46,7 +46,7 @@ def plan_setup(args: argparse.Namespace):
     from planning.complete_config import AnytimeConfig
     from planning.config_io import load_config
     from planning.pipeline import PipelineConfig
-    from rbp.commands.common import UserError, load_scenario_spec
+    from rbp.commands.common import MAX_SEED, UserError, check_seed, load_scenario_spec
 
     cfg = PipelineConfig()
     planner, motion = args.planner or "rbp", not args.footsteps_only
@@ -103,6 +103,10 @@ def plan_setup(args: argparse.Namespace):
         raise UserError(f"{source}: seconds between trajectory steps must be at least "
                         f"{MIN_DT:g} (the simulator's plant step) and at most {MAX_DT:g}, "
                         f"got {cfg.dt:g}")
+    if not 0 <= cfg.footstep.seed <= MAX_SEED:  # -1 ended in numpy's traceback
+        source = "--seed" if args.seed is not None else (
+            f"{args.config or args.from_plan or '(configuration)'}: footstep.seed")
+        check_seed(cfg.footstep.seed, source)
     budget = cfg.footstep.max_expansions
     if budget is not None and not budget >= 1:
         raise UserError(f"--max-expansions: must be 1 or more, got {budget}")

@@ -29,7 +29,8 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("plan", help="plan file (.json, from rbp plan)")
     p.add_argument("--trials", type=int, default=1000,
                    help="Monte Carlo trials (default 1000; 0: the deterministic run only)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the trials' draws (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the trials' draws, 0 or more (default 0)")
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
     p.add_argument("--meshcat", action="store_true",
                    help="show the climb in Meshcat (on localhost; waits for Enter on a terminal)")
@@ -80,8 +81,9 @@ def _simulation_failed(path: Path, error: Exception, where: str) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.commands.common import UserError, check_output, plural
+    from rbp.commands.common import UserError, check_output, check_seed, plural
 
+    check_seed(args.seed)
     if args.json:
         check_output(args.json, "--json")
     if args.trials < 0:

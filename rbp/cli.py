@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
+from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, RbpInputError
 from rbp.commands.common import (
     UserError,
     check_dpi,
@@ -148,6 +148,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
     check_output(args.output)
+    if args.animate:
+        from rbp.commands.plan import check_animation
+
+        check_animation(args.animate)
     if args.phase_figure is not None:  # what can be refused before planning
         if args.phase_figure < 0:
             raise UserError(f"--phase-figure: must be 0 or more, got {args.phase_figure}")
@@ -441,7 +445,7 @@ def _main(argv: list[str] | None) -> int:
 
     try:
         return int(args.func(args) or 0)
-    except (ScenarioError, ConfigError, UserError) as e:
+    except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:

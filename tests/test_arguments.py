@@ -119,3 +119,25 @@ def test_seeds_periods_and_resolutions_refused_with_their_range(tmp_path: Path, 
     assert len(lines) == 1 and lines[0].startswith(f"error: {flag}: must be "), result.stderr
     assert time.perf_counter() - start < 60, f"{args} was refused only after the work"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["seed.yaml"], "an output was written"
+
+
+@pytest.mark.parametrize("animation", ["a.json", "a.png", "a"])
+def test_animation_suffix_refused_before_planning(tmp_path: Path, animation: str) -> None:
+    """--animate picks its writer by the suffix: another one was written by ffmpeg (or failed
+    with a traceback) after the whole plan."""
+    result = run_rbp("plan", "demo-shaft", "-o", "p.json", "--animate", animation,
+                     cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--animate: must end in .gif or .mp4" in lines[0], lines
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_plan_with_animate_says_why_there_is_no_animation(tmp_path: Path) -> None:
+    """A search that found no route has nothing to animate: one line (was a traceback)."""
+    result = run_rbp("plan", "demo-shaft", "--footsteps-only", "--max-expansions", "3",
+                     "-o", "p.json", "--animate", "p.gif", cwd=tmp_path)
+    assert result.returncode == 1, result.stderr[-1500:]
+    assert "Traceback" not in result.stderr, result.stderr[-1500:]
+    assert "--animate: p.gif not written: the plan has no configurations" in result.stderr
+    assert (tmp_path / "p.json").exists() and not (tmp_path / "p.gif").exists()

@@ -244,6 +244,30 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
         fig = out.with_name(f"{out.stem}-phase{phase}.png")
         atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
         print(f"wrote {fig}")
-    if animate:
+    if animate and not any(p.steps for p in model.phases):  # a search that found no route
+        print(f"--animate: {animate} not written: the plan has no configurations to animate",
+              file=sys.stderr)
+    elif animate:
         animate_plan(scn, plan, animate)
         print(f"wrote {animate}")
+
+
+ANIMATION_SUFFIXES = (".gif", ".mp4")
+
+
+def check_animation(path: str) -> None:
+    """`rbp plan --animate PATH` checked before planning: a writable .gif, or an .mp4 with
+    ffmpeg installed (the writer is chosen by the suffix)."""
+    from rbp.commands.common import UserError, check_output
+
+    check_output(path, "--animate", picture=True)
+    suffix = Path(path).suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES:
+        raise UserError(f"{path}: --animate: must end in .gif or .mp4, got "
+                        f"{suffix or 'no suffix'}")
+    if suffix == ".mp4":
+        from matplotlib.animation import writers
+
+        if not writers.is_available("ffmpeg"):
+            raise UserError(f"{path}: --animate: an .mp4 needs ffmpeg, which is not installed "
+                            "(a .gif needs nothing more)")

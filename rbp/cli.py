@@ -230,6 +230,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure, atomic_write_text
 
     out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
+                        "into it)")
+    for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
+        check_output(out / name, "--out", picture=name.endswith(".png"))
     scn = load_scenario_spec(args.scenario)
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))

@@ -37,8 +37,8 @@ def rbp_body_plan(scn) -> dict[str, Any]:
     timing: dict[str, float] = {}
     motions, failure = phase_motions(scn, fp, config, timing)
     if failure:
-        return plan_dict(build_plan(scn, fp, "rbp", timing).replace(
-            success=False, reason=f"motion planning failed: {failure}", p_path=None, p_min=None))
+        return plan_dict(build_plan(scn, fp, "rbp", timing).failed(
+            f"motion planning failed: {failure}"))
     timing["total"] = sum(timing.values())
     return plan_dict(build_motion_plan(scn, fp, motions, "rbp", timing, config.dt))
 

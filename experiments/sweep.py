@@ -76,7 +76,11 @@ def machine_info() -> dict[str, Any]:
 
 
 def run_trial(trial: Trial) -> dict[str, Any]:
-    """Run one trial and return its record (never raises: an exception becomes `error`)."""
+    """Run one trial and return its record (never raises: an exception becomes `error`); the
+    worker's part names the machine, the kernel threads and the load when the trial ended
+    (`rb_drake.kernel.threads.run_conditions`)."""
+    from rb_drake.kernel.threads import run_conditions
+
     start = time.perf_counter()
     result, error, timing = None, None, {}
     try:
@@ -87,7 +91,7 @@ def run_trial(trial: Trial) -> dict[str, Any]:
     return {"format": RECORD_FORMAT, "name": trial.name, "function": trial.function,
             "params": trial.params, "result": result, "error": error,
             "timing": timing | {"trial": time.perf_counter() - start},
-            "worker": machine_info() | {"pid": os.getpid()}}
+            "worker": machine_info() | {"pid": os.getpid()} | run_conditions()}
 
 
 def trial_path(out: str | Path, name: str) -> Path:
@@ -150,7 +154,8 @@ class ProgressDisplay:
         finished = self.skipped + self.done
         if self.bar is not None:
             if self.errors:
-                self.bar.set_postfix_str(f"{self.errors} errors", refresh=False)
+                errors = f"{self.errors} error{'' if self.errors == 1 else 's'}"
+                self.bar.set_postfix_str(errors, refresh=False)
             self.bar.update(1)
         else:
             status = "ERROR " + record["error"].splitlines()[0] if record["error"] else "done"
@@ -164,8 +169,9 @@ class ProgressDisplay:
 
 def _share_cores(threads: int) -> None:
     """A pool worker's share of the cores for the complete search's compiled kernels
-    (`rb_drake.kernel.threads.kernel_threads`): workers do not oversubscribe the machine."""
-    os.environ.setdefault("RBP_THREADS", str(threads))
+    (`rb_drake.kernel.threads.kernel_threads`, `worker_threads`): workers times threads never
+    exceed the cores, whatever RBP_THREADS the sweep was started with."""
+    os.environ["RBP_THREADS"] = str(threads)
 
 
 def _local(trials: list[Trial], workers: int) -> Iterator[dict[str, Any]]:
@@ -174,8 +180,10 @@ def _local(trials: list[Trial], workers: int) -> Iterator[dict[str, Any]]:
             yield run_trial(t)
         return
     # spawn, not fork: the parent may hold pydrake and OMPL state that is unsafe to fork
+    from rb_drake.kernel.threads import worker_threads
+
     pool = multiprocessing.get_context("spawn").Pool(
-        workers, initializer=_share_cores, initargs=(max(1, (os.cpu_count() or 1) // workers),))
+        workers, initializer=_share_cores, initargs=(worker_threads(workers),))
     try:
         yield from pool.imap_unordered(run_trial, trials, chunksize=1)
         pool.close()

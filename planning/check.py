@@ -13,6 +13,7 @@ Each problem names its rule (`verify_climb.RULES`), phase and step.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -35,15 +36,21 @@ def _same(a: float, b: Any) -> bool:
     return isinstance(b, int | float) and math.isclose(a, b, rel_tol=REL, abs_tol=ABS)
 
 
-def check_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[str]:
+Progress = Callable[[int, int], None]
+
+
+def check_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
+               progress: Progress | None = None) -> list[str]:
     """Every problem found in `plan`, in words ("WHERE: RULE: WHAT"); [] for a valid plan."""
-    return [str(p) for p in verify_plan(plan, source)]
+    return [str(p) for p in verify_plan(plan, source, progress)]
 
 
-def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[Problem]:
+def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
+                progress: Progress | None = None) -> list[Problem]:
     """Every broken rule in a schema-valid `plan` (a Plan, or its plan-file object); [] for a
     valid plan. A malformed scenario or robot raises rb_drake.scenario.ScenarioError (bad
-    input, not a wrong plan)."""
+    input, not a wrong plan). `progress(done, phases)` after each phase's configurations
+    (`rbp.progress.CheckProgress`)."""
     plan = plan_of(plan)
     scn = plan_scenario(plan, source)
     robot = scn.robot
@@ -72,6 +79,8 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>") -> list[Pro
             efforts.append(effort)
             recomputed.append(Configuration(tuple(phase.stance), p_grasp, p_success))
         _check_motion(plan, k, efforts, problems)
+        if progress is not None:
+            progress(k + 1, len(plan.phases))
     if plan.success and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)

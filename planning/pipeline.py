@@ -233,7 +233,8 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         return build_plan(scn, fp, planner, timing)
     motions, failure = phase_motions(scn, fp, cfg, timing, progress)
     memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
-    excluded: list = []
+    excluded: list[tuple[tuple[str, ...], int, str]] = []
+    last_search = ""  # how the last search again ended, when it found no route
     for _ in range(cfg.motion_retries):
         if not failure:
             break
@@ -251,6 +252,7 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         if footsteps_done is not None:
             footsteps_done(retry)
         if not retry.success:
+            last_search = retry.reason
             break
         fp = retry
         for stage in ("seed_body", "scp_body", "seed_reach", "scp_reach"):
@@ -258,11 +260,29 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         motions, failure = phase_motions(scn, fp, cfg, timing, progress)
     if failure:
         timing["total"] = time.perf_counter() - t_start
-        return build_plan(scn, fp, planner, timing).replace(
-            success=False, reason=f"motion planning failed: {failure}", p_path=None, p_min=None)
+        reason = f"motion planning failed: {failure}" + retries_made(
+            excluded, last_search, cfg.motion_retries)
+        return build_plan(scn, fp, planner, timing).failed(reason)
     timing["total"] = time.perf_counter() - t_start
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
                              step_limits(cfg.seed.step, cfg.seed.turn_step))
+
+
+def retries_made(excluded: list[tuple[tuple[str, ...], int, str]], last_search: str,
+                 allowed: int) -> str:
+    """What a failed plan's reason adds about the footstep searches made again after a motion
+    failed: the moves each was made without (`failed_move`), in order, and how they ended
+    (the last found no route, or the retries ran out); '' when none was made."""
+    if not excluded:
+        return (f"; no footstep search again (motion_retries {allowed})" if allowed == 0
+                else "")
+    moves = [f"boom {boom} -> {anchor} from {list(stance)}" for stance, boom, anchor in excluded]
+    n = len(excluded)
+    text = (f"; searched footsteps again {n} time{'' if n == 1 else 's'}: without {moves[0]}"
+            + "".join(f", then also without {move}" for move in moves[1:]))
+    if last_search:
+        return f"{text}; the last found no route ({last_search})"
+    return f"{text}; motion_retries {allowed} used up (--config sets motion_retries)"
 
 
 def failed_move(fp: FootstepPlan, done: int) -> tuple[tuple[str, ...], int, str]:

@@ -267,6 +267,12 @@ class Provenance(Part):
     scenario_source: str = spec()
     config: dict[str, Any] = spec(required=["footstep", "seed", "scp"],
                                   description="the PipelineConfig (planning.config_io)")
+    threads: int | None = spec(None, minimum=1, description="the threads the compiled search "
+                               "kernels ran on (RBP_THREADS, or the cores numba sees)")
+    cores: int | None = spec(None, minimum=1, description="the cores of the machine it ran on")
+    load: float | None = spec(None, minimum=0, description="the machine's load average over "
+                              "the last minute when the plan was made (this run included): "
+                              "its times are read against it")
     OPEN: ClassVar[frozenset[str]] = frozenset({"config"})
     DESCRIPTION: ClassVar[str] = ("how the plan was made, enough to make it again (rbp plan "
                                   "--from-plan); optional when reading")
@@ -293,11 +299,14 @@ class Plan(Part):
     planner: Planner = spec()
     success: bool = spec()
     reason: str = spec(description="why the plan failed; empty on success")
-    p_min: float | None = spec(minimum=0, maximum=1)
-    p_path: float | None = spec(minimum=0, maximum=1)
+    p_min: float | None = spec(minimum=0, maximum=1, description="the lowest configuration "
+                               "probability of the climb; null when the plan failed")
+    p_path: float | None = spec(minimum=0, maximum=1, description="the climb's success "
+                                "probability; null when the plan failed")
     p_grasps: float | None = spec(None, nullable=True, minimum=0, maximum=1,
                                   description="p_path without the per-regrasp attach term "
-                                              "(optional)")
+                                              "(optional); null when the plan failed, as "
+                                              "p_path is")
     regrasps: int = spec(minimum=0)
     timing: dict[str, float] = spec(required=list(STAGES),
                                     additionalProperties={"type": "number", "minimum": 0},
@@ -355,6 +364,13 @@ class Plan(Part):
 
     def replace(self, **changes: Any) -> Plan:
         return dataclasses.replace(self, **changes)
+
+    def failed(self, reason: str) -> Plan:
+        """This plan as a failure for `reason`: its summary probabilities (p_path, p_min,
+        p_grasps) null, since a failed plan is not climbed; `regrasps` stays the count of the
+        route's regrasps, and the phases stay for a picture of where it went."""
+        return dataclasses.replace(self, success=False, reason=reason, p_path=None, p_min=None,
+                                   p_grasps=None)
 
     def upgraded(self) -> Plan:
         """This plan in the current format: the robot stored once (`robot`)."""

@@ -17,8 +17,16 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
-from rbp.commands.common import UserError, check_output, load_scenario_spec, read_plan
+from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, RbpInputError
+from rbp.commands.common import (
+    UserError,
+    check_dpi,
+    check_output,
+    check_seed,
+    load_scenario_spec,
+    plural,
+    read_plan,
+)
 
 if TYPE_CHECKING:
     from planning.plan_model import Plan
@@ -47,8 +55,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     if not 0 < args.anchor_density <= MAX_ANCHOR_DENSITY:
         raise UserError(f"--anchor-density: must be above 0 and at most {MAX_ANCHOR_DENSITY:g} "
                         f"anchors per metre, got {args.anchor_density:g}")
-    if not 0 <= args.seed < 2**63:
-        raise UserError(f"--seed: must be 0 or more (below 2**63), got {args.seed}")
+    check_seed(args.seed)
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
     check_output(args.output)
     try:
@@ -88,6 +95,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rb_drake.draw import scenario_figure
     from rb_drake.files import atomic_save_figure
 
+    check_dpi(args.dpi)
     check_output(args.output, picture=True)
     scn = load_scenario_spec(args.scenario, check_start=False)
     fig = scenario_figure(scn)
@@ -140,6 +148,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
 
     check_output(args.output)
+    if args.animate:
+        from rbp.commands.plan import check_animation
+
+        check_animation(args.animate)
     if args.phase_figure is not None:  # what can be refused before planning
         if args.phase_figure < 0:
             raise UserError(f"--phase-figure: must be 0 or more, got {args.phase_figure}")
@@ -173,7 +185,7 @@ def _print_motion(plan: Plan) -> None:
     better_mean = sum(r["mean"] > r["seed_mean"] + 1e-9 for r in room)
     better_min = sum(r["min"] > r["seed_min"] + 1e-9 for r in inner)
     t = plan.timing
-    phases = f"{len(rows)} phase{'' if len(rows) == 1 else 's'}"
+    phases = plural(len(rows), "phase")
     print(f"motion: {phases}; SCP raised the mean P on {better_mean} of the "
           f"{len(room)} with room (seed mean below 0.9999) and the minimum P on {better_min} of "
           f"the {len(inner)} whose seed's minimum is not at a fixed end; seeds "
@@ -182,20 +194,23 @@ def _print_motion(plan: Plan) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.check import check_plan
+    from rbp.progress import CheckProgress
 
     path = Path(args.plan)
     plan = read_plan(path)
-    problems = check_plan(plan, str(path))
+    with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
+        problems = check_plan(plan, str(path), progress=bar)
     for p in problems:
         print(f"{path}: {p}")
     if problems:
-        print(f"{path}: {len(problems)} problems")
+        print(f"{path}: {plural(len(problems), 'problem')}")
         return EXIT_FAILED
     from planning.plan_model import Plan
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
-    print(f"{path}: ok: {len(model.phases)} phases, {n} configurations verified; "
+    print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
+          f"{plural(n, 'configuration')} verified; "
           + _summary(model))
     if args.stamp:
         from planning.plan import write_plan
@@ -215,6 +230,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure, atomic_write_text
 
     out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
+                        "into it)")
+    for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
+        check_output(out / name, "--out", picture=name.endswith(".png"))
     scn = load_scenario_spec(args.scenario)
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
@@ -286,7 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--from-plan", metavar="PLAN",
                       help="repeat the plan PLAN was made with: its scenario, planner, "
                            "configuration and seed (flags given override them)")
-    plan.add_argument("--seed", type=int, help="seed of the planner's sampling (default 0)")
+    plan.add_argument("--seed", type=int,
+                      help="seed of the planner's sampling, 0 or more (default 0)")
     plan.add_argument("--max-expansions", type=int,
                       help="give up after expanding this many stances (default 1000, or 300 "
                            "per metre from the start to the goal if more)")
@@ -311,7 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,
-                      help="seconds between trajectory steps (default 0.5; steps are 5 cm apart)")
+                      help="seconds between trajectory steps, 0.01 to 60 (default 0.5; steps "
+                           "are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",
                       help="keep the seed trajectories (no sequential convex programming)")
     plan.add_argument("--footsteps-only", action="store_true",
@@ -332,6 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--stamp", action="store_true",
                        help="when the plan verifies, write into it a stamp (a hash of its "
                             "content) so simulate and rig-run need not verify it again")
+    check.add_argument("-q", "--quiet", action="store_true",
+                       help="no progress line (shown only when stderr is a terminal and the "
+                            "check takes over a second)")
     check.set_defaults(func=cmd_check)
 
     scn = sub.add_parser("scenario", help="generate, check and show caves")
@@ -356,7 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
     show = ssub.add_parser("show", help="draw a scenario with the robot in its start stance")
     show.add_argument("scenario")
     show.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
-    show.add_argument("--dpi", type=int, default=120)
+    show.add_argument("--dpi", type=int, default=120,
+                      help="the picture's resolution, 20 to 600 dots per inch (default 120)")
     show.set_defaults(func=cmd_scenario_show)
     lst = ssub.add_parser("list", help="the bundled caves")
     lst.set_defaults(func=cmd_scenario_list)
@@ -424,7 +450,7 @@ def _main(argv: list[str] | None) -> int:
 
     try:
         return int(args.func(args) or 0)
-    except (ScenarioError, ConfigError, UserError) as e:
+    except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {e}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:

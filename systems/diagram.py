@@ -53,6 +53,7 @@ context, set before each run, so one diagram serves every plan (including replan
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -74,6 +75,17 @@ from systems.holdings import StrengthDraws
 from systems.monitors import AnchorLoadMonitor, Cause, Failure, GraspFailures, GraspMonitor
 from systems.plan_source import PlanSource
 from systems.trajectory import PlanTrajectory
+
+
+class SimulationError(RuntimeError):
+    """The simulation's solver failed (a plan flown with `--no-verify` that was made for
+    another cave, say): where, as phase, kind and time, and the solver's first line."""
+
+    def __init__(self, phase: int, kind: str, time: float, reason: str):
+        self.phase, self.kind, self.time, self.reason = phase, kind, time, reason
+        super().__init__(f"the simulation failed in phase {phase} ({kind}) at t = {time:.2f} s: "
+                         f"{reason}")
+
 
 SAMPLE_PERIOD = 0.02  # s: loggers and the failure check run at this period, on the same grid
 PLANT_TIME_STEP = 1e-2  # s, the full (discrete) plant's period
@@ -373,7 +385,13 @@ class ClimbSimulator:
                 stop = min(end, t + RAMP_MASS_PERIOD)
             elif ramps:  # to the next ramp's start
                 stop = min([end, *(t0 for t0, _, _ in ramps if t0 > t + 1e-9)])
-            status = self.simulator.AdvanceTo(stop)
+            try:
+                status = self.simulator.AdvanceTo(stop)
+            except RuntimeError as e:  # the plant's solver (SAP) did not converge
+                first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+                first = re.split(r"(?<=[a-z0-9])\. (?=[A-Z])", first)[0].rstrip(". :")
+                raise SimulationError(k, "reach" if phase.stance.free_boom is not None
+                                      else "body", self.context.get_time(), first) from e
             if status.reason() == status.ReturnReason.kReachedTerminationCondition:
                 return False
             if stop >= end:

@@ -177,3 +177,33 @@ def test_help_loads_no_heavy_module() -> None:
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", f"heavy modules loaded by the parser: {out.stdout}"
+
+
+def test_simulate_no_verify_on_another_caves_plan_ends_in_one_line(tmp_path: Path) -> None:
+    """`rbp simulate --no-verify` on a plan of another cave (demo-crevasse's phases in
+    shaft-1): the plant's solver diverges; one line names the phase and the time (issue 32:
+    it was a Drake traceback), exit status 1 (a failed execution)."""
+    golden = Path(__file__).parent / "data" / "golden"
+    plan = json.loads((golden / "demo-crevasse.json").read_text())
+    plan["scenario"] = json.loads((golden / "shaft-1.json").read_text())["scenario"]
+    plan.pop("verified", None)
+    (tmp_path / "crossed.json").write_text(json.dumps(plan))
+    proc = run_rbp("simulate", "crossed.json", "--no-verify", "--trials", "0", cwd=tmp_path)
+    assert proc.returncode == 1, (proc.returncode, proc.stderr[-2000:])
+    assert "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("WARNING:"), proc.stderr
+    assert lines[1].startswith("error: crossed.json: the simulation failed in phase "), lines
+    assert " at t = " in lines[1] and "rbp check crossed.json" in lines[1], lines[1]
+
+
+def test_counts_read_right_in_the_singular(tmp_path: Path) -> None:
+    """'1 phase', '1 problem', '1 configuration' (issue 32: 'motion: 1 phases')."""
+    from rbp.commands.common import plural
+
+    assert [plural(n, "phase") for n in (0, 1, 2)] == ["0 phases", "1 phase", "2 phases"]
+    golden = Path(__file__).parent / "data" / "golden" / "rig.json"
+    proc = run_rbp("check", str(golden), cwd=tmp_path)
+    assert_ok(proc)
+    n = len(json.loads(golden.read_text())["phases"])
+    assert f"ok: {plural(n, 'phase')}, " in proc.stdout, proc.stdout

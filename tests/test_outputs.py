@@ -68,3 +68,13 @@ def test_a_symlinked_output_is_written_through(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert link.is_symlink(), "the symlink was replaced by a plain file"
     assert target.is_file() and "reachbot-scenario/1" in target.read_text()
+
+
+def test_demo_out_that_is_a_file_is_refused_in_one_line(tmp_path: Path) -> None:
+    """`rbp demo --out FILE` said only 'FILE: File exists'."""
+    (tmp_path / "afile").write_text("keep me\n")
+    result = run_rbp("demo", "--out", "afile", "--no-plan", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    assert result.stderr.strip() == ("error: afile: --out: is a file; give a folder (its "
+                                     "outputs are written into it)"), result.stderr
+    assert (tmp_path / "afile").read_text() == "keep me\n"

@@ -202,3 +202,33 @@ def test_excluded_move_is_not_taken_and_memo_is_reused(demo, footsteps):
     assert again.transitions_tested < decided(), (
         f"tested {again.transitions_tested} of {decided()} transitions: the memo "
         f"({known} known) was not reused")
+
+
+def test_a_failed_motion_names_the_retries_and_nulls_the_summary(demo, monkeypatch):
+    """A route whose motion keeps failing ends with a reason naming each move the footstep
+    search was made again without, and a failed plan has no summary: p_path, p_min and
+    p_grasps all null (issue 32: p_grasps 0.71 beside a null p_path)."""
+    import planning.pipeline as pipeline
+
+    def singular(scn, fp, *args, **kwargs):
+        return [], f"body phase 0 in stance {list(fp.stances[0])}: SINGULAR"
+
+    monkeypatch.setattr(pipeline, "phase_motions", singular)
+    plan = plan_climb(demo, config=PipelineConfig(motion_retries=2))
+    assert not plan.success
+    assert (plan.p_path, plan.p_min, plan.p_grasps) == (None, None, None), (
+        f"a failed plan carries p_path {plan.p_path}, p_min {plan.p_min}, "
+        f"p_grasps {plan.p_grasps}")
+    reason = plan.reason
+    assert "SINGULAR" in reason and "searched footsteps again 2 times" in reason, reason
+    assert reason.count("boom ") == 2 and "motion_retries 2 used up" in reason, reason
+    validate(plan_dict(plan))
+
+
+def test_no_retry_is_said_so(demo, monkeypatch):
+    import planning.pipeline as pipeline
+
+    monkeypatch.setattr(pipeline, "phase_motions",
+                        lambda scn, fp, *a, **k: ([], "body phase 0: SINGULAR"))
+    plan = plan_climb(demo, config=PipelineConfig(motion_retries=0))
+    assert plan.reason.endswith("no footstep search again (motion_retries 0)"), plan.reason

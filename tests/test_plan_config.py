@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -129,6 +130,9 @@ def test_plan_records_provenance_and_reads_config(tmp_path: Path, stuck: Path) -
     assert prov["command"] == (f"rbp plan {stuck} -o p.json --config planner.yaml "
                                "--no-pictures"), prov["command"]
     assert prov["rbp_version"] and prov["scenario_source"] == str(stuck)
+    # what it ran under (issue 32): the kernel threads, the cores and the load
+    assert 1 <= prov["threads"] <= prov["cores"] == os.cpu_count(), prov
+    assert prov["load"] is None or prov["load"] >= 0, prov
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.json", "planner.yaml",
                                                           "stuck.yaml"]
 
@@ -188,3 +192,16 @@ def test_from_plan_without_provenance_is_refused(tmp_path: Path) -> None:
     both = run_rbp("plan", "demo-crevasse", "--from-plan", "a.json", "-o", "b.json",
                    cwd=tmp_path)
     assert both.returncode == 2 and len(both.stderr.strip().splitlines()) == 1, both.stderr
+
+
+def test_provenance_records_the_threads_and_load(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plan records the threads its kernels ran on (RBP_THREADS here) and the load."""
+    from rb_drake.scenario import bundled_caves, load_scenario
+    from rbp.commands.plan import provenance
+
+    monkeypatch.setenv("RBP_THREADS", "1")
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    prov = provenance(scn, "rbp", PipelineConfig(), True, ["plan", "demo-shaft"])
+    assert (prov.threads, prov.cores) == (1, os.cpu_count()), prov
+    assert prov.load is None or prov.load >= 0, prov
+    assert {"threads", "cores", "load"} <= set(prov.to_dict()), prov.to_dict()

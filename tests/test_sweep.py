@@ -170,3 +170,35 @@ def test_local_pool_and_dask_cluster_give_the_in_process_results(tmp_path: Path)
         "the pool and the cluster must run the trials in other processes")
     for r in dask:
         assert json.loads(trial_path(tmp_path / "dask", r["name"]).read_text()) == r
+
+
+@pytest.mark.parametrize(("workers", "cores", "env", "threads"), [
+    (1, 2, None, 2), (2, 2, None, 1), (3, 2, None, 1), (2, 8, None, 4),
+    (1, 2, "8", 2), (2, 8, "2", 2), (2, 8, "16", 4), (1, 4, "1", 1)])
+def test_workers_times_threads_never_exceed_the_cores(monkeypatch: pytest.MonkeyPatch,
+                                                      workers: int, cores: int, env, threads
+                                                      ) -> None:
+    """Each worker's kernel threads: its share of the cores, lowered (never raised) by
+    RBP_THREADS (issue 32)."""
+    from rb_drake.kernel.threads import worker_threads
+
+    if env is None:
+        monkeypatch.delenv("RBP_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("RBP_THREADS", env)
+    got = worker_threads(workers, cores)
+    assert got == threads, f"{workers} workers on {cores} cores, RBP_THREADS={env}: {got}"
+    assert got * workers <= cores or got == 1
+
+
+def test_a_pool_records_its_workers_threads_and_load(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two workers started with RBP_THREADS larger than their share each run on their share
+    and record it, with the cores and the load, in the trial's record."""
+    monkeypatch.setenv("RBP_THREADS", "64")
+    cores = os.cpu_count() or 1
+    records = run_sweep([parse_trial(f"t{i}", i) for i in range(2)], tmp_path, workers=2)
+    for record in records:
+        worker = record["worker"]
+        assert worker["threads"] == max(1, cores // 2), worker
+        assert worker["cores"] == cores and (worker["load"] is None or worker["load"] >= 0)

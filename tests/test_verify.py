@@ -290,7 +290,7 @@ def test_wrong_files_give_a_message_not_a_traceback(
     if code == 2:
         assert err.count("\n") == 1 and err.startswith(f"error: {path}"), err
     else:
-        assert f"{path}: " in out and "problems" in out, out
+        assert f"{path}: " in out and "problem" in out, out
 
 
 def test_a_bad_scenario_in_a_plan_names_its_field_in_the_plan(

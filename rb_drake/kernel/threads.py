@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import numba
 import numpy as np
@@ -32,6 +33,30 @@ def kernel_threads() -> int:
 
 
 _HELD_THREADS: list[int] = []
+
+
+def run_conditions() -> dict[str, Any]:
+    """The threads and the load a run had, for its record (a plan's provenance, a sweep
+    worker's record): the compiled kernels' threads (`kernel_threads`), the machine's cores,
+    and the load average over the last minute when the record is made (None where the system
+    has none), so that a time is read against what else ran."""
+    try:
+        load: float | None = round(os.getloadavg()[0], 2)
+    except OSError:
+        load = None
+    return {"threads": kernel_threads(), "cores": os.cpu_count() or 1, "load": load}
+
+
+def worker_threads(workers: int, cores: int | None = None) -> int:
+    """Kernel threads for each of `workers` processes sharing the machine's `cores`: their
+    share, at least 1, so that workers times threads never exceed the cores; RBP_THREADS, if
+    set, lowers it further but never raises it."""
+    cores = cores or os.cpu_count() or 1
+    share = max(1, cores // max(1, workers))
+    value = os.environ.get("RBP_THREADS", "").strip()
+    if value.isdigit() and int(value) >= 1:
+        share = min(share, int(value))
+    return share
 
 
 @contextmanager

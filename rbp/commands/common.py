@@ -13,8 +13,31 @@ from pathlib import Path
 from rb_drake.errors import RbpInputError
 
 
+def plural(n: int, word: str) -> str:
+    """'1 phase', '2 phases', '0 phases' (words whose plural adds an s)."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 class UserError(RbpInputError):
     """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
+
+
+MAX_SEED = 2**63 - 1  # numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
+MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels
+
+
+def check_seed(seed: int, flag: str = "--seed") -> None:
+    """A seed within 0..MAX_SEED, or a UserError naming `flag` (a negative seed ended in
+    numpy's traceback)."""
+    if not 0 <= seed <= MAX_SEED:
+        raise UserError(f"{flag}: must be 0 or more (at most 2**63 - 1), got {seed}")
+
+
+def check_dpi(dpi: int) -> None:
+    """A picture's --dpi within MIN_DPI..MAX_DPI (0 ended in matplotlib's traceback, 100000 in
+    a MemoryError)."""
+    if not MIN_DPI <= dpi <= MAX_DPI:
+        raise UserError(f"--dpi: must be {MIN_DPI} to {MAX_DPI} dots per inch, got {dpi}")
 
 
 def check_output(path: str | Path, flag: str = "-o", picture: bool = False) -> Path:
@@ -72,11 +95,14 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
         return False
     if has_valid_stamp(plan):
         return False
-    problems = check_plan(plan, str(path))
+    from rbp.progress import CheckProgress
+
+    with CheckProgress(f"verifying {path}") as bar:
+        problems = check_plan(plan, str(path), progress=bar)
     for p in problems[:20]:
         print(f"error: {path}: {p}", file=sys.stderr)
     if problems:
-        count = f"{len(problems)} problem{'' if len(problems) == 1 else 's'}"
+        count = plural(len(problems), "problem")
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
         print(f"error: {path}: the plan fails verification ({count}{shown}); "
               f"refused (rbp check {path} lists them all)", file=sys.stderr)

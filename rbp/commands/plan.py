@@ -22,6 +22,12 @@ if TYPE_CHECKING:
     from planning.plan_model import Plan, Provenance
     from rb_drake.scenario import Scenario
 
+# --dt's range: a step of the plan is at least one of the simulator's plant steps
+# (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as 1/dt^2 and its solver fails,
+# and the plan's time stamps, rounded to 1 us, cannot keep the steps apart), and a 5 cm step
+# takes at most a minute
+MIN_DT, MAX_DT = 0.01, 60.0
+
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
 
@@ -40,7 +46,7 @@ def plan_setup(args: argparse.Namespace):
     from planning.complete_config import AnytimeConfig
     from planning.config_io import load_config
     from planning.pipeline import PipelineConfig
-    from rbp.commands.common import UserError, load_scenario_spec
+    from rbp.commands.common import MAX_SEED, UserError, check_seed, load_scenario_spec
 
     cfg = PipelineConfig()
     planner, motion = args.planner or "rbp", not args.footsteps_only
@@ -91,8 +97,16 @@ def plan_setup(args: argparse.Namespace):
         cfg = dataclasses.replace(cfg, dt=args.dt)
     if args.no_scp:
         cfg = dataclasses.replace(cfg, optimise=False)
-    if not cfg.dt > 0:
-        raise UserError(f"--dt: must be positive, got {cfg.dt}")
+    if not MIN_DT <= cfg.dt <= MAX_DT:
+        source = "--dt" if args.dt is not None else (
+            f"{args.config or args.from_plan or '(configuration)'}: dt")
+        raise UserError(f"{source}: seconds between trajectory steps must be at least "
+                        f"{MIN_DT:g} (the simulator's plant step) and at most {MAX_DT:g}, "
+                        f"got {cfg.dt:g}")
+    if not 0 <= cfg.footstep.seed <= MAX_SEED:  # -1 ended in numpy's traceback
+        source = "--seed" if args.seed is not None else (
+            f"{args.config or args.from_plan or '(configuration)'}: footstep.seed")
+        check_seed(cfg.footstep.seed, source)
     budget = cfg.footstep.max_expansions
     if budget is not None and not budget >= 1:
         raise UserError(f"--max-expansions: must be 1 or more, got {budget}")
@@ -157,15 +171,17 @@ def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig]:
 
 def provenance(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool,
                argv: list[str] | None) -> Provenance:
-    """How a plan was made: enough to make it again (`rbp plan --from-plan`)."""
+    """How a plan was made: enough to make it again (`rbp plan --from-plan`), and the threads
+    and load it ran under (its times depend on them)."""
     from planning.config_io import config_to_dict
     from planning.plan_model import Provenance, planner_of
+    from rb_drake.kernel.threads import run_conditions
 
     return Provenance(
         rbp_version=rbp_version(),
         command=shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
         planner=planner_of(planner), motion=motion, seed=cfg.footstep.seed,
-        scenario_source=scn.source, config=config_to_dict(cfg))
+        scenario_source=scn.source, config=config_to_dict(cfg), **run_conditions())
 
 
 class SearchRecord:
@@ -228,6 +244,30 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
         fig = out.with_name(f"{out.stem}-phase{phase}.png")
         atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
         print(f"wrote {fig}")
-    if animate:
+    if animate and not any(p.steps for p in model.phases):  # a search that found no route
+        print(f"--animate: {animate} not written: the plan has no configurations to animate",
+              file=sys.stderr)
+    elif animate:
         animate_plan(scn, plan, animate)
         print(f"wrote {animate}")
+
+
+ANIMATION_SUFFIXES = (".gif", ".mp4")
+
+
+def check_animation(path: str) -> None:
+    """`rbp plan --animate PATH` checked before planning: a writable .gif, or an .mp4 with
+    ffmpeg installed (the writer is chosen by the suffix)."""
+    from rbp.commands.common import UserError, check_output
+
+    check_output(path, "--animate", picture=True)
+    suffix = Path(path).suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES:
+        raise UserError(f"{path}: --animate: must end in .gif or .mp4, got "
+                        f"{suffix or 'no suffix'}")
+    if suffix == ".mp4":
+        from matplotlib.animation import writers
+
+        if not writers.is_available("ffmpeg"):
+            raise UserError(f"{path}: --animate: an .mp4 needs ffmpeg, which is not installed "
+                            "(a .gif needs nothing more)")

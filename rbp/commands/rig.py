@@ -12,6 +12,8 @@ from pathlib import Path
 
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
+MIN_PERIOD, MAX_PERIOD = 0.01, 1.0  # s between rig commands: 100 a second to one a second
+
 
 def add_rig_commands(subparsers) -> None:
     """Declare the three rig subcommands on `rbp`'s subparsers."""
@@ -26,7 +28,7 @@ def add_rig_commands(subparsers) -> None:
                      help="answer with the simulated rig, in this process on memq://")
     run.add_argument("--seed", type=int, default=0, help="seed of the simulated rig's noise")
     run.add_argument("--period", type=float, default=0.1,
-                     help="seconds between commands (default 0.1)")
+                     help="seconds between commands, 0.01 to 1 (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
     run.add_argument("--no-verify", dest="verify", action="store_false",
@@ -43,7 +45,8 @@ def add_rig_commands(subparsers) -> None:
                                    help="plot a rig log: grasp probabilities and tensions")
     report.add_argument("log", help="LCM log written by rbp rig-run")
     report.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf)")
-    report.add_argument("--dpi", type=int, default=120)
+    report.add_argument("--dpi", type=int, default=120,
+                        help="the picture's resolution, 20 to 600 dots per inch (default 120)")
     report.set_defaults(func=cmd_rig_report)
 
 
@@ -58,14 +61,16 @@ def _summary(record, stance_ids) -> list[str]:
 
 
 def cmd_rig_run(args: argparse.Namespace) -> int:
-    from rbp.commands.common import UserError, read_plan, refuse_wrong_plan
+    from rbp.commands.common import UserError, check_seed, read_plan, refuse_wrong_plan
     from systems.rig import RigSimConfig
     from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
+    if not MIN_PERIOD <= args.period <= MAX_PERIOD:  # 1e-9 sent commands without end
+        raise UserError(f"--period: must be {MIN_PERIOD:g} to {MAX_PERIOD:g} s between "
+                        f"commands, got {args.period:g}")
+    check_seed(args.seed)
     path = Path(args.plan)
     plan = read_plan(path)
-    if not args.period > 0:
-        raise UserError(f"--period: must be positive, got {args.period}")
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
         return EXIT_FAILED  # before any LCM traffic
     config = RigLcmConfig(url=args.lcm_url, period=args.period)
@@ -116,9 +121,10 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
 
 def cmd_rig_report(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure
-    from rbp.commands.common import UserError, check_output
+    from rbp.commands.common import UserError, check_dpi, check_output
     from systems.rig_interface import RigLcmConfig, report_figure
 
+    check_dpi(args.dpi)
     check_output(args.output, picture=True)
     log = _replay(args.log)
     if not len(log.replay.time):

@@ -29,7 +29,8 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("plan", help="plan file (.json, from rbp plan)")
     p.add_argument("--trials", type=int, default=1000,
                    help="Monte Carlo trials (default 1000; 0: the deterministic run only)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the trials' draws (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the trials' draws, 0 or more (default 0)")
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
     p.add_argument("--meshcat", action="store_true",
                    help="show the climb in Meshcat (on localhost; waits for Enter on a terminal)")
@@ -70,10 +71,19 @@ def _progress(label: str):
     return show, done
 
 
+def _simulation_failed(path: Path, error: Exception, where: str) -> int:
+    """One line on stderr for a simulation whose solver failed (`SimulationError`, naming the
+    phase and time), never a traceback; exit status 1, a failed execution."""
+    print(f"error: {path}: {error}{where}; rbp check {path} tells whether the plan fits its "
+          "cave and robot", file=sys.stderr)
+    return EXIT_FAILED
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.commands.common import UserError, check_output
+    from rbp.commands.common import UserError, check_output, check_seed, plural
 
+    check_seed(args.seed)
     if args.json:
         check_output(args.json, "--json")
     if args.trials < 0:
@@ -86,7 +96,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return EXIT_FAILED
 
     from rb_drake.files import atomic_write_text
-    from systems.diagram import ClimbSimulator
+    from systems.diagram import ClimbSimulator, SimulationError
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanError, PlanTrajectory, plan_scenario
 
@@ -98,7 +108,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     simulator = ClimbSimulator(scn)
     show, done = _progress("simulating")
     start = time.perf_counter()
-    record = simulator.run(traj, progress=lambda k, n, t: show(f"phase {k}/{n}, t = {t:.1f} s"))
+    try:
+        record = simulator.run(traj, progress=lambda k, n, t: show(f"phase {k}/{n}, "
+                                                                   f"t = {t:.1f} s"))
+    except SimulationError as e:
+        done()
+        return _simulation_failed(path, e, "")
     done()
     wall = time.perf_counter() - start
     import numpy as np
@@ -108,7 +123,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 "rms_position_error": float(np.sqrt(np.mean(err**2))),
                 "max_heading_error": float(heading.max())}
     p_path, p_sim = plan["p_path"], record.implied_p_path()
-    print(f"{path}: simulated {traj.end_time:.1f} s, {len(traj.phases)} phases, in {wall:.1f} s; "
+    print(f"{path}: simulated {traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}, in "
+          f"{wall:.1f} s; "
           f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
           f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
     worst = record.holding_minimum()
@@ -127,8 +143,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         elif args.replan == "footsteps":
             replanner, strategy = FootstepReplanner(seed=args.seed), "footsteps"
         show, done = _progress("replanning failed climbs")
-        mc = monte_carlo(record, args.trials, args.seed, replanner, strategy, simulator,
-                         progress=lambda i, n: show(f"trial {i}/{n}"))
+        try:
+            mc = monte_carlo(record, args.trials, args.seed, replanner, strategy, simulator,
+                             progress=lambda i, n: show(f"trial {i}/{n}"))
+        except SimulationError as e:
+            done()
+            return _simulation_failed(path, e, " (a Monte Carlo trial's or a replan's run)")
         done()
         lo, hi = mc.ci95
         inside = "inside" if lo <= p_path <= hi else "OUTSIDE"

@@ -34,6 +34,7 @@ from typing import IO, Any, NamedTuple
 
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text
+from rb_drake.input_files import InputFileError, load_json, read_text
 
 RECORD_FORMAT = "rbp-trial/1"
 
@@ -114,12 +115,14 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     Raises SweepError when the folder holds a record of that name for other parameters: the
     folder belongs to another sweep, and mixing the two would be silently wrong."""
     path = trial_path(out, trial.name)
-    try:
-        record = json.loads(path.read_text())
-    except FileNotFoundError:
+    if not path.exists():
         return None
-    except (json.JSONDecodeError, UnicodeDecodeError):
+    try:  # within the input bounds: a sweep folder may hold anything (rb_drake.input_files)
+        record = load_json(read_text(path))
+    except (InputFileError, json.JSONDecodeError, RecursionError):
         return None  # not ours or damaged: run the trial again, the new record replaces it
+    if not isinstance(record, dict):
+        return None
     # Compare through JSON, as stored: tuples become lists.
     wanted = json.loads(json.dumps({"function": trial.function, "params": trial.params}))
     if {"function": record.get("function"), "params": record.get("params")} != wanted:

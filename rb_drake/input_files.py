@@ -57,9 +57,10 @@ def max_input_bytes() -> int:
     return int(min(megabytes, 1e6) * 2**20)
 
 
-def read_text(path: str | Path, max_bytes: int | None = None) -> str:
-    """The UTF-8 text of a regular file of at most `max_bytes` (default `max_input_bytes()`);
-    raises InputFileError("(file)", reason) for anything else."""
+def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
+    """The byte limit an input file must keep to (default `max_input_bytes()`), once `path` is
+    known to be a regular file within it; raises InputFileError("(file)", reason) otherwise
+    (for readers that open the file themselves, such as an LCM log's)."""
     limit = max_input_bytes() if max_bytes is None else max_bytes
     path = Path(path)
     try:
@@ -78,6 +79,14 @@ def read_text(path: str | Path, max_bytes: int | None = None) -> str:
     if info.st_size > limit:
         raise InputFileError("(file)", f"is {_size(info.st_size)}, over the {_size(limit)} limit "
                              "for input files (RBP_MAX_INPUT_MB raises it)")
+    return limit
+
+
+def read_text(path: str | Path, max_bytes: int | None = None) -> str:
+    """The UTF-8 text of a regular file of at most `max_bytes` (default `max_input_bytes()`);
+    raises InputFileError("(file)", reason) for anything else."""
+    limit = check_input_file(path, max_bytes)
+    path = Path(path)
     try:
         # O_NONBLOCK: should the path become a FIFO after the check, open returns at once
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))

@@ -222,3 +222,25 @@ def test_plan_readers_refuse_hostile_files_in_one_line(tmp_path):
         assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
             (path, result.stderr)
         assert time.perf_counter() - start < 30, f"rbp check {path} took too long"
+
+
+def test_rig_log_readers_refuse_hostile_files_in_one_line(tmp_path, monkeypatch):
+    """`rbp rig-replay` and `rbp rig-report` read an LCM log: a FIFO, a device, a directory or
+    a file over the input limit is refused before reading, with one line naming the file."""
+    fifo = tmp_path / "run.lcmlog"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.lcmlog"
+    big.write_bytes(b"\0" * (2 * 2**20))
+    monkeypatch.setenv("RBP_MAX_INPUT_MB", "1")  # the subprocesses inherit it
+    cases = [(fifo, "pipe"), (tmp_path, "directory"), (big, "over the")]
+    if Path("/dev/zero").exists():
+        cases.append((Path("/dev/zero"), "device"))
+    for command in (("rig-replay",), ("rig-report", "-o", str(tmp_path / "r.png"))):
+        for path, words in cases:
+            start = time.perf_counter()
+            result = run_rbp(command[0], str(path), *command[1:], cwd=tmp_path)
+            lines = result.stderr.strip().splitlines()
+            assert result.returncode == 2, (command, path, result.returncode, result.stderr)
+            assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
+                (command, path, result.stderr)
+            assert time.perf_counter() - start < 30, f"{command} {path} took too long"

@@ -94,12 +94,15 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
 
 
 def _replay(log_path: str):
+    from rb_drake.input_files import InputFileError, check_input_file
     from rbp.commands.common import UserError
     from systems.rig_interface import RigInputError, replay_log
 
     path = Path(log_path)
-    if not path.is_file():
-        raise UserError(f"{path}: (file): no such file")
+    try:
+        check_input_file(path)  # a FIFO, a device or a huge file is refused before reading
+    except InputFileError as e:
+        raise UserError(f"{path}: {e.field}: {e.reason}") from None
     try:
         return replay_log(path)
     except RigInputError as e:

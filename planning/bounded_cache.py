@@ -46,14 +46,46 @@ def array_bytes(value: Any) -> int:
     return sum(v.nbytes for v in value if isinstance(v, np.ndarray))
 
 
+class MemoryPool:
+    """One cap shared by several caches (`BoundedCache(pool=...)`): past it, the least
+    recently used entry of any of them is dropped first, so that a cache whose entries are
+    used more keeps more of the memory (None: no cap)."""
+
+    def __init__(self, cap_bytes: float | None = None) -> None:
+        self.cap_bytes = cap_bytes
+        self.protected = PROTECTED  # the most recently used entries, never dropped
+        self._order: OrderedDict[tuple[str, Hashable], BoundedCache[Any, Any]] = OrderedDict()
+        self.total_bytes = 0
+        self.peak_bytes = 0
+
+    def touched(self, cache: BoundedCache[Any, Any], key: Hashable, grew: int) -> None:
+        """`cache` used (or stored) `key`, whose bytes grew by `grew`."""
+        slot = (cache.name, key)
+        self._order[slot] = cache
+        self._order.move_to_end(slot)
+        self.total_bytes += grew
+        if self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
+            while self.total_bytes > self.cap_bytes and len(self._order) > self.protected:
+                (_, oldest), owner = self._order.popitem(last=False)
+                self.total_bytes -= owner.drop(oldest)
+        self.peak_bytes = max(self.peak_bytes, self.total_bytes)
+
+    def stats(self) -> dict[str, float]:
+        return {"bytes": self.total_bytes, "peak_bytes": self.peak_bytes,
+                "live": len(self._order)}
+
+
 class BoundedCache(Generic[K, V]):
-    """A dict of at most `cap_bytes` of values (`size(value)`: its bytes; None: no cap) that
-    rebuilds a dropped entry with `rebuild(key, tombstone)` (module doc)."""
+    """A dict of at most `cap_bytes` of values (`size(value)`: its bytes; None: no cap), or
+    sharing `pool`'s cap with other caches, that rebuilds a dropped entry with
+    `rebuild(key, tombstone)` (module doc)."""
 
     def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
                  tombstone: Callable[[V], Any] = lambda value: None,
-                 cap_bytes: float | None = None) -> None:
+                 cap_bytes: float | None = None, pool: MemoryPool | None = None,
+                 name: str = "") -> None:
         self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
+        self.pool, self.name = pool, name
         self.cap_bytes = cap_bytes
         self.protected = PROTECTED  # the most recently used entries, never dropped
         self._live: OrderedDict[K, V] = OrderedDict()
@@ -116,19 +148,24 @@ class BoundedCache(Generic[K, V]):
 
     def _account(self, key: K, value: V) -> None:
         size = self._size(value)
-        self.total_bytes += size - self._bytes.get(key, 0)
+        grew = size - self._bytes.get(key, 0)
+        self.total_bytes += grew
         self._bytes[key] = size
-        if self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
-            self._shrink()
+        if self.pool is not None:
+            self.pool.touched(self, key, grew)
+        elif self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
+            while self.total_bytes > self.cap_bytes and len(self._live) > self.protected:
+                self.drop(next(iter(self._live)))
         self.peak_bytes = max(self.peak_bytes, self.total_bytes)
 
-    def _shrink(self) -> None:
-        assert self.cap_bytes is not None
-        while self.total_bytes > self.cap_bytes and len(self._live) > self.protected:
-            key, value = self._live.popitem(last=False)
-            self.total_bytes -= self._bytes.pop(key)
-            self._dropped[key] = self._tombstone(value)
-            self.drops += 1
+    def drop(self, key: K) -> int:
+        """Drop live `key` (keeping its tombstone); its bytes."""
+        value = self._live.pop(key)
+        size = self._bytes.pop(key)
+        self.total_bytes -= size
+        self._dropped[key] = self._tombstone(value)
+        self.drops += 1
+        return size
 
     def stats(self) -> dict[str, float]:
         """Bytes held now and at most, entries held and dropped, drops and rebuilds."""

@@ -425,7 +425,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
 
 def _memory(memo: FootstepMemo) -> tuple[float, float]:
     """FootstepPlan's peak_memory_mb and kept_memory_mb, as the search ends."""
-    kept = sum(s["peak_bytes"] for s in memo.lattice.stats().values())
+    kept = memo.lattice.pool.peak_bytes
     return peak_memory_mb(), kept / 2.0 ** 20
 
 

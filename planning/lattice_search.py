@@ -22,7 +22,7 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.bounded_cache import BoundedCache, array_bytes
+from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes
 from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, unpack
 from planning.lattice_moves import LatticeTransition, MoveTable, lattice_transition, move_dict
@@ -42,8 +42,7 @@ def stance4(ids: Iterable[str]) -> Stance4:
 
 
 DEFAULT_MEMORY_MB = 1024.0  # the memo's cap: one search per core of a 24 GB machine, with room
-# shares of the cap: stances' components, moves' transitions, vertices' move tables
-SHARES = {"components": 0.6, "transitions": 0.2, "moves": 0.2}
+CACHES = ("components", "transitions", "moves")  # the memo's caches, sharing one cap
 
 
 class LatticeMemo:
@@ -56,20 +55,21 @@ class LatticeMemo:
         self.config = config  # the lattice all of it was decided on
         self._scn: Scenario | None = None
         self._ignore_grasps = False
+        self.pool = MemoryPool()
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
-            lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds)
+            lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds,
+            pool=self.pool, name="components")
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
-            array_bytes, self._transition_again)
+            array_bytes, self._transition_again, pool=self.pool, name="transitions")
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
-            lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again)
+            lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again,
+            pool=self.pool, name="moves")
         self.set_memory(memory_mb)
 
     def set_memory(self, memory_mb: float | None) -> None:
         """Cap what it holds at `memory_mb` MiB (None: no cap)."""
-        cap = None if memory_mb is None else float(memory_mb) * 2.0 ** 20
         self.memory_mb = memory_mb
-        for name, share in SHARES.items():
-            getattr(self, name).cap_bytes = None if cap is None else share * cap
+        self.pool.cap_bytes = None if memory_mb is None else float(memory_mb) * 2.0 ** 20
 
     def move_table(self, vertex: Vertex) -> MoveTable:
         """Vertex (stance, component)'s moves: (boom, anchor index) -> its `move_rows`."""
@@ -92,7 +92,8 @@ class LatticeMemo:
 
     def stats(self) -> dict[str, dict[str, float]]:
         """What each cache holds, held at most, dropped and rebuilt (`BoundedCache.stats`)."""
-        return {name: getattr(self, name).stats() for name in SHARES}
+        return {"pool": self.pool.stats()} | {name: getattr(self, name).stats()
+                                             for name in CACHES}
 
     def _bound(self) -> tuple[Scenario, LatticeConfig]:
         if self._scn is None or self.config is None:

@@ -52,8 +52,7 @@ def test_a_capped_search_decides_as_an_uncapped_one(cave: str,
     config = CompleteConfig(COARSE, anytime=anytime)
     free = complete_search(scn, config, memo=LatticeMemo(memory_mb=None))
     capped_memo = LatticeMemo(memory_mb=0.05)  # 50 kB: a few stances' lattice work
-    for cache in (capped_memo.components, capped_memo.transitions, capped_memo.moves):
-        cache.protected = 2  # a search this small would otherwise stay within the protected
+    capped_memo.pool.protected = 2  # a search this small would stay within the protected
     capped = complete_search(scn, config, memo=capped_memo)
     stats = capped_memo.stats()
     assert stats["components"]["drops"] > 0 and stats["components"]["rebuilds"] > 0, \

@@ -204,11 +204,15 @@ class SimulationResult:
 
 
 def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
-             plant: str = "full") -> SimulationResult:
+             replan: str | None = None, plant: str = "full") -> SimulationResult:
     """Execute `plan` in the Drake simulation `rbp simulate` uses (the full plant, grasps
     monitored): one deterministic climb, then, with `trials` > 0, that many stochastic
     executions (grasp strengths and attach failures drawn from `seed`) for a Monte Carlo
     estimate of the success rate with its 95 % Wilson interval (`result.monte_carlo`).
+    `replan` continues failed trials on a new plan, as `rbp simulate --replan` does: "retry"
+    re-grasps the same anchor, "footsteps" plans again from where the robot is (slow); the
+    climbs it saves are in `result.monte_carlo.replanning`. `plant="body"` simulates the body
+    alone (faster, less faithful).
 
     The plan is not verified here: `check(plan)` first (the command line refuses a plan that
     fails it). Raises `RbpInputError` for a plan without a route or one that cannot be
@@ -218,7 +222,7 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
     from planning.plan_model import plan_of
     from rb_drake.errors import RbpInputError
     from systems.diagram import ClimbSimulator
-    from systems.montecarlo import monte_carlo
+    from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanTrajectory, plan_scenario
 
     model = plan_of(plan)
@@ -229,6 +233,12 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
         raise RbpInputError(f"must be 0 or more, got {trials}", field="trials")
     if not 0 <= seed <= 2**63 - 1:
         raise RbpInputError(f"must be 0 or more (at most 2**63 - 1), got {seed}", field="seed")
+    if replan not in (None, "retry", "footsteps"):
+        raise RbpInputError(f"must be None, 'retry' or 'footsteps', got {replan!r}",
+                            field="replan")
+    if replan is not None and trials == 0:
+        raise RbpInputError("replanning continues failed trials; give trials > 0",
+                            field="replan")
     scn = plan_scenario(model)
     traj = PlanTrajectory(model, scn)
     simulator = ClimbSimulator(scn, plant=plant)
@@ -237,7 +247,13 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
     tracking = {"max_position_error": float(err.max()),
                 "rms_position_error": float(np.sqrt(np.mean(err**2))),
                 "max_heading_error": float(heading.max())}
-    mc = monte_carlo(record, trials, seed, simulator=simulator) if trials > 0 else None
+    replanner: Callable[..., Any] | None = None
+    if replan == "retry":
+        replanner = retry_replanner
+    elif replan == "footsteps":
+        replanner = FootstepReplanner(seed=seed)
+    mc = (monte_carlo(record, trials, seed, replanner, replan or "", simulator)
+          if trials > 0 else None)
     return SimulationResult(record, model.p_path, record.implied_p_path(), tracking, mc)
 
 

@@ -114,3 +114,14 @@ def test_a_failed_plan_is_not_simulated(demo: rbp.Scenario) -> None:
     assert not plan.success
     with pytest.raises(rbp.RbpInputError):
         rbp.simulate(plan)
+
+
+def test_simulate_with_replanning(full_plan: rbp.Plan) -> None:
+    """`replan="retry"` (as `rbp simulate --replan retry`) continues failed trials; a few
+    trials keep it short (each failed one is simulated again)."""
+    with pytest.raises(rbp.RbpInputError):
+        rbp.simulate(full_plan, replan="retry")  # no trials to continue
+    mc = rbp.simulate(full_plan, trials=12, seed=1, replan="retry").monte_carlo
+    assert mc is not None and mc.replanning is not None
+    assert mc.replanning.strategy == "retry"
+    assert mc.replanning.successes >= mc.successes

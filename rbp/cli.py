@@ -92,14 +92,11 @@ def cmd_scenario_check(args: argparse.Namespace) -> int:
 
 
 def cmd_scenario_show(args: argparse.Namespace) -> int:
-    from rb_drake.draw import scenario_figure
-    from rb_drake.files import atomic_save_figure
+    from rbp.api import draw
 
     check_dpi(args.dpi)
     check_output(args.output, picture=True)
-    scn = load_scenario_spec(args.scenario, check_start=False)
-    fig = scenario_figure(scn)
-    atomic_save_figure(fig, args.output, dpi=args.dpi)
+    draw(load_scenario_spec(args.scenario, check_start=False), args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
     return EXIT_OK
 

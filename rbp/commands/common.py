@@ -57,16 +57,10 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool = False) -> P
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):
-    """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`)."""
-    from rb_drake.scenario import bundled_caves, load_scenario
+    """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`):
+    `rbp.api.load_scenario`."""
+    from rbp.api import load_scenario
 
-    caves = bundled_caves()
-    if not Path(spec).exists() and spec in caves:
-        return load_scenario(caves[spec], check_start=check_start)
-    if not Path(spec).exists() and spec == "rig":  # the lab rig's frame (systems.rig)
-        from systems.rig import RIG_SCENARIO
-
-        return load_scenario(RIG_SCENARIO, check_start=check_start)
     return load_scenario(spec, check_start=check_start)
 
 

@@ -196,26 +196,12 @@ class SearchRecord:
 
 def run_planner(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool = True,
                 quiet: bool = False, record: SearchRecord | None = None) -> Plan:
-    """The whole pipeline (footsteps, then seeds and SCP per phase) -> the plan."""
-    from planning.footsteps import expansion_budget
-    from planning.pipeline import plan_climb
-    from rbp.progress import SearchProgress
+    """The whole pipeline (footsteps, then seeds and SCP per phase) -> the plan
+    (`rbp.api.plan`, with the progress line unless `quiet`)."""
+    from rbp.api import plan
 
-    budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
-              else cfg.footstep.max_expansions)
-    with SearchProgress(f"{planner} on {scn.name}", budget, quiet=quiet) as bar:
-        if not motion:
-            from planning.baseline import plan_naive
-            from planning.footsteps import plan_footsteps
-            from planning.plan import build_plan
-
-            fp = (plan_footsteps(scn, cfg.footstep, progress=bar.search) if planner == "rbp"
-                  else plan_naive(scn, cfg.footstep))
-            if record is not None:
-                record(fp)
-            return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
-        return plan_climb(scn, planner, cfg, progress=bar.phase, footstep_progress=bar.search,
-                          footsteps_done=record)
+    return plan(scn, cfg, planner=planner, footsteps_only=not motion, progress=not quiet,
+                footsteps_done=record)
 
 
 def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,

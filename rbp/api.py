@@ -1,0 +1,281 @@
+"""rbp's Python front door: load or generate a cave, plan a climb, check, simulate and draw it,
+and read and write plan files; `import rbp` exports these functions (`rbp.plan`, ...).
+
+    import rbp
+
+    cave = rbp.load_scenario("demo-shaft")
+    plan = rbp.plan(cave)                  # a planning.plan_model.Plan
+    assert rbp.check(plan) == []           # the verifier of `rbp check` finds nothing
+    rbp.write_plan(plan, "climb.json")
+    result = rbp.simulate(plan)            # one simulated climb (trials=N: Monte Carlo)
+    rbp.draw(plan, "climb.png")
+
+The command line (`rbp plan`, `rbp check`, ...) is built on the same functions. Only the
+standard library is imported here at the top: each function imports what it needs when
+called, so `import rbp` stays instant (no Drake, no numba) and the command line starts fast.
+Mistakes in the input raise `rb_drake.errors.RbpInputError` (a `ScenarioError` for a cave,
+a `PlanFileError` for a plan file), whose message names the file, the field and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from planning.footsteps import FootstepPlan
+    from planning.pipeline import PipelineConfig
+    from planning.plan_model import Plan
+    from rb_drake.generate import CaveConfig
+    from rb_drake.scenario import Scenario
+    from systems.diagram import SimulationRecord
+    from systems.montecarlo import MonteCarloResult
+
+__all__ = ["SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
+           "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
+
+PLAN_DPI = 110  # `rbp plan`'s pictures
+SCENARIO_DPI = 120  # `rbp scenario show`'s default
+
+
+def bundled_caves() -> dict[str, Path]:
+    """The caves shipped with rbp, by name (what `rbp scenario list` prints): name -> file."""
+    from rb_drake.scenario import bundled_caves as caves
+
+    return caves()
+
+
+def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenario:
+    """A cave from a scenario file (YAML, `reachbot-scenario/1`), or a bundled cave by name
+    (`bundled_caves()`; "rig" is the lab rig's frame). A file of that name wins over a bundled
+    cave. `check_start` also checks that the start stance holds the robot. Raises
+    `rb_drake.scenario.ScenarioError` (file, field, reason) for a bad or missing file."""
+    from rb_drake.scenario import load_scenario as load
+
+    spec = Path(path_or_name)
+    if not spec.exists():
+        caves = bundled_caves()
+        if str(path_or_name) in caves:
+            return load(caves[str(path_or_name)], check_start=check_start)
+        if str(path_or_name) == "rig":  # the lab rig's frame (systems.rig)
+            from systems.rig import RIG_SCENARIO
+
+            return load(RIG_SCENARIO, check_start=check_start)
+    return load(spec, check_start=check_start)
+
+
+def generate_scenario(kind: str = "shaft", seed: int = 0,
+                      length: tuple[float, float] = (4.5, 5.0), anchor_density: float = 3.0,
+                      config: CaveConfig | None = None) -> Scenario:
+    """A seeded random cave, as `rbp scenario generate` makes it: `kind` is "shaft" (a
+    vertical shaft to climb), "crevasse" or "rockfall" (a passage to cross); `length` the range
+    its height or length is drawn from in m (default the experiments' 4.5 to 5 m), with
+    `anchor_density` anchors per metre of rock. The same arguments give the same cave. Give
+    `config` (an `rb_drake.generate.CaveConfig`) for the other knobs; `length` and
+    `anchor_density` then override it. Raises `RbpInputError` for a bad kind or length and
+    `CaveGenerationError` when no draw has a feasible start stance."""
+    from rb_drake.errors import RbpInputError
+    from rb_drake.generate import CaveConfig, generate_cave, length_problem
+
+    lo, hi = length
+    if (problem := length_problem(lo, hi)) is not None:
+        raise RbpInputError(problem, field="length")
+    if not anchor_density > 0:
+        raise RbpInputError(f"must be above 0 anchors per metre, got {anchor_density:g}",
+                            field="anchor_density")
+    cfg = dataclasses.replace(config or CaveConfig(), anchor_density=anchor_density,
+                              length=(lo, hi))
+    return generate_cave(kind, seed, cfg)
+
+
+def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, *,
+         planner: str = "rbp", footsteps_only: bool = False, progress: bool = False,
+         footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+    """Plan a climb of `scenario` (a Scenario, or what `load_scenario` takes), as `rbp plan`
+    does: the footstep search, then a seed and SCP per phase (`planning.pipeline.plan_climb`).
+
+    `config` is a `planning.pipeline.PipelineConfig` (its footstep search: `.footstep`, a
+    `planning.footsteps.FootstepConfig`); None for the defaults. `planner` is "rbp" or
+    "naive" (the baseline, footsteps only). `footsteps_only` stops after the footstep plan
+    (phases hold only the transition poses: seconds, not minutes). `progress` shows the
+    progress line on stderr (on a terminal only). `footsteps_done` is called with each footstep
+    plan (a failed one explains where the search went: `planning.figures.search_figure`).
+
+    Returns the plan (`planning.plan_model.Plan`); when no climb is found it has
+    `success` False and the `reason`, and is still a plan to write and draw."""
+    from planning.footsteps import expansion_budget
+    from planning.pipeline import PLANNERS, PipelineConfig, plan_climb
+    from rb_drake.errors import RbpInputError
+    from rbp.progress import SearchProgress
+
+    if planner not in PLANNERS:
+        raise RbpInputError(f"must be one of {PLANNERS}, got {planner!r}", field="planner")
+    scn = scenario if not isinstance(scenario, str | Path) else load_scenario(scenario)
+    cfg = config or PipelineConfig()
+    budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
+              else cfg.footstep.max_expansions)
+    with SearchProgress(f"{planner} on {scn.name}", budget, quiet=not progress) as bar:
+        if footsteps_only:
+            from planning.baseline import plan_naive
+            from planning.footsteps import plan_footsteps
+            from planning.plan import build_plan
+
+            fp = (plan_footsteps(scn, cfg.footstep, progress=bar.search) if planner == "rbp"
+                  else plan_naive(scn, cfg.footstep))
+            if footsteps_done is not None:
+                footsteps_done(fp)
+            return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
+        return plan_climb(scn, planner, cfg, progress=bar.phase, footstep_progress=bar.search,
+                          footsteps_done=footsteps_done)
+
+
+def _same_cave(plan: Plan, scn: Scenario) -> bool:
+    """Whether `plan` was made for the cave and robot of `scn` (the plan keeps both)."""
+    cave = scn.to_dict(resolved=True)
+    del cave["robot"]
+    return plan.scenario == cave and plan.robot == scn.robot.to_dict()
+
+
+def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
+          progress: bool = False) -> list[str]:
+    """What `rbp check` finds wrong with `plan`, one line each ("WHERE: RULE: WHAT"); an empty
+    list when the plan holds. Every configuration is recomputed from scratch against the cave
+    and robot the plan carries (`planning.check.check_plan`); given a `scenario`, the plan must
+    also have been made for that cave and robot. `progress` shows a progress line on stderr
+    (on a terminal only, after a second)."""
+    from planning.check import check_plan
+    from planning.plan_model import plan_of
+    from rbp.progress import CheckProgress
+
+    model = plan_of(plan)
+    problems = []
+    if scenario is not None and not _same_cave(model, scenario):
+        problems.append(f"scenario: the plan was made for another cave or robot than "
+                        f"{scenario.name} ({scenario.source})")
+    with CheckProgress("checking the plan", quiet=not progress) as bar:
+        problems += check_plan(model, progress=bar)
+    return problems
+
+
+def read_plan(path: str | Path) -> Plan:
+    """A plan file (`rbp plan`'s JSON), validated against its schema (NaN and Infinity
+    refused); raises `planning.plan_file.PlanFileError` naming the field and the reason."""
+    from planning.plan_file import read_plan as read
+
+    return read(path)
+
+
+def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:
+    """Write `plan` to `path` as a plan file (JSON, checked against the schema first; written
+    to a temporary file and renamed, so never half-written); returns the path."""
+    from planning.plan import write_plan as write
+
+    return write(plan, path)
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulationResult:
+    """A simulated climb: the deterministic run (`record`, sampled every 20 ms), its tracking
+    errors, the success probability the simulated forces imply (`p_sim`) beside the plan's
+    (`p_path`), and the Monte Carlo estimate when trials were asked for (`monte_carlo`)."""
+
+    record: SimulationRecord
+    p_path: float | None
+    p_sim: float
+    tracking: dict[str, float]  # max_position_error, rms_position_error (m), max_heading_error
+    monte_carlo: MonteCarloResult | None = None
+
+    @property
+    def success(self) -> bool:
+        """Whether the deterministic run climbed to the end of the plan (no grasp failed)."""
+        return self.record.failure is None
+
+    def to_json(self) -> dict[str, Any]:
+        """The numbers `rbp simulate --json` writes (without the plan's file name)."""
+        out: dict[str, Any] = {"trials": 0, "successes": None, "rate": None, "ci95": None,
+                               "p_path": self.p_path, "p_sim": self.p_sim, "seed": None,
+                               "tracking": self.tracking}
+        if self.monte_carlo is not None:
+            out |= self.monte_carlo.to_json()
+            out["tracking"] = self.tracking
+        return out
+
+
+def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
+             replan: str | None = None, plant: str = "full") -> SimulationResult:
+    """Execute `plan` in the Drake simulation `rbp simulate` uses (the full plant, grasps
+    monitored): one deterministic climb, then, with `trials` > 0, that many stochastic
+    executions (grasp strengths and attach failures drawn from `seed`) for a Monte Carlo
+    estimate of the success rate with its 95 % Wilson interval (`result.monte_carlo`).
+    `replan` continues failed trials on a new plan, as `rbp simulate --replan` does: "retry"
+    re-grasps the same anchor, "footsteps" plans again from where the robot is (slow); the
+    climbs it saves are in `result.monte_carlo.replanning`. `plant="body"` simulates the body
+    alone (faster, less faithful).
+
+    The plan is not verified here: `check(plan)` first (the command line refuses a plan that
+    fails it). Raises `RbpInputError` for a plan without a route or one that cannot be
+    flown, and `systems.diagram.SimulationError` when the solver fails."""
+    import numpy as np
+
+    from planning.plan_model import plan_of
+    from rb_drake.errors import RbpInputError
+    from systems.diagram import ClimbSimulator
+    from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
+    from systems.trajectory import PlanTrajectory, plan_scenario
+
+    model = plan_of(plan)
+    if not model.success:
+        raise RbpInputError(f"the plan found no route ({model.reason}); nothing to simulate",
+                            field="success")
+    if trials < 0:
+        raise RbpInputError(f"must be 0 or more, got {trials}", field="trials")
+    if not 0 <= seed <= 2**63 - 1:
+        raise RbpInputError(f"must be 0 or more (at most 2**63 - 1), got {seed}", field="seed")
+    if replan not in (None, "retry", "footsteps"):
+        raise RbpInputError(f"must be None, 'retry' or 'footsteps', got {replan!r}",
+                            field="replan")
+    if replan is not None and trials == 0:
+        raise RbpInputError("replanning continues failed trials; give trials > 0",
+                            field="replan")
+    scn = plan_scenario(model)
+    traj = PlanTrajectory(model, scn)
+    simulator = ClimbSimulator(scn, plant=plant)
+    record = simulator.run(traj)
+    err, heading = record.position_error, record.heading_error
+    tracking = {"max_position_error": float(err.max()),
+                "rms_position_error": float(np.sqrt(np.mean(err**2))),
+                "max_heading_error": float(heading.max())}
+    replanner: Callable[..., Any] | None = None
+    if replan == "retry":
+        replanner = retry_replanner
+    elif replan == "footsteps":
+        replanner = FootstepReplanner(seed=seed)
+    mc = (monte_carlo(record, trials, seed, replanner, replan or "", simulator)
+          if trials > 0 else None)
+    return SimulationResult(record, model.p_path, record.implied_p_path(), tracking, mc)
+
+
+def draw(scenario_or_plan: Scenario | Plan | dict[str, Any], path: str | Path,
+         dpi: int | None = None) -> Path:
+    """Draw a cave or a plan into `path` (.png, .pdf, .svg), the picture the command line
+    writes: for a Scenario, `rbp scenario show`'s (the robot in its start stance); for a plan,
+    `rbp plan`'s snapshots of the climb. `dpi` defaults to theirs (120 and 110). Returns the
+    path written."""
+    from planning.plan_model import Plan, plan_dict, plan_scenario
+    from rb_drake.files import atomic_save_figure
+    from rb_drake.scenario import Scenario
+
+    if isinstance(scenario_or_plan, Scenario):
+        from rb_drake.draw import scenario_figure
+
+        fig = scenario_figure(scenario_or_plan)
+        return atomic_save_figure(fig, path, dpi=dpi or SCENARIO_DPI)
+    if not isinstance(scenario_or_plan, Plan | dict):
+        raise TypeError(f"draw takes a Scenario or a Plan, got {type(scenario_or_plan).__name__}")
+    from planning.figures import snapshots_figure
+
+    data = plan_dict(scenario_or_plan)
+    fig = snapshots_figure(plan_scenario(data), data)
+    return atomic_save_figure(fig, path, dpi=dpi or PLAN_DPI)

@@ -446,6 +446,9 @@ def _main(argv: list[str] | None) -> int:
     from rb_drake.scenario import ScenarioError
 
     try:
+        from rb_drake.environment import threads_setting
+
+        threads_setting()  # a malformed RBP_THREADS is refused before any work
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {e}", file=sys.stderr)

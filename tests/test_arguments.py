@@ -141,3 +141,23 @@ def test_a_failed_plan_with_animate_says_why_there_is_no_animation(tmp_path: Pat
     assert "Traceback" not in result.stderr, result.stderr[-1500:]
     assert "--animate: p.gif not written: the plan has no configurations" in result.stderr
     assert (tmp_path / "p.json").exists() and not (tmp_path / "p.gif").exists()
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-2", "1.5", "99999"])
+def test_a_malformed_rbp_threads_is_refused_in_one_line(tmp_path: Path, value: str,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("RBP_THREADS", value)  # the subprocess inherits it
+    result = run_rbp("plan", "demo-shaft", "--footsteps-only", "-o", str(tmp_path / "p.json"),
+                     cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, (value, result.returncode, result.stderr)
+    assert len(lines) == 1 and "RBP_THREADS" in lines[0] and repr(value) in lines[0], \
+        (value, result.stderr)
+    assert not (tmp_path / "p.json").exists(), "a refused run wrote its plan"
+
+
+@pytest.mark.parametrize("trials", ["-1", "1000001"])
+def test_simulate_trials_refused_beyond_their_range(tmp_path: Path, trials: str) -> None:
+    result = run_rbp("simulate", "nothing.json", "--trials", trials, cwd=tmp_path)
+    assert result.returncode == 2, (trials, result.returncode, result.stderr)
+    assert "--trials" in result.stderr and "1,000,000" in result.stderr, result.stderr

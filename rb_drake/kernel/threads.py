@@ -14,6 +14,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from rb_drake.environment import threads_setting
 from rb_drake.kernel.pose_kernel import score_kernel
 
 MIN_ROWS_PER_THREAD = 12  # fewer: one thread scores them (a launch and join cost a few us)
@@ -27,8 +28,8 @@ def kernel_threads() -> int:
     as the block began."""
     if _HELD_THREADS:
         return _HELD_THREADS[-1]
-    value = os.environ.get("RBP_THREADS", "").strip()
-    threads = int(value) if value else numba.config.NUMBA_NUM_THREADS
+    setting = threads_setting()
+    threads = numba.config.NUMBA_NUM_THREADS if setting is None else setting
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
 
 
@@ -53,9 +54,9 @@ def worker_threads(workers: int, cores: int | None = None) -> int:
     set, lowers it further but never raises it."""
     cores = cores or os.cpu_count() or 1
     share = max(1, cores // max(1, workers))
-    value = os.environ.get("RBP_THREADS", "").strip()
-    if value.isdigit() and int(value) >= 1:
-        share = min(share, int(value))
+    setting = threads_setting()
+    if setting is not None:
+        share = min(share, setting)
     return share
 
 

@@ -20,6 +20,8 @@ from typing import Any
 
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
+MAX_TRIALS = 1_000_000  # Monte Carlo climbs of one plan; more is a sweep's job
+
 
 def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     """Register `simulate` on the `rbp` sub-command parsers."""
@@ -86,8 +88,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     check_seed(args.seed)
     if args.json:
         check_output(args.json, "--json")
-    if args.trials < 0:
-        raise UserError(f"--trials: must be 0 or more, got {args.trials}")
+    if not 0 <= args.trials <= MAX_TRIALS:
+        raise UserError(f"--trials: must be 0 to {MAX_TRIALS:,}, got {args.trials}")
     if args.replan and args.trials == 0:
         raise UserError("--replan: replanning continues failed trials; give --trials N > 0")
     path = Path(args.plan)

@@ -78,16 +78,16 @@ class MemoryPool:
 class BoundedCache(Generic[K, V]):
     """A dict of at most `cap_bytes` of values (`size(value)`: its bytes; None: no cap), or
     sharing `pool`'s cap with other caches, that rebuilds a dropped entry with
-    `rebuild(key, tombstone)` (module doc)."""
+    `rebuild(key, tombstone)` (module doc). `grows`: a stored value may grow (a stance's
+    components do), so its size is measured again each time it is used."""
 
     def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
                  tombstone: Callable[[V], Any] = lambda value: None,
                  cap_bytes: float | None = None, pool: MemoryPool | None = None,
-                 name: str = "") -> None:
+                 name: str = "", grows: bool = False) -> None:
         self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
-        self.pool, self.name = pool, name
-        self.cap_bytes = cap_bytes
-        self.protected = PROTECTED  # the most recently used entries, never dropped
+        self.pool = pool if pool is not None else MemoryPool(cap_bytes)
+        self.name, self.grows = name, grows
         self._live: OrderedDict[K, V] = OrderedDict()
         self._bytes: dict[K, int] = {}
         self._dropped: dict[K, Any] = {}
@@ -95,6 +95,10 @@ class BoundedCache(Generic[K, V]):
         self.peak_bytes = 0
         self.drops = 0
         self.rebuilds = 0
+
+    @property
+    def cap_bytes(self) -> float | None:
+        return self.pool.cap_bytes
 
     def __len__(self) -> int:
         return len(self._live) + len(self._dropped)
@@ -106,22 +110,15 @@ class BoundedCache(Generic[K, V]):
         yield from list(self._live)
         yield from list(self._dropped)
 
-    def keys(self) -> list[K]:
-        return list(self)
-
     def items(self) -> Iterator[tuple[K, V]]:
         for key in list(self):
             yield key, self[key]
-
-    def values(self) -> Iterator[V]:
-        for _, value in self.items():
-            yield value
 
     def get(self, key: K, default: Any = None) -> Any:
         if key in self._live:
             value = self._live[key]
             self._live.move_to_end(key)
-            self._account(key, value)  # a value may have grown since it was stored
+            self._account(key, value if self.grows else None)
             return value
         if key in self._dropped:
             tomb = self._dropped.pop(key)
@@ -146,16 +143,15 @@ class BoundedCache(Generic[K, V]):
         self._live.move_to_end(key)
         self._account(key, value)
 
-    def _account(self, key: K, value: V) -> None:
-        size = self._size(value)
-        grew = size - self._bytes.get(key, 0)
-        self.total_bytes += grew
-        self._bytes[key] = size
-        if self.pool is not None:
-            self.pool.touched(self, key, grew)
-        elif self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
-            while self.total_bytes > self.cap_bytes and len(self._live) > self.protected:
-                self.drop(next(iter(self._live)))
+    def _account(self, key: K, value: V | None) -> None:
+        """`key` used; its size measured again if `value` is given (stored, or may grow)."""
+        grew = 0
+        if value is not None:
+            size = self._size(value)
+            grew = size - self._bytes.get(key, 0)
+            self.total_bytes += grew
+            self._bytes[key] = size
+        self.pool.touched(self, key, grew)
         self.peak_bytes = max(self.peak_bytes, self.total_bytes)
 
     def drop(self, key: K) -> int:

@@ -275,9 +275,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             heapq.heappush(open_list, edge_entry(g - c_attach, move, tr, None, child, None))
             continue
         (child, comp), move, pose, p4, pick, g_parent, cost = payload
-        tr = None if move is None else memo.transitions[_transition_key(move)]
         if comp is None:  # entered through a move: split among the child's components
-            assert tr is not None
+            tr = memo.transitions[_transition_key(move)]
             comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
             if (comps < 0).any():  # the kernel is deterministic: never expected
                 raise RuntimeError("a transition pose is missing from the new stance's lattice")

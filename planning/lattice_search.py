@@ -58,7 +58,7 @@ class LatticeMemo:
         self.pool = MemoryPool()
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
             lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds,
-            pool=self.pool, name="components")
+            pool=self.pool, name="components", grows=True)
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
             array_bytes, self._transition_again, pool=self.pool, name="transitions")
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(

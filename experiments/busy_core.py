@@ -1,0 +1,135 @@
+"""Threads on a busy machine: the default thread count against one thread, cave by cave.
+
+The benchmark's caves (`route_quality`'s: the same kinds, seeds and lengths), the footstep
+stage of one search variant (default: today's `rbp plan`), run twice per cave in the same run:
+once by a worker with the default kernel threads (RBP_THREADS unset: numba's count, the cores)
+and once by a worker with RBP_THREADS=1, one after the other (never at once), in alternating
+order from cave to cave so that drift in the machine's load falls on both alike. With `--busy N`
+(default 1) N processes spin on a core each for the whole run, as another user's job would.
+Each worker plans a cave first to warm its compiled kernels; that cave is not counted.
+
+Reports, per cave, both footstep times and whether both made the same decisions (route,
+regrasps, expansions: the thread count must not change a plan), and the median and the
+total-time ratio of default over one thread (issue 32 asks at most 1.2 with a core busy).
+
+    python -m experiments.busy_core --trials 100 --busy 1 --out docs/figures/busy-core.json
+    python -m experiments.busy_core --trials 100 --busy 0 --out out/idle.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from experiments.common import ROUTE_VARIANTS, cave_kind
+from experiments.common import route_variants as run_cave
+from experiments.sweep import machine_info
+from rb_drake.errors import EXIT_OK
+
+MODES = ("default", "one")  # RBP_THREADS unset; RBP_THREADS=1
+
+
+def _spin() -> None:
+    while True:
+        pass
+
+
+def _pool(mode: str) -> Any:
+    """One spawned worker whose environment has the mode's RBP_THREADS (read at its start)."""
+    saved = os.environ.get("RBP_THREADS")
+    os.environ.pop("RBP_THREADS", None)
+    if mode == "one":
+        os.environ["RBP_THREADS"] = "1"
+    try:
+        return multiprocessing.get_context("spawn").Pool(1)
+    finally:
+        os.environ.pop("RBP_THREADS", None)
+        if saved is not None:
+            os.environ["RBP_THREADS"] = saved
+
+
+def _threads() -> dict[str, Any]:
+    from rb_drake.kernel.threads import run_conditions
+
+    return run_conditions()
+
+
+def decisions(run: dict[str, Any]) -> tuple:
+    """What a thread count must not change: route or stop, regrasps, expansions, stances."""
+    return (run["success"], run["stop"], run["regrasps"], run["expansions"], run["stances"])
+
+
+def summarise(caves: list[dict[str, Any]]) -> dict[str, Any]:
+    ratios = [c["default"]["seconds"] / c["one"]["seconds"] for c in caves]
+    total = {m: sum(c[m]["seconds"] for c in caves) for m in MODES}
+    return {"caves": len(caves),
+            "same_decisions": sum(decisions(c["default"]) == decisions(c["one"]) for c in caves),
+            "median_ratio": statistics.median(ratios) if ratios else None,
+            "ratio_quartiles": (statistics.quantiles(ratios, n=4) if len(ratios) > 1 else None),
+            "total_seconds": total,
+            "total_ratio": total["default"] / total["one"] if total["one"] else None}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m experiments.busy_core",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials", type=int, default=100, help="caves (default 100)")
+    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
+    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
+    parser.add_argument("--variant", default="default", choices=ROUTE_VARIANTS)
+    parser.add_argument("--busy", type=int, default=1, help="cores kept spinning (default 1)")
+    parser.add_argument("--out", default="out/busy_core.json")
+    args = parser.parse_args(argv)
+    if args.trials < 1 or args.busy < 0:
+        parser.error("--trials must be at least 1 and --busy at least 0")
+    ctx = multiprocessing.get_context("spawn")
+    pools = {m: _pool(m) for m in MODES}
+    spinners = []
+    try:
+        threads = {m: pools[m].apply(_threads) for m in MODES}
+        warm = ("shaft", args.first_seed, tuple(args.length), [args.variant], None)
+        for m in MODES:
+            pools[m].apply(run_cave, (warm,))
+        for _ in range(args.busy):
+            spinners.append(ctx.Process(target=_spin, daemon=True))
+            spinners[-1].start()
+        caves: list[dict[str, Any]] = []
+        t0 = time.perf_counter()
+        for i in range(args.trials):
+            job = (cave_kind(i, args.kind), args.first_seed + i, tuple(args.length),
+                   [args.variant], None)
+            cave: dict[str, Any] = {"kind": job[0], "seed": job[1]}
+            for m in (MODES if i % 2 == 0 else MODES[::-1]):
+                cave[m] = pools[m].apply(run_cave, (job,))[args.variant]
+            caves.append(cave)
+            print(f"[{i + 1}/{args.trials}] {cave['kind']} {cave['seed']}: "
+                  f"default {cave['default']['seconds']:.2f} s, "
+                  f"one thread {cave['one']['seconds']:.2f} s", file=sys.stderr)
+    finally:
+        for p in spinners:
+            p.terminate()
+        for pool in pools.values():
+            pool.terminate()
+    result = {"machine": machine_info(), "args": vars(args), "threads": threads,
+              "wall_seconds": time.perf_counter() - t0, "summary": summarise(caves),
+              "caves": caves}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=1) + "\n")
+    tmp.replace(out)
+    print(json.dumps(result["summary"], indent=1))
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

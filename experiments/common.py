@@ -332,6 +332,7 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
                         "expansions": int(fp.expansions), "seconds": seconds,
                         "peak_memory_mb": fp.peak_memory_mb,
                         "kept_memory_mb": fp.kept_memory_mb,
+                        "history": search.get("history"),
                         "memo": fp.memo.lattice.stats() if fp.memo is not None else None,
                         "stances": [list(s) for s in fp.stances] if fp.success else None}
     return out

@@ -249,7 +249,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     figure = atomic_save_figure(baseline_figure(done, [p for p in planners if p != "oracle"]),
                                 f"{args.out}/baseline.png", dpi=120)
     print(f"wrote {figure}")
-    results = {
+    results: dict[str, Any] = {
         "experiment": "baseline_comparison", "machine": machine_info(),
         "params": {"trials": args.trials, "kind": args.kind, "first_seed": args.first_seed,
                    "length": list(args.length), "max_expansions": args.max_expansions,

@@ -155,7 +155,7 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
         return {"cave": None, **{p: dict(failed) for p in planners},
                 "timing": {"cave": time.perf_counter() - start}}
     out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
-    timing = {"cave": time.perf_counter() - start}
+    timing: dict[str, Any] = {"cave": time.perf_counter() - start}
     for planner in planners:  # each from scratch: its time is what `rbp plan` costs
         plan = plan_cave(scn, planner, max_expansions, motion, oracle_seconds)
         out[planner] = plan_record(plan)

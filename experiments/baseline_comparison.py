@@ -11,6 +11,9 @@ than 10 regrasps cannot pass 0.90.
 
     python -m experiments.baseline_comparison --trials 100 --out out/baseline
 
+`--ompl-log PATH` also writes the runs as an OMPL benchmark log (`experiments.ompl_log`), for
+`ompl_benchmark_statistics` and Planner Arena.
+
 The trial function `climb_trial` (a cave from its parameters, the planners on it) and the other
 helpers the timing table, the SCP statistics and the parameter sweep share with this
 experiment are in `experiments.common`.
@@ -19,6 +22,7 @@ experiment are in `experiments.common`.
 from __future__ import annotations
 
 import argparse
+from datetime import UTC, datetime
 from typing import Any
 
 from experiments.common import (
@@ -27,7 +31,9 @@ from experiments.common import (
     PLANNERS,
     THRESHOLDS,
     add_cave_arguments,
+    add_ompl_log_argument,
     check_cave_arguments,
+    check_ompl_log,
     climb_trial,  # noqa: F401 (CLIMB_TRIAL names it here: the trials' records keep that name)
     climb_trials,
     path_probabilities,
@@ -200,6 +206,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser.add_argument("--oracle-time", type=float, default=ORACLE_SECONDS,
                         help="seconds the oracle may search a cave before it says undecided "
                              f"(default {ORACLE_SECONDS:g})")
+    add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
     check_cave_arguments(parser, args)
     planners = [p for p in args.planners.split(",") if p]
@@ -208,9 +215,11 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
                      f"{args.planners!r}")
     if not args.oracle_time > 0:
         parser.error(f"--oracle-time: must be positive, got {args.oracle_time}")
+    check_ompl_log(parser, args.ompl_log)
 
     from rb_drake.files import atomic_save_figure
 
+    started = datetime.now(UTC)
     records = labelled_sweep(args, planners)
     done = ok_records(records)
     summary = {p: planner_summary(done, p) for p in planners}
@@ -240,7 +249,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     figure = atomic_save_figure(baseline_figure(done, [p for p in planners if p != "oracle"]),
                                 f"{args.out}/baseline.png", dpi=120)
     print(f"wrote {figure}")
-    results = {
+    results: dict[str, Any] = {
         "experiment": "baseline_comparison", "machine": machine_info(),
         "params": {"trials": args.trials, "kind": args.kind, "first_seed": args.first_seed,
                    "length": list(args.length), "max_expansions": args.max_expansions,
@@ -263,6 +272,20 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         "figure": str(figure),
     }
     write_results(args.out, results)
+    if args.ompl_log:
+        from experiments.common import footstep_config
+        from experiments.ompl_log import baseline_log, write_log
+        from planning.config_io import config_to_dict
+
+        common = {p: {"planner": p, "motion": args.motion and p not in ("oracle", "naive"),
+                      "footstep": config_to_dict(footstep_config(p, args.max_expansions,
+                                                                 args.oracle_time))}
+                  for p in planners}
+        memory = footstep_config("rbp", args.max_expansions).search_memory_mb
+        log = baseline_log(done, planners, results["params"], common, results["machine"],
+                           started, time_limit=args.oracle_time if "oracle" in planners else 0.0,
+                           memory_limit=memory or 0.0)
+        print(f"wrote {write_log(args.ompl_log, log)}")
     return EXIT_FAILED if results["errors"] else EXIT_OK
 
 

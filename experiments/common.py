@@ -101,15 +101,18 @@ def plan_cave(scn, planner: str, max_expansions: int, motion: bool,
 
 
 def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
-    """What the experiments keep of a plan (its timing goes to the trial's `timing`), and
-    whether `rbp check`'s verifier finds it sound (`verified`; a failed plan is not)."""
+    """What the experiments keep of a plan (its timing goes to the trial's `timing`, with
+    `search_measures`), and whether `rbp check`'s verifier finds it sound (`verified`; a
+    failed plan is not)."""
     from planning.check import check_plan
     from planning.pipeline import motion_summary
     from planning.plan_model import plan_of
 
     kinds = [p["kind"] for p in plan["phases"]]
+    search = plan.get("search", {})
     record = {"success": plan["success"], "reason": plan["reason"], "p_path": plan["p_path"],
-              "stop": plan.get("search", {}).get("stop"),
+              "stop": search.get("stop"), "expansions": search.get("expansions"),
+              "cost": search.get("cost"), "bound": search.get("bound"),
               "p_grasps": plan.get("p_grasps"), "p_min": plan["p_min"],
               "regrasps": plan["regrasps"],
               "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
@@ -121,6 +124,15 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
                                                "improved", "status")}
                             for r in rows]
     return record
+
+
+def search_measures(plan: dict[str, Any]) -> dict[str, Any]:
+    """What the footstep search measured that differs from run to run, kept with the trial's
+    timing: its memory (peak resident and kept lattice work, MiB) and, an anytime search, its
+    improvements over time (`history`: seconds, cost, lower_bound, expansions)."""
+    search = plan.get("search", {})
+    return {"peak_memory_mb": search.get("peak_memory_mb"),
+            "kept_memory_mb": search.get("kept_memory_mb"), "history": search.get("history")}
 
 
 def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
@@ -143,11 +155,11 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
         return {"cave": None, **{p: dict(failed) for p in planners},
                 "timing": {"cave": time.perf_counter() - start}}
     out: dict[str, Any] = {"cave": {"name": scn.name, "anchors": len(scn.anchors)}}
-    timing = {"cave": time.perf_counter() - start}
+    timing: dict[str, Any] = {"cave": time.perf_counter() - start}
     for planner in planners:  # each from scratch: its time is what `rbp plan` costs
         plan = plan_cave(scn, planner, max_expansions, motion, oracle_seconds)
         out[planner] = plan_record(plan)
-        timing[planner] = plan["timing"]
+        timing[planner] = {**plan["timing"], "search": search_measures(plan)}
     out["timing"] = timing
     return out
 
@@ -169,6 +181,21 @@ def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 10
     parser.add_argument("--max-expansions", type=int, default=max_expansions,
                         help="RBP gives up after expanding this many stances "
                              f"(default {max_expansions})")
+
+
+def add_ompl_log_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ompl-log", metavar="PATH", default=None,
+                        help="also write the runs as an OMPL benchmark log (a planner per "
+                             "planner or variant, a run per cave), for ompl_benchmark_statistics "
+                             "and Planner Arena")
+
+
+def check_ompl_log(parser: argparse.ArgumentParser, path: str | None) -> None:
+    """Refuse an --ompl-log path that cannot be written, before any work."""
+    from rb_drake.files import output_problem
+
+    if path is not None and (problem := output_problem(path)) is not None:
+        parser.error(f"--ompl-log: {path}: {problem}")
 
 
 def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
@@ -305,6 +332,7 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
                         "expansions": int(fp.expansions), "seconds": seconds,
                         "peak_memory_mb": fp.peak_memory_mb,
                         "kept_memory_mb": fp.kept_memory_mb,
+                        "history": search.get("history"),
                         "memo": fp.memo.lattice.stats() if fp.memo is not None else None,
                         "stances": [list(s) for s in fp.stances] if fp.success else None}
     return out

@@ -10,6 +10,9 @@ run the script in each tree, then compare).
 
     python -m experiments.route_quality --variants default --out out/rq-new.json
     python -m experiments.route_quality --variants first,default,oracle --trials 100 --workers 2
+
+`--ompl-log PATH` also writes the runs as an OMPL benchmark log (`experiments.ompl_log`): a
+planner per variant, a run per cave.
 """
 
 from __future__ import annotations
@@ -20,11 +23,12 @@ import multiprocessing
 import os
 import sys
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from experiments.common import ROUTE_VARIANTS as VARIANTS
-from experiments.common import cave_kind
+from experiments.common import add_ompl_log_argument, cave_kind, check_ompl_log
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
@@ -116,6 +120,27 @@ def against_oracle(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def write_ompl_log(args: argparse.Namespace, caves: list[dict[str, Any]], variants: list[str],
+                   result: dict[str, Any], started: datetime) -> Path:
+    """The run's OMPL benchmark log at args.ompl_log (a planner per variant)."""
+    from experiments.common import variant_config
+    from experiments.ompl_log import route_quality_log, write_log
+    from planning.config_io import config_to_dict
+
+    configs = {v: variant_config(v, args.time_limit) for v in variants
+               if v != "default-quarter"}
+    common = {v: {"variant": v, **({"footstep": config_to_dict(configs[v])} if v in configs
+                                   else {"footstep": "default, memo capped at a quarter of "
+                                                     "the default variant's most"})}
+              for v in variants}
+    limits = [c.time_limit for c in configs.values() if c.time_limit is not None]
+    memory = [c.search_memory_mb for c in configs.values() if c.search_memory_mb is not None]
+    log = route_quality_log(caves, variants, result["args"], common, result["machine"], started,
+                            result["wall_seconds"], time_limit=max(limits, default=0.0),
+                            memory_limit=max(memory, default=0.0))
+    return write_log(args.ompl_log, log)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.route_quality",
                                      description=__doc__.split("\n\n")[0])
@@ -136,7 +161,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="no search: compare the variants of these runs' files with the "
                              "oracle variant found in them, cave by cave, and print it (a "
                              "variant of a cave is taken from the first file that has it)")
+    add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
+    check_ompl_log(parser, args.ompl_log)
     if args.against_oracle:
         runs = [json.loads(Path(f).read_text()) for f in args.against_oracle]
         print(json.dumps(against_oracle(runs), indent=1))
@@ -152,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers > 1:  # a search per core
         os.environ.setdefault("RBP_THREADS", "1")
     caves: list[dict[str, Any]] = []
+    started = datetime.now(UTC)
     t0 = time.perf_counter()
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         for k, cave in enumerate(pool.imap(run_cave, jobs), 1):
@@ -169,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     tmp.replace(out)
     print(json.dumps(result["summary"], indent=1))
     print(f"wrote {out}")
+    if args.ompl_log:
+        print(f"wrote {write_ompl_log(args, caves, variants, result, started)}")
     if args.compare:
         compare(result, json.loads(Path(args.compare).read_text()))
     return EXIT_OK

@@ -23,7 +23,8 @@ LAYERS = ("rb_drake", "planning", "systems", "experiments", "rbp")  # lowest fir
 # What an experiment script may import from its own layer: the shared libraries, never another
 # experiment script (run one with `rbp experiment NAME`, or move what it shares into these). An
 # experiment that is a package (experiments/bench/) may import its own modules.
-EXPERIMENT_LIBRARIES = frozenset({"experiments", "experiments.common", "experiments.sweep"})
+EXPERIMENT_LIBRARIES = frozenset({"experiments", "experiments.common", "experiments.sweep",
+                                  "experiments.ompl_log"})
 
 
 def experiment_of(module: str) -> str:

@@ -239,3 +239,13 @@ def test_obj_and_stl_read_as_the_ply(tmp_path: Path) -> None:
         got = free_region(section_polygons(path, None, None, RESOLUTION, TOLERANCE))
         ratio = got.symmetric_difference(expected).area / expected.area
         assert ratio < 1e-3, f"{suffix}: differs from the PLY's section by {ratio:.2%}"
+
+
+def test_figure_is_written(tmp_path: Path) -> None:
+    from rb_drake.terrain.mesh_figure import section_figure
+
+    for kind, path in FILES.items():
+        out = section_figure(path, tmp_path / f"{kind}.png", compare=CLOUD_FILE, max_items=200)
+        data = out.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, f"{kind}: not a picture"
+    assert not list(tmp_path.glob(".*.tmp")), "a temporary file was left behind"

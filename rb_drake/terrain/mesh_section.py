@@ -147,7 +147,7 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
     if kind == "mesh":
         if side.min() >= 0.0 or side.max() <= 0.0:
             raise _error(path, "plane", where)
-        free = _mesh_free_space(path, scan, o, x2, y2, n)
+        free = _mesh_free_space(path, scan, o, x2, y2, n, where)
     else:
         near = np.abs(side) <= resolution
         if not near.any():
@@ -162,15 +162,15 @@ def _fmt(v: np.ndarray) -> str:
 
 
 def _mesh_free_space(path: Path, mesh: Any, o: np.ndarray, x2: np.ndarray, y2: np.ndarray,
-                     n: np.ndarray) -> BaseGeometry:
-    """The inside of the section's closed curves, even-odd."""
+                     n: np.ndarray, misses: str) -> BaseGeometry:
+    """The inside of the section's closed curves, even-odd; `misses` is the reason given
+    when there is no section (the plane passes between parts of the mesh, or grazes it)."""
     from shapely import make_valid
     from shapely.geometry import Polygon
 
     section = mesh.section(plane_origin=o, plane_normal=n)
     if section is None:
-        raise _error(path, "plane", f"the plane at origin {_fmt(o)} with normal {_fmt(n)} "
-                     "touches the mesh without crossing it")
+        raise _error(path, "plane", misses)
     open_curves = len(section.dangling)
     if open_curves:
         raise _error(path, "mesh", f"the section has {open_curves} open curve piece(s): the mesh "

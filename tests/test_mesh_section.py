@@ -249,3 +249,24 @@ def test_figure_is_written(tmp_path: Path) -> None:
         data = out.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, f"{kind}: not a picture"
     assert not list(tmp_path.glob(".*.tmp")), "a temporary file was left behind"
+
+
+def test_dense_cloud_is_thinned_and_still_agrees(tmp_path: Path) -> None:
+    import time
+
+    from rb_drake.terrain import mesh_section
+
+    mesh = lava_tube_mesh(SEED)
+    path = tmp_path / "dense.ply"
+    path.write_bytes(trimesh.PointCloud(lava_tube_cloud(mesh, SEED, 300_000)).export(
+        file_type="ply"))
+    points = trimesh.load(path).vertices
+    near = np.abs(points[:, 0] - mesh.bounds.mean(axis=0)[0]) <= RESOLUTION
+    assert near.sum() > mesh_section.THIN_ABOVE, "the cloud must be dense enough to be thinned"
+    start = time.perf_counter()
+    dense = free_region(section_polygons(path, None, None, RESOLUTION, TOLERANCE))
+    elapsed = time.perf_counter() - start
+    exact = free_region(section_polygons(MESH_FILE, None, None, RESOLUTION, TOLERANCE))
+    ratio = dense.symmetric_difference(exact).area / exact.area
+    assert ratio <= 0.04, f"the thinned cloud's section differs by {ratio:.1%} from the mesh's"
+    assert elapsed < 5.0, f"{near.sum()} points near the plane took {elapsed:.1f} s"

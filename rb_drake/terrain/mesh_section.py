@@ -48,6 +48,12 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply")
 DEFAULT_NORMAL = (1.0, 0.0, 0.0)  # a vertical plane; 2D (x, y) = world (y, z) from the origin
 MARGIN = 0.5  # m, rock kept around the free space's bounding box
 HULL_EDGE = 2.0  # a cloud's outline bridges gaps up to HULL_EDGE × resolution
+# A dense cloud is thinned to one point per square of THIN × resolution before its hull is
+# built (which moves the outline by at most 0.18 × resolution), so that the work stays bounded
+# by the section's size in units of resolution, not by the scanner's density.
+THIN_ABOVE = 20_000  # points near the plane
+THIN = 0.25
+MAX_HULL_POINTS = 500_000  # after thinning: a larger section needs a larger resolution
 
 
 def _error(path: Path, field: str, reason: str) -> RbpInputError:
@@ -153,6 +159,12 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
         if not near.any():
             raise _error(path, "plane", f"{where}: no point within {resolution:g} m of it")
         pts = np.stack([(vertices[near] - o) @ x2, (vertices[near] - o) @ y2], axis=1)
+        if len(pts) > THIN_ABOVE:
+            pts = _thin(pts, THIN * resolution)
+        if len(pts) > MAX_HULL_POINTS:
+            raise _error(path, "resolution", f"{len(pts):,} points near the plane even thinned "
+                         f"to one per {THIN * resolution:g} m square (at most "
+                         f"{MAX_HULL_POINTS:,}): a larger resolution takes fewer")
         free = _cloud_free_space(path, pts, HULL_EDGE * resolution)
     return rock_polygons(free, tolerance)
 
@@ -187,6 +199,13 @@ def _mesh_free_space(path: Path, mesh: Any, o: np.ndarray, x2: np.ndarray, y2: n
         raise _error(path, "mesh", "the section has no closed outline with an inside: the plane "
                      "only grazes the mesh")
     return free
+
+
+def _thin(pts: np.ndarray, cell: float) -> np.ndarray:
+    """One point of `pts` per square of side `cell` (the first in the input's order)."""
+    keys = np.floor((pts - pts.min(axis=0)) / cell).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return pts[np.sort(first)]
 
 
 def _cloud_free_space(path: Path, pts: np.ndarray, max_edge: float) -> BaseGeometry:

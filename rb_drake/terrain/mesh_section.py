@@ -49,8 +49,8 @@ DEFAULT_NORMAL = (1.0, 0.0, 0.0)  # a vertical plane; 2D (x, y) = world (y, z) f
 MARGIN = 0.5  # m, rock kept around the free space's bounding box
 HULL_EDGE = 2.0  # a cloud's outline bridges gaps up to HULL_EDGE × resolution
 # A dense cloud is thinned to one point per square of THIN × resolution before its hull is
-# built (which moves the outline by at most 0.18 × resolution), so that the work stays bounded
-# by the section's size in units of resolution, not by the scanner's density.
+# built (which moves the outline by at most a square's diagonal, 0.35 × resolution), so that
+# the work grows with the section's size in units of resolution, not with the scan's density.
 THIN_ABOVE = 20_000  # points near the plane
 THIN = 0.25
 MAX_HULL_POINTS = 500_000  # after thinning: a larger section needs a larger resolution

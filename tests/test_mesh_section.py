@@ -203,6 +203,7 @@ def test_bad_plane_and_numbers() -> None:
     assert ": resolution: " in refusal(CLOUD_FILE, resolution=0.0)
     assert ": tolerance: " in refusal(MESH_FILE, tolerance=-1.0)
     assert ": tolerance: " in refusal(MESH_FILE, tolerance=float("nan"))
+    assert ": resolution: " in refusal(MESH_FILE, resolution=True)  # a flag, not metres
 
 
 def test_garbage_empty_and_unknown_files(tmp_path: Path) -> None:
@@ -216,6 +217,15 @@ def test_garbage_empty_and_unknown_files(tmp_path: Path) -> None:
     other.write_text("1 2 3\n")
     assert ": mesh: unknown format '.xyz'" in refusal(other)
     assert ": (file): no such file" in refusal(tmp_path / "missing.obj")
+    # headers that promise billions of elements in a few bytes: refused, not allocated
+    lying_stl = tmp_path / "lying.stl"
+    lying_stl.write_bytes(b"\0" * 80 + (4_000_000_000).to_bytes(4, "little") + b"\0" * 100)
+    assert ": mesh: not a readable STL file" in refusal(lying_stl)
+    lying_ply = tmp_path / "lying.ply"
+    lying_ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
+                          b"property float x\nproperty float y\nproperty float z\nend_header\n"
+                          + bytes(36))
+    assert ": mesh: not a readable PLY file" in refusal(lying_ply)
     assert "is a directory" in refusal(tmp_path)
 
 

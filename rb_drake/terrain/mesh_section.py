@@ -106,7 +106,9 @@ def load_scan(path: Path) -> tuple[str, Any]:
         if isinstance(loaded, trimesh.Scene):
             loaded = loaded.to_geometry() if loaded.geometry else None
     except Exception as e:  # trimesh's readers raise whatever their parsers raise
-        detail = " ".join(str(e).split())[:200] or type(e).__name__
+        # an ImportError is trimesh trying an optional decoder on bytes that are not a mesh
+        detail = ("" if isinstance(e, ImportError) else " ".join(str(e).split())[:200]
+                  ) or "its content does not parse"
         raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {detail}") from None
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
@@ -135,7 +137,8 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
     """
     path = Path(path)
     for name, value in (("resolution", resolution), ("tolerance", tolerance)):
-        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+        if not (isinstance(value, int | float) and not isinstance(value, bool)
+                and math.isfinite(value) and value > 0):
             raise _error(path, name, f"must be a positive number of metres, got {value!r}")
     n_raw = _vec(DEFAULT_NORMAL if normal is None else normal, path, "normal")
     if np.linalg.norm(n_raw) < 1e-12:

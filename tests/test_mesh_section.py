@@ -280,3 +280,12 @@ def test_dense_cloud_is_thinned_and_still_agrees(tmp_path: Path) -> None:
     ratio = dense.symmetric_difference(exact).area / exact.area
     assert ratio <= 0.04, f"the thinned cloud's section differs by {ratio:.1%} from the mesh's"
     assert elapsed < 5.0, f"{near.sum()} points near the plane took {elapsed:.1f} s"
+
+
+def test_obj_naming_other_files_does_not_open_them(tmp_path: Path) -> None:
+    # an OBJ's `mtllib` is not followed: /dev/zero would never end
+    mesh = trimesh.load(MESH_FILE)
+    path = tmp_path / "tube.obj"
+    path.write_text("mtllib /dev/zero\n" + mesh.export(file_type="obj"))
+    rock = section_polygons(path, None, None, RESOLUTION, TOLERANCE)
+    check_polygons(rock)

@@ -31,7 +31,10 @@ the erosion leak into the cave).
 from __future__ import annotations
 
 import heapq
+import io
 import math
+import os
+import stat
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -88,7 +91,7 @@ def load_scan(path: Path) -> tuple[str, Any]:
     RbpInputError naming the file ("mesh" field) and the reason."""
     path = Path(path)
     try:
-        check_input_file(path)
+        check_input_file(path)  # a missing file or a directory, before its name's suffix
     except InputFileError as e:
         raise _error(path, e.field, e.reason) from None
     suffix = path.suffix.lower()
@@ -100,9 +103,11 @@ def load_scan(path: Path) -> tuple[str, Any]:
     except ImportError:
         raise _error(path, "mesh", "reading meshes needs the optional package trimesh "
                      "(pip install trimesh)") from None
+    data = _read_bytes(path)
     try:
-        # resolver=None: an OBJ's material files are not looked up (only geometry matters)
-        loaded: Any = trimesh.load(str(path), file_type=suffix[1:], resolver=None)
+        # from memory, without a resolver: the files an OBJ names (materials, textures) are
+        # not opened, so a hostile `mtllib /dev/zero` cannot hang the reader
+        loaded: Any = trimesh.load(io.BytesIO(data), file_type=suffix[1:], resolver=None)
         if isinstance(loaded, trimesh.Scene):
             loaded = loaded.to_geometry() if loaded.geometry else None
     except Exception as e:  # trimesh's readers raise whatever their parsers raise
@@ -119,6 +124,25 @@ def load_scan(path: Path) -> tuple[str, Any]:
     if isinstance(loaded, trimesh.Trimesh) and len(faces) > 0:
         return "mesh", loaded
     return "cloud", vertices
+
+
+def _read_bytes(path: Path) -> bytes:
+    """The bytes of a regular file within the input size limit (rb_drake.input_files)."""
+    try:
+        limit = check_input_file(path)
+        # O_NONBLOCK: should the path become a FIFO after the check, open returns at once
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise InputFileError("(file)", "is not a regular file")
+            data = f.read(limit + 1)
+    except InputFileError as e:
+        raise _error(path, e.field, e.reason) from None
+    except OSError as e:
+        raise _error(path, "(file)", f"cannot read: {e.strerror or e}") from None
+    if len(data) > limit:
+        raise _error(path, "(file)", "grew past the input size limit while being read")
+    return data
 
 
 def section_polygons(path: Path, origin: tuple[float, float, float] | None,

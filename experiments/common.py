@@ -254,7 +254,8 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
-            "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter")
+            "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
+            "whole")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -269,7 +270,8 @@ def variant_config(variant: str, time_limit: float | None):
     start), "repair" (the first route repaired window by window: planning.route_repair) and
     "default-repair" (today's default, then repaired); "default-quarter" is today's default with
     its memo capped at a quarter of the most the "default" variant kept on the same cave
-    (`route_variants`: run "default" first)."""
+    (`route_variants`: run "default" first); "whole" is today's default with every climb searched
+    whole (no segments: planning.segmented)."""
     from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
@@ -292,6 +294,7 @@ def variant_config(variant: str, time_limit: float | None):
                       "heuristic_weight": 1.0},
         "repair": {"anytime": None, "repair": RepairConfig()},
         "default-repair": {"repair": RepairConfig()},
+        "whole": {"segments": None},
     }
     return FootstepConfig(**table[variant])
 

@@ -52,6 +52,7 @@ from planning.search_cost import (
     goal_distance,
 )
 from planning.search_outcome import Quality, Stop
+from planning.segmented import SegmentConfig, segmented_search
 from planning.transition import (
     ReleaseSet,
     Transition,
@@ -92,6 +93,10 @@ class FootstepConfig:
     # complete search only: the route improved window by window, each window searched to its
     # optimum (planning.route_repair); None: the route as the search found it
     repair: RepairConfig | None = None
+    # complete search with a budget (not --thorough, not min_success): a long climb searched in
+    # segments a few metres ahead (planning.segmented), so that its work and its regrasps grow
+    # with its length; None: every climb searched whole
+    segments: SegmentConfig | None = dataclasses.field(default_factory=SegmentConfig)
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
     # complete search: at most this many MiB of lattice work kept for reuse (components and
@@ -361,6 +366,14 @@ def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], b
     return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)
 
 
+def segmented(cfg: FootstepConfig) -> bool:
+    """Whether `cfg` searches a long climb in segments: a budgeted anytime search (the oracle,
+    `--thorough`, and `min_success` search the whole climb for their proofs)."""
+    return (cfg.segments is not None and cfg.max_expansions is not None
+            and cfg.min_success is None and cfg.anytime is not None
+            and cfg.anytime.improve_factor is not None)
+
+
 def expansion_budget(scn: Scenario, cfg: FootstepConfig) -> int | None:
     """The complete search's expansion budget on `scn`: max_expansions, or more for a long
     climb (`expansions_per_metre` times the start's distance to the goal)."""
@@ -377,17 +390,23 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     """plan_footsteps through the complete search (planning.complete)."""
     t0 = time.perf_counter()
     start_pose = np.asarray(scn.start_pose, dtype=float)
+    asked = cfg
     cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
     memo.lattice.set_memory(cfg.search_memory_mb)
     if cfg.min_success is not None:
         result = constrained_search(scn, cfg.min_success, cfg.complete_config(),
                                     exclude=exclude, memo=memo.lattice, progress=progress)
+    elif segmented(asked):
+        assert asked.segments is not None
+        result = segmented_search(scn, asked.complete_config(), asked.segments,
+                                  lambda part: expansion_budget(part, asked), exclude=exclude,
+                                  memo=memo.lattice, progress=progress)
     else:
         result = complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
                                  progress=progress)
-        if cfg.repair is not None and result.success:
-            result = repair_route(scn, result, memo.lattice, cfg.repair,
-                                  cfg.transition.ignore_grasps, exclude)
+    if cfg.min_success is None and cfg.repair is not None and result.success:
+        result = repair_route(scn, result, memo.lattice, cfg.repair,
+                              cfg.transition.ignore_grasps, exclude)
     search = search_result(result)
     peak, kept = _memory(memo)
     explored = [Explored(v[0], np.asarray(p, dtype=float), k, goal_distance(scn, v[0]))

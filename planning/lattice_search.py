@@ -84,10 +84,10 @@ class LatticeMemo:
             self.config = cfg
         elif self.config != cfg:
             raise ValueError(f"a memo of lattice {self.config} cannot serve lattice {cfg}")
-        if self._scn is not None and (self._scn is not scn
+        if self._scn is not None and (not same_world(self._scn, scn)
                                       or self._ignore_grasps != ignore_grasps):
-            raise ValueError("a memo serves the searches of one scenario, with or without "
-                             "grasps, not both")
+            raise ValueError("a memo serves the searches of one scenario (its start and goal "
+                             "may differ), with or without grasps, not both")
         self._scn, self._ignore_grasps = scn, ignore_grasps
 
     def stats(self) -> dict[str, dict[str, float]]:
@@ -114,6 +114,13 @@ class LatticeMemo:
         stance, comp, boom, anchor = key
         lat = self.components[stance].components[comp]
         return lattice_transition(scn, lat, stance, boom, anchor, self._ignore_grasps)
+
+
+def same_world(a: Scenario, b: Scenario) -> bool:
+    """Whether two scenarios share what a memo's lattice work depends on (rock, anchors, robot,
+    gravity): searches of one cave to different goals or from different starts may share it."""
+    return a is b or (a.walls is b.walls and a.anchors is b.anchors and a.robot == b.robot
+                      and tuple(a.gravity) == tuple(b.gravity))
 
 
 class CompleteResult(NamedTuple):

@@ -1,0 +1,239 @@
+"""A scenario from rock polygons (an imported drawing or a mesh's section): anchors placed on the
+rock's surface by the generator's rules (`rb_drake.generate.place_anchors`), a start stance at
+the lowest place the robot can hang from and a goal at the top of the free space it can get to.
+
+The scenario's walls must be simple polygons, so rock with holes (a tunnel's section: rock all
+round a free tube) is cut into simple pieces through each hole; anchors come from the rock's
+true outline, never from those cuts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from rb_drake.collision import Rock, polygon_is_simple
+from rb_drake.errors import RbpInputError
+from rb_drake.generate import (
+    CaveConfig,
+    Surface,
+    best_stance,
+    ccw,
+    place_anchors,
+    with_start_stance,
+)
+from rb_drake.params import NUM_BOOMS, RobotParams
+from rb_drake.scenario import Scenario, scenario_from_dict
+
+if TYPE_CHECKING:
+    from shapely.geometry import Polygon
+
+MAX_ANCHORS = 5000     # anchors in one cave: the planner's tables grow with their square
+GRID_CELLS = 40_000    # candidate body positions for the start and the goal, at most
+GRID_STEP = 0.1        # m between candidate body positions (coarser if the cave is large)
+START_TRIES = 60       # the lowest candidates tried for a start stance ...
+PER_ROW = 2            # ... at most this many at each height
+GOAL_TOLERANCE = 0.5   # m, as the generator's caves
+DECIMALS = 4           # wall coordinates are rounded as the generator rounds them
+
+
+def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig | None = None,
+                       robot: RobotParams | None = None,
+                       start: tuple[float, float] | None = None,
+                       goal: tuple[float, float] | None = None,
+                       name: str = "imported", source: str = "<imported>") -> Scenario:
+    """A cave of the rock `rock` (shapely Polygons in metres, up = +y). Anchors are placed as
+    the generator places them (config's density, normal noise and limit-surface ranges) from
+    `seed`: the same rock and seed, the same cave. `start` (x, y) is the body's position to
+    hang from (a feasible stance at or near it), chosen when None: the lowest free position
+    with a feasible stance. `goal` (x, y) is chosen when None: the highest free position the
+    body can get to from the start (through free space) with an anchor in reach of each boom.
+    Raises RbpInputError (file `source`) when the rock makes no cave."""
+    from shapely import union_all
+
+    cfg = config or CaveConfig()
+    robot = robot or RobotParams()
+    solid = [p for p in _polygons(union_all(rock)) if p.area > 0]
+    if not solid:
+        raise RbpInputError("no rock to climb", file=source)
+    perimeter = sum(p.length for p in solid)
+    if perimeter * cfg.anchor_density > MAX_ANCHORS:
+        raise RbpInputError(f"{perimeter:.0f} m of rock surface at {cfg.anchor_density:g} "
+                            f"anchors per metre is more than {MAX_ANCHORS} anchors; lower "
+                            "--anchor-density or import a smaller section", file=source)
+    walls = _walls(solid, source)
+    surfaces = _surfaces(solid)
+    rng = np.random.default_rng(seed)
+    anchors = place_anchors(rng, cfg, surfaces, Rock(walls))
+    if len(anchors) < NUM_BOOMS:
+        raise RbpInputError(f"only {len(anchors)} anchors on {perimeter:.2f} m of rock surface "
+                            f"(the robot needs {NUM_BOOMS}); raise --anchor-density", file=source)
+    scn = Scenario(name=name, gravity=cfg.gravity, robot=robot, walls=tuple(walls),
+                   anchors=tuple(anchors), start_pose=(0.0, 0.0, 0.0), start_stance=("",) * 4,
+                   goal_position=(0.0, 0.0), goal_tolerance=GOAL_TOLERANCE, source=source,
+                   robot_overrides={} if robot == RobotParams() else robot.to_dict())
+    grid = _Grid(scn)
+    if start is not None:
+        started = with_start_stance(scn, np.array([start[0], start[1], 0.0]))
+        if started is None:
+            raise RbpInputError(f"no feasible stance for the body at or near ({start[0]:g}, "
+                                f"{start[1]:g}): give a free position with anchors in reach of "
+                                "all four booms", file=source, field="--start")
+    else:
+        started = _lowest_start(scn, grid)
+    if goal is None:
+        goal = _highest_goal(started, grid, source)
+    scn = dataclasses.replace(started, goal_position=(float(goal[0]), float(goal[1])))
+    # the file's own checks (simple counter-clockwise walls, anchors on them, goal in free
+    # space, the start stance holding the robot) on what will be written
+    return scenario_from_dict(scn.to_dict(), source)
+
+
+def _polygons(geometry: object) -> list[Polygon]:
+    from shapely.geometry import Polygon
+
+    if isinstance(geometry, Polygon):
+        return [geometry]
+    return [g for g in getattr(geometry, "geoms", ()) if isinstance(g, Polygon)]
+
+
+def _surfaces(solid: list[Polygon]) -> list[Surface]:
+    """Every ring of the rock, oriented so that rock is on its left: outward is to the right."""
+    from shapely.geometry.polygon import orient
+
+    surfaces = []
+    for poly in solid:
+        poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise
+        for ring in (poly.exterior, *poly.interiors):
+            surfaces.append(Surface(np.asarray(ring.coords, dtype=float), -1))
+    return surfaces
+
+
+def _walls(solid: list[Polygon], source: str) -> list[np.ndarray]:
+    """Simple counter-clockwise polygons (numpy, rounded) covering the rock."""
+    walls = []
+    for piece in (p for poly in solid for p in _without_holes(poly)):
+        pts = np.round(np.asarray(piece.exterior.coords, dtype=float)[:-1], DECIMALS)
+        keep = np.any(pts != np.roll(pts, 1, axis=0), axis=1)  # repeats rounding made
+        pts = pts[keep]
+        simple, why = polygon_is_simple(pts) if len(pts) >= 3 else (False, "too small")
+        if not simple:
+            x, y = piece.representative_point().coords[0]
+            raise RbpInputError(f"the rock near ({x:.2f}, {y:.2f}) is not simple at "
+                                f"{10 ** -DECIMALS:g} m resolution ({why}); give --simplify "
+                                "to smooth it", file=source)
+        walls.append(ccw(pts))
+    return walls
+
+
+def _without_holes(poly: Polygon) -> list[Polygon]:
+    """`poly` cut into pieces without holes by vertical lines through its holes."""
+    from shapely.geometry import LineString
+    from shapely.ops import split
+
+    if not poly.interiors:
+        return [poly]
+    hole = poly.interiors[0].bounds
+    x = 0.5 * (hole[0] + hole[2])  # a vertical line here crosses the hole
+    lo, hi = poly.bounds[1] - 1.0, poly.bounds[3] + 1.0
+    pieces = split(poly, LineString([(x, lo), (x, hi)]))
+    return [q for piece in _polygons(pieces) for q in _without_holes(piece)]
+
+
+class _Grid:
+    """Candidate body positions (angle 0) on a grid over the anchors: which are free of rock
+    and have an anchor in reach of each boom."""
+
+    def __init__(self, scn: Scenario):
+        from rb_drake.feasibility import body_in_rock
+
+        pos = scn.anchor_positions
+        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        area = float(np.prod(np.maximum(hi - lo, GRID_STEP)))
+        self.step = max(GRID_STEP, math.sqrt(area / GRID_CELLS))
+        nx, ny = (np.floor((hi - lo) / self.step).astype(int) + 1)
+        xs = np.round(lo[0] + self.step * np.arange(nx), DECIMALS)
+        ys = np.round(lo[1] + self.step * np.arange(ny), DECIMALS)
+        self.shape = (ny, nx)
+        gx, gy = np.meshgrid(xs, ys)
+        self.points = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        poses = np.column_stack([self.points, np.zeros(len(self.points))])
+        self.free = ~body_in_rock(scn.robot, scn.rock, poses)
+        self.free &= ~scn.rock.contains(self.points)  # a body wholly inside rock
+        self.holdable = np.zeros(len(self.points), dtype=bool)
+        self.holdable[self.free] = _anchor_for_each_boom(scn, poses[self.free])
+
+
+def _anchor_for_each_boom(scn: Scenario, poses: np.ndarray) -> np.ndarray:
+    """Whether each pose has some anchor within reach of every boom (kinematics only)."""
+    from scipy.spatial import cKDTree
+
+    from rb_drake import geometry
+
+    out = np.zeros(len(poses), dtype=bool)
+    tree = cKDTree(scn.anchor_positions)
+    for k, near in enumerate(tree.query_ball_point(poses[:, :2], scn.robot.max_reach)):
+        if len(near) < NUM_BOOMS:
+            continue
+        idx = np.array(near)
+        ok = True
+        for i in range(NUM_BOOMS):
+            r = geometry.reach(scn.robot, poses[k], scn.anchor_positions[idx],
+                               np.full(len(idx), i))
+            if not (r.violation[0] == 0.0).any():
+                ok = False
+                break
+        out[k] = ok
+    return out
+
+
+def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
+    """`scn` with the most robust stance near the lowest candidate that has a feasible one.
+
+    Candidates are screened row by row from the bottom, the few nearest the middle of each row,
+    with two anchors per boom (a quarter of a second each); the first that holds is searched
+    fully, as the generator searches its start (`with_start_stance`)."""
+    idx = np.flatnonzero(grid.holdable)
+    centre = float(np.mean(grid.points[idx, 0])) if len(idx) else 0.0
+    order = idx[np.lexsort((np.abs(grid.points[idx, 0] - centre), grid.points[idx, 1]))]
+    rows = grid.points[order, 1]
+    rank = np.zeros(len(order), dtype=int)  # place of each candidate within its row
+    for k in range(1, len(order)):
+        rank[k] = rank[k - 1] + 1 if rows[k] == rows[k - 1] else 0
+    tried = order[rank < PER_ROW][:START_TRIES]
+    for k in tried:
+        pose = np.array([*grid.points[k], 0.0])
+        if best_stance(scn, pose, per_boom=2) is not None:
+            started = with_start_stance(scn, pose)
+            if started is not None:
+                return started
+    raise RbpInputError(f"no feasible start stance at the {len(tried)} lowest free positions "
+                        "with anchors in reach; give --start X Y, or raise --anchor-density",
+                        file=scn.source)
+
+
+def _highest_goal(scn: Scenario, grid: _Grid, source: str) -> tuple[float, float]:
+    """The highest holdable candidate reached from the start through free candidates."""
+    from scipy import ndimage
+
+    labels, _ = ndimage.label(grid.free.reshape(grid.shape))
+    flat = labels.ravel()
+    start = np.array(scn.start_pose[:2])
+    free = np.flatnonzero(grid.free)
+    home = free[np.argmin(np.linalg.norm(grid.points[free] - start, axis=1))]
+    reachable = np.flatnonzero(grid.holdable & (flat == flat[home]))
+    if not len(reachable):
+        raise RbpInputError("no free position to climb to from the start; give --goal X Y",
+                            file=source)
+    top = grid.points[reachable, 1].max()
+    level = reachable[grid.points[reachable, 1] >= top - 1e-9]
+    k = level[np.argmin(np.abs(grid.points[level, 0] - start[0]))]
+    goal = grid.points[k]
+    if goal[1] - start[1] <= GOAL_TOLERANCE:
+        raise RbpInputError(f"nothing to climb: the highest free position with anchors in reach "
+                            f"({goal[1]:.2f} m) is within {GOAL_TOLERANCE:g} m of the start's "
+                            f"height ({start[1]:.2f} m); give --goal X Y", file=source)
+    return round(float(goal[0]), DECIMALS), round(float(goal[1]), DECIMALS)

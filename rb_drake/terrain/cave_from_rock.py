@@ -17,6 +17,7 @@ import numpy as np
 
 from rb_drake.collision import Rock, polygon_is_simple
 from rb_drake.errors import RbpInputError
+from rb_drake.feasibility import body_in_rock
 from rb_drake.generate import (
     CaveConfig,
     Surface,
@@ -75,16 +76,22 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
                    anchors=tuple(anchors), start_pose=(0.0, 0.0, 0.0), start_stance=("",) * 4,
                    goal_position=(0.0, 0.0), goal_tolerance=GOAL_TOLERANCE, source=source,
                    robot_overrides={} if robot == RobotParams() else robot.to_dict())
-    grid = _Grid(scn)
+    grid = _Grid(scn) if start is None or goal is None else None
     if start is not None:
-        started = with_start_stance(scn, np.array([start[0], start[1], 0.0]))
+        pose = np.array([start[0], start[1], 0.0])
+        if body_in_rock(robot, scn.rock, pose[None])[0] or scn.rock.contains(pose[:2]):
+            raise RbpInputError(f"the body at ({start[0]:g}, {start[1]:g}) meets rock: give a "
+                                "position in free space", file=source, field="--start")
+        started = with_start_stance(scn, pose)
         if started is None:
             raise RbpInputError(f"no feasible stance for the body at or near ({start[0]:g}, "
                                 f"{start[1]:g}): give a free position with anchors in reach of "
                                 "all four booms", file=source, field="--start")
     else:
+        assert grid is not None
         started = _lowest_start(scn, grid)
     if goal is None:
+        assert grid is not None
         goal = _highest_goal(started, grid, source)
     scn = dataclasses.replace(started, goal_position=(float(goal[0]), float(goal[1])))
     # the file's own checks (simple counter-clockwise walls, anchors on them, goal in free
@@ -148,8 +155,6 @@ class _Grid:
     and have an anchor in reach of each boom."""
 
     def __init__(self, scn: Scenario):
-        from rb_drake.feasibility import body_in_rock
-
         pos = scn.anchor_positions
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         area = float(np.prod(np.maximum(hi - lo, GRID_STEP)))

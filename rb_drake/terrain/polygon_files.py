@@ -76,7 +76,7 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
     factor = UNITS[unit] * scale
     try:
         polygons, even_odd = readers[suffix](text, factor)
-    except _Refusal as e:
+    except _ReadError as e:
         raise RbpInputError(e.reason, file=name, field=e.where) from None
     if not polygons:
         raise RbpInputError("no rock: the file holds no closed outline", file=name)
@@ -84,7 +84,7 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
     return _finish(rock, name, simplify)
 
 
-class _Refusal(Exception):
+class _ReadError(Exception):
     """A reader's complaint: where in the file (`where`, or None for the file) and why."""
 
     def __init__(self, where: str | None, reason: str):
@@ -94,29 +94,33 @@ class _Refusal(Exception):
 
 
 def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
-    """A valid polygon from rings already in metres, or a _Refusal saying why not."""
+    """A valid polygon from rings already in metres, or a _ReadError saying why not."""
     from shapely.geometry import Polygon
     from shapely.validation import explain_validity
 
     for ring in (shell, *holes):
         if len({(round(x, 9), round(y, 9)) for x, y in ring}) < 3:
-            raise _Refusal(where, "fewer than 3 distinct points; rock must enclose an area")
+            raise _ReadError(where, "fewer than 3 distinct points; rock must enclose an area")
         if any(abs(v) > MAX_COORDINATE for p in ring for v in p):
-            raise _Refusal(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
+            raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
                            "and --scale")
     poly = Polygon(shell, holes)
     if not poly.is_valid:
-        raise _Refusal(where, f"not a simple outline: {explain_validity(poly).lower()}")
+        raise _ReadError(where, f"not a simple outline: {explain_validity(poly).lower()}")
     if poly.area <= 0:
-        raise _Refusal(where, "encloses no area")
+        raise _ReadError(where, "encloses no area")
     return poly
 
 
 def _combine(polygons: list[Polygon], even_odd: bool) -> list[Polygon]:
     """Overlapping rock merged (GeoJSON), or outlines nested by the even-odd rule (DXF, SVG)."""
-    from shapely import symmetric_difference_all, union_all
+    from shapely import union_all
 
-    merged = symmetric_difference_all(polygons) if even_odd else union_all(polygons)
+    if not even_odd:
+        return _parts(union_all(polygons))
+    merged = polygons[0]  # shapely's symmetric_difference_all is deprecated as wrong
+    for poly in polygons[1:]:
+        merged = merged.symmetric_difference(poly)
     return _parts(merged)
 
 
@@ -161,7 +165,7 @@ def _closed(ring: Ring, tolerance: float) -> bool:
 def _count_vertices(total: list[int], ring: Ring) -> None:
     total[0] += len(ring)
     if total[0] > MAX_VERTICES:
-        raise _Refusal(None, f"more than {MAX_VERTICES} outline vertices; simplify the "
+        raise _ReadError(None, f"more than {MAX_VERTICES} outline vertices; simplify the "
                        "drawing first")
 
 
@@ -173,11 +177,11 @@ def _geojson(text: str, factor: float) -> tuple[list[Polygon], bool]:
     try:
         data = load_json(text)
     except json.JSONDecodeError as e:
-        raise _Refusal(f"line {e.lineno}, column {e.colno}", f"not JSON: {e.msg}") from None
+        raise _ReadError(f"line {e.lineno}, column {e.colno}", f"not JSON: {e.msg}") from None
     except RecursionError:
-        raise _Refusal(None, "nested too deeply to be GeoJSON") from None
+        raise _ReadError(None, "nested too deeply to be GeoJSON") from None
     except InputFileError as e:
-        raise _Refusal(e.field, e.reason) from None
+        raise _ReadError(e.field, e.reason) from None
     polygons: list[Polygon] = []
     total = [0]
     for where, geometry in _geometries(data, "(top level)"):
@@ -188,12 +192,12 @@ def _geojson(text: str, factor: float) -> tuple[list[Polygon], bool]:
 def _geometries(data: Any, where: str, depth: int = 0) -> Iterator[tuple[str, Any]]:
     """(where, geometry object) for each geometry of a GeoJSON object."""
     if not isinstance(data, dict):
-        raise _Refusal(where, f"expected a GeoJSON object, got {type(data).__name__}")
+        raise _ReadError(where, f"expected a GeoJSON object, got {type(data).__name__}")
     kind = data.get("type")
     if kind == "FeatureCollection":
         features = data.get("features")
         if not isinstance(features, list):
-            raise _Refusal(where, "a FeatureCollection needs a list 'features'")
+            raise _ReadError(where, "a FeatureCollection needs a list 'features'")
         for k, feature in enumerate(features):
             yield from _geometries(feature, f"features[{k}]", depth + 1)
     elif kind == "Feature":
@@ -202,16 +206,16 @@ def _geometries(data: Any, where: str, depth: int = 0) -> Iterator[tuple[str, An
     elif kind == "GeometryCollection" and depth < 8:
         members = data.get("geometries")
         if not isinstance(members, list):
-            raise _Refusal(where, "a GeometryCollection needs a list 'geometries'")
+            raise _ReadError(where, "a GeometryCollection needs a list 'geometries'")
         for k, member in enumerate(members):
             yield from _geometries(member, f"{_prefix(where)}geometries[{k}]", depth + 1)
     elif kind in ("Polygon", "MultiPolygon", "LineString", "MultiLineString"):
         yield where, data
     elif kind in ("Point", "MultiPoint"):
-        raise _Refusal(where, f"a {kind} has no area; rock must be a Polygon or a closed "
+        raise _ReadError(where, f"a {kind} has no area; rock must be a Polygon or a closed "
                        "LineString")
     else:
-        raise _Refusal(where, f"unknown GeoJSON type {kind!r}; expected a Feature, "
+        raise _ReadError(where, f"unknown GeoJSON type {kind!r}; expected a Feature, "
                        "FeatureCollection, Polygon, MultiPolygon or closed LineString")
 
 
@@ -240,7 +244,7 @@ def _geojson_geometry(geometry: dict, where: str, factor: float,
         at = field if kind == "LineString" else f"{field}[{k}]"
         ring = _ring(line, at, factor, total)
         if not _closed(ring, 1e-9):
-            raise _Refusal(at, f"open {kind} (its last point is not its first); rock must be "
+            raise _ReadError(at, f"open {kind} (its last point is not its first); rock must be "
                            "closed")
         out.append(_polygon(ring, [], at))
     return out
@@ -248,7 +252,7 @@ def _geojson_geometry(geometry: dict, where: str, factor: float,
 
 def _list(value: Any, field: str) -> list:
     if not isinstance(value, list) or not value:
-        raise _Refusal(field, f"expected a non-empty list, got {_describe(value)}")
+        raise _ReadError(field, f"expected a non-empty list, got {_describe(value)}")
     return value
 
 
@@ -256,7 +260,7 @@ def _rings(value: Any, field: str, factor: float, total: list[int]) -> list[Ring
     rings = [_ring(r, f"{field}[{k}]", factor, total) for k, r in enumerate(_list(value, field))]
     for k, ring in enumerate(rings):
         if not _closed(ring, 1e-9):
-            raise _Refusal(f"{field}[{k}]", "open ring (its last point is not its first); rock "
+            raise _ReadError(f"{field}[{k}]", "open ring (its last point is not its first); rock "
                            "must be closed")
     return rings
 
@@ -268,7 +272,7 @@ def _ring(value: Any, field: str, factor: float, total: list[int]) -> Ring:
         if (not isinstance(p, list) or len(p) < 2
                 or not all(isinstance(v, int | float) and not isinstance(v, bool)
                            and math.isfinite(v) for v in p[:2])):
-            raise _Refusal(f"{field}[{k}]", f"expected a position [x, y], got {_describe(p)}")
+            raise _ReadError(f"{field}[{k}]", f"expected a position [x, y], got {_describe(p)}")
         ring.append(p)
     scaled = _scaled(iter(ring), factor)
     _count_vertices(total, scaled)
@@ -293,30 +297,31 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
     try:
         doc = ezdxf.read(io.StringIO(text))
     except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
-        raise _Refusal(None, f"not a DXF drawing: {e}") from None
+        raise _ReadError(None, f"not a DXF drawing: {e}") from None
     polygons: list[Polygon] = []
     others: dict[str, int] = {}
     total = [0]
+    entity: Any  # LWPOLYLINE and POLYLINE have what a DXFGraphic lacks
     for k, entity in enumerate(doc.modelspace(), start=1):
         kind = entity.dxftype()
         where = f"entity {k} ({kind}, handle {entity.dxf.handle})"
         if kind == "POLYLINE" and (entity.is_poly_face_mesh or entity.is_polygon_mesh):
-            raise _Refusal(where, "a mesh, not an outline; rock must be closed 2D polylines")
+            raise _ReadError(where, "a mesh, not an outline; rock must be closed 2D polylines")
         if kind not in ("LWPOLYLINE", "POLYLINE"):
             others[kind] = others.get(kind, 0) + 1
             continue
         if not entity.is_closed:
-            raise _Refusal(where, "open polyline; rock must be closed")
+            raise _ReadError(where, "open polyline; rock must be closed")
         try:  # arcs (bulges) become short chords
             points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
         except Exception as e:  # a malformed entity
-            raise _Refusal(where, f"cannot be read: {e}") from None
-        ring = _scaled((p[:2] for p in points), factor)
+            raise _ReadError(where, f"cannot be read: {e}") from None
+        ring = _scaled(((p.x, p.y) for p in points), factor)
         _count_vertices(total, ring)
         polygons.append(_polygon(ring, [], where))
     if not polygons and others:
         found = ", ".join(f"{n} {kind}" for kind, n in sorted(others.items()))
-        raise _Refusal(None, f"no closed LWPOLYLINE or POLYLINE (found {found}); rock must be "
+        raise _ReadError(None, f"no closed LWPOLYLINE or POLYLINE (found {found}); rock must be "
                        "closed polylines")
     return polygons, True
 
@@ -333,9 +338,9 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
     try:
         svg = se.SVG.parse(io.StringIO(text))
     except Exception as e:  # xml.etree's ParseError, or svgelements' own on odd attributes
-        raise _Refusal(None, f"not an SVG drawing: {e}") from None
+        raise _ReadError(None, f"not an SVG drawing: {e}") from None
     if not isinstance(svg, se.SVG):
-        raise _Refusal(None, "not an SVG drawing: no <svg> element")
+        raise _ReadError(None, "not an SVG drawing: no <svg> element")
     # svgelements maps the viewBox to pixels; undo it, so that --unit names the user unit
     viewport = se.Matrix(svg.viewbox_transform) if svg.viewbox_transform else se.Matrix()
     to_user = ~viewport
@@ -352,7 +357,7 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
             if len(ring) < 2:
                 continue  # a lone moveto draws nothing
             if not closed:
-                raise _Refusal(where, "open path; rock must be closed (end it with Z)")
+                raise _ReadError(where, "open path; rock must be closed (end it with Z)")
             _count_vertices(total, ring)
             polygons.append(_polygon(ring, [], where))
     return polygons, True

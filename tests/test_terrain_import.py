@@ -225,3 +225,12 @@ def test_cli_writes_the_command_and_a_checked_scenario(tmp_path):
     check = run_rbp("scenario", "check", str(out), cwd=tmp_path)
     assert check.returncode == 0, check.stderr
     assert "ok: lava" in check.stdout, check.stdout
+
+
+def test_example_cave_has_a_climb():
+    """The example is a cave to climb: the footstep search finds a route to the chosen goal
+    (about 8 s; the start and the goal are the importer's own choice)."""
+    import rbp
+
+    plan = rbp.plan(example_cave(), footsteps_only=True)
+    assert plan.success, f"no route up the imported example: {plan.reason}"

@@ -1,6 +1,7 @@
 """A scenario from rock polygons (an imported drawing or a mesh's section): anchors placed on the
 rock's surface by the generator's rules (`rb_drake.generate.place_anchors`), a start stance at
-the lowest place the robot can hang from and a goal at the top of the free space it can get to.
+the lowest place the robot can hang from and a goal at the top of the free space it can get to,
+with rock above it for the upper booms.
 
 The scenario's walls must be simple polygons, so rock with holes (a tunnel's section: rock all
 round a free tube) is cut into simple pieces through each hole; anchors come from the rock's
@@ -38,6 +39,8 @@ GRID_STEP = 0.1        # m between candidate body positions (coarser if the cave
 START_TRIES = 60       # the lowest candidates tried for a start stance ...
 PER_ROW = 2            # ... at most this many at each height
 GOAL_TOLERANCE = 0.5   # m, as the generator's caves
+GOAL_HEADROOM = 1.0    # m of rock above the goal that the upper booms reach (the generator's
+#                        shafts: 1.5 m of wall above the goal, the body within 0.5 m of it)
 DECIMALS = 4           # wall coordinates are rounded as the generator rounds them
 
 
@@ -51,8 +54,9 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     `seed`: the same rock and seed, the same cave. `start` (x, y) is the body's position to
     hang from (a feasible stance at or near it), chosen when None: the lowest free position
     with a feasible stance. `goal` (x, y) is chosen when None: the highest free position the
-    body can get to from the start (through free space) with an anchor in reach of each boom.
-    Raises RbpInputError (file `source`) when the rock makes no cave."""
+    body can get to from the start (through free space) with anchors in reach of each boom,
+    those of the upper booms GOAL_HEADROOM above it. Raises RbpInputError (file `source`)
+    when the rock makes no cave."""
     from shapely import union_all
 
     cfg = config or CaveConfig()
@@ -151,8 +155,9 @@ def _without_holes(poly: Polygon) -> list[Polygon]:
 
 
 class _Grid:
-    """Candidate body positions (angle 0) on a grid over the anchors: which are free of rock
-    and have an anchor in reach of each boom."""
+    """Candidate body positions (angle 0) on a grid over the anchors: which are free of rock,
+    which have an anchor in reach of each boom (`holdable`), and which also have, for each
+    upper boom, an anchor in reach GOAL_HEADROOM above the body (`headroom`)."""
 
     def __init__(self, scn: Scenario):
         pos = scn.anchor_positions
@@ -169,50 +174,65 @@ class _Grid:
         self.free = ~body_in_rock(scn.robot, scn.rock, poses)
         self.free &= ~scn.rock.contains(self.points)  # a body wholly inside rock
         self.holdable = np.zeros(len(self.points), dtype=bool)
-        self.holdable[self.free] = _anchor_for_each_boom(scn, poses[self.free])
+        self.headroom = np.zeros(len(self.points), dtype=bool)
+        where = np.flatnonzero(self.free)
+        self.holdable[where], self.headroom[where] = _anchors_in_reach(scn, poses[where])
 
 
-def _anchor_for_each_boom(scn: Scenario, poses: np.ndarray) -> np.ndarray:
-    """Whether each pose has some anchor within reach of every boom (kinematics only)."""
+def _anchors_in_reach(scn: Scenario, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, whether every boom reaches some anchor (kinematics only), and whether every
+    upper boom (pointing up at rest) reaches one GOAL_HEADROOM or more above the pose."""
     from scipy.spatial import cKDTree
 
     from rb_drake import geometry
 
-    out = np.zeros(len(poses), dtype=bool)
+    robot = scn.robot
+    upper = np.sin(robot.shoulder_directions) > 0
+    hold = np.zeros(len(poses), dtype=bool)
+    room = np.zeros(len(poses), dtype=bool)
     tree = cKDTree(scn.anchor_positions)
-    for k, near in enumerate(tree.query_ball_point(poses[:, :2], scn.robot.max_reach)):
+    for k, near in enumerate(tree.query_ball_point(poses[:, :2], robot.max_reach)):
         if len(near) < NUM_BOOMS:
             continue
         idx = np.array(near)
-        ok = True
+        targets = scn.anchor_positions[idx]
+        above = targets[:, 1] >= poses[k, 1] + GOAL_HEADROOM
+        hold[k] = room[k] = True
         for i in range(NUM_BOOMS):
-            r = geometry.reach(scn.robot, poses[k], scn.anchor_positions[idx],
-                               np.full(len(idx), i))
-            if not (r.violation[0] == 0.0).any():
-                ok = False
-                break
-        out[k] = ok
-    return out
+            ok = geometry.reach(robot, poses[k], targets, np.full(len(idx), i)).violation[0] == 0
+            hold[k] &= bool(ok.any())
+            room[k] &= bool(ok.any()) and (not upper[i] or bool((ok & above).any()))
+    return hold, room
 
 
-def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
-    """`scn` with the most robust stance near the lowest candidate that has a feasible one.
-
-    Candidates are screened row by row from the bottom, the few nearest the middle of each row,
-    with two anchors per boom (a quarter of a second each); the first that holds is searched
-    fully, as the generator searches its start (`with_start_stance`)."""
-    idx = np.flatnonzero(grid.holdable)
-    centre = float(np.mean(grid.points[idx, 0])) if len(idx) else 0.0
-    order = idx[np.lexsort((np.abs(grid.points[idx, 0] - centre), grid.points[idx, 1]))]
-    rows = grid.points[order, 1]
+def _by_rows(points: np.ndarray, idx: np.ndarray, centre: float, upward: bool) -> np.ndarray:
+    """Candidates `idx` row by row (from the bottom, or the top), at most PER_ROW a row, the
+    nearest `centre` first; START_TRIES at most."""
+    height = points[idx, 1] if upward else -points[idx, 1]
+    order = idx[np.lexsort((np.abs(points[idx, 0] - centre), height))]
+    rows = points[order, 1]
     rank = np.zeros(len(order), dtype=int)  # place of each candidate within its row
     for k in range(1, len(order)):
         rank[k] = rank[k - 1] + 1 if rows[k] == rows[k - 1] else 0
-    tried = order[rank < PER_ROW][:START_TRIES]
+    return order[rank < PER_ROW][:START_TRIES]
+
+
+def _holds(scn: Scenario, point: np.ndarray) -> bool:
+    """Whether the body at `point` (angle 0) has a feasible stance, screened with two anchors
+    per boom (a tenth of a second)."""
+    return best_stance(scn, np.array([point[0], point[1], 0.0]), per_boom=2) is not None
+
+
+def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
+    """`scn` with the most robust stance near the lowest candidate that has a feasible one:
+    candidates are screened from the bottom (`_holds`); the first that holds is searched fully,
+    as the generator searches its start (`with_start_stance`)."""
+    idx = np.flatnonzero(grid.holdable)
+    centre = float(np.mean(grid.points[idx, 0])) if len(idx) else 0.0
+    tried = _by_rows(grid.points, idx, centre, upward=True)
     for k in tried:
-        pose = np.array([*grid.points[k], 0.0])
-        if best_stance(scn, pose, per_boom=2) is not None:
-            started = with_start_stance(scn, pose)
+        if _holds(scn, grid.points[k]):
+            started = with_start_stance(scn, np.array([*grid.points[k], 0.0]))
             if started is not None:
                 return started
     raise RbpInputError(f"no feasible start stance at the {len(tried)} lowest free positions "
@@ -221,7 +241,9 @@ def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
 
 
 def _highest_goal(scn: Scenario, grid: _Grid, source: str) -> tuple[float, float]:
-    """The highest holdable candidate reached from the start through free candidates."""
+    """The highest candidate with rock GOAL_HEADROOM above in reach of the upper booms (as the
+    generator's shafts end their climb below the top) that the body can get to from the start
+    through free candidates; of those at that height, the nearest above the start."""
     from scipy import ndimage
 
     labels, _ = ndimage.label(grid.free.reshape(grid.shape))
@@ -229,16 +251,12 @@ def _highest_goal(scn: Scenario, grid: _Grid, source: str) -> tuple[float, float
     start = np.array(scn.start_pose[:2])
     free = np.flatnonzero(grid.free)
     home = free[np.argmin(np.linalg.norm(grid.points[free] - start, axis=1))]
-    reachable = np.flatnonzero(grid.holdable & (flat == flat[home]))
-    if not len(reachable):
-        raise RbpInputError("no free position to climb to from the start; give --goal X Y",
-                            file=source)
-    top = grid.points[reachable, 1].max()
+    reachable = np.flatnonzero(grid.headroom & (flat == flat[home]))
+    top = grid.points[reachable, 1].max() if len(reachable) else -math.inf
+    if top - start[1] <= GOAL_TOLERANCE:
+        raise RbpInputError(f"nothing to climb: no free position more than {GOAL_TOLERANCE:g} m "
+                            f"above the start, reached from it, has rock {GOAL_HEADROOM:g} m "
+                            "above in reach; give --goal X Y", file=source)
     level = reachable[grid.points[reachable, 1] >= top - 1e-9]
     k = level[np.argmin(np.abs(grid.points[level, 0] - start[0]))]
-    goal = grid.points[k]
-    if goal[1] - start[1] <= GOAL_TOLERANCE:
-        raise RbpInputError(f"nothing to climb: the highest free position with anchors in reach "
-                            f"({goal[1]:.2f} m) is within {GOAL_TOLERANCE:g} m of the start's "
-                            f"height ({start[1]:.2f} m); give --goal X Y", file=source)
-    return round(float(goal[0]), DECIMALS), round(float(goal[1]), DECIMALS)
+    return float(grid.points[k, 0]), float(grid.points[k, 1])

@@ -15,6 +15,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import re
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -106,10 +107,19 @@ def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
                            "and --scale")
     poly = Polygon(shell, holes)
     if not poly.is_valid:
-        raise _ReadError(where, f"not a simple outline: {explain_validity(poly).lower()}")
+        raise _ReadError(where, f"not a simple outline: {_why(explain_validity(poly))}")
     if poly.area <= 0:
         raise _ReadError(where, "encloses no area")
     return poly
+
+
+def _why(validity: str) -> str:
+    """shapely's "Self-intersection[1 1]" as "self-intersection at (1, 1) m"."""
+    match = re.fullmatch(r"(.*?)\[(\S+) (\S+)\]", validity.strip())
+    if match is None:
+        return validity.lower()
+    what, x, y = match.groups()
+    return f"{what.lower()} at ({float(x):g}, {float(y):g}) m"
 
 
 def _combine(polygons: list[Polygon], even_odd: bool) -> list[Polygon]:
@@ -148,7 +158,7 @@ def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
     for k, poly in enumerate(rock):
         if not poly.is_valid:  # as simplify can leave it
             raise RbpInputError(f"rock {k} is not simple after simplifying to {simplify:g} m: "
-                                f"{explain_validity(poly).lower()}; give a smaller --simplify",
+                                f"{_why(explain_validity(poly))}; give a smaller --simplify",
                                 file=name)
     return rock
 

@@ -229,6 +229,11 @@ def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
     as the generator searches its start (`with_start_stance`)."""
     idx = np.flatnonzero(grid.holdable)
     centre = float(np.mean(grid.points[idx, 0])) if len(idx) else 0.0
+    if not len(idx):
+        raise RbpInputError(f"no free position has anchors in reach of all four booms "
+                            f"({len(scn.anchors)} anchors): the cave is too small, too wide or "
+                            "too sparse for the robot; give --start X Y or raise "
+                            "--anchor-density", file=scn.source)
     tried = _by_rows(grid.points, idx, centre, upward=True)
     for k in tried:
         if _holds(scn, grid.points[k]):

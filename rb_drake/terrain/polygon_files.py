@@ -102,7 +102,7 @@ def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
     for ring in (shell, *holes):
         if len({(round(x, 9), round(y, 9)) for x, y in ring}) < 3:
             raise _ReadError(where, "fewer than 3 distinct points; rock must enclose an area")
-        if any(abs(v) > MAX_COORDINATE for p in ring for v in p):
+        if not all(abs(v) <= MAX_COORDINATE for p in ring for v in p):  # NaN fails too
             raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
                            "and --scale")
     poly = Polygon(shell, holes)
@@ -280,13 +280,27 @@ def _ring(value: Any, field: str, factor: float, total: list[int]) -> Ring:
     ring = []
     for k, p in enumerate(points):
         if (not isinstance(p, list) or len(p) < 2
-                or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                           and math.isfinite(v) for v in p[:2])):
+                or not all(_finite(v) for v in p[:2])):
             raise _ReadError(f"{field}[{k}]", f"expected a position [x, y], got {_describe(p)}")
         ring.append(p)
     scaled = _scaled(iter(ring), factor)
     _count_vertices(total, scaled)
     return scaled
+
+
+def _finite(value: Any) -> bool:
+    """Whether `value` is a number (not a bool) that is a finite float (10**400 is not)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
+def _one_line(error: Exception) -> str:
+    """A parser's message on one line (ezdxf quotes the offending line, newline and all)."""
+    return " ".join(str(error).split())[:200]
 
 
 def _describe(value: Any) -> str:
@@ -307,7 +321,7 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
     try:
         doc = ezdxf.read(io.StringIO(text))
     except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
-        raise _ReadError(None, f"not a DXF drawing: {e}") from None
+        raise _ReadError(None, f"not a DXF drawing: {_one_line(e)}") from None
     polygons: list[Polygon] = []
     others: dict[str, int] = {}
     total = [0]
@@ -325,7 +339,7 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
         try:  # arcs (bulges) become short chords
             points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
         except Exception as e:  # a malformed entity
-            raise _ReadError(where, f"cannot be read: {e}") from None
+            raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
         ring = _scaled(((p.x, p.y) for p in points), factor)
         _count_vertices(total, ring)
         polygons.append(_polygon(ring, [], where))
@@ -348,7 +362,7 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
     try:
         svg = se.SVG.parse(io.StringIO(text))
     except Exception as e:  # xml.etree's ParseError, or svgelements' own on odd attributes
-        raise _ReadError(None, f"not an SVG drawing: {e}") from None
+        raise _ReadError(None, f"not an SVG drawing: {_one_line(e)}") from None
     if not isinstance(svg, se.SVG):
         raise _ReadError(None, "not an SVG drawing: no <svg> element")
     # svgelements maps the viewBox to pixels; undo it, so that --unit names the user unit

@@ -59,8 +59,14 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     when the rock makes no cave."""
     from shapely import union_all
 
+    from rb_drake.terrain.polygon_files import validity_reason
+
     cfg = config or CaveConfig()
     robot = robot or RobotParams()
+    for k, poly in enumerate(rock):  # as a mesh's section or an API caller gives them
+        if not poly.is_valid:
+            raise RbpInputError(f"rock polygon {k} is not simple: "
+                                f"{validity_reason(poly)}", file=source)
     solid = [p for p in _polygons(union_all(rock)) if p.area > 0]
     if not solid:
         raise RbpInputError("no rock to climb", file=source)

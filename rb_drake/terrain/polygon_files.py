@@ -97,7 +97,6 @@ class _ReadError(Exception):
 def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
     """A valid polygon from rings already in metres, or a _ReadError saying why not."""
     from shapely.geometry import Polygon
-    from shapely.validation import explain_validity
 
     for ring in (shell, *holes):
         if len({(round(x, 9), round(y, 9)) for x, y in ring}) < 3:
@@ -107,14 +106,18 @@ def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
                            "and --scale")
     poly = Polygon(shell, holes)
     if not poly.is_valid:
-        raise _ReadError(where, f"not a simple outline: {_why(explain_validity(poly))}")
+        raise _ReadError(where, f"not a simple outline: {validity_reason(poly)}")
     if poly.area <= 0:
         raise _ReadError(where, "encloses no area")
     return poly
 
 
-def _why(validity: str) -> str:
-    """shapely's "Self-intersection[1 1]" as "self-intersection at (1, 1) m"."""
+def validity_reason(poly: Polygon) -> str:
+    """Why shapely finds `poly` invalid: "Self-intersection[1 1]" as "self-intersection at
+    (1, 1) m"."""
+    from shapely.validation import explain_validity
+
+    validity = explain_validity(poly)
     match = re.fullmatch(r"(.*?)\[(\S+) (\S+)\]", validity.strip())
     if match is None:
         return validity.lower()
@@ -147,8 +150,7 @@ def _parts(geometry: Any) -> list[Polygon]:
 
 
 def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
-    from shapely.validation import explain_validity
-
+    """The rock simplified to `simplify` m, refused if that leaves nothing or breaks it."""
     if simplify > 0:
         rock = [p for poly in rock for p in _parts(poly.simplify(simplify,
                                                                  preserve_topology=True))]
@@ -158,7 +160,7 @@ def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
     for k, poly in enumerate(rock):
         if not poly.is_valid:  # as simplify can leave it
             raise RbpInputError(f"rock {k} is not simple after simplifying to {simplify:g} m: "
-                                f"{_why(explain_validity(poly))}; give a smaller --simplify",
+                                f"{validity_reason(poly)}; give a smaller --simplify",
                                 file=name)
     return rock
 

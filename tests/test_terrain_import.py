@@ -238,3 +238,48 @@ def test_example_cave_has_a_climb():
 
     plan = rbp.plan(example_cave(), footsteps_only=True)
     assert plan.success, f"no route up the imported example: {plan.reason}"
+
+
+CURVE_AREA_TOL = 0.01  # relative: curves become chords within 5 mm
+
+
+def test_curves_become_polylines(tmp_path):
+    """A circle of radius 1 m drawn with DXF bulges and as an SVG <circle> reads as one."""
+    doc = ezdxf.new()
+    doc.modelspace().add_lwpolyline([(-1, 0, 0, 0, 1), (1, 0, 0, 0, 1)], format="xyseb",
+                                    close=True)
+    doc.saveas(tmp_path / "disc.dxf")
+    (tmp_path / "disc.svg").write_text('<svg xmlns="http://www.w3.org/2000/svg">'
+                                       '<circle cx="0" cy="0" r="100"/></svg>')
+    for name, unit in (("disc.dxf", "m"), ("disc.svg", "cm")):
+        (disc,) = read_rock(tmp_path / name, unit=unit)
+        error = abs(disc.area - np.pi) / np.pi
+        assert error <= CURVE_AREA_TOL, f"{name}: area {disc.area:.4f} against pi ({error:.2%})"
+
+
+def test_meshes_go_to_mesh_section(monkeypatch, tmp_path):
+    """A mesh's file, plane and resolution reach mesh_section.section_polygons, in the mesh's
+    unit, and its section comes back in metres (a stand-in module: the real one is another
+    branch's)."""
+    import types
+
+    from shapely.geometry import Polygon
+
+    rings = example_rings()
+    calls = []
+
+    def section_polygons(path, origin, normal, resolution, tolerance):
+        calls.append((path, origin, normal, resolution, tolerance))
+        return [Polygon([(x * 100, y * 100) for x, y in ring]) for ring in rings]  # in cm
+
+    fake = types.ModuleType("rb_drake.terrain.mesh_section")
+    fake.section_polygons = section_polygons
+    monkeypatch.setitem(sys.modules, "rb_drake.terrain.mesh_section", fake)
+    first = example_cave()
+    mesh = tmp_path / "cave.ply"
+    scn = import_cave(mesh, ImportOptions(unit="cm", plane_origin=(0, 0, 1), resolution=0.05,
+                                          plane_normal=(0, 1, 0), simplify=0.01,
+                                          start=first.start_pose[:2], goal=first.goal_position))
+    assert calls == [(mesh, (0, 0, 1), (0, 1, 0), pytest.approx(5.0), pytest.approx(1.0))], calls
+    assert_same_rock([Polygon(w) for w in scn.walls], [Polygon(w) for w in first.walls],
+                     "the section in cm, read in metres")

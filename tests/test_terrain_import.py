@@ -119,8 +119,8 @@ def test_example_cave_is_a_valid_scenario():
     assert len(scn.walls) == 2, f"{len(scn.walls)} walls"
     check_anchors_on_rock(scn, read_rock(EXAMPLE))
     start_y, goal_y = scn.start_pose[1], scn.goal_position[1]
-    assert goal_y - start_y >= 3.0, f"start at {start_y} m, goal at {goal_y} m: no climb"
-    assert -0.5 <= start_y <= 2.0, f"the start ({start_y} m) is not near the bottom (-0.5 m)"
+    assert goal_y - start_y >= 2.0, f"start at {start_y} m, goal at {goal_y} m: no climb"
+    assert 1.0 <= start_y <= 2.0, f"the start ({start_y} m) is not 1.5 m above the bottom"
 
 
 def test_same_seed_same_cave():

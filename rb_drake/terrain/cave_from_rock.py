@@ -39,8 +39,12 @@ GRID_STEP = 0.1        # m between candidate body positions (coarser if the cave
 START_TRIES = 60       # the lowest candidates tried for a start stance ...
 PER_ROW = 2            # ... at most this many at each height
 GOAL_TOLERANCE = 0.5   # m, as the generator's caves
-GOAL_HEADROOM = 1.0    # m of rock above the goal that the upper booms reach (the generator's
-#                        shafts: 1.5 m of wall above the goal, the body within 0.5 m of it)
+GOAL_HEADROOM = 0.5    # m: the upper booms reach anchors this far above the goal, so that the
+#                        body, within GOAL_TOLERANCE of it, has 1 m of rock above (as in the
+#                        generator's shafts: goal 1.5 m below the walls' top)
+START_RISE = 1.5       # m above the lowest anchor where the start is looked for first (the
+#                        generator's shafts: 1.5 m; lower, the lower booms have only the rock's
+#                        bottom edge to hold, and the start is often a dead end)
 DECIMALS = 4           # wall coordinates are rounded as the generator rounds them
 
 
@@ -186,11 +190,13 @@ class _Grid:
 
 
 def _anchors_in_reach(scn: Scenario, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pose, whether every boom reaches some anchor (kinematics only), and whether every
-    upper boom (pointing up at rest) reaches one GOAL_HEADROOM or more above the pose."""
+    """Per pose, whether every boom reaches some anchor (its length and angle in range, its
+    line clear of rock), and whether every upper boom (pointing up at rest) reaches one
+    GOAL_HEADROOM or more above the pose."""
     from scipy.spatial import cKDTree
 
     from rb_drake import geometry
+    from rb_drake.collision import ANCHOR_CLEARANCE
 
     robot = scn.robot
     upper = np.sin(robot.shoulder_directions) > 0
@@ -203,9 +209,14 @@ def _anchors_in_reach(scn: Scenario, poses: np.ndarray) -> tuple[np.ndarray, np.
         idx = np.array(near)
         targets = scn.anchor_positions[idx]
         above = targets[:, 1] >= poses[k, 1] + GOAL_HEADROOM
+        shoulders = geometry.shoulder_positions(robot, poses[k])[0]  # (4, 2)
         hold[k] = room[k] = True
         for i in range(NUM_BOOMS):
             ok = geometry.reach(robot, poses[k], targets, np.full(len(idx), i)).violation[0] == 0
+            if ok.any():  # of those in range, the booms that would pass through no rock
+                d = targets[ok] - shoulders[i]
+                end = targets[ok] - ANCHOR_CLEARANCE * d / np.linalg.norm(d, axis=1)[:, None]
+                ok[ok] = ~scn.rock.segments_hit(shoulders[i], end, inside=False)
             hold[k] &= bool(ok.any())
             room[k] &= bool(ok.any()) and (not upper[i] or bool((ok & above).any()))
     return hold, room
@@ -230,25 +241,28 @@ def _holds(scn: Scenario, point: np.ndarray) -> bool:
 
 
 def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
-    """`scn` with the most robust stance near the lowest candidate that has a feasible one:
-    candidates are screened from the bottom (`_holds`); the first that holds is searched fully,
-    as the generator searches its start (`with_start_stance`)."""
+    """`scn` with the most robust stance near the lowest candidate START_RISE or more above the
+    lowest anchor that has a feasible one (lower candidates after, from the highest down):
+    candidates are screened with `_holds`; the first that holds is searched fully, as the
+    generator searches its start (`with_start_stance`)."""
     idx = np.flatnonzero(grid.holdable)
-    centre = float(np.mean(grid.points[idx, 0])) if len(idx) else 0.0
     if not len(idx):
         raise RbpInputError(f"no free position has anchors in reach of all four booms "
                             f"({len(scn.anchors)} anchors): the cave is too small, too wide or "
                             "too sparse for the robot; give --start X Y or raise "
                             "--anchor-density", file=scn.source)
-    tried = _by_rows(grid.points, idx, centre, upward=True)
-    for k in tried:
+    centre = float(np.mean(grid.points[idx, 0]))
+    rise = grid.points[idx, 1] >= scn.anchor_positions[:, 1].min() + START_RISE
+    tried = np.concatenate([_by_rows(grid.points, idx[rise], centre, upward=True),
+                            _by_rows(grid.points, idx[~rise], centre, upward=False)])
+    for k in tried[:START_TRIES]:
         if _holds(scn, grid.points[k]):
             started = with_start_stance(scn, np.array([*grid.points[k], 0.0]))
             if started is not None:
                 return started
-    raise RbpInputError(f"no feasible start stance at the {len(tried)} lowest free positions "
-                        "with anchors in reach; give --start X Y, or raise --anchor-density",
-                        file=scn.source)
+    raise RbpInputError(f"no feasible start stance at the {min(len(tried), START_TRIES)} lowest "
+                        "free positions with anchors in reach; give --start X Y, or raise "
+                        "--anchor-density", file=scn.source)
 
 
 def _highest_goal(scn: Scenario, grid: _Grid, source: str) -> tuple[float, float]:

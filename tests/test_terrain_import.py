@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("shapely", reason="the extra rbp[import] is not installed")
 pytest.importorskip("ezdxf", reason="the extra rbp[import] is not installed")
@@ -283,3 +285,52 @@ def test_meshes_go_to_mesh_section(monkeypatch, tmp_path):
     assert calls == [(mesh, (0, 0, 1), (0, 1, 0), pytest.approx(5.0), pytest.approx(1.0))], calls
     assert_same_rock([Polygon(w) for w in scn.walls], [Polygon(w) for w in first.walls],
                      "the section in cm, read in metres")
+
+
+def _read_or_refuse(path: Path) -> None:
+    """Reading `path` gives valid rock or RbpInputError naming it, never another exception."""
+    try:
+        rock = read_rock(path)
+    except RbpInputError as e:
+        assert str(e).startswith(f"{path}: "), f"refusal not naming the file: {e}"
+        assert "\n" not in str(e), f"refusal on more than one line: {e!r}"
+        return
+    assert rock and all(p.is_valid for p in rock), f"{path}: invalid rock accepted"
+
+
+GEOJSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=12),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner,
+                                                                max_size=4),
+    max_leaves=20)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(value=GEOJSON_VALUES, key=st.sampled_from(["type", "coordinates", "features",
+                                                  "geometry", "geometries"]))
+def test_any_geojson_value_refused_or_read(tmp_path, value, key):
+    """Hypothesis's values (huge integers, NaN, nesting) in the example's fields."""
+    data = json.loads(EXAMPLE.read_text())
+    target = data if key in ("type", "features") else data["features"][0]
+    if key == "coordinates":
+        target = target["geometry"]
+    target[key] = value
+    path = tmp_path / "fuzz.geojson"
+    path.write_text(json.dumps(data))
+    _read_or_refuse(path)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(min_value=0, max_value=10_000), junk=st.text(max_size=30),
+       suffix=st.sampled_from([".dxf", ".svg"]))
+def test_damaged_drawings_refused_or_read(tmp_path, cut, junk, suffix):
+    """A DXF or SVG of the example cut short or with text spliced in."""
+    rings = example_rings()
+    whole = (write_dxf(tmp_path / "whole.dxf", rings) if suffix == ".dxf"
+             else write_svg(tmp_path / "whole.svg", rings)).read_text()
+    at = cut % (len(whole) + 1)
+    path = tmp_path / f"fuzz{suffix}"
+    path.write_text(whole[:at] + junk + whole[at + len(junk):])
+    _read_or_refuse(path)

@@ -57,10 +57,10 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     the generator places them (config's density, normal noise and limit-surface ranges) from
     `seed`: the same rock and seed, the same cave. `start` (x, y) is the body's position to
     hang from (a feasible stance at or near it), chosen when None: the lowest free position
-    with a feasible stance, START_RISE above the lowest anchor if one there has. `goal` (x, y) is chosen when None: the highest free position the
-    body can get to from the start (through free space) with anchors in reach of each boom,
-    those of the upper booms GOAL_HEADROOM above it. Raises RbpInputError (file `source`)
-    when the rock makes no cave."""
+    with a feasible stance, START_RISE above the lowest anchor if one there has. `goal` (x, y)
+    is chosen when None: the highest free position the body can get to from the start
+    (through free space) with anchors in reach of each boom, those of the upper booms
+    GOAL_HEADROOM above it. Raises RbpInputError (file `source`) when the rock makes no cave."""
     from shapely import union_all
 
     from rb_drake.terrain.polygon_files import validity_reason

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import math
 import re
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -320,10 +322,15 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
         from ezdxf import path as dxf_path
     except ImportError:
         raise missing_extra("ezdxf") from None
+    log = logging.getLogger("ezdxf")  # which would report what it skips on stderr
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
     try:
         doc = ezdxf.read(io.StringIO(text))
     except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
         raise _ReadError(None, f"not a DXF drawing: {_one_line(e)}") from None
+    finally:
+        log.setLevel(level)
     polygons: list[Polygon] = []
     others: dict[str, int] = {}
     total = [0]
@@ -361,31 +368,41 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
         import svgelements as se
     except ImportError:
         raise missing_extra("svgelements") from None
-    try:
-        svg = se.SVG.parse(io.StringIO(text))
-    except Exception as e:  # xml.etree's ParseError, or svgelements' own on odd attributes
-        raise _ReadError(None, f"not an SVG drawing: {_one_line(e)}") from None
-    if not isinstance(svg, se.SVG):
-        raise _ReadError(None, "not an SVG drawing: no <svg> element")
-    # svgelements maps the viewBox to pixels; undo it, so that --unit names the user unit
-    viewport = se.Matrix(svg.viewbox_transform) if svg.viewbox_transform else se.Matrix()
-    to_user = ~viewport
-    polygons: list[Polygon] = []
-    total = [0]
-    for k, element in enumerate(e for e in svg.elements() if isinstance(e, se.Shape)):
-        label = type(element).__name__.lower()
-        ident = f" id {element.id!r}" if element.id else ""
-        path = se.Path(element) * to_user
-        path.reify()
-        for j, sub in enumerate(path.as_subpaths()):
-            where = f"shape {k} ({label}{ident}), subpath {j}"
-            ring, closed = _svg_ring(se, se.Path(sub), factor)
-            if len(ring) < 2:
-                continue  # a lone moveto draws nothing
-            if not closed:
-                raise _ReadError(where, "open path; rock must be closed (end it with Z)")
-            _count_vertices(total, ring)
-            polygons.append(_polygon(ring, [], where))
+    with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
+        warnings.simplefilter("ignore")
+        try:
+            svg = se.SVG.parse(io.StringIO(text))
+            if not isinstance(svg, se.SVG):
+                raise _ReadError(None, "not an SVG drawing: no <svg> element")
+            # svgelements maps the viewBox to pixels; undo it, so that --unit names user units
+            viewport = (se.Matrix(svg.viewbox_transform) if svg.viewbox_transform
+                        else se.Matrix())
+            to_user = ~viewport
+            shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
+        except _ReadError:
+            raise
+        except Exception as e:  # xml.etree's ParseError, a singular viewBox, svgelements' own
+            raise _ReadError(None, f"not an SVG drawing: {_one_line(e)}") from None
+        polygons: list[Polygon] = []
+        total = [0]
+        for k, element in enumerate(shapes):
+            label = type(element).__name__.lower()
+            ident = f" id {element.id!r}" if element.id else ""
+            try:
+                path = se.Path(element) * to_user
+                path.reify()
+                subpaths = [_svg_ring(se, se.Path(sub), factor) for sub in path.as_subpaths()]
+            except Exception as e:  # a degenerate transform or arc svgelements cannot follow
+                raise _ReadError(f"shape {k} ({label}{ident})",
+                                 f"cannot be read: {_one_line(e)}") from None
+            for j, (ring, closed) in enumerate(subpaths):
+                where = f"shape {k} ({label}{ident}), subpath {j}"
+                if len(ring) < 2:
+                    continue  # a lone moveto draws nothing
+                if not closed:
+                    raise _ReadError(where, "open path; rock must be closed (end it with Z)")
+                _count_vertices(total, ring)
+                polygons.append(_polygon(ring, [], where))
     return polygons, True
 
 

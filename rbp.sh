@@ -25,7 +25,8 @@ setup() {
     if [ ! -x "$VENV/bin/rbp" ] || [ pyproject.toml -nt "$VENV/.rbp-installed" ]; then
         echo "rbp.sh: setting up $VENV (first run takes about a minute)" >&2
         [ -x "$VENV/bin/python" ] || "$(find_python)" -m venv "$VENV"
-        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+        # test: the test tools; import: rbp scenario import's readers, which its tests need
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -e ".[test,import]"
         touch "$VENV/.rbp-installed"
     fi
 }

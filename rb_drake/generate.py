@@ -145,14 +145,17 @@ def _passage(rng: np.random.Generator, cfg: CaveConfig, obstacle: str):
     return walls, surfaces, start, goal
 
 
-def _ccw(poly: np.ndarray) -> np.ndarray:
+def ccw(poly: np.ndarray) -> np.ndarray:
+    """The polygon with its vertices counter-clockwise, as scenario files want them."""
     q = np.roll(poly, -1, axis=0)
     area = 0.5 * np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
     return poly if area > 0 else poly[::-1]
 
 
-def _anchors(rng: np.random.Generator, cfg: CaveConfig, surfaces: list[Surface],
-             rock: Rock) -> list[Anchor]:
+def place_anchors(rng: np.random.Generator, cfg: CaveConfig, surfaces: list[Surface],
+                  rock: Rock) -> list[Anchor]:
+    """Anchors scattered along `surfaces` (cfg.anchor_density per metre), their normals the
+    surface's outward normal with noise and their limit surfaces drawn from cfg's ranges."""
     anchors: list[Anchor] = []
     for surf in surfaces:
         for p, normal_angle in surf.sample(rng, cfg.anchor_density):
@@ -203,6 +206,21 @@ def best_stance(scn: Scenario, poses: np.ndarray, per_boom: int = 4,
     return best
 
 
+START_OFFSETS = np.array([[0, 0, 0], [0.15, 0, 0], [-0.15, 0, 0], [0, 0.15, 0], [0, -0.15, 0],
+                          [0, 0, 0.2], [0, 0, -0.2]])  # tried about a start pose, in order
+
+
+def with_start_stance(scn: Scenario, start: np.ndarray) -> Scenario | None:
+    """`scn` with the most robust feasible start stance at `start` (x, y, phi) or a pose
+    near it (START_OFFSETS), or None when there is none."""
+    found = best_stance(scn, start + START_OFFSETS)
+    if found is None:
+        return None
+    pose, ids, _ = found
+    return dataclasses.replace(scn, start_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
+                               start_stance=ids)
+
+
 class CaveGenerationError(RbpError, RuntimeError):
     """No cave of the kind asked for had a feasible start stance in `CaveConfig.max_redraws`
     draws (the user's seed and configuration: `rbp scenario generate` reports it as their
@@ -222,9 +240,9 @@ def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
             walls, surfaces, start, goal = _shaft(rng, cfg)
         else:
             walls, surfaces, start, goal = _passage(rng, cfg, kind)
-        walls = [_ccw(np.round(w, 4)) for w in walls]
+        walls = [ccw(np.round(w, 4)) for w in walls]
         rock = Rock(walls)
-        anchors = _anchors(rng, cfg, surfaces, rock)
+        anchors = place_anchors(rng, cfg, surfaces, rock)
         if len(anchors) < 4:
             continue
         scn = Scenario(name=f"{kind}-{seed}", gravity=cfg.gravity, robot=robot,
@@ -233,14 +251,8 @@ def generate_cave(kind: str, seed: int, config: CaveConfig | None = None,
                        goal_position=tuple(goal), goal_tolerance=0.5,
                        source=f"generated:{kind}:{seed}",
                        robot_overrides={} if robot == RobotParams() else robot.to_dict())
-        offsets = np.array([[0, 0, 0], [0.15, 0, 0], [-0.15, 0, 0], [0, 0.15, 0], [0, -0.15, 0],
-                            [0, 0, 0.2], [0, 0, -0.2]])
-        found = best_stance(scn, start + offsets)
-        if found is None:
-            continue
-        pose, ids, _ = found
-        return dataclasses.replace(scn, start_pose=(float(pose[0]), float(pose[1]),
-                                                    float(pose[2])),
-                                   start_stance=ids)
+        started = with_start_stance(scn, start)
+        if started is not None:
+            return started
     raise CaveGenerationError(f"no cave of kind {kind!r} with a feasible start stance after "
                               f"{cfg.max_redraws} draws from seed {seed}; loosen the CaveConfig")

@@ -3,6 +3,7 @@
     import rbp
 
     cave = rbp.load_scenario("demo-shaft")   # or rbp.generate_scenario("shaft", seed=3)
+    # or rbp.import_scenario("section.geojson"): a cave from a drawing or a mesh of rock
     plan = rbp.plan(cave)                    # rbp.PipelineConfig(...) to configure it
     assert rbp.check(plan) == []
     rbp.write_plan(plan, "climb.json")
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
         check,
         draw,
         generate_scenario,
+        import_scenario,
         load_scenario,
         plan,
         read_plan,
@@ -42,7 +44,7 @@ if TYPE_CHECKING:
 _LAZY = {
     **{name: "rbp.api" for name in (
         "SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-        "load_scenario", "plan", "read_plan", "simulate", "write_plan")},
+        "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan")},
     "Scenario": "rb_drake.scenario",
     "CaveConfig": "rb_drake.generate",
     "Plan": "planning.plan_model",
@@ -55,7 +57,7 @@ _LAZY = {
 __all__ = [  # the same names as _LAZY (a literal, for linters and type checkers)
     "CaveConfig", "FootstepConfig", "PipelineConfig", "Plan", "RbpError", "RbpInputError",
     "Scenario", "SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-    "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
+    "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
 
 
 def __getattr__(name: str) -> Any:

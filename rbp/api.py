@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from systems.montecarlo import MonteCarloResult
 
 __all__ = ["SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-           "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
+           "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
 
 PLAN_DPI = 110  # `rbp plan`'s pictures
 SCENARIO_DPI = 120  # `rbp scenario show`'s default
@@ -88,6 +88,30 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     cfg = dataclasses.replace(config or CaveConfig(), anchor_density=anchor_density,
                               length=(lo, hi))
     return generate_cave(kind, seed, cfg)
+
+
+def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
+                    simplify: float = 0.0, anchor_density: float = 3.0, seed: int = 0,
+                    start: tuple[float, float] | None = None,
+                    goal: tuple[float, float] | None = None, name: str | None = None,
+                    plane_origin: tuple[float, float, float] | None = None,
+                    plane_normal: tuple[float, float, float] | None = None,
+                    resolution: float = 0.05) -> Scenario:
+    """A cave from a file of rock, as `rbp scenario import` makes it: a polygon drawing
+    (GeoJSON .geojson/.json, DXF .dxf, SVG .svg) or a mesh or point cloud (.stl, .obj, .ply)
+    cut by the plane through `plane_origin` with normal `plane_normal` (traced every
+    `resolution` m). Coordinates are in `unit` (m, cm, mm, in, ft) times `scale`; outlines are
+    simplified to `simplify` m. Anchors are placed as `generate_scenario` places them
+    (`anchor_density` per metre, from `seed`: the same file and seed, the same cave); `start`
+    and `goal` (x, y in m) are chosen when None: the lowest place with a feasible stance and
+    the highest free place above it. Needs the extra `rbp[import]`. Raises `RbpInputError`
+    (file and reason) for a file that is not closed, simple rock or makes no cave."""
+    from rb_drake.terrain.import_cave import ImportOptions, import_cave
+
+    return import_cave(path, ImportOptions(
+        unit=unit, scale=scale, simplify=simplify, anchor_density=anchor_density, seed=seed,
+        start=start, goal=goal, name=name, plane_origin=plane_origin,
+        plane_normal=plane_normal, resolution=resolution))
 
 
 def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, *,

@@ -70,6 +70,49 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_scenario_import(args: argparse.Namespace) -> int:
+    import shlex
+
+    from rb_drake.files import atomic_write_text
+    from rb_drake.scenario import scenario_to_yaml
+    from rbp.api import import_scenario
+
+    check_seed(args.seed)
+    check_output(args.output)
+    scn = import_scenario(args.file, unit=args.unit, scale=args.scale, simplify=args.simplify,
+                          anchor_density=args.anchor_density, seed=args.seed,
+                          start=_pair(args.start), goal=_pair(args.goal), name=args.name,
+                          plane_origin=_triple(args.plane_origin),
+                          plane_normal=_triple(args.plane_normal), resolution=args.resolution)
+    words = ["rbp", "scenario", "import", args.file, "--unit", args.unit,
+             "--scale", f"{args.scale:g}", "--simplify", f"{args.simplify:g}",
+             "--anchor-density", f"{args.anchor_density:g}", "--seed", str(args.seed)]
+    for flag, value in (("--start", args.start), ("--goal", args.goal),
+                        ("--plane-origin", args.plane_origin),
+                        ("--plane-normal", args.plane_normal)):
+        if value is not None:
+            words += [flag, *(f"{v:g}" for v in value)]
+    if args.plane_origin is not None or args.plane_normal is not None:
+        words += ["--resolution", f"{args.resolution:g}"]
+    if args.name is not None:
+        words += ["--name", args.name]
+    # one line: a newline in a file name or --name would end the comment
+    command = shlex.join(words).replace("\n", " ").replace("\r", " ")
+    atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
+    print(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
+          f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "
+          f"{list(scn.start_stance)}, goal {list(scn.goal_position)}")
+    return EXIT_OK
+
+
+def _pair(value: list[float] | None) -> tuple[float, float] | None:
+    return None if value is None else (value[0], value[1])
+
+
+def _triple(value: list[float] | None) -> tuple[float, float, float] | None:
+    return None if value is None else (value[0], value[1], value[2])
+
+
 def cmd_scenario_check(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -356,7 +399,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "check takes over a second)")
     check.set_defaults(func=cmd_check)
 
-    scn = sub.add_parser("scenario", help="generate, check and show caves")
+    scn = sub.add_parser("scenario", help="generate, import, check and show caves")
     ssub = scn.add_subparsers(dest="scenario_command", required=True)
     gen = ssub.add_parser("generate", help="a seeded random cave")
     gen.add_argument("--kind", choices=("shaft", "crevasse", "rockfall"), default="shaft",
@@ -372,6 +415,38 @@ def build_parser() -> argparse.ArgumentParser:
                           "7 9; the experiments use 4.5 5)")
     gen.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
     gen.set_defaults(func=cmd_scenario_generate)
+    imp = ssub.add_parser(
+        "import", help="a cave from a file of rock: a polygon drawing (GeoJSON, DXF, SVG) or "
+                       "a mesh or point cloud cut by a plane (STL, OBJ, PLY); needs the extra "
+                       "rbp[import]")
+    imp.add_argument("file", help="the rock: .geojson/.json, .dxf, .svg, or .stl/.obj/.ply")
+    imp.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
+    imp.add_argument("--unit", choices=("m", "cm", "mm", "in", "ft"), default="m",
+                     help="the unit of the file's coordinates (default m)")
+    imp.add_argument("--scale", type=float, default=1.0,
+                     help="a factor on the coordinates besides the unit (default 1)")
+    imp.add_argument("--simplify", type=float, default=0.0, metavar="TOL",
+                     help="simplify outlines to TOL metres (default 0: as drawn)")
+    imp.add_argument("--anchor-density", type=float, default=3.0,
+                     help="anchors per metre of rock surface, above 0 and at most 20 "
+                          "(default 3.0)")
+    imp.add_argument("--seed", type=int, default=0,
+                     help="seed of the anchors, 0 or more: the same seed, the same cave "
+                          "(default 0)")
+    imp.add_argument("--start", type=float, nargs=2, metavar=("X", "Y"),
+                     help="the body's start position in m (default: the lowest free position "
+                          "with a feasible stance)")
+    imp.add_argument("--goal", type=float, nargs=2, metavar=("X", "Y"),
+                     help="the goal in m (default: the highest free position reached from the "
+                          "start with an anchor in reach of each boom)")
+    imp.add_argument("--name", help="the scenario's name (default: the file's name)")
+    imp.add_argument("--plane-origin", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                     help="meshes: a point of the cutting plane (in the mesh's coordinates)")
+    imp.add_argument("--plane-normal", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                     help="meshes: the cutting plane's normal")
+    imp.add_argument("--resolution", type=float, default=0.05, metavar="R",
+                     help="meshes: trace the section every R metres (default 0.05)")
+    imp.set_defaults(func=cmd_scenario_import)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")
     chk.add_argument("scenario")
     chk.set_defaults(func=cmd_scenario_check)

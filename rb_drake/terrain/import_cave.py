@@ -1,0 +1,104 @@
+"""`rbp scenario import`: a cave from a file of rock, a polygon drawing (GeoJSON, DXF, SVG:
+`polygon_files`) or a mesh or point cloud cut by a plane (STL, OBJ, PLY: `mesh_section`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from rb_drake.errors import RbpInputError
+from rb_drake.terrain.polygon_files import MESH_SUFFIXES, UNITS, missing_extra, read_rock
+
+if TYPE_CHECKING:
+    from shapely.geometry import Polygon
+
+    from rb_drake.scenario import Scenario
+
+MAX_ANCHOR_DENSITY = 20.0   # anchors per metre, as `rbp scenario generate` allows
+DEFAULT_RESOLUTION = 0.05   # m: a mesh's section is traced this finely
+
+
+@dataclasses.dataclass(frozen=True)
+class ImportOptions:
+    """How a file of rock becomes a cave (`rbp scenario import`'s options)."""
+
+    unit: str = "m"                  # the file's unit: m, cm, mm, in or ft
+    scale: float = 1.0               # and a factor on top of it (a drawing's scale)
+    simplify: float = 0.0            # m: outlines simplified to this tolerance (0: as drawn)
+    anchor_density: float = 3.0      # anchors per metre of rock surface
+    seed: int = 0                    # anchors drawn from this seed: the same seed, the same cave
+    start: tuple[float, float] | None = None  # m: where the body hangs at the start
+    goal: tuple[float, float] | None = None   # m: the goal; both chosen when None
+    name: str | None = None          # the scenario's name (default: the file's stem)
+    plane_origin: tuple[float, float, float] | None = None  # meshes: the cutting plane
+    plane_normal: tuple[float, float, float] | None = None
+    resolution: float = DEFAULT_RESOLUTION                   # m, meshes only
+
+
+def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scenario:
+    """The cave of the rock in `path` (see ImportOptions); raises RbpInputError naming the file
+    and the problem for anything that is not closed, simple rock or makes no climbable cave."""
+    from rb_drake.generate import CaveConfig
+    from rb_drake.terrain.cave_from_rock import scenario_from_rock
+
+    opts = options or ImportOptions()
+    path = Path(path)
+    _check(opts)
+    try:
+        import shapely  # noqa: F401  (every reader and the cave's assembly need it)
+    except ImportError:
+        raise missing_extra("shapely") from None
+    if path.suffix.lower() in MESH_SUFFIXES:
+        rock = _mesh_rock(path, opts)
+    else:
+        if opts.plane_origin is not None or opts.plane_normal is not None:
+            raise RbpInputError("only for a mesh or point cloud (.stl, .obj, .ply)",
+                                file=str(path), field="--plane-origin/--plane-normal")
+        rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
+    cfg = CaveConfig(anchor_density=opts.anchor_density)
+    return scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
+                              goal=opts.goal, name=opts.name or path.stem, source=str(path))
+
+
+def _check(opts: ImportOptions) -> None:
+    if opts.unit not in UNITS:
+        raise RbpInputError(f"must be one of {sorted(UNITS)}, got {opts.unit!r}", field="--unit")
+    if not 0 < opts.anchor_density <= MAX_ANCHOR_DENSITY:
+        raise RbpInputError(f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per "
+                            f"metre, got {opts.anchor_density:g}", field="--anchor-density")
+    if not (math.isfinite(opts.resolution) and opts.resolution > 0):
+        raise RbpInputError(f"must be a positive number of metres, got {opts.resolution:g}",
+                            field="--resolution")
+    for flag, point in (("--start", opts.start), ("--goal", opts.goal),
+                        ("--plane-origin", opts.plane_origin),
+                        ("--plane-normal", opts.plane_normal)):
+        if point is not None and not all(math.isfinite(v) and abs(v) <= 1e4 for v in point):
+            raise RbpInputError(f"must be finite numbers of at most 1e4 in magnitude, got "
+                                f"{list(point)}", field=flag)
+    if opts.plane_normal is not None and not any(opts.plane_normal):
+        raise RbpInputError("the zero vector has no direction", field="--plane-normal")
+
+
+def _mesh_rock(path: Path, opts: ImportOptions) -> list[Polygon]:
+    """The section of a mesh or point cloud, in metres. The mesh is read in its own unit:
+    resolution and tolerance go to it in that unit, and its section comes back scaled."""
+    try:
+        from rb_drake.terrain.mesh_section import section_polygons
+    except ModuleNotFoundError as e:
+        if e.name == "rb_drake.terrain.mesh_section":
+            raise RbpInputError("mesh import needs rb_drake.terrain.mesh_section",
+                                file=str(path)) from None
+        raise missing_extra(e.name or "trimesh") from None
+    from shapely.affinity import scale as scaled
+
+    factor = UNITS[opts.unit] * opts.scale
+    if not (math.isfinite(opts.scale) and opts.scale > 0):
+        raise RbpInputError(f"must be a positive number, got {opts.scale:g}", field="--scale")
+    if not (math.isfinite(opts.simplify) and opts.simplify >= 0):
+        raise RbpInputError(f"must be 0 or more metres, got {opts.simplify:g}",
+                            field="--simplify")
+    section = section_polygons(path, opts.plane_origin, opts.plane_normal,
+                               opts.resolution / factor, opts.simplify / factor)
+    return [scaled(p, factor, factor, origin=(0.0, 0.0)) for p in section]

@@ -1,0 +1,426 @@
+"""Rock outlines from polygon files: GeoJSON, DXF and SVG, read into shapely Polygons in metres.
+
+GeoJSON says what is rock: each Polygon (with its holes) or closed LineString is rock, and
+rocks that overlap are one rock. DXF and SVG draw outlines only, so their closed outlines nest by
+the even-odd rule: an outline inside another is a hole (free space, a tunnel's section), an
+island inside that is rock again. SVG's y axis points down; it is flipped so that up is +y.
+
+Anything that is not closed rock is refused with one `RbpInputError` naming the file, the
+element and what is wrong: an open polyline, a self-intersecting outline, an empty file, a file
+of another format.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+import re
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rb_drake.errors import RbpInputError
+from rb_drake.input_files import InputFileError, load_json, read_text
+
+if TYPE_CHECKING:
+    from shapely.geometry import Polygon
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}  # metres per unit
+POLYGON_SUFFIXES = (".geojson", ".json", ".dxf", ".svg")
+MESH_SUFFIXES = (".stl", ".obj", ".ply")  # sectioned by rb_drake.terrain.mesh_section
+MAX_COORDINATE = 1e4  # m, as rb_drake.scenario.MAX_COORDINATE: farther is a wrong unit or scale
+CURVE_TOLERANCE = 0.005  # m: arcs and Bézier curves become polylines this close to them
+MAX_VERTICES = 200_000  # outline vertices in one file: a cave section needs a few thousand
+INSTALL_HINT = "pip install 'rbp[import]'"
+
+Ring = list[tuple[float, float]]
+
+
+def missing_extra(module: str) -> RbpInputError:
+    """The error for an optional dependency of `rbp scenario import` that is not installed."""
+    return RbpInputError(f"importing caves needs {module}, of the optional extra 'import': "
+                         f"{INSTALL_HINT}")
+
+
+def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
+              simplify: float = 0.0) -> list[Polygon]:
+    """The rock of a GeoJSON (.geojson, .json), DXF (.dxf) or SVG (.svg) file as valid shapely
+    Polygons in metres: file coordinates times UNITS[unit] times `scale`, then simplified to
+    `simplify` m (shapely's `simplify`, topology kept; 0: as drawn). Raises RbpInputError
+    naming the file for anything that is not closed, simple rock."""
+    path = Path(path)
+    name = str(path)
+    if unit not in UNITS:
+        raise RbpInputError(f"must be one of {sorted(UNITS)}, got {unit!r}", field="--unit")
+    if not (math.isfinite(scale) and scale > 0):
+        raise RbpInputError(f"must be a positive number, got {scale:g}", field="--scale")
+    if not (math.isfinite(simplify) and simplify >= 0):
+        raise RbpInputError(f"must be 0 or more metres, got {simplify:g}", field="--simplify")
+    suffix = path.suffix.lower()
+    readers: dict[str, Callable[[str, float], tuple[list[Polygon], bool]]] = {
+        ".geojson": _geojson, ".json": _geojson, ".dxf": _dxf, ".svg": _svg}
+    if suffix not in readers:
+        known = ", ".join(POLYGON_SUFFIXES + MESH_SUFFIXES)
+        raise RbpInputError(f"unknown suffix {suffix or '(none)'!r}; rock is read from {known}",
+                            file=name)
+    try:
+        import shapely  # noqa: F401  (the readers need it; say so once, here)
+    except ImportError:
+        raise missing_extra("shapely") from None
+    try:
+        text = read_text(path)
+    except InputFileError as e:
+        raise RbpInputError(e.reason, file=name, field=e.field) from None
+    if not text.strip():
+        raise RbpInputError("empty file; no rock to read", file=name)
+    factor = UNITS[unit] * scale
+    try:
+        polygons, even_odd = readers[suffix](text, factor)
+    except _ReadError as e:
+        raise RbpInputError(e.reason, file=name, field=e.where) from None
+    if not polygons:
+        raise RbpInputError("no rock: the file holds no closed outline", file=name)
+    rock = _combine(polygons, even_odd)
+    return _finish(rock, name, simplify)
+
+
+class _ReadError(Exception):
+    """A reader's complaint: where in the file (`where`, or None for the file) and why."""
+
+    def __init__(self, where: str | None, reason: str):
+        super().__init__(reason)
+        self.where = where
+        self.reason = reason
+
+
+def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
+    """A valid polygon from rings already in metres, or a _ReadError saying why not."""
+    from shapely.geometry import Polygon
+
+    for ring in (shell, *holes):
+        if len({(round(x, 9), round(y, 9)) for x, y in ring}) < 3:
+            raise _ReadError(where, "fewer than 3 distinct points; rock must enclose an area")
+        if not all(abs(v) <= MAX_COORDINATE for p in ring for v in p):  # NaN fails too
+            raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
+                           "and --scale")
+    poly = Polygon(shell, holes)
+    if not poly.is_valid:
+        raise _ReadError(where, f"not a simple outline: {validity_reason(poly)}")
+    if poly.area <= 0:
+        raise _ReadError(where, "encloses no area")
+    return poly
+
+
+def validity_reason(poly: Polygon) -> str:
+    """Why shapely finds `poly` invalid: "Self-intersection[1 1]" as "self-intersection at
+    (1, 1) m"."""
+    from shapely.validation import explain_validity
+
+    validity = explain_validity(poly)
+    match = re.fullmatch(r"(.*?)\[(\S+) (\S+)\]", validity.strip())
+    if match is None:
+        return validity.lower()
+    what, x, y = match.groups()
+    return f"{what.lower()} at ({float(x):g}, {float(y):g}) m"
+
+
+def _combine(polygons: list[Polygon], even_odd: bool) -> list[Polygon]:
+    """Overlapping rock merged (GeoJSON), or outlines nested by the even-odd rule (DXF, SVG)."""
+    from shapely import union_all
+
+    if not even_odd:
+        return _parts(union_all(polygons))
+    merged = polygons[0]  # shapely's symmetric_difference_all is deprecated as wrong
+    for poly in polygons[1:]:
+        merged = merged.symmetric_difference(poly)
+    return _parts(merged)
+
+
+def _parts(geometry: Any) -> list[Polygon]:
+    """The non-empty polygons of a shapely geometry, largest first (a stable order)."""
+    from shapely.geometry import Polygon
+
+    if isinstance(geometry, Polygon):
+        found = [geometry]
+    else:
+        found = [g for g in getattr(geometry, "geoms", ()) if isinstance(g, Polygon)]
+    found = [g for g in found if not g.is_empty and g.area > 0]
+    return sorted(found, key=lambda g: (-g.area, g.bounds))
+
+
+def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
+    """The rock simplified to `simplify` m, refused if that leaves nothing or breaks it."""
+    if simplify > 0:
+        rock = [p for poly in rock for p in _parts(poly.simplify(simplify,
+                                                                 preserve_topology=True))]
+        if not rock:
+            raise RbpInputError(f"nothing is left after simplifying to {simplify:g} m; give a "
+                                "smaller --simplify", file=name)
+    for k, poly in enumerate(rock):
+        if not poly.is_valid:  # as simplify can leave it
+            raise RbpInputError(f"rock {k} is not simple after simplifying to {simplify:g} m: "
+                                f"{validity_reason(poly)}; give a smaller --simplify",
+                                file=name)
+    return rock
+
+
+def _scaled(points: Iterator[Sequence[float]], factor: float, flip_y: bool = False) -> Ring:
+    sign = -1.0 if flip_y else 1.0
+    return [(float(p[0]) * factor, sign * float(p[1]) * factor) for p in points]
+
+
+def _closed(ring: Ring, tolerance: float) -> bool:
+    return len(ring) >= 2 and math.dist(ring[0], ring[-1]) <= tolerance
+
+
+def _count_vertices(total: list[int], ring: Ring) -> None:
+    total[0] += len(ring)
+    if total[0] > MAX_VERTICES:
+        raise _ReadError(None, f"more than {MAX_VERTICES} outline vertices; simplify the "
+                       "drawing first")
+
+
+# ---------------------------------------------------------------------------------------------
+# GeoJSON (RFC 7946): coordinates as written, x then y (a third, z, is ignored)
+
+
+def _geojson(text: str, factor: float) -> tuple[list[Polygon], bool]:
+    try:
+        data = load_json(text)
+    except json.JSONDecodeError as e:
+        raise _ReadError(f"line {e.lineno}, column {e.colno}", f"not JSON: {e.msg}") from None
+    except RecursionError:
+        raise _ReadError(None, "nested too deeply to be GeoJSON") from None
+    except InputFileError as e:
+        raise _ReadError(e.field, e.reason) from None
+    polygons: list[Polygon] = []
+    total = [0]
+    for where, geometry in _geometries(data, "(top level)"):
+        polygons += _geojson_geometry(geometry, where, factor, total)
+    return polygons, False
+
+
+def _geometries(data: Any, where: str, depth: int = 0) -> Iterator[tuple[str, Any]]:
+    """(where, geometry object) for each geometry of a GeoJSON object."""
+    if not isinstance(data, dict):
+        raise _ReadError(where, f"expected a GeoJSON object, got {type(data).__name__}")
+    kind = data.get("type")
+    if kind == "FeatureCollection":
+        features = data.get("features")
+        if not isinstance(features, list):
+            raise _ReadError(where, "a FeatureCollection needs a list 'features'")
+        for k, feature in enumerate(features):
+            yield from _geometries(feature, f"features[{k}]", depth + 1)
+    elif kind == "Feature":
+        if data.get("geometry") is not None:  # a feature without geometry holds no rock
+            yield from _geometries(data["geometry"], f"{_prefix(where)}geometry", depth + 1)
+    elif kind == "GeometryCollection" and depth < 8:
+        members = data.get("geometries")
+        if not isinstance(members, list):
+            raise _ReadError(where, "a GeometryCollection needs a list 'geometries'")
+        for k, member in enumerate(members):
+            yield from _geometries(member, f"{_prefix(where)}geometries[{k}]", depth + 1)
+    elif kind in ("Polygon", "MultiPolygon", "LineString", "MultiLineString"):
+        yield where, data
+    elif kind in ("Point", "MultiPoint"):
+        raise _ReadError(where, f"a {kind} has no area; rock must be a Polygon or a closed "
+                       "LineString")
+    else:
+        raise _ReadError(where, f"unknown GeoJSON type {kind!r}; expected a Feature, "
+                       "FeatureCollection, Polygon, MultiPolygon or closed LineString")
+
+
+def _prefix(where: str) -> str:
+    return "" if where == "(top level)" else f"{where}."
+
+
+def _geojson_geometry(geometry: dict, where: str, factor: float,
+                      total: list[int]) -> list[Polygon]:
+    kind = geometry["type"]
+    coords = geometry.get("coordinates")
+    field = f"{_prefix(where)}coordinates"
+    if kind == "Polygon":
+        rings = _rings(coords, field, factor, total)
+        return [_polygon(rings[0], rings[1:], field)]
+    if kind == "MultiPolygon":
+        parts = _list(coords, field)
+        out = []
+        for k, part in enumerate(parts):
+            rings = _rings(part, f"{field}[{k}]", factor, total)
+            out.append(_polygon(rings[0], rings[1:], f"{field}[{k}]"))
+        return out
+    lines = [coords] if kind == "LineString" else _list(coords, field)
+    out = []
+    for k, line in enumerate(lines):
+        at = field if kind == "LineString" else f"{field}[{k}]"
+        ring = _ring(line, at, factor, total)
+        if not _closed(ring, 1e-9):
+            raise _ReadError(at, f"open {kind} (its last point is not its first); rock must be "
+                           "closed")
+        out.append(_polygon(ring, [], at))
+    return out
+
+
+def _list(value: Any, field: str) -> list:
+    if not isinstance(value, list) or not value:
+        raise _ReadError(field, f"expected a non-empty list, got {_describe(value)}")
+    return value
+
+
+def _rings(value: Any, field: str, factor: float, total: list[int]) -> list[Ring]:
+    rings = [_ring(r, f"{field}[{k}]", factor, total) for k, r in enumerate(_list(value, field))]
+    for k, ring in enumerate(rings):
+        if not _closed(ring, 1e-9):
+            raise _ReadError(f"{field}[{k}]", "open ring (its last point is not its first); rock "
+                           "must be closed")
+    return rings
+
+
+def _ring(value: Any, field: str, factor: float, total: list[int]) -> Ring:
+    points = _list(value, field)
+    ring = []
+    for k, p in enumerate(points):
+        if (not isinstance(p, list) or len(p) < 2
+                or not all(_finite(v) for v in p[:2])):
+            raise _ReadError(f"{field}[{k}]", f"expected a position [x, y], got {_describe(p)}")
+        ring.append(p)
+    scaled = _scaled(iter(ring), factor)
+    _count_vertices(total, scaled)
+    return scaled
+
+
+def _finite(value: Any) -> bool:
+    """Whether `value` is a number (not a bool) that is a finite float (10**400 is not)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
+def _one_line(error: Exception) -> str:
+    """A parser's message on one line (ezdxf quotes the offending line, newline and all)."""
+    return " ".join(str(error).split())[:200]
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    return f"{type(value).__name__} {text[:57] + '...' if len(text) > 60 else text}"
+
+
+# ---------------------------------------------------------------------------------------------
+# DXF: closed LWPOLYLINE and 2D/3D POLYLINE entities of model space, in the drawing's x and y
+
+
+def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
+    try:
+        import ezdxf
+        from ezdxf import path as dxf_path
+    except ImportError:
+        raise missing_extra("ezdxf") from None
+    log = logging.getLogger("ezdxf")  # which would report what it skips on stderr
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        doc = ezdxf.read(io.StringIO(text))
+    except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
+        raise _ReadError(None, f"not a DXF drawing: {_one_line(e)}") from None
+    finally:
+        log.setLevel(level)
+    polygons: list[Polygon] = []
+    others: dict[str, int] = {}
+    total = [0]
+    entity: Any  # LWPOLYLINE and POLYLINE have what a DXFGraphic lacks
+    for k, entity in enumerate(doc.modelspace(), start=1):
+        kind = entity.dxftype()
+        where = f"entity {k} ({kind}, handle {entity.dxf.handle})"
+        if kind == "POLYLINE" and (entity.is_poly_face_mesh or entity.is_polygon_mesh):
+            raise _ReadError(where, "a mesh, not an outline; rock must be closed 2D polylines")
+        if kind not in ("LWPOLYLINE", "POLYLINE"):
+            others[kind] = others.get(kind, 0) + 1
+            continue
+        if not entity.is_closed:
+            raise _ReadError(where, "open polyline; rock must be closed")
+        try:  # arcs (bulges) become short chords
+            points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
+        except Exception as e:  # a malformed entity
+            raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
+        ring = _scaled(((p.x, p.y) for p in points), factor)
+        _count_vertices(total, ring)
+        polygons.append(_polygon(ring, [], where))
+    if not polygons and others:
+        found = ", ".join(f"{n} {kind}" for kind, n in sorted(others.items()))
+        raise _ReadError(None, f"no closed LWPOLYLINE or POLYLINE (found {found}); rock must be "
+                       "closed polylines")
+    return polygons, True
+
+
+# ---------------------------------------------------------------------------------------------
+# SVG: the closed (sub)paths of every shape, in the user units of the viewBox, y flipped
+
+
+def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
+    try:
+        import svgelements as se
+    except ImportError:
+        raise missing_extra("svgelements") from None
+    with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
+        warnings.simplefilter("ignore")
+        try:
+            svg = se.SVG.parse(io.StringIO(text))
+            if not isinstance(svg, se.SVG):
+                raise _ReadError(None, "not an SVG drawing: no <svg> element")
+            # svgelements maps the viewBox to pixels; undo it, so that --unit names user units
+            viewport = (se.Matrix(svg.viewbox_transform) if svg.viewbox_transform
+                        else se.Matrix())
+            to_user = ~viewport
+            shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
+        except _ReadError:
+            raise
+        except Exception as e:  # xml.etree's ParseError, a singular viewBox, svgelements' own
+            raise _ReadError(None, f"not an SVG drawing: {_one_line(e)}") from None
+        polygons: list[Polygon] = []
+        total = [0]
+        for k, element in enumerate(shapes):
+            label = type(element).__name__.lower()
+            ident = f" id {element.id!r}" if element.id else ""
+            try:
+                path = se.Path(element) * to_user
+                path.reify()
+                subpaths = [_svg_ring(se, se.Path(sub), factor) for sub in path.as_subpaths()]
+            except Exception as e:  # a degenerate transform or arc svgelements cannot follow
+                raise _ReadError(f"shape {k} ({label}{ident})",
+                                 f"cannot be read: {_one_line(e)}") from None
+            for j, (ring, closed) in enumerate(subpaths):
+                where = f"shape {k} ({label}{ident}), subpath {j}"
+                if len(ring) < 2:
+                    continue  # a lone moveto draws nothing
+                if not closed:
+                    raise _ReadError(where, "open path; rock must be closed (end it with Z)")
+                _count_vertices(total, ring)
+                polygons.append(_polygon(ring, [], where))
+    return polygons, True
+
+
+def _svg_ring(se: Any, sub: Any, factor: float) -> tuple[Ring, bool]:
+    """The subpath's points in metres (up = +y) and whether it closes."""
+    points: list[Any] = []
+    closed = False
+    for seg in sub.segments():
+        if isinstance(seg, se.Move):
+            points = [seg.end]
+        elif isinstance(seg, se.Close):
+            closed = True
+        elif isinstance(seg, se.Line):
+            points.append(seg.end)
+        else:  # a curve: enough chords to stay within CURVE_TOLERANCE of it
+            length = seg.length(error=1e-4) * factor
+            n = max(2, min(1000, math.ceil(math.sqrt(length / CURVE_TOLERANCE)) * 2))
+            points += [seg.point(t / n) for t in range(1, n + 1)]
+    ring = _scaled(((p.x, p.y) for p in points), factor, flip_y=True)
+    closed = closed or _closed(ring, 1e-9)
+    return ring, closed

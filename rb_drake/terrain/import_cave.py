@@ -18,6 +18,7 @@ if TYPE_CHECKING:
 
 MAX_ANCHOR_DENSITY = 20.0   # anchors per metre, as `rbp scenario generate` allows
 DEFAULT_RESOLUTION = 0.05   # m: a mesh's section is traced this finely
+MESH_SIMPLIFY = 0.01      # m: a mesh section's outline simplified this far unless --simplify says
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,6 +100,9 @@ def _mesh_rock(path: Path, opts: ImportOptions) -> list[Polygon]:
     if not (math.isfinite(opts.simplify) and opts.simplify >= 0):
         raise RbpInputError(f"must be 0 or more metres, got {opts.simplify:g}",
                             field="--simplify")
+    # a scan's facets are far finer than the planner's 2 cm lattice: without a tolerance of
+    # its own, a section is simplified to MESH_SIMPLIFY (0 would keep every facet's vertex)
+    simplify = opts.simplify if opts.simplify > 0 else MESH_SIMPLIFY
     section = section_polygons(path, opts.plane_origin, opts.plane_normal,
-                               opts.resolution / factor, opts.simplify / factor)
+                               opts.resolution / factor, simplify / factor)
     return [scaled(p, factor, factor, origin=(0.0, 0.0)) for p in section]

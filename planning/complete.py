@@ -58,7 +58,12 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
-from planning.search_cost import DistanceHeuristic, RegraspHeuristic, edge_cost
+from planning.search_cost import (
+    DistanceHeuristic,
+    RegraspHeuristic,
+    TravelHeuristic,
+    edge_cost,
+)
 from planning.search_outcome import Quality, Stop
 from rb_drake.scenario import Scenario
 
@@ -158,9 +163,13 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             deferred.append(entry)
         return True
 
+    travel = TravelHeuristic(scn) if config.ordering == "travel" else None
+
     def heuristic(stance: tuple) -> float:
         if exact:
             return bound(stance)
+        if travel is not None:
+            return weight * travel(stance)
         # the weighted distance, in the order it always had
         return weight * c_attach * distance(stance) / distance_heuristic.max_step
 

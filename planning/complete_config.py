@@ -55,8 +55,10 @@ class CompleteConfig:
 
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     # <= 1: A* ordered by the admissible bound, the first route is then optimal; above, the
-    # weighted goal distance (planning.search_cost)
+    # weighted `ordering` estimate (planning.search_cost): "distance", the anchors' distance to
+    # the goal (`DistanceHeuristic`), or "travel", each boom's travel (`TravelHeuristic`)
     heuristic_weight: float = 300.0
+    ordering: str = "distance"
     max_expansions: int | None = None  # stop with Stop.BUDGET after this many; None: no limit
     time_limit: float | None = None    # s: stop with Stop.BUDGET after it; None: no limit
     ignore_grasps: bool = False        # decide poses without the grasps' probabilities

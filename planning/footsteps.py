@@ -68,6 +68,7 @@ from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 SEARCHES = ("hybrid", "complete", "sampled")
+ORDERINGS = ("distance", "travel")  # the complete search's weighted estimates
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,6 +83,8 @@ class FootstepConfig:
     sampled_expansions: int = 150
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     heuristic_weight: float = 300.0  # <= 1: A* on the admissible bound (optimal routes)
+    # complete search: what the weight multiplies (planning.complete_config.CompleteConfig)
+    ordering: str = "distance"
     # complete search only: after the first route, better ones for twice its expansions, with
     # a proven bound on how far the best is from the optimum
     # (planning.complete_config.AnytimeConfig; None: the first route, as before)
@@ -114,6 +117,9 @@ class FootstepConfig:
     transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
 
     def __post_init__(self) -> None:
+        if self.ordering not in ORDERINGS:
+            raise RbpInputError(f"must be one of {', '.join(ORDERINGS)}, got {self.ordering!r}",
+                                field="footstep.ordering")
         mb = self.search_memory_mb
         if mb is not None and not (isinstance(mb, int | float) and 1.0 <= mb < math.inf):
             raise RbpInputError(f"must be a number of MiB of at least 1 (or null: no cap), "
@@ -122,6 +128,7 @@ class FootstepConfig:
     def complete_config(self) -> CompleteConfig:
         """The complete (or constrained) search's part of this configuration."""
         return CompleteConfig(lattice=self.lattice, heuristic_weight=self.heuristic_weight,
+                              ordering=self.ordering,
                               max_expansions=self.max_expansions, time_limit=self.time_limit,
                               ignore_grasps=self.transition.ignore_grasps, anytime=self.anytime)
 

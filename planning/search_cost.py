@@ -213,3 +213,54 @@ class RegraspHeuristic:
 
     def __call__(self, stance: tuple[str, ...]) -> float:
         return self.c_attach * self.regrasps(stance)
+
+
+class TravelHeuristic:
+    """A lower bound on the cost to go from how far each boom's gripper must still travel.
+
+    In `RegraspHeuristic`'s relaxed graph with each edge as long as its anchors are apart,
+    travel_jk(a) is the shortest path from anchor a to boom j's targets T_jk (Dijkstra from the
+    targets). Boom j's moves along a route are such a path, each move at most H =
+    `boom_hop_length` long, so boom j still needs at least travel_jk(a_j) / H regrasps if the
+    route ends at an orientation in cell k, and
+
+        h(stance) = -log(1 - p_att) * min_k sum_j travel_jk(a_j) / H
+
+    never overestimates; a regrasp moves one boom along one edge, which lowers its travel by
+    at most the edge's length <= H, so h is consistent too. As a bound it is weaker than
+    `RegraspHeuristic` (a path of n hops is at most n H long); as an order it is better: it
+    measures the distance each boom has left, where the hop count rounds it to the most
+    generous hops, and multiplied by a weight it leads the search to routes with few regrasps
+    (docs/model.md, "The order of the search")."""
+
+    def __init__(self, scn: Scenario, cells: int = ORIENTATION_CELLS) -> None:
+        from scipy.sparse.csgraph import dijkstra
+
+        self.c_attach = attach_cost(scn.robot)
+        self.hop = boom_hop_length(scn.robot)
+        pts = scn.anchor_positions
+        lengths = np.where(hop_graph(scn), np.linalg.norm(pts[:, None] - pts[None], axis=2), 0.0)
+        np.fill_diagonal(lengths, 0.0)  # zero: no edge (csgraph's convention)
+        targets = goal_targets(scn, cells)
+        self.travel = np.full(targets.shape, np.inf)
+        for k in range(cells):
+            for j in range(NUM_BOOMS):
+                sources = np.flatnonzero(targets[k, j])
+                if len(sources):
+                    self.travel[k, j] = dijkstra(lengths, directed=False, indices=sources,
+                                                 min_only=True)
+        self._booms = np.arange(NUM_BOOMS)
+        self._row = scn.anchor_index
+        self._cache: dict[tuple, float] = {}
+
+    def regrasps(self, stance: tuple[str, ...]) -> float:
+        """min_k sum_j travel_jk(a_j) / H: the fewest regrasps the travel allows (inf: none)."""
+        h = self._cache.get(stance)
+        if h is None:
+            rows = [self._row[a] for a in stance]
+            h = self._cache[stance] = float(
+                self.travel[:, self._booms, rows].sum(axis=1).min()) / self.hop
+        return h
+
+    def __call__(self, stance: tuple[str, ...]) -> float:
+        return self.c_attach * self.regrasps(stance)

@@ -24,6 +24,7 @@ from planning.plan_model import plan_dict
 from planning.search_cost import (
     ORIENTATION_CELLS,
     RegraspHeuristic,
+    TravelHeuristic,
     boom_hop_length,
     edge_cost,
     goal_targets,
@@ -61,13 +62,29 @@ def test_bound_is_consistent_on_every_evaluated_edge(demo: Scenario, optimal) ->
     assert math.isfinite(bound(tuple(demo.start_stance)))
 
 
-def test_bound_never_exceeds_the_cost_to_go(demo: Scenario, optimal) -> None:
+def test_travel_bound_is_consistent_and_below_the_hop_bound(demo: Scenario, optimal) -> None:
+    """The travel bound (the search's order): consistent on every evaluated edge, 0 at the goal
+    stance, and never above the regrasp bound (a path of n hops is at most n hops long)."""
+    travel, hops = TravelHeuristic(demo), RegraspHeuristic(demo)
+    edges = [(u, v, c) for u, v, c in optimal.graph.edges(data="cost") if c is not None]
+    assert len(edges) >= 20, f"only {len(edges)} edges evaluated: the check would be vacuous"
+    worst = max(travel(u[0]) - c - travel(v) for u, v, c in edges)
+    assert worst <= 1e-12, f"travel h(u) exceeds cost(u, v) + h(v) by {worst:.3g} on some edge"
+    assert travel(optimal.path[-1][0]) == 0.0, "the travel bound of the goal stance must be 0"
+    stances = {u[0] for u, _, _ in edges} | {v for _, v, _ in edges}
+    above = max(travel(s) - hops(s) for s in stances)
+    assert above <= 1e-12, f"the travel bound exceeds the hop bound by {above:.3g}"
+    assert sum(travel(s) > 0 for s in stances) >= len(stances) // 2, "travel is 0 almost always"
+
+
+@pytest.mark.parametrize("name", ["regrasp", "travel"])
+def test_bound_never_exceeds_the_cost_to_go(demo: Scenario, optimal, name: str) -> None:
     """h(v) <= the cheapest cost from v to the goal stance through the edges the exhaustive A*
     evaluated (its components merged, so no more than the true cost to go), at every stance
     that reaches it there."""
     import networkx as nx
 
-    bound = RegraspHeuristic(demo)
+    bound = RegraspHeuristic(demo) if name == "regrasp" else TravelHeuristic(demo)
     def stance(node: tuple) -> tuple:  # the search graph's nodes: vertices or stances
         return node[0] if len(node) == 2 else node
 
@@ -149,9 +166,11 @@ def test_astar_on_the_bound_equals_dijkstra(demo: Scenario, optimal, monkeypatch
     assert optimal.expansions <= dijkstra.expansions
 
 
-def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal) -> None:
-    found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=300.0,
-                                                   anytime=EXHAUSTIVE))
+@pytest.mark.parametrize("ordering,weight", [("distance", 300.0), ("travel", 7.0)])
+def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal, ordering: str,
+                                             weight: float) -> None:
+    found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=weight,
+                                                 ordering=ordering, anytime=EXHAUSTIVE))
     assert found.success and found.quality == "optimal"
     assert found.cost == pytest.approx(optimal.cost, rel=1e-9)
     history = found.history

@@ -255,7 +255,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "whole", "travel7", "travel5", "travel7-any")
+            "whole", "travel7", "travel5", "travel7-any", "dt", "dt7")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -299,6 +299,9 @@ def variant_config(variant: str, time_limit: float | None):
         "travel5": {"ordering": "travel", "heuristic_weight": 5.0, "anytime": None},
         "travel7-any": {"ordering": "travel", "heuristic_weight": 7.0,
                         "anytime": AnytimeConfig(weights=(3.0, 2.0, 1.5, 1.0))},
+        "dt": {"ordering": "distance+travel"},
+        "dt7": {"ordering": "distance+travel",
+                "anytime": AnytimeConfig(weights=(7.0, 4.0, 2.0, 1.0))},
     }
     return FootstepConfig(**table[variant])
 

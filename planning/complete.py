@@ -163,12 +163,15 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             deferred.append(entry)
         return True
 
-    travel = TravelHeuristic(scn) if config.ordering == "travel" else None
+    travel = TravelHeuristic(scn) if config.ordering in ("travel", "distance+travel") else None
+    # "distance+travel": the first route by distance (greedy, as fast as ever), the better ones
+    # after it by travel
+    by_travel = config.ordering == "travel"
 
     def heuristic(stance: tuple) -> float:
         if exact:
             return bound(stance)
-        if travel is not None:
+        if by_travel and travel is not None:
             return weight * travel(stance)
         # the weighted distance, in the order it always had
         return weight * c_attach * distance(stance) / distance_heuristic.max_step
@@ -326,6 +329,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 now = time.perf_counter() - t0
                 if first_expansions < 0:
                     first_expansions = expansions
+                    by_travel = travel is not None
                 history.append((now, best_cost, lower(), expansions))
                 if progress is not None:
                     progress(expansions, tested, nearest, bound=_ratio(best_cost, history[-1][2]))

@@ -68,7 +68,7 @@ from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 SEARCHES = ("hybrid", "complete", "sampled")
-ORDERINGS = ("distance", "travel")  # the complete search's weighted estimates
+ORDERINGS = ("distance", "travel", "distance+travel")  # the complete search's weighted estimates
 
 
 @dataclasses.dataclass(frozen=True)

@@ -166,7 +166,8 @@ def test_astar_on_the_bound_equals_dijkstra(demo: Scenario, optimal, monkeypatch
     assert optimal.expansions <= dijkstra.expansions
 
 
-@pytest.mark.parametrize("ordering,weight", [("distance", 300.0), ("travel", 7.0)])
+@pytest.mark.parametrize("ordering,weight", [("distance", 300.0), ("travel", 7.0),
+                                             ("distance+travel", 300.0)])
 def test_anytime_answers_bracket_the_optimum(demo: Scenario, optimal, ordering: str,
                                              weight: float) -> None:
     found = complete_search(demo, CompleteConfig(COARSE, heuristic_weight=weight,
@@ -241,4 +242,21 @@ def test_bad_anytime_settings_get_one_line(tmp_path, setting: str, field: str) -
     assert run.returncode == 2, run.stderr
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and f"footstep.anytime.{field}" in lines[0], run.stderr
+    assert not out.exists(), "no plan may be written for a refused configuration"
+
+
+@pytest.mark.parametrize("setting, field", [("ordering: sideways", "footstep.ordering"),
+                                            ("segments: {commit: 9}", "footstep.segments.commit"),
+                                            ("segments: {lookahead: -1}",
+                                             "footstep.segments.lookahead")])
+def test_bad_order_and_segment_settings_get_one_line(tmp_path, setting: str, field: str) -> None:
+    from cli_helpers import run_rbp
+
+    config = tmp_path / "planner.yaml"
+    config.write_text(f"footstep:\n  {setting}\n")
+    out = tmp_path / "plan.json"
+    run = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(out), cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and field in lines[0], run.stderr
     assert not out.exists(), "no plan may be written for a refused configuration"

@@ -191,6 +191,7 @@ def _print_motion(plan: Plan) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.check import check_plan
+    from planning.verify_between import resolution_text
     from rbp.progress import CheckProgress
 
     path = Path(args.plan)
@@ -207,8 +208,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
-          f"{plural(n, 'configuration')} verified; "
-          + _summary(model))
+          f"{plural(n, 'configuration')} verified, and the motion between them "
+          f"{resolution_text()}; " + _summary(model))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp

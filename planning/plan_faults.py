@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning import between_faults
 from planning.plan import score_plan
 from planning.plan_model import Plan
 from planning.verify_climb import step_limits
@@ -32,7 +33,7 @@ PlanFile = dict[str, Any]
 Rng = np.random.Generator
 
 
-def _rescore(plan: PlanFile) -> None:
+def rescore(plan: PlanFile) -> None:
     """Set the summary of a (schema-valid) damaged plan file from its configurations."""
     scored = score_plan(Plan.from_dict(plan), plan["robot"]["attach_failure"])
     plan.update(p_path=scored.p_path, p_grasps=scored.p_grasps, p_min=scored.p_min,
@@ -275,7 +276,7 @@ def phases_truncated(plan: PlanFile, rng: Rng) -> Fault | None:
     m = int(rng.choice(cuts))
     out = copy.deepcopy(plan)
     out["phases"] = out["phases"][:m]
-    _rescore(out)
+    rescore(out)
     return Fault("phases-truncated", out, frozenset({"goal", "phase-order"}), None,
                  f"only the first {m} of {len(plan['phases'])} phases kept")
 
@@ -352,7 +353,7 @@ def ramp_removed(plan: PlanFile, rng: Rng) -> Fault | None:
         later = later + other["steps"]
     for step in later:
         step["t"] = round(step["t"] - span, 6)
-    _rescore(out)
+    rescore(out)
     return Fault("ramp-removed", out, frozenset({"release", "attach"}), k,
                  f"phases[{k}]: the {'attach' if lead else 'release'} ramp (steps {run}) "
                  "removed")
@@ -375,6 +376,17 @@ def release_loaded(plan: PlanFile, rng: Rng) -> Fault | None:
                  "gripper's contact")
 
 
+def between_cut(plan: PlanFile, rng: Rng) -> Fault | None:
+    """One step replaced by another valid configuration so that the motion to or from it
+    leaves feasibility while every step holds (`planning.between_faults`)."""
+    cut = between_faults.between_cut(plan, rng)
+    if cut is None:
+        return None
+    out, k, what = cut
+    rescore(out)
+    return Fault("between-cut", out, frozenset({"between"}), k, what)
+
+
 FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "step-removed": step_removed,
     "step-duplicated": step_duplicated,
@@ -393,6 +405,7 @@ FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "bad-number": bad_number,
     "ramp-removed": ramp_removed,
     "release-loaded": release_loaded,
+    "between-cut": between_cut,
 }
 
 

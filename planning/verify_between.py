@@ -28,6 +28,7 @@ import numpy as np
 
 from planning.between import step_motion
 from planning.plan_model import Phase
+from rb_drake.collision import Rock
 from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
@@ -93,15 +94,19 @@ def samples(robot: RobotParams, phase: Phase) -> Samples:
     return Samples(t, out_poses, out_tips, interval)
 
 
-def _slack_robot(robot: RobotParams) -> RobotParams:
-    lo, hi = robot.boom_tension
-    return dataclasses.replace(robot, boom_tension=(max(0.0, lo - TENSION_SLACK), hi))
-
-
 class _World(NamedTuple):
     robot: RobotParams
-    rock: object
+    rock: Rock
     gravity_vector: np.ndarray
+
+
+def verification_world(scn: Scenario) -> _World:
+    """The cave and robot the rule checks samples in: the robot's lower tension bound
+    TENSION_SLACK lower, all else as it is."""
+    robot = scn.robot
+    lo, hi = robot.boom_tension
+    slack = dataclasses.replace(robot, boom_tension=(max(0.0, lo - TENSION_SLACK), hi))
+    return _World(slack, scn.rock, scn.gravity_vector)
 
 
 Fail = Callable[[int, int, str], None]
@@ -113,7 +118,7 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
     (reported by other rules); `fail(phase, n, text)` once per failing interval (n: its first
     step). Returns the number of configurations checked between steps."""
     robot = scn.robot
-    world = _World(_slack_robot(robot), scn.rock, scn.gravity_vector)
+    world = verification_world(scn)
     checked = 0
     for k, phase in enumerate(phases):
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):

@@ -52,9 +52,11 @@ def _fails_long(world, stance, a: np.ndarray, b: np.ndarray, ta, tb, parts: int)
     return bool((runs.max() + 1) / FINE > 1.0 / parts + 1.0 / FINE)
 
 
-def between_cut(plan: PlanFile, rng: np.random.Generator) -> tuple[PlanFile, int, str] | None:
-    """The damaged copy (its summary not yet rescored), the phase and the fault in words; None
-    when no tried cut leaves feasibility."""
+def between_cut(plan: PlanFile, rng: np.random.Generator
+                ) -> tuple[PlanFile, int, int, str] | None:
+    """The damaged copy (its summary not yet rescored), the phase, the step (in the damaged
+    phase) that starts an interval whose motion leaves feasibility, and the fault in words;
+    None when no tried cut leaves feasibility."""
     if not plan["success"] or not plan["phases"]:
         return None
     scn = plan_scenario(Plan.from_dict(plan))
@@ -87,7 +89,8 @@ def between_cut(plan: PlanFile, rng: np.random.Generator) -> tuple[PlanFile, int
                 removed = [i for i in range(a + 1, b) if i not in remain]
                 cut["steps"] = [s for i, s in enumerate(cut["steps"]) if i not in removed]
                 cut.pop("motion", None)
-                return out, k, (f"phases[{k}]: steps {a + 1} to {b - 1} removed but "
+                n = remain[m] - sum(i < remain[m] for i in removed)  # its index now
+                return out, k, n, (f"phases[{k}]: steps {a + 1} to {b - 1} removed but "
                                 f"{[int(i) for i in kept]}; the straight motion from step "
                                 f"{remain[m]} to step {remain[m + 1]} leaves feasibility")
     return None

@@ -47,6 +47,7 @@ class Fault(NamedTuple):
     phase: int | None      # the phase a local fault is in (its problem names it or a neighbour)
     what: str              # in words, for messages
     bad_number: bool = False  # plan holds NaN or inf: it must be refused when read
+    step: int | None = None   # the step a fault is at, where its rule must name it exactly
 
 
 def _phase(plan: PlanFile, rng: Rng, min_steps: int = 1) -> int | None:
@@ -382,9 +383,9 @@ def between_cut(plan: PlanFile, rng: Rng) -> Fault | None:
     cut = between_faults.between_cut(plan, rng)
     if cut is None:
         return None
-    out, k, what = cut
+    out, k, n, what = cut
     rescore(out)
-    return Fault("between-cut", out, frozenset({"between"}), k, what)
+    return Fault("between-cut", out, frozenset({"between"}), k, what, step=n)
 
 
 FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
@@ -422,7 +423,8 @@ def random_fault(plan: PlanFile, rng: Rng, kind: str | None = None) -> Fault:
 class Verdict(NamedTuple):
     rules: frozenset[str]  # the rules the verifier (or the reader) reported
     right_rule: bool       # one of the fault's rules among them
-    located: bool          # for a local fault: a problem of a right rule names its phase (+-1)
+    located: bool          # for a local fault: a problem of a right rule names its phase (+-1;
+    #                        exactly, and its step, when the fault gives one)
 
     @property
     def rejected(self) -> bool:
@@ -455,5 +457,6 @@ def judge(fault: Fault) -> Verdict:
     rules = frozenset(p.rule for p in problems)
     located = fault.phase is None or any(
         p.rule in fault.rules and p.phase is not None and abs(p.phase - fault.phase) <= 1
+        and (fault.step is None or (p.phase == fault.phase and p.step == fault.step))
         for p in problems)
     return Verdict(rules, bool(rules & fault.rules), located)

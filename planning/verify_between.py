@@ -75,12 +75,13 @@ def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None)
     return np.maximum(1, np.ceil(need - 1e-12)).astype(int)
 
 
-def samples(robot: RobotParams, phase: Phase) -> Samples:
-    """A phase's samples between its steps on `step_motion` (the rig's and this rule's motion)."""
-    times = np.array([s.t for s in phase.steps], dtype=float)
-    poses = np.array([s.pose for s in phase.steps], dtype=float)
-    tips = (np.array([s.free_tip for s in phase.steps], dtype=float)
-            if phase.kind == "reach" else None)
+def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
+            tips: np.ndarray | None = None) -> Samples:
+    """The samples strictly inside the intervals of steps at `times` (K,) with body `poses`
+    (K, 3) and, in a reach phase, free gripper `tips` (K, 2), on `step_motion` (the motion the
+    rig executes and this rule verifies): interval n cut into `subdivisions` equal parts."""
+    times = np.asarray(times, dtype=float)
+    poses = np.asarray(poses, dtype=float)
     parts = subdivisions(robot, poses, tips)
     interval = np.repeat(np.arange(len(parts)), parts - 1)
     first = np.concatenate([[0], np.cumsum(parts - 1)])[interval]
@@ -92,6 +93,15 @@ def samples(robot: RobotParams, phase: Phase) -> Samples:
     if tips is not None:
         out_tips = step_motion(times, tips).vector_values(t).T if len(t) else np.zeros((0, 2))
     return Samples(t, out_poses, out_tips, interval)
+
+
+def phase_samples(robot: RobotParams, phase: Phase) -> Samples:
+    """`samples` of a phase's steps."""
+    times = np.array([s.t for s in phase.steps], dtype=float)
+    poses = np.array([s.pose for s in phase.steps], dtype=float)
+    tips = (np.array([s.free_tip for s in phase.steps], dtype=float)
+            if phase.kind == "reach" else None)
+    return samples(robot, times, poses, tips)
 
 
 class _World(NamedTuple):
@@ -124,7 +134,7 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
             continue
         stance = scn.stance(tuple(phase.stance))
-        s = samples(robot, phase)
+        s = phase_samples(robot, phase)
         if not len(s.t):
             continue
         checked += len(s.t)

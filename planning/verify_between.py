@@ -29,7 +29,7 @@ import numpy as np
 from planning.between import step_motion
 from planning.plan_model import Phase
 from rb_drake.collision import Rock
-from rb_drake.feasibility import REASON_TEXT, Reason, check_poses
+from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 
@@ -41,6 +41,11 @@ TRAVEL = 0.005                 # m: each boom's length, and the free gripper, be
 # between steps (three points, planning.between) leaves dips of a few tenths of a newton
 # between its samples (demo-crevasse: 0.2 N). Any other limit is exact.
 TENSION_SLACK = 0.25
+# Intervals longer than this many samples (50 m of travel) are not sampled but reported: no
+# step of a climb moves that far, and a hostile file must not make the verifier allocate
+# without bound. Samples are checked in chunks of CHUNK to bound memory.
+MAX_PARTS = 10_000
+CHUNK = 20_000
 
 
 def resolution_text() -> str:
@@ -70,9 +75,11 @@ def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None)
            else np.linalg.norm(np.diff(tips, axis=0), axis=1))
     radius = float(np.linalg.norm(robot.shoulder_array, axis=1).max())
     travel = move + radius * turn + tip
-    need = np.maximum.reduce([move / TRANSLATION, turn / ROTATION, tip / TRAVEL,
-                              travel / TRAVEL])
-    return np.maximum(1, np.ceil(need - 1e-12)).astype(int)
+    with np.errstate(all="ignore"):
+        need = np.maximum.reduce([move / TRANSLATION, turn / ROTATION, tip / TRAVEL,
+                                  travel / TRAVEL])
+    need = np.where(np.isfinite(need), need, np.inf)
+    return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
 
 
 def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
@@ -83,6 +90,7 @@ def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
     times = np.asarray(times, dtype=float)
     poses = np.asarray(poses, dtype=float)
     parts = subdivisions(robot, poses, tips)
+    parts = np.where(parts > MAX_PARTS, 1, parts)  # too long to sample: `too_long` reports it
     interval = np.repeat(np.arange(len(parts)), parts - 1)
     first = np.concatenate([[0], np.cumsum(parts - 1)])[interval]
     j = np.arange(len(interval)) - first + 1  # 1 .. parts - 1 within each interval
@@ -95,13 +103,18 @@ def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
     return Samples(t, out_poses, out_tips, interval)
 
 
-def phase_samples(robot: RobotParams, phase: Phase) -> Samples:
-    """`samples` of a phase's steps."""
+def _arrays(phase: Phase) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A phase's step times, poses and (in a reach phase) free gripper positions."""
     times = np.array([s.t for s in phase.steps], dtype=float)
     poses = np.array([s.pose for s in phase.steps], dtype=float)
     tips = (np.array([s.free_tip for s in phase.steps], dtype=float)
             if phase.kind == "reach" else None)
-    return samples(robot, times, poses, tips)
+    return times, poses, tips
+
+
+def phase_samples(robot: RobotParams, phase: Phase) -> Samples:
+    """`samples` of a phase's steps."""
+    return samples(robot, *_arrays(phase))
 
 
 class _World(NamedTuple):
@@ -134,30 +147,40 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
             continue
         stance = scn.stance(tuple(phase.stance))
+        for n in np.flatnonzero(subdivisions(robot, *_arrays(phase)[1:]) > MAX_PARTS):
+            fail(k, int(n), f"between steps {n} and {n + 1}: the motion is too long to verify "
+                 f"(over {MAX_PARTS} samples at the resolution)")
         s = phase_samples(robot, phase)
-        if not len(s.t):
-            continue
         checked += len(s.t)
-        with np.errstate(all="ignore"):
-            check = check_poses(world, stance, s.poses, s.tips)
-        bad = np.flatnonzero(~check.feasible)
-        if not len(bad):
-            continue
-        _, first = np.unique(s.interval[bad], return_index=True)
-        for i in bad[first]:  # the first failing sample of each failing interval
-            n = int(s.interval[i])
-            t0, t1 = phase.steps[n].t, phase.steps[n + 1].t
-            w = (s.t[i] - t0) / (t1 - t0)
-            reason = Reason(int(check.reason[i]))
-            what = REASON_TEXT[reason]
-            if check.boom[i] >= 0:
-                what = f"boom {int(check.boom[i])}: {what}"
-            if reason == Reason.PROBABILITY:
-                what += f" (P = {float(check.probability[i]):.5f} < {robot.p_min})"
-            pose = ", ".join(f"{v:.4f}" for v in s.poses[i])
-            fail(k, n, f"between steps {n} and {n + 1}, at {w:.3f} of the way (t={s.t[i]:.4f}, "
-                 f"pose [{pose}]): {what}")
+        failed: set[int] = set()
+        for lo in range(0, len(s.t), CHUNK):
+            rows = slice(lo, lo + CHUNK)
+            tips = None if s.tips is None else s.tips[rows]
+            with np.errstate(all="ignore"):
+                check = check_poses(world, stance, s.poses[rows], tips)
+            for i in np.flatnonzero(~check.feasible):
+                n = int(s.interval[lo + i])
+                if n in failed:  # one problem per interval: its first failing sample
+                    continue
+                failed.add(n)
+                fail(k, n, _text(phase, s, lo + i, check, i, robot.p_min))
     return checked
+
+
+def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float) -> str:
+    """What failed at sample j (row i of `check`), in words."""
+    n = int(s.interval[j])
+    t0, t1 = phase.steps[n].t, phase.steps[n + 1].t
+    w = (s.t[j] - t0) / (t1 - t0)
+    reason = Reason(int(check.reason[i]))
+    what = REASON_TEXT[reason]
+    if check.boom[i] >= 0:
+        what = f"boom {int(check.boom[i])}: {what}"
+    if reason == Reason.PROBABILITY:
+        what += f" (P = {float(check.probability[i]):.5f} < {p_min})"
+    pose = ", ".join(f"{v:.4f}" for v in s.poses[j])
+    return (f"between steps {n} and {n + 1}, at {w:.3f} of the way (t={s.t[j]:.4f}, "
+            f"pose [{pose}]): {what}")
 
 
 def _well_formed(phase: Phase) -> bool:
@@ -168,4 +191,5 @@ def _well_formed(phase: Phase) -> bool:
     if phase.kind == "reach" and any(s.free_tip is None for s in phase.steps):
         return False
     poses = np.array([s.pose for s in phase.steps], dtype=float)
-    return bool(np.all(np.isfinite(poses)))
+    tips = _arrays(phase)[2]
+    return bool(np.all(np.isfinite(poses)) and (tips is None or np.all(np.isfinite(tips))))

@@ -176,3 +176,14 @@ def test_simulate_and_rig_run_refuse_a_plan_whose_motion_between_steps_fails(
     err = capsys.readouterr().err
     assert ": between: " in err and "refused" in err, err
     assert not (tmp_path / "rig.lcm").exists(), "the rig ran a refused plan"
+
+
+def test_an_interval_too_long_to_sample_is_reported_not_sampled(shaft) -> None:
+    """A hostile file's steps 100 m apart: reported (without allocating 20,000 samples per
+    metre), never accepted."""
+    found: list[tuple[int, int, str]] = []
+    phase = _body_phase([[0.0, 1.0, 0.0], [100.0, 1.0, 0.0], [100.0, 1.0, 0.0]],
+                        list(shaft.start_stance))
+    checked = between_problems((phase,), shaft, set(), lambda k, n, t: found.append((k, n, t)))
+    assert checked == 0, checked
+    assert [(k, n) for k, n, _ in found] == [(0, 0)] and "too long" in found[0][2], found

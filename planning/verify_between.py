@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import NamedTuple
 
 import numpy as np
@@ -135,7 +135,7 @@ def verification_world(scn: Scenario) -> _World:
 Fail = Callable[[int, int, str], None]
 
 
-def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
+def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[int | None],
                      fail: Fail) -> int:
     """Verifies the motion inside every step interval of every phase but those in `skip`
     (reported by other rules); `fail(phase, n, text)` once per failing interval (n: its first
@@ -147,9 +147,9 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
             continue
         stance = scn.stance(tuple(phase.stance))
-        for n in np.flatnonzero(subdivisions(robot, *_arrays(phase)[1:]) > MAX_PARTS):
-            fail(k, int(n), f"between steps {n} and {n + 1}: the motion is too long to verify "
-                 f"(over {MAX_PARTS} samples at the resolution)")
+        for long in np.flatnonzero(subdivisions(robot, *_arrays(phase)[1:]) > MAX_PARTS):
+            fail(k, int(long), f"between steps {long} and {long + 1}: the motion is too long to "
+                 f"verify (over {MAX_PARTS} samples at the resolution)")
         s = phase_samples(robot, phase)
         checked += len(s.t)
         failed: set[int] = set()
@@ -158,7 +158,7 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: set[int],
             tips = None if s.tips is None else s.tips[rows]
             with np.errstate(all="ignore"):
                 check = check_poses(world, stance, s.poses[rows], tips)
-            for i in np.flatnonzero(~check.feasible):
+            for i in map(int, np.flatnonzero(~check.feasible)):
                 n = int(s.interval[lo + i])
                 if n in failed:  # one problem per interval: its first failing sample
                     continue

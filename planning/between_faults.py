@@ -57,8 +57,8 @@ def between_cut(plan: PlanFile, rng: np.random.Generator
     """The damaged copy (its summary not yet rescored), the phase, the step (in the damaged
     phase) that starts an interval whose motion leaves feasibility, and the fault in words;
     None when no tried cut leaves feasibility."""
-    if not plan["success"] or not plan["phases"]:
-        return None
+    if not plan["success"] or not plan["phases"] or "time_step" not in plan:
+        return None  # a footstep plan's motion between steps is not verified
     scn = plan_scenario(Plan.from_dict(plan))
     robot = scn.robot
     world = verification_world(scn)

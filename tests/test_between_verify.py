@@ -187,3 +187,19 @@ def test_an_interval_too_long_to_sample_is_reported_not_sampled(shaft) -> None:
     checked = between_problems((phase,), shaft, set(), lambda k, n, t: found.append((k, n, t)))
     assert checked == 0, checked
     assert [(k, n) for k, n, _ in found] == [(0, 0)] and "too long" in found[0][2], found
+
+
+def test_a_footstep_plan_says_its_motion_between_steps_is_not_verified(tmp_path: Path,
+                                                                       capsys) -> None:
+    """A footstep plan (no time_step) states end configurations only: rule `between` does not
+    apply, and `rbp check` says the motion between them was not verified."""
+    import rbp
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    plan = rbp.plan(load_scenario(bundled_caves()["demo-shaft"]), footsteps_only=True)
+    assert plan.time_step is None
+    path = tmp_path / "footsteps.json"
+    path.write_text(json.dumps(plan.to_dict()))
+    assert main(["check", "-q", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "not the motion between them" in out and resolution_text() not in out, out

@@ -3,8 +3,10 @@
 Plans each cave once (the `rbp plan` pipeline), then applies N random single faults
 (`planning.plan_faults`), cycling through the caves, and verifies each damaged plan as
 `rbp check` would. Reports how many were accepted (must be 0), how many were rejected but not
-by one of their class's rules, and per rule and per fault class how many each caught; with
---out, writes the counts as JSON. Exit status 1 if any fault was accepted or misattributed.
+by one of their class's rules (or not in their phase and, where the class names one, step), and
+per rule and per fault class how many each caught; with --out, writes the counts as JSON. Exit
+status 1 if any fault was accepted or misattributed. --classes limits the faults to some
+classes (the between-steps class alone: --classes between-cut).
 
     python -m experiments.mutation_bench --faults 1000
 """
@@ -35,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the faults' draws")
     parser.add_argument("--caves", default=",".join(CAVES),
                         help=f"bundled caves, comma-separated (default {','.join(CAVES)})")
+    parser.add_argument("--classes", help="only these fault classes, comma-separated (default: "
+                        "all); e.g. --classes between-cut")
     parser.add_argument("--out", help="write the counts to this JSON file")
     args = parser.parse_args(argv)
     caves = bundled_caves()
@@ -42,6 +46,10 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(names) - set(caves))
     if unknown:
         parser.error(f"--caves: unknown {unknown}; bundled caves are {', '.join(caves)}")
+    kinds = args.classes.split(",") if args.classes else None
+    wrong = sorted(set(kinds or ()) - set(FAULTS))
+    if wrong:
+        parser.error(f"--classes: unknown {wrong}; fault classes are {', '.join(FAULTS)}")
     if args.faults < 1:
         parser.error(f"--faults: must be at least 1, got {args.faults}")
     plans = {}
@@ -58,7 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     for i in range(args.faults):
         name = names[i % len(names)]
-        fault = random_fault(plans[name], rng)
+        kind = None if kinds is None else str(rng.choice(kinds))
+        fault = random_fault(plans[name], rng, kind)
         verdict = judge(fault)
         by_class[fault.kind] += 1
         by_rule.update(verdict.rules)
@@ -72,11 +81,11 @@ def main(argv: list[str] | None = None) -> int:
           "one of their class's rules (or not in their phase)")
     for line in (accepted + misattributed)[:20]:
         print(f"  {line}")
-    print("faults per class: " + ", ".join(f"{k} {by_class[k]}" for k in FAULTS))
+    print("faults per class: " + ", ".join(f"{k} {by_class[k]}" for k in FAULTS if by_class[k]))
     print("faults each rule reported: " + ", ".join(f"{r} {n}" for r, n in by_rule.most_common()))
     if args.out:
         atomic_write_text(args.out, json.dumps({
-            "faults": args.faults, "seed": args.seed, "caves": names,
+            "faults": args.faults, "seed": args.seed, "caves": names, "classes": kinds,
             "accepted": accepted, "misattributed": misattributed,
             "by_class": dict(by_class), "by_rule": dict(by_rule), "seconds": seconds},
             indent=1) + "\n")

@@ -6,7 +6,9 @@ robot stored once); here every configuration is checked with the plan's own tens
 re-optimised): kinematic limits, collisions, statics to 1e-6 N, tension bounds, shoulder torque,
 pull angles below the robot's max_pull_angle_deg, and P >= p_min recomputed from the limit
 surfaces; every recorded per-step value (each grasp's P, P, shoulder torque, summed tension)
-is recomputed and compared, and p_min, p_path and the regrasp count are recomputed.
+is recomputed and compared, and p_min, p_path and the regrasp count are recomputed. In a
+motion plan (one with `time_step`) the motion between successive steps is verified densely
+(rule `between`, planning.verify_between); a footstep plan states end configurations only.
 Each problem names its rule (`verify_climb.RULES`), phase and step.
 """
 
@@ -21,6 +23,7 @@ import numpy as np
 from planning.plan_model import Plan, Step, plan_of, plan_scenario
 from planning.probability import Configuration, path_probability
 from planning.ramps import ramp_statics
+from planning.verify_between import between_problems
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
@@ -81,6 +84,12 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
         _check_motion(plan, k, efforts, problems)
         if progress is not None:
             progress(k + 1, len(plan.phases))
+
+    def between(k: int, n: int, text: str) -> None:
+        problems.append(Problem("between", text, k, n, locate(plan, k, n)))
+
+    if plan.time_step is not None:  # a footstep plan holds end configurations, no motion
+        between_problems(plan.phases, scn, bad_form, between)
     if plan.success and recomputed:
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)

@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning import between_faults
 from planning.plan import score_plan
 from planning.plan_model import Plan
 from planning.verify_climb import step_limits
@@ -32,7 +33,7 @@ PlanFile = dict[str, Any]
 Rng = np.random.Generator
 
 
-def _rescore(plan: PlanFile) -> None:
+def rescore(plan: PlanFile) -> None:
     """Set the summary of a (schema-valid) damaged plan file from its configurations."""
     scored = score_plan(Plan.from_dict(plan), plan["robot"]["attach_failure"])
     plan.update(p_path=scored.p_path, p_grasps=scored.p_grasps, p_min=scored.p_min,
@@ -46,6 +47,7 @@ class Fault(NamedTuple):
     phase: int | None      # the phase a local fault is in (its problem names it or a neighbour)
     what: str              # in words, for messages
     bad_number: bool = False  # plan holds NaN or inf: it must be refused when read
+    step: int | None = None   # the step a fault is at, where its rule must name it exactly
 
 
 def _phase(plan: PlanFile, rng: Rng, min_steps: int = 1) -> int | None:
@@ -275,7 +277,7 @@ def phases_truncated(plan: PlanFile, rng: Rng) -> Fault | None:
     m = int(rng.choice(cuts))
     out = copy.deepcopy(plan)
     out["phases"] = out["phases"][:m]
-    _rescore(out)
+    rescore(out)
     return Fault("phases-truncated", out, frozenset({"goal", "phase-order"}), None,
                  f"only the first {m} of {len(plan['phases'])} phases kept")
 
@@ -352,7 +354,7 @@ def ramp_removed(plan: PlanFile, rng: Rng) -> Fault | None:
         later = later + other["steps"]
     for step in later:
         step["t"] = round(step["t"] - span, 6)
-    _rescore(out)
+    rescore(out)
     return Fault("ramp-removed", out, frozenset({"release", "attach"}), k,
                  f"phases[{k}]: the {'attach' if lead else 'release'} ramp (steps {run}) "
                  "removed")
@@ -375,6 +377,17 @@ def release_loaded(plan: PlanFile, rng: Rng) -> Fault | None:
                  "gripper's contact")
 
 
+def between_cut(plan: PlanFile, rng: Rng) -> Fault | None:
+    """One step replaced by another valid configuration so that the motion to or from it
+    leaves feasibility while every step holds (`planning.between_faults`)."""
+    cut = between_faults.between_cut(plan, rng)
+    if cut is None:
+        return None
+    out, k, n, what = cut
+    rescore(out)
+    return Fault("between-cut", out, frozenset({"between"}), k, what, step=n)
+
+
 FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "step-removed": step_removed,
     "step-duplicated": step_duplicated,
@@ -393,6 +406,7 @@ FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "bad-number": bad_number,
     "ramp-removed": ramp_removed,
     "release-loaded": release_loaded,
+    "between-cut": between_cut,
 }
 
 
@@ -409,7 +423,8 @@ def random_fault(plan: PlanFile, rng: Rng, kind: str | None = None) -> Fault:
 class Verdict(NamedTuple):
     rules: frozenset[str]  # the rules the verifier (or the reader) reported
     right_rule: bool       # one of the fault's rules among them
-    located: bool          # for a local fault: a problem of a right rule names its phase (+-1)
+    located: bool          # for a local fault: a problem of a right rule names its phase (+-1;
+    #                        exactly, and its step, when the fault gives one)
 
     @property
     def rejected(self) -> bool:
@@ -442,5 +457,6 @@ def judge(fault: Fault) -> Verdict:
     rules = frozenset(p.rule for p in problems)
     located = fault.phase is None or any(
         p.rule in fault.rules and p.phase is not None and abs(p.phase - fault.phase) <= 1
+        and (fault.step is None or (p.phase == fault.phase and p.step == fault.step))
         for p in problems)
     return Verdict(rules, bool(rules & fault.rules), located)

@@ -20,7 +20,8 @@ from planning.plan_model import Plan
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, read_text
 
-VERIFIER = "rbp-verify/2"  # bump when the rules change: older stamps then no longer count
+# bump when the rules change: older stamps then no longer count (3: rule between)
+VERIFIER = "rbp-verify/3"
 
 
 class PlanFileError(RbpInputError):

@@ -52,6 +52,10 @@ RULES = {
     "conditioning": "the booms' wrench not degenerate (not all through one point)",
     "pull-angle": "every grasp pulled at less than the robot's max_pull_angle_deg from its normal",
     "probability": "every configuration's P at least p_min",
+    "between": "in a motion plan (with time_step), the motion from each step to the next "
+               "(linear, as rbp rig-run executes it) passes the checks of a step at every "
+               "sample of a resolution of 5 mm, 0.5 deg and 5 mm of boom or gripper travel "
+               "(planning.verify_between)",
     "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation",
 }
 

@@ -234,6 +234,7 @@ def _print_motion(plan: Plan) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.check import check_plan
+    from planning.verify_between import resolution_text
     from rbp.progress import CheckProgress
 
     path = Path(args.plan)
@@ -249,9 +250,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
+    between = (f"and the motion between them {resolution_text()}" if model.time_step is not None
+               else "not the motion between them (a footstep plan: end configurations only)")
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
-          f"{plural(n, 'configuration')} verified; "
-          + _summary(model))
+          f"{plural(n, 'configuration')} verified, {between}; " + _summary(model))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp

@@ -37,6 +37,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, Leaf
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.between import step_motion
 from planning.plan_model import Plan, plan_of, plan_scenario
 from rb_drake import geometry, grasp
 from rb_drake.errors import RbpInputError
@@ -68,7 +69,8 @@ class RigInputError(RbpInputError):
 
 
 class BodyPhase(NamedTuple):
-    """A body phase of a plan as trajectories in plan time (pose and tensions, linear in t)."""
+    """A body phase of a plan as trajectories in plan time (pose and tensions, linear in t
+    between steps: `planning.between.step_motion`)."""
 
     scenario: Scenario
     stance_ids: tuple[str, ...]
@@ -118,13 +120,11 @@ def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
     # the first one has nothing safe before it.
     if not (np.all(np.isfinite(poses[:, 0])) and np.all(np.isfinite(tensions[:, 0]))):
         raise RigInputError(f"{where}.steps[0]", "the first pose and tensions must be finite")
-    if len(steps) == 1:  # hold still for a second
-        times = np.append(times, times[0] + 1.0)
-        poses, tensions = np.repeat(poses, 2, axis=1), np.repeat(tensions, 2, axis=1)
+    # the motion between steps that `rbp check` verifies (rule `between`); one step holds
+    # still for a second
+    pose, tension = step_motion(times, poses.T), step_motion(times, tensions.T)
     return BodyPhase(scn, tuple(str(a) for a in phase.stance),  # each checked above
-                     PiecewisePolynomial.FirstOrderHold(times, poses),
-                     PiecewisePolynomial.FirstOrderHold(times, tensions),
-                     float(times[0]), float(times[-1]))
+                     pose, tension, float(pose.start_time()), float(pose.end_time()))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
+from planning.between import step_motion
 from planning.plan_file import content_hash
 from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
@@ -90,11 +91,9 @@ def _rate(trajectory: PiecewisePolynomial | None) -> PiecewisePolynomial | None:
 
 
 def _hold(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
-    """Linear interpolation of values (K, n) at times (K,); one step holds its value."""
-    if len(times) == 1:
-        times = np.array([times[0], times[0] + 1.0])
-        values = np.vstack([values, values])
-    return PiecewisePolynomial.FirstOrderHold(times, values.T)
+    """Linear interpolation of values (K, n) at times (K,); one step holds its value: the
+    motion between steps that `rbp check` verifies and `rbp rig-run` executes."""
+    return step_motion(times, values)
 
 
 def _smooth(times: np.ndarray, values: np.ndarray, rest: bool) -> PiecewisePolynomial:

@@ -1,0 +1,195 @@
+"""Rule `between`: the motion between successive steps of a plan, verified densely.
+
+A plan is verified at its steps but executed everywhere between them: `rbp rig-run` commands
+the straight line from each step to the next (`planning.between.step_motion`, linear in time:
+body pose and free tip, so each boom's length follows), and this rule verifies that same
+motion. Every interval is sampled so that successive checked configurations (the steps
+included) lie at most `TRANSLATION` apart in body position, `ROTATION` in body angle and
+`TRAVEL` in each boom's length and in the free gripper's position, and every sample must be
+what a step must be (`rb_drake.feasibility.check_poses`, vectorised over all samples of a
+phase): booms within their length and shoulder limits, body and booms clear of rock, the free
+boom's shoulder torque within its limit, the booms' wrench not degenerate, and tensions (the
+most robust allocation, the planner's model of them, which `rbp simulate`'s feed-forward
+follows between steps) within the tension limits that balance gravity with every grasp pulled
+within max_pull_angle_deg and P at least p_min. `TENSION_SLACK` is the one tolerance, on the
+lower tension bound only (docs/formats.md says why). An interval in which neither the body
+nor the free gripper moves (a release or attach ramp, a dwell) has nothing between its steps
+to sample: a ramp moves the load linearly at one pose, where the statics hold exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Collection
+from typing import NamedTuple
+
+import numpy as np
+
+from planning.between import step_motion
+from planning.plan_model import Phase
+from rb_drake.collision import Rock
+from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
+from rb_drake.params import RobotParams
+from rb_drake.scenario import Scenario
+
+TRANSLATION = 0.005            # m: body translation between successive checked configurations
+ROTATION = math.radians(0.5)   # rad: body rotation between them
+TRAVEL = 0.005                 # m: each boom's length, and the free gripper, between them
+# N below the lower tension bound that a boom may reach between steps (not at a step): the
+# bound keeps a boom taut, and where a plan's tensions sit on it the planner's own test
+# between steps (three points, planning.between) leaves dips of a few tenths of a newton
+# between its samples (demo-crevasse: 0.2 N). Any other limit is exact.
+TENSION_SLACK = 0.25
+# Intervals longer than this many samples (50 m of travel) are not sampled but reported: no
+# step of a climb moves that far, and a hostile file must not make the verifier allocate
+# without bound. Samples are checked in chunks of CHUNK to bound memory.
+MAX_PARTS = 10_000
+CHUNK = 20_000
+
+
+def resolution_text() -> str:
+    """The resolution `between` verifies at, in words (for `rbp check`'s output)."""
+    return (f"every {TRANSLATION * 1e3:g} mm, {math.degrees(ROTATION):g} deg of body motion "
+            f"and {TRAVEL * 1e3:g} mm of boom or gripper travel")
+
+
+class Samples(NamedTuple):
+    """Configurations strictly inside a phase's step intervals."""
+
+    t: np.ndarray               # (S,) plan time
+    poses: np.ndarray           # (S, 3)
+    tips: np.ndarray | None     # (S, 2) the free gripper in a reach phase
+    interval: np.ndarray        # (S,) n: the sample lies between steps n and n + 1
+
+
+def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None) -> np.ndarray:
+    """Per interval (K - 1,), how many equal parts the linear motion from step to step is cut
+    into so that the resolution holds: translation and rotation are linear in the interval's
+    fraction; a boom's length changes at most by its shoulder's travel (translation plus the
+    shoulder's radius times the rotation) plus its gripper's (the free tip's travel)."""
+    d = np.diff(poses, axis=0)
+    move = np.hypot(d[:, 0], d[:, 1])
+    turn = np.abs(d[:, 2])
+    tip = (np.zeros_like(move) if tips is None
+           else np.linalg.norm(np.diff(tips, axis=0), axis=1))
+    radius = float(np.linalg.norm(robot.shoulder_array, axis=1).max())
+    travel = move + radius * turn + tip
+    with np.errstate(all="ignore"):
+        need = np.maximum.reduce([move / TRANSLATION, turn / ROTATION, tip / TRAVEL,
+                                  travel / TRAVEL])
+    need = np.where(np.isfinite(need), need, np.inf)
+    return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
+
+
+def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
+            tips: np.ndarray | None = None) -> Samples:
+    """The samples strictly inside the intervals of steps at `times` (K,) with body `poses`
+    (K, 3) and, in a reach phase, free gripper `tips` (K, 2), on `step_motion` (the motion the
+    rig executes and this rule verifies): interval n cut into `subdivisions` equal parts."""
+    times = np.asarray(times, dtype=float)
+    poses = np.asarray(poses, dtype=float)
+    parts = subdivisions(robot, poses, tips)
+    parts = np.where(parts > MAX_PARTS, 1, parts)  # too long to sample: `too_long` reports it
+    interval = np.repeat(np.arange(len(parts)), parts - 1)
+    first = np.concatenate([[0], np.cumsum(parts - 1)])[interval]
+    j = np.arange(len(interval)) - first + 1  # 1 .. parts - 1 within each interval
+    w = j / parts[interval]
+    t = times[interval] + w * (times[interval + 1] - times[interval])
+    out_poses = step_motion(times, poses).vector_values(t).T if len(t) else np.zeros((0, 3))
+    out_tips = None
+    if tips is not None:
+        out_tips = step_motion(times, tips).vector_values(t).T if len(t) else np.zeros((0, 2))
+    return Samples(t, out_poses, out_tips, interval)
+
+
+def _arrays(phase: Phase) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A phase's step times, poses and (in a reach phase) free gripper positions."""
+    times = np.array([s.t for s in phase.steps], dtype=float)
+    poses = np.array([s.pose for s in phase.steps], dtype=float)
+    tips = (np.array([s.free_tip for s in phase.steps], dtype=float)
+            if phase.kind == "reach" else None)
+    return times, poses, tips
+
+
+def phase_samples(robot: RobotParams, phase: Phase) -> Samples:
+    """`samples` of a phase's steps."""
+    return samples(robot, *_arrays(phase))
+
+
+class _World(NamedTuple):
+    robot: RobotParams
+    rock: Rock
+    gravity_vector: np.ndarray
+
+
+def verification_world(scn: Scenario) -> _World:
+    """The cave and robot the rule checks samples in: the robot's lower tension bound
+    TENSION_SLACK lower, all else as it is."""
+    robot = scn.robot
+    lo, hi = robot.boom_tension
+    slack = dataclasses.replace(robot, boom_tension=(max(0.0, lo - TENSION_SLACK), hi))
+    return _World(slack, scn.rock, scn.gravity_vector)
+
+
+Fail = Callable[[int, int, str], None]
+
+
+def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[int | None],
+                     fail: Fail) -> int:
+    """Verifies the motion inside every step interval of every phase but those in `skip`
+    (reported by other rules); `fail(phase, n, text)` once per failing interval (n: its first
+    step). Returns the number of configurations checked between steps."""
+    robot = scn.robot
+    world = verification_world(scn)
+    checked = 0
+    for k, phase in enumerate(phases):
+        if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
+            continue
+        stance = scn.stance(tuple(phase.stance))
+        for long in np.flatnonzero(subdivisions(robot, *_arrays(phase)[1:]) > MAX_PARTS):
+            fail(k, int(long), f"between steps {long} and {long + 1}: the motion is too long to "
+                 f"verify (over {MAX_PARTS} samples at the resolution)")
+        s = phase_samples(robot, phase)
+        checked += len(s.t)
+        failed: set[int] = set()
+        for lo in range(0, len(s.t), CHUNK):
+            rows = slice(lo, lo + CHUNK)
+            tips = None if s.tips is None else s.tips[rows]
+            with np.errstate(all="ignore"):
+                check = check_poses(world, stance, s.poses[rows], tips)
+            for i in map(int, np.flatnonzero(~check.feasible)):
+                n = int(s.interval[lo + i])
+                if n in failed:  # one problem per interval: its first failing sample
+                    continue
+                failed.add(n)
+                fail(k, n, _text(phase, s, lo + i, check, i, robot.p_min))
+    return checked
+
+
+def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float) -> str:
+    """What failed at sample j (row i of `check`), in words."""
+    n = int(s.interval[j])
+    t0, t1 = phase.steps[n].t, phase.steps[n + 1].t
+    w = (s.t[j] - t0) / (t1 - t0)
+    reason = Reason(int(check.reason[i]))
+    what = REASON_TEXT[reason]
+    if check.boom[i] >= 0:
+        what = f"boom {int(check.boom[i])}: {what}"
+    if reason == Reason.PROBABILITY:
+        what += f" (P = {float(check.probability[i]):.5f} < {p_min})"
+    pose = ", ".join(f"{v:.4f}" for v in s.poses[j])
+    return (f"between steps {n} and {n + 1}, at {w:.3f} of the way (t={s.t[j]:.4f}, "
+            f"pose [{pose}]): {what}")
+
+
+def _well_formed(phase: Phase) -> bool:
+    """Whether a phase's motion can be sampled (else other rules report why it cannot)."""
+    times = np.array([s.t for s in phase.steps], dtype=float)
+    if not (np.all(np.isfinite(times)) and np.all(np.diff(times) > 0)):
+        return False
+    if phase.kind == "reach" and any(s.free_tip is None for s in phase.steps):
+        return False
+    poses = np.array([s.pose for s in phase.steps], dtype=float)
+    tips = _arrays(phase)[2]
+    return bool(np.all(np.isfinite(poses)) and (tips is None or np.all(np.isfinite(tips))))

@@ -6,7 +6,9 @@ robot stored once); here every configuration is checked with the plan's own tens
 re-optimised): kinematic limits, collisions, statics to 1e-6 N, tension bounds, shoulder torque,
 pull angles below the robot's max_pull_angle_deg, and P >= p_min recomputed from the limit
 surfaces; every recorded per-step value (each grasp's P, P, shoulder torque, summed tension)
-is recomputed and compared, and p_min, p_path and the regrasp count are recomputed.
+is recomputed and compared, and p_min, p_path and the regrasp count are recomputed (for a
+successful plan and a partial one, `rbp plan --partial`, whose climb is checked as any other
+but need not reach the goal).
 Each problem names its rule (`verify_climb.RULES`), phase and step.
 """
 
@@ -81,7 +83,7 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
         _check_motion(plan, k, efforts, problems)
         if progress is not None:
             progress(k + 1, len(plan.phases))
-    if plan.success and recomputed:
+    if (plan.success or plan.partial is not None) and recomputed:  # a partial climb's too
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)
         # p_grasps is optional (plans before it): absent, it is not checked; null is wrong

@@ -211,11 +211,14 @@ def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | N
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
                progress: Progress | None = None,
                footstep_progress: Callable[..., None] | None = None,
-               footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+               footsteps_done: Callable[[FootstepPlan], None] | None = None,
+               partial: bool = False) -> Plan:
     """The whole plan (`reachbot-plan/2`) for a scenario.
 
     `footsteps_done` is called with each footstep plan (the search's, then any retry's): a
-    caller can picture where a failed search went."""
+    caller can picture where a failed search went. `partial`: when the search finds no route
+    (none exists, or its budget ran out), the plan climbs to the expanded stance nearest the
+    goal (`partial_climb`); it still says `success: false`."""
     if planner not in PLANNERS:
         raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
     cfg = config or PipelineConfig()
@@ -224,10 +227,14 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     if planner == "naive":
         fp = plan_naive(scn, cfg.footstep)
     else:
-        fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress)
+        fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, partial=partial)
     timing["footstep"] = time.perf_counter() - t_start
     if footsteps_done is not None:
         footsteps_done(fp)
+    if planner == "rbp" and fp.partial is not None:
+        plan = partial_climb(scn, fp, cfg, timing, progress)
+        timing["total"] = time.perf_counter() - t_start
+        return plan.replace(timing=plan.timing | timing)
     if planner == "naive" or not fp.success:
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
@@ -266,6 +273,47 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     timing["total"] = time.perf_counter() - t_start
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
                              step_limits(cfg.seed.step, cfg.seed.turn_step))
+
+
+def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None = None,
+                  timing: dict[str, float] | None = None,
+                  progress: Progress | None = None) -> Plan:
+    """The plan of a failed search's partial route (`FootstepPlan.partial`: to the expanded
+    stance nearest the goal), flown like a route: a seed and SCP per phase, ramps. Where a
+    phase's motion fails, the climb stops at the last stance its motions reach (on a body
+    phase), and the reason says so; where even the first body phase fails, the plan is the
+    failed search's, without a climb. The plan says `success: false`, with `partial`."""
+    from planning.plan_model import Partial
+    from planning.search_cost import centroid_distance
+
+    cfg = config or PipelineConfig()
+    timing = timing if timing is not None else {}
+    route = fp.partial
+    if route is None:
+        raise ValueError("partial_climb: the footstep plan has no partial route")
+    motions, failure = phase_motions(scn, route, cfg, timing, progress)
+    if failure and motions and motions[-1].kind == "reach":
+        motions = motions[:-1]  # the climb ends on four booms
+    if not motions:
+        return build_plan(scn, fp, "rbp", timing).failed(
+            f"{fp.reason}; no partial climb: {failure}")
+    reached = len(motions) // 2  # body, reach, body, ...: the stance the last body phase holds
+    stances, steps = route.stances[:reached + 1], route.steps[:reached]
+    flown = route._replace(stances=stances, steps=steps, goal_pose=motions[-1].poses[-1])
+    plan = build_motion_plan(scn, flown, motions, "rbp", timing, cfg.dt,
+                             step_limits(cfg.seed.step, cfg.seed.turn_step))
+    stance = tuple(stances[-1])
+    distance = centroid_distance(scn, stance)
+    start = centroid_distance(scn, tuple(scn.start_stance))
+    reason = (f"{fp.reason}; partial climb: {len(steps)} regrasp"
+              f"{'' if len(steps) == 1 else 's'} to stance {list(stance)}, {distance:.2f} m "
+              f"from the goal (the start is {start:.2f} m)")
+    if failure:
+        reason += (f", stopped short of the nearest stance reached "
+                   f"({list(route.stances[-1])}, {route.goal_distance:.2f} m): {failure}")
+    return plan.replace(success=False, reason=reason,
+                        partial=Partial(reached_stance=stance, goal_distance_m=distance,
+                                        start_distance_m=start))
 
 
 def retries_made(excluded: list[tuple[tuple[str, ...], int, str]], last_search: str,

@@ -195,13 +195,14 @@ class SearchRecord:
 
 
 def run_planner(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool = True,
-                quiet: bool = False, record: SearchRecord | None = None) -> Plan:
+                quiet: bool = False, record: SearchRecord | None = None,
+                partial: bool = False) -> Plan:
     """The whole pipeline (footsteps, then seeds and SCP per phase) -> the plan
-    (`rbp.api.plan`, with the progress line unless `quiet`)."""
+    (`rbp.api.plan`, with the progress line unless `quiet`; `partial`: rbp plan --partial)."""
     from rbp.api import plan
 
     return plan(scn, cfg, planner=planner, footsteps_only=not motion, progress=not quiet,
-                footsteps_done=record)
+                footsteps_done=record, partial=partial)
 
 
 def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,

@@ -318,10 +318,11 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
     for name, stance, said in (("goal_distance_m", tuple(last.stance), part.goal_distance_m),
                                ("start_distance_m", tuple(scn.start_stance),
                                 part.start_distance_m)):
-        if any(a is None or a not in scn.anchor_index for a in stance):
+        ids = [a for a in stance if a is not None and a in scn.anchor_index]
+        if len(ids) != len(stance):
             continue  # `stance` or `phase-form` says what is wrong
         # the measure of planning.search_cost.centroid_distance, recomputed here
-        centre = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
+        centre = scn.anchor_positions[[scn.anchor_index[a] for a in ids]].mean(axis=0)
         mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
         if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")

@@ -214,7 +214,6 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"{path}: {plural(len(problems), 'problem')}")
         return EXIT_FAILED
     from planning.plan_model import Plan
-
     from planning.verify_climb import partial_note
 
     model = Plan.from_dict(plan)

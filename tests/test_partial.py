@@ -32,12 +32,17 @@ def blocked() -> Scenario:
     return load_scenario(bundled_caves()["blocked-shaft"])
 
 
+SEARCHES: list = []  # the footstep plans behind the `plan` fixture
+
+
 @pytest.fixture(scope="module")
 def plan(blocked: Scenario) -> Plan:
     """The partial plan of blocked-shaft, seeds without SCP (fast; SCP changes no rule)."""
     from rbp.api import plan as make
 
-    return make(blocked, PipelineConfig(optimise=False), partial=True)
+    SEARCHES.clear()
+    return make(blocked, PipelineConfig(optimise=False), partial=True,
+                footsteps_done=SEARCHES.append)
 
 
 def _nearest_property(scn: Scenario, result) -> None:
@@ -99,8 +104,14 @@ def test_partial_plan_verifies_as_partial(blocked: Scenario, plan: Plan) -> None
     assert plan.regrasps >= 1 and plan.p_path is not None and 0 < plan.p_path <= 1
     # every configuration is on a trajectory (the pipeline's motions), not the footstep stage
     assert all(p.motion is not None for p in plan.phases)
-    # the footstep search's nearest expanded stance, as the failure's reason names it
-    assert f"nearest stance reached is {plan.partial.goal_distance_m:.2f} m" in plan.reason
+    # the footstep search's nearest expanded stance (its motions all flown: not cut short),
+    # as the failure's reason names it
+    assert len(SEARCHES) == 1 and not SEARCHES[0].success
+    nearest = min(centroid_distance(blocked, tuple(e.stance)) for e in SEARCHES[0].explored)
+    assert abs(plan.partial.goal_distance_m - nearest) <= DIST_TOL, (
+        f"the plan ends {plan.partial.goal_distance_m} m from the goal, the nearest stance the "
+        f"search expanded is {nearest} m")
+    assert f"nearest stance reached is {nearest:.2f} m" in plan.reason
 
 
 def _rules(plan: Plan) -> set[str]:

@@ -170,3 +170,16 @@ def test_partial_refused_where_it_cannot_be_flown(blocked: Scenario) -> None:
         make(blocked, partial=True, footsteps_only=True)
     with pytest.raises(RbpInputError, match="whole pipeline"):
         make(blocked, partial=True, planner="naive")
+
+
+@pytest.mark.parametrize("flag", ["--footsteps-only", "--planner=naive"])
+def test_cli_partial_refused_in_one_line_before_planning(tmp_path: Path, flag: str,
+                                                         capsys) -> None:
+    from rbp import cli
+
+    out = tmp_path / "p.json"
+    assert cli.main(["plan", "blocked-shaft", "--partial", flag, "--no-pictures", "-q",
+                     "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--partial" in err[0], err
+    assert not out.exists(), "a refused run wrote a plan"

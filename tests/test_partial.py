@@ -183,3 +183,32 @@ def test_cli_partial_refused_in_one_line_before_planning(tmp_path: Path, flag: s
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--partial" in err[0], err
     assert not out.exists(), "a refused run wrote a plan"
+
+
+def test_a_motion_failure_cuts_the_climb_to_the_last_stance_reached(blocked: Scenario,
+                                                                   monkeypatch) -> None:
+    """Where a phase's motion fails (here: made to fail at the second reach), the partial climb
+    stops in the last stance its motions reach, on a body phase, and still verifies."""
+    from planning import pipeline
+    from planning.check import check_plan
+    from planning.footsteps import plan_footsteps
+
+    cfg = PipelineConfig(optimise=False, motion_retries=0)
+    fp = plan_footsteps(blocked, cfg.footstep, partial=True)
+    assert fp.partial is not None and len(fp.partial.steps) >= 2, "blocked-shaft's route"
+    real = pipeline.phase_motions
+
+    def failing(*args, **kwargs):
+        motions, _ = real(*args, **kwargs)
+        return motions[:4], "reach phase 3: made to fail"  # body, reach, body, reach
+
+    monkeypatch.setattr(pipeline, "phase_motions", failing)
+    plan = pipeline.partial_climb(blocked, fp, cfg)
+    assert plan.partial is not None and not plan.success
+    assert plan.partial.reached_stance == tuple(fp.partial.stances[1]), plan.partial
+    assert plan.regrasps == 1 and plan.phases[-1].kind == "body"
+    assert "made to fail" in plan.reason
+    assert abs(plan.partial.goal_distance_m
+               - centroid_distance(blocked, tuple(fp.partial.stances[1]))) <= DIST_TOL
+    problems = check_plan(plan)
+    assert problems == [], problems

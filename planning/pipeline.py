@@ -331,7 +331,7 @@ def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
         return build_plan(scn, fp, "rbp", timing).failed(
             f"{fp.reason}; no partial climb: {first_failure}")
     distance, motions, flown, failure, search = kept
-    if footsteps_done is not None and search is not fp:
+    if footsteps_done is not None:  # the search picture draws the climb kept
         footsteps_done(search._replace(partial=flown))
     plan = build_motion_plan(scn, flown, motions, "rbp", timing, cfg.dt,
                              step_limits(cfg.seed.step, cfg.seed.turn_step))

@@ -106,7 +106,10 @@ def test_partial_plan_verifies_as_partial(blocked: Scenario, plan: Plan) -> None
     assert all(p.motion is not None for p in plan.phases)
     # the footstep search's nearest expanded stance (its motions all flown: not cut short),
     # as the failure's reason names it
-    assert len(SEARCHES) == 1 and not SEARCHES[0].success
+    assert SEARCHES and not SEARCHES[0].success  # the first search, then the climb's
+    last = SEARCHES[-1].partial
+    assert last is not None and tuple(last.stances[-1]) == plan.partial.reached_stance, (
+        "the search picture would draw another route than the climb's")
     nearest = min(centroid_distance(blocked, tuple(e.stance)) for e in SEARCHES[0].explored)
     assert abs(plan.partial.goal_distance_m - nearest) <= DIST_TOL, (
         f"the plan ends {plan.partial.goal_distance_m} m from the goal, the nearest stance the "

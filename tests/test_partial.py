@@ -164,6 +164,10 @@ def test_cli_partial_exit_status_and_check(tmp_path: Path) -> None:
     data = json.loads(out.read_text())
     assert data["success"] is False and data["partial"]["goal_distance_m"] >= 0
     assert cli.main(["check", "-q", str(out)]) == 0, "the partial plan does not verify"
+    again = tmp_path / "again.json"  # --from-plan makes a partial plan again partial
+    assert cli.main(["plan", "--from-plan", str(out), "--no-pictures", "-q",
+                     "-o", str(again)]) == 1
+    assert json.loads(again.read_text())["partial"] == data["partial"]
 
 
 def test_partial_refused_where_it_cannot_be_flown(blocked: Scenario) -> None:

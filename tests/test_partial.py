@@ -219,3 +219,21 @@ def test_a_motion_failure_cuts_the_climb_to_the_last_stance_reached(blocked: Sce
                - centroid_distance(blocked, tuple(fp.partial.stances[1]))) <= DIST_TOL
     problems = check_plan(plan)
     assert problems == [], problems
+
+
+def test_the_experiment_script_runs_and_counts(tmp_path: Path) -> None:
+    """experiments/partial_climbs.py on one benchmark cave without a route (crevasse-30, a
+    short search): its row and summary agree with the plan it made."""
+    from experiments.partial_climbs import main, no_route_caves
+
+    assert ("crevasse", 30) in no_route_caves(), "crevasse-30 is labelled as having no route"
+    out = tmp_path / "partial.json"
+    assert main(["--seeds", "30", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    (row,) = data["caves"]
+    assert (row["kind"], row["seed"], row["success"]) == ("crevasse", 30, False), row
+    assert row["partial"] and row["verified"] and row["start_can_move"], row
+    assert row["goal_distance_m"] <= row["start_distance_m"] + DIST_TOL, row
+    summary = data["summary"]
+    assert (summary["caves"], summary["partial_written"], summary["partial_verified"]) == \
+        (1, 1, 1), summary

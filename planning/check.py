@@ -6,9 +6,11 @@ robot stored once); here every configuration is checked with the plan's own tens
 re-optimised): kinematic limits, collisions, statics to 1e-6 N, tension bounds, shoulder torque,
 pull angles below the robot's max_pull_angle_deg, and P >= p_min recomputed from the limit
 surfaces; every recorded per-step value (each grasp's P, P, shoulder torque, summed tension)
-is recomputed and compared, and p_min, p_path and the regrasp count are recomputed. In a
-motion plan (one with `time_step`) the motion between successive steps is verified densely
-(rule `between`, planning.verify_between); a footstep plan states end configurations only.
+is recomputed and compared, and p_min, p_path and the regrasp count are recomputed (for a
+successful plan and a partial one, `rbp plan --partial`, whose climb is checked as any other
+but need not reach the goal). In a motion plan (one with `time_step`) the motion between
+successive steps is verified densely (rule `between`, planning.verify_between); a footstep plan
+states end configurations only.
 Each problem names its rule (`verify_climb.RULES`), phase and step.
 """
 
@@ -90,7 +92,7 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
 
     if plan.time_step is not None:  # a footstep plan holds end configurations, no motion
         between_problems(plan.phases, scn, bad_form, between)
-    if plan.success and recomputed:
+    if (plan.success or plan.partial is not None) and recomputed:  # a partial climb's too
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)
         # p_grasps is optional (plans before it): absent, it is not checked; null is wrong

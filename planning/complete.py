@@ -51,9 +51,11 @@ from planning.lattice_moves import (
 from planning.lattice_search import (
     CompleteResult,
     LatticeMemo,
+    PartialRoute,
     Stance4,
     Vertex,
     best_poses,
+    end_pose_of,
     goal_pose_of,
     stance_components,
     threads_held,
@@ -62,6 +64,7 @@ from planning.search_cost import (
     DistanceHeuristic,
     RegraspHeuristic,
     TravelHeuristic,
+    centroid_distance,
     edge_cost,
 )
 from planning.search_outcome import Quality, Stop
@@ -96,7 +99,8 @@ def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
 def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                     memo: LatticeMemo | None = None,
-                    progress: Callable[..., None] | None = None) -> CompleteResult:
+                    progress: Callable[..., None] | None = None,
+                    partial: bool = False) -> CompleteResult:
     """A* over (stance, component) vertices on the pose lattice (module doc), as `config`
     says (`CompleteConfig`).
 
@@ -105,7 +109,9 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     `exclude`: moves (stance, boom, anchor) not to take; `memo`: what earlier searches on this
     scenario decided (same lattice).
     `progress(expansions, transitions tested, nearest goal distance)` after each expansion,
-    and with `bound=` (cost over the proven lower bound) whenever an anytime search improves."""
+    and with `bound=` (cost over the proven lower bound) whenever an anytime search improves.
+    `partial`: when no route reaches the goal, the result's `partial` holds the route to the
+    expanded vertex nearest the goal (`PartialRoute`); the search itself is the same."""
     config = config or CompleteConfig()
     cfg = config.lattice
     heuristic_weight, anytime = config.heuristic_weight, config.anytime
@@ -237,7 +243,9 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         """Whether nothing through `stance` at `g` can beat the best route (or reach the goal)."""
         return g + bound(stance) >= best_cost * (1.0 - 1e-12)
 
-    def finished(vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
+    def route(vertex: Vertex) -> tuple[list, list, list, list, float]:
+        """The route to an expanded `vertex` through the parent pointers (the cheapest the
+        search knows): vertices, and per edge its pose, P4 and alternatives; its cost."""
         path, poses, probs, others, cost = [vertex], [], [], [], 0.0
         while parent[path[-1]][0] is not None:
             move, pz, pp, pick, c = parent[path[-1]]
@@ -248,9 +256,23 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             others.append(best_poses(tr, _rows(tr, pick), cfg)[0])
             path.append(pv)
             cost += c
-        return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], goal_pose,
-                              expansions, tested, expanded, [], graph, others[::-1],
-                              cost=cost)
+        return path[::-1], poses[::-1], probs[::-1], others[::-1], cost
+
+    def finished(vertex: Vertex, goal_pose: np.ndarray) -> CompleteResult:
+        path, poses, probs, others, cost = route(vertex)
+        return CompleteResult(True, Stop.ROUTE, "", path, poses, probs, goal_pose,
+                              expansions, tested, expanded, [], graph, others, cost=cost)
+
+    def nearest_route() -> PartialRoute | None:
+        """The route to the expanded vertex nearest the goal (ties: the cheapest)."""
+        if not closed:
+            return None
+        vertex = min(closed, key=lambda v: (centroid_distance(scn, v[0]), closed[v]))
+        path, poses, probs, others, cost = route(vertex)
+        stance, comp = vertex
+        lat = stance_components(scn, memo, stance, cfg, ignore_grasps).components[comp]
+        return PartialRoute(path, poses, probs, others, end_pose_of(scn, lat), cost,
+                            centroid_distance(scn, stance))
 
     while open_list:
         popped = heapq.heappop(open_list)
@@ -406,7 +428,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             stop = Stop.EXHAUSTED
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
-                          _frontier(open_list, closed), graph)
+                          _frontier(open_list, closed), graph,
+                          partial=nearest_route() if partial else None)
 
 
 def _rows(tr: LatticeTransition, pick: np.ndarray | None) -> np.ndarray:

@@ -49,6 +49,11 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
     else:
         summary = (f"p_path = {plan['p_path']:.4f}, p_min = {plan['p_min']:.4f} (the lowest "
                    "P over every pose of the plan)")
+    part = plan.get("partial")
+    if part is not None:  # rbp plan --partial: no route reached the goal
+        summary = (f"PARTIAL climb (no route reaches the goal): ends "
+                   f"{part['goal_distance_m']:.2f} m from the goal (the start is "
+                   f"{part['start_distance_m']:.2f} m), {summary}")
     width = max(4.0 * cols, 6.0) + 0.5 + 1.45
     lines = [f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
              "each panel: the robot at the last pose of its stance's body move (where the next "
@@ -272,6 +277,15 @@ def search_figure(scn: Scenario, fp):
     else:
         ax.plot(*scn.start_pose[:2], "X", color="#cb181d", ms=11, zorder=9, ls="none",
                 label="start (the search recorded no stances)")
+    route = getattr(fp, "partial", None)
+    if route is not None:  # rbp plan --partial climbs it: start, transition poses, end
+        line = np.array([np.asarray(route.start_pose)[:2]]
+                        + [np.asarray(s.pose)[:2] for s in route.steps]
+                        + [np.asarray(route.goal_pose)[:2]])
+        n = len(route.steps)
+        ax.plot(line[:, 0], line[:, 1], "-", color="#cb181d", lw=1.4, zorder=8,
+                label=f"partial route (rbp plan --partial): {n} regrasp{'' if n == 1 else 's'} "
+                      "to the nearest stance, through its transition poses")
     why = STOP_REASONS.get(getattr(fp, "stop", "") or "", "stopped")
     if getattr(fp, "stop", "") == Stop.NOROUTE:
         lattice = _lattice_of(fp)

@@ -181,6 +181,12 @@ class FootstepPlan(NamedTuple):
     # its memo kept at once (planning.bounded_cache; at most FootstepConfig.search_memory_mb)
     peak_memory_mb: float = math.nan
     kept_memory_mb: float = math.nan
+    # a failed complete search asked for it (`plan_footsteps(partial=True)`): the route to the
+    # expanded stance nearest the goal, as a footstep plan (success False, `goal_pose` where the
+    # body ends in its last stance, `goal_distance` that stance's centroid distance from the
+    # goal), for `rbp plan --partial`
+    partial: FootstepPlan | None = None
+    goal_distance: float = math.nan
 
 
 class Explored(NamedTuple):
@@ -245,18 +251,20 @@ class FootstepMemo:
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                    progress: Callable[..., None] | None = None,
                    exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
-                   memo: FootstepMemo | None = None) -> FootstepPlan:
+                   memo: FootstepMemo | None = None, partial: bool = False) -> FootstepPlan:
     """RBP's footstep plan from the scenario's start stance to a stance that reaches the goal.
 
     `exclude` holds moves (stance, boom, new anchor) not to take (the pipeline excludes one
     whose motion could not be planned); `memo` carries searched transitions between calls;
-    `progress(expansions, transitions tested, nearest goal distance in m)` follows the search."""
+    `progress(expansions, transitions tested, nearest goal distance in m)` follows the search;
+    `partial`: a failed complete search also returns the route to the expanded stance nearest
+    the goal (`FootstepPlan.partial`; the sampled search has none)."""
     cfg = config or FootstepConfig()
     if cfg.search not in SEARCHES:
         raise RbpInputError(f"must be one of {SEARCHES}, got {cfg.search!r}", field="search")
     memo = memo if memo is not None else FootstepMemo()
     if cfg.search == "complete":
-        return _plan_complete(scn, cfg, progress, exclude, memo)
+        return _plan_complete(scn, cfg, progress, exclude, memo, partial)
     if cfg.search == "hybrid":
         budget = cfg.sampled_expansions
         if cfg.max_expansions is not None:
@@ -269,7 +277,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
             return first
         rest = None if cfg.max_expansions is None else max(1, cfg.max_expansions - budget)
         second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest), progress,
-                                exclude, memo)
+                                exclude, memo, partial)
         return second._replace(seconds=time.perf_counter() - t0,
                                expansions=first.expansions + second.expansions,
                                transitions_tested=first.transitions_tested
@@ -393,7 +401,7 @@ def expansion_budget(scn: Scenario, cfg: FootstepConfig) -> int | None:
 def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                    progress: Callable[..., None] | None,
                    exclude: Collection[tuple[tuple[str, ...], int, str]],
-                   memo: FootstepMemo) -> FootstepPlan:
+                   memo: FootstepMemo, partial: bool = False) -> FootstepPlan:
     """plan_footsteps through the complete search (planning.complete)."""
     t0 = time.perf_counter()
     start_pose = np.asarray(scn.start_pose, dtype=float)
@@ -407,10 +415,10 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
         assert asked.segments is not None
         result = segmented_search(scn, asked.complete_config(), asked.segments,
                                   lambda part: expansion_budget(part, asked), exclude=exclude,
-                                  memo=memo.lattice, progress=progress)
+                                  memo=memo.lattice, progress=progress, partial=partial)
     else:
         result = complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
-                                 progress=progress)
+                                 progress=progress, partial=partial)
     if cfg.min_success is None and cfg.repair is not None and result.success:
         result = repair_route(scn, result, memo.lattice, cfg.repair,
                               cfg.transition.ignore_grasps, exclude)
@@ -427,26 +435,45 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
             nearest = min(centroid_distance(scn, e.stance) for e in explored)
             reason += (f"; the nearest stance reached is {nearest:.2f} m from the goal (the "
                        f"start is {centroid_distance(scn, start):.2f} m)")
-        return FootstepPlan(False, reason, [start], [], start_pose, None, result.expansions,
-                            result.transitions_tested, time.perf_counter() - t0, search, None,
-                            result.stop, explored, frontier, memo, min_success=cfg.min_success,
-                            peak_memory_mb=peak, kept_memory_mb=kept)
+        failed = FootstepPlan(False, reason, [start], [], start_pose, None, result.expansions,
+                              result.transitions_tested, time.perf_counter() - t0, search, None,
+                              result.stop, explored, frontier, memo,
+                              min_success=cfg.min_success, peak_memory_mb=peak,
+                              kept_memory_mb=kept)
+        near = result.partial
+        if near is None:
+            return failed
+        stances = [v[0] for v in near.path]
+        route = failed._replace(
+            stances=stances, goal_pose=np.asarray(near.end_pose, dtype=float),
+            steps=_route_steps(scn, cfg, stances, near.poses, near.probabilities,
+                               near.alternatives),
+            goal_distance=near.goal_distance)
+        return failed._replace(partial=route)
     stances = [v[0] for v in result.path]
-    steps = []
-    no_alternatives: list[np.ndarray | None] = [None] * len(result.poses)
-    others = result.alternatives or no_alternatives
-    for a, b, pose, probabilities, alternatives in zip(stances[:-1], stances[1:], result.poses,
-                                                       result.probabilities, others,
-                                                       strict=True):
-        j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
-        steps.append(polished_step(scn, cfg, a, j, b[j], np.asarray(pose, dtype=float),
-                                   probabilities, alternatives))
+    steps = _route_steps(scn, cfg, stances, result.poses, result.probabilities,
+                         result.alternatives)
     return FootstepPlan(True, "", stances, steps, start_pose, result.goal_pose,
                         result.expansions, result.transitions_tested,
                         time.perf_counter() - t0, search, None, Stop.ROUTE, explored, frontier,
                         memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
                         result.quality, cfg.min_success, peak, kept)
+
+
+def _route_steps(scn: Scenario, cfg: FootstepConfig, stances: list[Stance4],
+                 poses: list[np.ndarray], probabilities: list[np.ndarray],
+                 alternatives: list[np.ndarray] | None) -> list[Step]:
+    """The polished steps of a route found by the complete search."""
+    steps = []
+    no_alternatives: list[np.ndarray | None] = [None] * len(poses)
+    others = alternatives or no_alternatives
+    for a, b, pose, p4, other in zip(stances[:-1], stances[1:], poses, probabilities, others,
+                                     strict=True):
+        j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
+        steps.append(polished_step(scn, cfg, a, j, b[j], np.asarray(pose, dtype=float), p4,
+                                   other))
+    return steps
 
 
 def _memory(memo: FootstepMemo) -> tuple[float, float]:

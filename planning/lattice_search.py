@@ -148,6 +148,23 @@ class CompleteResult(NamedTuple):
     # (seconds, best cost, lower bound, expansions) each time either improved (anytime search)
     history: list[tuple[float, float, float, int]] | None = None
     quality: Quality = Quality.FIRST
+    # a failed search asked for it (`complete_search(partial=True)`): the route to the expanded
+    # vertex nearest the goal
+    partial: PartialRoute | None = None
+
+
+class PartialRoute(NamedTuple):
+    """The route, as the search reached it, to the expanded vertex nearest the goal (the
+    smallest `search_cost.centroid_distance`, the failure message's measure; ties: the lowest
+    cost): what `rbp plan --partial` climbs when no route reaches the goal."""
+
+    path: list[Vertex]               # the start's vertex .. the nearest one
+    poses: list[np.ndarray]          # transition pose per edge
+    probabilities: list[np.ndarray]  # the four configurations' P per edge
+    alternatives: list[np.ndarray]   # per edge, its most robust lattice poses, best first
+    end_pose: np.ndarray             # where the body ends in the last stance (`end_pose_of`)
+    cost: float                      # the route's search cost
+    goal_distance: float             # m, the last stance's centroid distance from the goal
 
 
 def stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: LatticeConfig,
@@ -172,6 +189,17 @@ def goal_pose_of(scn: Scenario, lat: Component) -> np.ndarray | None:
     if not len(near):
         return None
     return lat.poses_at(near[[int(np.argmax(lat.robustness[near]))]])[0]
+
+
+def end_pose_of(scn: Scenario, lat: Component) -> np.ndarray:
+    """Where a partial climb's body ends in component `lat`: as `goal_pose_of` picks the most
+    robust pose within the goal tolerance of the goal, the most robust pose within the goal
+    tolerance of the component's nearest approach to the goal (the very nearest pose lies on
+    the edge of the feasible set, at p_min)."""
+    poses = lat.poses
+    d = np.linalg.norm(poses[:, :2] - np.asarray(scn.goal_position, dtype=float), axis=1)
+    near = np.flatnonzero(d <= d.min() + scn.goal_tolerance)
+    return poses[near[int(np.argmax(lat.robustness[near]))]].copy()
 
 
 def best_poses(tr: LatticeTransition, pick: np.ndarray, cfg: LatticeConfig) -> tuple:

@@ -211,11 +211,14 @@ def _handover_shortfall(scn: Scenario, reach: PhaseMotion, before: tuple[str | N
 def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | None = None,
                progress: Progress | None = None,
                footstep_progress: Callable[..., None] | None = None,
-               footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+               footsteps_done: Callable[[FootstepPlan], None] | None = None,
+               partial: bool = False) -> Plan:
     """The whole plan (`reachbot-plan/2`) for a scenario.
 
     `footsteps_done` is called with each footstep plan (the search's, then any retry's): a
-    caller can picture where a failed search went."""
+    caller can picture where a failed search went. `partial`: when the search finds no route
+    (none exists, or its budget ran out), the plan climbs to the expanded stance nearest the
+    goal (`partial_climb`); it still says `success: false`."""
     if planner not in PLANNERS:
         raise ValueError(f"planner must be one of {PLANNERS}, got {planner!r}")
     cfg = config or PipelineConfig()
@@ -224,10 +227,15 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     if planner == "naive":
         fp = plan_naive(scn, cfg.footstep)
     else:
-        fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress)
+        fp = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, partial=partial)
     timing["footstep"] = time.perf_counter() - t_start
     if footsteps_done is not None:
         footsteps_done(fp)
+    if planner == "rbp" and fp.partial is not None:
+        plan = partial_climb(scn, fp, cfg, timing, progress, footstep_progress,
+                             footsteps_done)
+        timing["total"] = time.perf_counter() - t_start
+        return plan.replace(timing=plan.timing | timing)
     if planner == "naive" or not fp.success:
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
@@ -266,6 +274,80 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     timing["total"] = time.perf_counter() - t_start
     return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
                              step_limits(cfg.seed.step, cfg.seed.turn_step))
+
+
+def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None = None,
+                  timing: dict[str, float] | None = None,
+                  progress: Progress | None = None,
+                  footstep_progress: Callable[..., None] | None = None,
+                  footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+    """The plan of a failed search's partial route (`FootstepPlan.partial`: to the expanded
+    stance nearest the goal), flown like a route: a seed and SCP per phase, ramps. Where a
+    phase's motion fails, the footsteps are searched again without that move (as a route's are,
+    `motion_retries` times), each search's partial route flown in turn; the climb kept is the
+    one whose last stance is nearest the goal (the first of equals), cut to the last stance its
+    motions reach (on a body phase) when they fail on the way, as the reason says. Where even
+    the first body phase fails, the plan is the failed search's, without a climb. The plan says
+    `success: false`, with `partial`; `footsteps_done` is called with each search again and at
+    last with the search of the climb kept, its partial route the climb's."""
+    from planning.plan_model import Partial
+    from planning.search_cost import centroid_distance
+
+    cfg = config or PipelineConfig()
+    timing = timing if timing is not None else {}
+    route = fp.partial
+    if route is None:
+        raise ValueError("partial_climb: the footstep plan has no partial route")
+    memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
+    excluded: list[tuple[tuple[str, ...], int, str]] = []
+    search = fp
+    kept: tuple | None = None  # (distance, motions, flown route, failure, search)
+    first_failure = ""
+    for attempt in range(cfg.motion_retries + 1):
+        motions, failure = phase_motions(scn, route, cfg, timing, progress)
+        first_failure = first_failure or failure
+        if failure and motions and motions[-1].kind == "reach":
+            motions = motions[:-1]  # the climb ends on four booms
+        if motions:
+            reached = len(motions) // 2  # body, reach, body, ...: the last body phase's stance
+            flown = route._replace(stances=route.stances[:reached + 1],
+                                   steps=route.steps[:reached], goal_pose=motions[-1].poses[-1],
+                                   goal_distance=centroid_distance(scn, route.stances[reached]))
+            if kept is None or flown.goal_distance < kept[0] - 1e-12:
+                kept = (flown.goal_distance, motions, flown, failure, search)
+        if not failure or not route.steps or attempt == cfg.motion_retries:
+            break
+        excluded.append(failed_move(route, len(motions)))
+        t0 = time.perf_counter()
+        search = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, exclude=excluded,
+                                memo=memo, partial=True)
+        timing["footstep"] = timing.get("footstep", 0.0) + time.perf_counter() - t0
+        if footsteps_done is not None:
+            footsteps_done(search)
+        if search.success or search.partial is None:
+            break  # (a route found without the moves excluded: rbp plan without --partial)
+        route = search.partial
+    if kept is None:
+        return build_plan(scn, fp, "rbp", timing).failed(
+            f"{fp.reason}; no partial climb: {first_failure}")
+    distance, motions, flown, failure, search = kept
+    if footsteps_done is not None:  # the search picture draws the climb kept
+        footsteps_done(search._replace(partial=flown))
+    plan = build_motion_plan(scn, flown, motions, "rbp", timing, cfg.dt,
+                             step_limits(cfg.seed.step, cfg.seed.turn_step))
+    stance = tuple(flown.stances[-1])
+    start = centroid_distance(scn, tuple(scn.start_stance))
+    n = len(flown.steps)
+    reason = (f"{fp.reason}; partial climb: {n} regrasp{'' if n == 1 else 's'} to stance "
+              f"{list(stance)}, {distance:.2f} m from the goal (the start is {start:.2f} m)")
+    if excluded:
+        reason += (f"; {len(excluded)} search{'' if len(excluded) == 1 else 'es'} again, each "
+                   f"without a move whose motion failed (first: {first_failure})")
+    if failure:
+        reason += f"; the climb stops where a motion failed: {failure}"
+    return plan.replace(success=False, reason=reason,
+                        partial=Partial(reached_stance=stance, goal_distance_m=distance,
+                                        start_distance_m=start))
 
 
 def retries_made(excluded: list[tuple[tuple[str, ...], int, str]], last_search: str,

@@ -232,6 +232,24 @@ class SearchRecord(Part):
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
+class Partial(Part):
+    """A partial climb (`rbp plan --partial`): no route reached the goal, and the plan climbs to
+    the expanded stance nearest it."""
+
+    reached_stance: tuple[str, ...] = spec(minItems=4, maxItems=4, description="the stance "
+                                           "the climb ends in (its last phase's)")
+    goal_distance_m: float = spec(minimum=0, description="that stance's distance from the "
+                                  "goal: its anchors' centroid to the goal's centre "
+                                  "(planning.search_cost.centroid_distance), the measure of "
+                                  "the failed search's reason")
+    start_distance_m: float = spec(minimum=0, description="the start stance's, by the same "
+                                   "measure")
+    DESCRIPTION: ClassVar[str] = ("a partial climb (rbp plan --partial): no route reached the "
+                                  "goal; the plan climbs to the expanded stance nearest it "
+                                  "(success stays false)")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class Limits(Part):
     """The largest change between successive trajectory steps (`planning.plan.step_limits`)."""
 
@@ -300,9 +318,11 @@ class Plan(Part):
     success: bool = spec()
     reason: str = spec(description="why the plan failed; empty on success")
     p_min: float | None = spec(minimum=0, maximum=1, description="the lowest configuration "
-                               "probability of the climb; null when the plan failed")
+                               "probability of the climb; null when the plan failed (a "
+                               "partial plan: its partial climb's)")
     p_path: float | None = spec(minimum=0, maximum=1, description="the climb's success "
-                                "probability; null when the plan failed")
+                                "probability; null when the plan failed (a partial plan: its "
+                                "partial climb's)")
     p_grasps: float | None = spec(None, nullable=True, minimum=0, maximum=1,
                                   description="p_path without the per-regrasp attach term "
                                               "(optional); null when the plan failed, as "
@@ -312,6 +332,7 @@ class Plan(Part):
                                     additionalProperties={"type": "number", "minimum": 0},
                                     description="seconds spent per stage")
     search: SearchRecord | None = spec(None)
+    partial: Partial | None = spec(None)
     scenario: dict[str, Any] = spec(ref="scenario")
     robot: dict[str, Any] = spec(ref="robot")
     phases: tuple[Phase, ...] = spec()
@@ -328,7 +349,8 @@ class Plan(Part):
     p_grasps_absent: bool = dataclasses.field(default=False, metadata={"file": False})
     ALWAYS: ClassVar[frozenset[str]] = frozenset({"p_grasps"})
     NESTED: ClassVar[dict[str, type[Part]]] = {
-        "search": SearchRecord, "phases": Phase, "limits": Limits, "start": Start,
+        "search": SearchRecord, "partial": Partial, "phases": Phase, "limits": Limits,
+        "start": Start,
         "provenance": Provenance, "verified": Verified}
     OPEN: ClassVar[frozenset[str]] = frozenset({"timing", "scenario", "robot"})
     DESCRIPTION: ClassVar[str] = ("A climb planned by rbp (or the naive baseline). Units SI, "

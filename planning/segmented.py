@@ -101,14 +101,16 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
                      budget: Callable[[Scenario], int | None], *,
                      exclude: Collection[tuple[tuple[str, ...], int, str]] = (),
                      memo: LatticeMemo | None = None,
-                     progress: Callable[..., None] | None = None) -> CompleteResult:
+                     progress: Callable[..., None] | None = None,
+                     partial: bool = False) -> CompleteResult:
     """`complete_search` of `scn` with `config`, in segments when the climb is longer than
     `segment.min_climb` (module doc). `budget(scenario)` gives a search's expansion budget on a
-    scenario (the whole climb's, or a segment's)."""
+    scenario (the whole climb's, or a segment's); `partial`: as `complete_search`'s, for the
+    whole search (a failed segment's answer is the whole search's)."""
     memo = memo if memo is not None else LatticeMemo()
     if climb_distance(scn) <= segment.min_climb:
         return complete_search(scn, dataclasses.replace(config, max_expansions=budget(scn)),
-                               exclude=exclude, memo=memo, progress=progress)
+                               exclude=exclude, memo=memo, progress=progress, partial=partial)
     t0 = time.perf_counter()
 
     def limited(scenario: Scenario) -> CompleteConfig:
@@ -147,7 +149,7 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
         graph.update(part.graph)
         if not part.success:  # a dead end or a sub-goal out of reach: the whole search decides
             fallback = complete_search(scn, limited(scn), exclude=exclude, memo=memo,
-                                       progress=offset)
+                                       progress=offset, partial=partial)
             return fallback._replace(expansions=done["expansions"] + fallback.expansions,
                                      transitions_tested=done["tested"]
                                      + fallback.transitions_tested)

@@ -25,8 +25,11 @@ from rb_drake.scenario import Scenario
 RULES = {
     "robot": "the robot under `scenario` is the robot at the top level",
     "start": "the climb starts at t = 0 at the start pose, in the start stance",
-    "goal": "a plan that claims success ends inside the goal disc",
-    "phase-order": "phases alternate body, reach, ..., and a successful plan ends on a body phase",
+    "goal": "a plan that claims success ends inside the goal disc; a partial plan (`partial`) "
+            "does not claim success and ends in the stance it names, as far from the goal as "
+            "it says",
+    "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
+                   "on a body phase",
     "phase-form": "a phase's stance, free boom and steps fit its kind",
     "stance": "each phase's anchors follow from the phase before (a reach frees one boom, the "
               "next body phase holds it on to_anchor)",
@@ -110,6 +113,8 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     if not plan.phases:  # a plan that found no route may hold none
         if plan.success:
             fail("phase-order", "the plan claims success but has no phases")
+        if plan.partial is not None:
+            fail("phase-order", "a partial plan without phases (no climb)")
         return out
     _start(plan, scn, fail)
     _phase_order(plan, fail)
@@ -166,8 +171,9 @@ def _phase_order(plan: Plan, fail) -> None:
     for k in range(1, len(phases)):
         if phases[k].kind == phases[k - 1].kind:
             fail("phase-order", f"two {phases[k].kind} phases in a row", k)
-    if plan.success and phases[-1].kind != "body":
-        fail("phase-order", "a successful climb ends on a body phase", len(phases) - 1)
+    if (plan.success or plan.partial is not None) and phases[-1].kind != "body":
+        fail("phase-order", f"a {'successful' if plan.success else 'partial'} climb ends on a "
+             "body phase", len(phases) - 1)
     reaches = sum(p.kind == "reach" for p in phases)
     if reaches != plan.regrasps:
         fail("summary", f"regrasps: the plan says {plan.regrasps}, its phases hold {reaches} "
@@ -288,6 +294,8 @@ def _continuity(plan: Plan, fail) -> None:
 
 
 def _goal(plan: Plan, scn: Scenario, fail) -> None:
+    if plan.partial is not None:
+        _partial(plan, scn, fail)
     if not plan.success:
         return
     k = len(plan.phases) - 1
@@ -297,6 +305,40 @@ def _goal(plan: Plan, scn: Scenario, fail) -> None:
     if not gap <= scn.goal_tolerance + POSE_TOL:
         fail("goal", f"the plan claims success but ends {gap:.3f} m from the goal "
              f"{list(scn.goal_position)} (tolerance {scn.goal_tolerance} m)", k, n)
+
+
+def _partial(plan: Plan, scn: Scenario, fail) -> None:
+    """A partial plan's record: not a success, and its stance and distances are the climb's."""
+    part = plan.partial
+    assert part is not None
+    k = len(plan.phases) - 1
+    if plan.success:
+        fail("goal", "a plan that claims success is not partial (it reaches the goal or it is "
+             "not a success)")
+    last = plan.phases[k]
+    if last.kind == "body" and tuple(last.stance) != tuple(part.reached_stance):
+        fail("goal", f"partial.reached_stance {list(part.reached_stance)} but the climb ends in "
+             f"{list(last.stance)}", k)
+    for name, stance, said in (("goal_distance_m", tuple(last.stance), part.goal_distance_m),
+                               ("start_distance_m", tuple(scn.start_stance),
+                                part.start_distance_m)):
+        ids = [a for a in stance if a is not None and a in scn.anchor_index]
+        if len(ids) != len(stance):
+            continue  # `stance` or `phase-form` says what is wrong
+        # the measure of planning.search_cost.centroid_distance, recomputed here
+        centre = scn.anchor_positions[[scn.anchor_index[a] for a in ids]].mean(axis=0)
+        mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
+        if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
+            fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
+
+
+def partial_note(plan: Plan) -> str:
+    """What `rbp check` says of a partial plan that verifies ('' for another plan)."""
+    part = plan.partial
+    if part is None:
+        return ""
+    return (f"partial: ends {part.goal_distance_m:.2f} m from the goal in stance "
+            f"{list(part.reached_stance)} (the start is {part.start_distance_m:.2f} m)")
 
 
 SHARE_TOL = 1e-9  # a ramp's share reaches 1 exactly (plans write the value 1.0)

@@ -116,7 +116,8 @@ def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
 
 def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, *,
          planner: str = "rbp", footsteps_only: bool = False, progress: bool = False,
-         footsteps_done: Callable[[FootstepPlan], None] | None = None) -> Plan:
+         footsteps_done: Callable[[FootstepPlan], None] | None = None,
+         partial: bool = False) -> Plan:
     """Plan a climb of `scenario` (a Scenario, or what `load_scenario` takes), as `rbp plan`
     does: the footstep search, then a seed and SCP per phase (`planning.pipeline.plan_climb`).
 
@@ -126,6 +127,10 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
     (phases hold only the transition poses: seconds, not minutes). `progress` shows the
     progress line on stderr (on a terminal only). `footsteps_done` is called with each footstep
     plan (a failed one explains where the search went: `planning.figures.search_figure`).
+    `partial` (rbp plan --partial; the rbp planner's complete search, the whole pipeline): when
+    no route reaches the goal, the plan climbs to the expanded stance nearest it
+    (`planning.pipeline.partial_climb`), with `success` False and `partial` saying where it
+    ends and how far from the goal.
 
     Returns the plan (`planning.plan_model.Plan`); when no climb is found it has
     `success` False and the `reason`, and is still a plan to write and draw."""
@@ -136,6 +141,10 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
 
     if planner not in PLANNERS:
         raise RbpInputError(f"must be one of {PLANNERS}, got {planner!r}", field="planner")
+    if partial and (planner != "rbp" or footsteps_only):
+        raise RbpInputError("a partial climb is flown through the whole pipeline of the rbp "
+                            "planner: not with the naive planner or footsteps only",
+                            field="partial")
     scn = scenario if not isinstance(scenario, str | Path) else load_scenario(scenario)
     cfg = config or PipelineConfig()
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
@@ -152,7 +161,7 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                 footsteps_done(fp)
             return build_plan(scn, fp, planner, {"footstep": fp.seconds, "total": fp.seconds})
         return plan_climb(scn, planner, cfg, progress=bar.phase, footstep_progress=bar.search,
-                          footsteps_done=footsteps_done)
+                          footsteps_done=footsteps_done, partial=partial)
 
 
 def _same_cave(plan: Plan, scn: Scenario) -> bool:

@@ -32,9 +32,11 @@ if TYPE_CHECKING:
     from planning.plan_model import Plan
 
 EXIT_STATUSES = """exit status:
-  0  done (rbp plan: a plan was found and written; rbp check: the plan verifies)
+  0  done (rbp plan: a plan was found and written; rbp check: the plan verifies, a partial
+     plan as partial)
   1  ran but failed: no route or planning failed (rbp plan still writes the plan file, with
-     success: false and the reason), a plan that does not verify, a failed execution
+     success: false and the reason; with --partial, the climb to the stance nearest the
+     goal), a plan that does not verify, a failed execution
   2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
      output that cannot be written
   3  interrupted (Ctrl-C: one line on stderr; or the reader of the output closed it, as
@@ -161,6 +163,9 @@ def _summary(plan: Plan) -> str:
         if search.get("stop") == "budget":
             hint = ("; rbp plan --thorough searches on without a budget, --max-expansions N "
                     "or --time-limit S sets another")
+        if plan.partial is not None and plan.p_path is not None:
+            hint += (f"; partial plan: ends {plan.partial.goal_distance_m:.2f} m from the goal "
+                     f"(p_path {plan.p_path:.4f}, regrasps {plan.regrasps})")
         return (f"success: false ({plan.reason}), time {plan.timing['total']:.2f} s"
                 + hint)
     grasps = f" (grasps alone {plan.p_grasps:.4f})" if plan.p_grasps is not None else ""
@@ -200,8 +205,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
             raise UserError(f"--phase-figure: draws a phase's trajectory, which {flag} "
                             "leaves out")
     scn, planner, cfg, motion = plan_setup(args)
+    partial = getattr(args, "partial", False)
+    if partial and (planner != "rbp" or not motion):
+        flag = "--planner naive" if planner != "rbp" else "--footsteps-only"
+        raise UserError(f"--partial: flies the partial climb through the whole pipeline of the "
+                        f"rbp planner, which {flag} leaves out")
     record = SearchRecord()
-    plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record)
+    plan = run_planner(scn, planner, cfg, motion=motion, quiet=args.quiet, record=record,
+                       partial=partial)
     plan = plan.replace(provenance=provenance(scn, planner, cfg, motion,
                                               getattr(args, "argv", None)))
     out = Path(args.output)
@@ -247,13 +258,16 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"{path}: {plural(len(problems), 'problem')}")
         return EXIT_FAILED
     from planning.plan_model import Plan
+    from planning.verify_climb import partial_note
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
     between = (f"and the motion between them {resolution_text()}" if model.time_step is not None
                else "not the motion between them (a footstep plan: end configurations only)")
+    note = partial_note(model)
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
-          f"{plural(n, 'configuration')} verified, {between}; " + _summary(model))
+          f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")
+          + _summary(model))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp
@@ -371,6 +385,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="then improve the route window by window, each window searched to "
                            "its optimum (planning.route_repair): routes nearer the most robust "
                            "at about three times the footstep time (docs/benchmarks.md)")
+    plan.add_argument("--partial", action="store_true",
+                      help="when no route reaches the goal, climb to the expanded stance "
+                           "nearest it (the plan still says success: false, exit status 1)")
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,

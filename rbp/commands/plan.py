@@ -54,8 +54,10 @@ def plan_setup(args: argparse.Namespace):
         if args.scenario is not None:
             raise UserError(f"{args.scenario}: (argument): give a scenario or --from-plan, "
                             "not both (the plan holds its scenario)")
-        scn, recorded, cfg = _from_plan(Path(args.from_plan))
+        scn, recorded, cfg, partial = _from_plan(Path(args.from_plan))
         planner = args.planner or recorded.planner
+        if partial:  # a partial plan is made again partial (the flag is not in the config)
+            args.partial = True
         motion = recorded.motion and not args.footsteps_only
     elif args.scenario is None:
         raise UserError("scenario: (argument): give a scenario file or bundled cave name, or "
@@ -146,8 +148,9 @@ def anytime_problem(anytime) -> str:
     return ""
 
 
-def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig]:
-    """The scenario, provenance and configuration a plan file was planned with."""
+def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig, bool]:
+    """The scenario, provenance and configuration a plan file was planned with, and whether
+    it is a partial plan (`rbp plan --partial`)."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
     from planning.plan_model import Plan, plan_scenario
@@ -166,7 +169,7 @@ def _from_plan(path: Path) -> tuple[Scenario, Provenance, PipelineConfig]:
                             e.reason) from None
     cfg = config_from_dict(PipelineConfig, recorded.config, str(path),
                            prefix="provenance.config")
-    return scn, recorded, cfg
+    return scn, recorded, cfg, plan.partial is not None
 
 
 def provenance(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool,
@@ -195,13 +198,14 @@ class SearchRecord:
 
 
 def run_planner(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool = True,
-                quiet: bool = False, record: SearchRecord | None = None) -> Plan:
+                quiet: bool = False, record: SearchRecord | None = None,
+                partial: bool = False) -> Plan:
     """The whole pipeline (footsteps, then seeds and SCP per phase) -> the plan
-    (`rbp.api.plan`, with the progress line unless `quiet`)."""
+    (`rbp.api.plan`, with the progress line unless `quiet`; `partial`: rbp plan --partial)."""
     from rbp.api import plan
 
     return plan(scn, cfg, planner=planner, footsteps_only=not motion, progress=not quiet,
-                footsteps_done=record)
+                footsteps_done=record, partial=partial)
 
 
 def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,

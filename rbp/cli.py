@@ -92,7 +92,7 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
                         ("--plane-normal", args.plane_normal)):
         if value is not None:
             words += [flag, *(f"{v:g}" for v in value)]
-    if args.plane_origin is not None or args.plane_normal is not None:
+    if args.resolution is not None:
         words += ["--resolution", f"{args.resolution:g}"]
     if args.name is not None:
         words += ["--name", args.name]
@@ -444,8 +444,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="meshes: a point of the cutting plane (in the mesh's coordinates)")
     imp.add_argument("--plane-normal", type=float, nargs=3, metavar=("X", "Y", "Z"),
                      help="meshes: the cutting plane's normal")
-    imp.add_argument("--resolution", type=float, default=0.05, metavar="R",
-                     help="meshes: trace the section every R metres (default 0.05)")
+    imp.add_argument("--resolution", type=float, metavar="R",
+                     help="point clouds: outline the points within R metres of the plane, "
+                          "bridging gaps up to 2R (default: about 4 point spacings, from the "
+                          "cloud's density); a mesh's section is exact")
     imp.set_defaults(func=cmd_scenario_import)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")
     chk.add_argument("scenario")

@@ -51,7 +51,8 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         import shapely  # noqa: F401  (every reader and the cave's assembly need it)
     except ImportError:
         raise missing_extra("shapely") from None
-    if path.suffix.lower() in MESH_SUFFIXES:
+    scan = path.suffix.lower() in MESH_SUFFIXES
+    if scan:
         rock = _mesh_rock(path, opts)
     else:
         if opts.plane_origin is not None or opts.plane_normal is not None:
@@ -60,7 +61,8 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
     cfg = CaveConfig(anchor_density=opts.anchor_density)
     return scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
-                              goal=opts.goal, name=opts.name or path.stem, source=str(path))
+                              goal=opts.goal, name=opts.name or path.stem, source=str(path),
+                              framed=scan)  # a scan's rock is a frame minus the free space
 
 
 def _check(opts: ImportOptions) -> None:

@@ -157,7 +157,8 @@ def _off_frame(ring: np.ndarray,
         return [ring]
     first = int(np.flatnonzero(on_frame)[0])  # start the walk on the frame: no run wraps
     order = np.roll(np.arange(len(ring) - 1), -first)
-    pieces, run = [], []
+    pieces: list[np.ndarray] = []
+    run: list[np.ndarray] = []
     for k in order:
         if on_frame[k]:
             if run:

@@ -32,6 +32,7 @@ def climb_figure(scan: Path, scn: Any, plan: Any, out: Path) -> Path:
     imported cave with the robot in its start stance, and the planned route (the body's path,
     its outline where each stance's move ends, the anchors held on the way, the robot at the
     end)."""
+    from matplotlib.lines import Line2D
     from matplotlib.patches import Polygon as MplPolygon
     from shapely.geometry import Polygon
 
@@ -41,7 +42,7 @@ def climb_figure(scan: Path, scn: Any, plan: Any, out: Path) -> Path:
     from rb_drake.terrain.mesh_figure import draw_scan
 
     data = plan_dict(plan)
-    fig = draw.new_figure(figsize=(12.5, 6.8), layout="constrained")
+    fig = draw.new_figure(figsize=(12.5, 7.2), layout="constrained")
     grid = fig.add_gridspec(1, 3, width_ratios=(1.5, 1.0, 1.0))
     rock = [Polygon(w) for w in scn.walls]
     draw_scan(fig.add_subplot(grid[0], projection="3d"), scan, rock, max_items=1500)
@@ -79,8 +80,11 @@ def climb_figure(scan: Path, scn: Any, plan: Any, out: Path) -> Path:
         title = f"no route: {data['reason']}"
     draw.frame_axes(ax, scn)
     ax.set_title(title, fontsize=9)
-    fig.legend(handles=draw.cave_legend_handles(scn, glyphs=False), loc="outside lower center",
-               ncol=3, fontsize=8, frameon=False)
+    handles = draw.cave_legend_handles(scn, glyphs=False)
+    handles += [Line2D([], [], color=PATH_COLOUR, lw=1.2, label="the body's route"),
+                MplPolygon([(0, 0)], closed=True, facecolor="none", edgecolor=PATH_COLOUR,
+                           label="the body where each stance's move ends")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     return atomic_save_figure(fig, out, dpi=110)
 
 

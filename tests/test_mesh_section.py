@@ -317,3 +317,11 @@ def test_default_cloud_resolution_follows_the_density_and_does_not_leak() -> Non
     cloud = free_region(section_polygons(CLOUD_FILE, None, None, None, TOLERANCE))
     ratio = cloud.symmetric_difference(exact).area / exact.area
     assert ratio <= 0.04, f"the cloud's default section differs by {ratio:.1%} from the mesh's"
+
+
+def test_too_few_points_for_a_density_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "five.ply"
+    points = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 1], [0, 2, 3]], dtype=float)
+    path.write_bytes(trimesh.PointCloud(points).export(file_type="ply"))
+    with pytest.raises(RbpInputError, match=r"five\.ply: resolution: 5 point\(s\) are too few"):
+        section_polygons(path, None, None, None, TOLERANCE)

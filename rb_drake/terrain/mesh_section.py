@@ -224,6 +224,9 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
     else:
         if resolution is None:
             resolution = cloud_resolution(vertices)
+            if not math.isfinite(resolution):
+                raise _error(path, "resolution", f"{len(vertices)} point(s) are too few to "
+                             "tell the cloud's density: give a resolution")
         near = np.abs(side) <= resolution
         if not near.any():
             raise _error(path, "plane", f"{where}: no point within {resolution:g} m of it")

@@ -96,10 +96,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=DOCS_FIGURE, help="the picture to write")
     args = parser.parse_args(argv)
 
-    import rbp
+    # rbp.import_scenario and rbp.plan(footsteps_only=True), from below the command line's
+    # layer (tests/test_layers.py)
+    from planning.footsteps import plan_footsteps
+    from planning.plan import build_plan
+    from rb_drake.terrain.import_cave import ImportOptions, import_cave
 
-    scn = rbp.import_scenario(args.scan, seed=args.seed)
-    plan = rbp.plan(scn, footsteps_only=True)
+    scn = import_cave(args.scan, ImportOptions(seed=args.seed))
+    fp = plan_footsteps(scn)
+    plan = build_plan(scn, fp, "rbp", {"footstep": fp.seconds, "total": fp.seconds})
     print(f"{scn.name}: {len(scn.anchors)} anchors, start {list(scn.start_pose)}, goal "
           f"{list(scn.goal_position)}; route: {plan.success}, {plan.regrasps} regrasps, "
           f"footsteps {plan.timing['footstep']:.2f} s")

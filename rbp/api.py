@@ -96,11 +96,12 @@ def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
                     goal: tuple[float, float] | None = None, name: str | None = None,
                     plane_origin: tuple[float, float, float] | None = None,
                     plane_normal: tuple[float, float, float] | None = None,
-                    resolution: float = 0.05) -> Scenario:
+                    resolution: float | None = None) -> Scenario:
     """A cave from a file of rock, as `rbp scenario import` makes it: a polygon drawing
     (GeoJSON .geojson/.json, DXF .dxf, SVG .svg) or a mesh or point cloud (.stl, .obj, .ply)
-    cut by the plane through `plane_origin` with normal `plane_normal` (traced every
-    `resolution` m). Coordinates are in `unit` (m, cm, mm, in, ft) times `scale`; outlines are
+    cut by the plane through `plane_origin` with normal `plane_normal` (a point cloud's points
+    within `resolution` m of it outlined, bridging gaps up to twice that; None: from the
+    cloud's density). Coordinates are in `unit` (m, cm, mm, in, ft) times `scale`; outlines are
     simplified to `simplify` m. Anchors are placed as `generate_scenario` places them
     (`anchor_density` per metre, from `seed`: the same file and seed, the same cave); `start`
     and `goal` (x, y in m) are chosen when None: the lowest place with a feasible stance and

@@ -94,7 +94,7 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
                         ("--plane-normal", args.plane_normal)):
         if value is not None:
             words += [flag, *(f"{v:g}" for v in value)]
-    if args.plane_origin is not None or args.plane_normal is not None:
+    if args.resolution is not None:
         words += ["--resolution", f"{args.resolution:g}"]
     if args.name is not None:
         words += ["--name", args.name]
@@ -438,14 +438,17 @@ def build_parser() -> argparse.ArgumentParser:
         "import", help="a cave from a file of rock: a polygon drawing (GeoJSON, DXF, SVG) or "
                        "a mesh or point cloud cut by a plane (STL, OBJ, PLY); needs the extra "
                        "rbp[import]")
-    imp.add_argument("file", help="the rock: .geojson/.json, .dxf, .svg, or .stl/.obj/.ply")
+    imp.add_argument("file", help="the rock: a 2D section of closed outlines (.geojson/.json, "
+                                  ".dxf, .svg; x to the side, y up), or a 3D scan cut by a "
+                                  "plane (.stl/.obj/.ply mesh, .ply point cloud; z up)")
     imp.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
     imp.add_argument("--unit", choices=("m", "cm", "mm", "in", "ft"), default="m",
                      help="the unit of the file's coordinates (default m)")
     imp.add_argument("--scale", type=float, default=1.0,
                      help="a factor on the coordinates besides the unit (default 1)")
     imp.add_argument("--simplify", type=float, default=0.0, metavar="TOL",
-                     help="simplify outlines to TOL metres (default 0: as drawn)")
+                     help="simplify outlines to TOL metres (default 0: as drawn; a scan's "
+                          "section: 0.01)")
     imp.add_argument("--anchor-density", type=float, default=3.0,
                      help="anchors per metre of rock surface, above 0 and at most 20 "
                           "(default 3.0)")
@@ -453,18 +456,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help="seed of the anchors, 0 or more: the same seed, the same cave "
                           "(default 0)")
     imp.add_argument("--start", type=float, nargs=2, metavar=("X", "Y"),
-                     help="the body's start position in m (default: the lowest free position "
-                          "with a feasible stance)")
+                     help="the body's start position in m, in the section's frame (default: "
+                          "the lowest free position with a feasible stance, 1.5 m above the "
+                          "bottom if one there has)")
     imp.add_argument("--goal", type=float, nargs=2, metavar=("X", "Y"),
-                     help="the goal in m (default: the highest free position reached from the "
-                          "start with an anchor in reach of each boom)")
+                     help="the goal in m, in the section's frame (default: the highest free "
+                          "position reached from the start with an anchor in reach of each "
+                          "boom, the upper booms' 0.5 m above it)")
     imp.add_argument("--name", help="the scenario's name (default: the file's name)")
     imp.add_argument("--plane-origin", type=float, nargs=3, metavar=("X", "Y", "Z"),
-                     help="meshes: a point of the cutting plane (in the mesh's coordinates)")
+                     help="scans: a point of the cutting plane, in the scan's coordinates, "
+                          "and the section's 2D origin (default: the scan's bounding-box "
+                          "centre)")
     imp.add_argument("--plane-normal", type=float, nargs=3, metavar=("X", "Y", "Z"),
-                     help="meshes: the cutting plane's normal")
-    imp.add_argument("--resolution", type=float, default=0.05, metavar="R",
-                     help="meshes: trace the section every R metres (default 0.05)")
+                     help="scans: the cutting plane's normal (default 1 0 0: a vertical "
+                          "plane; the section's x is world y, its y world z, up)")
+    imp.add_argument("--resolution", type=float, metavar="R",
+                     help="point clouds: outline the points within R metres of the plane, "
+                          "bridging gaps up to 2R (default: about 4 point spacings, from the "
+                          "cloud's density); a mesh's section is exact")
     imp.set_defaults(func=cmd_scenario_import)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")
     chk.add_argument("scenario")

@@ -295,3 +295,33 @@ def test_obj_naming_other_files_does_not_open_them(tmp_path: Path) -> None:
     path.write_text("mtllib /dev/zero\n" + mesh.export(file_type="obj"))
     rock = section_polygons(path, None, None, RESOLUTION, TOLERANCE)
     check_polygons(rock)
+
+
+def test_default_cloud_resolution_follows_the_density_and_does_not_leak() -> None:
+    """Without a resolution the cloud's comes from its density: 16 times the points, a
+    quarter of the resolution; and the shipped cloud's default section is the mesh's (the
+    import's old fixed 5 cm let the outline leak through its walls: 35 % of the cave lost)."""
+    from rb_drake.terrain.mesh_section import SPACINGS, cloud_resolution
+
+    mesh = lava_tube_mesh(SEED)
+    sparse = cloud_resolution(lava_tube_cloud(mesh, SEED, 5_000))
+    dense = cloud_resolution(lava_tube_cloud(mesh, SEED, 80_000))
+    assert abs(sparse / dense - 4.0) <= 0.4, f"resolutions {sparse:.4f} and {dense:.4f} m"
+    # the example's walls and caps: the sampled surface
+    area = mesh.area
+    expected = SPACINGS / math.sqrt(DESIGN.cloud_points / area)
+    shipped = cloud_resolution(trimesh.load(CLOUD_FILE).vertices)
+    assert abs(shipped - expected) <= 0.15 * expected, \
+        f"{shipped:.4f} m for {DESIGN.cloud_points} points on {area:.1f} m²: {expected:.4f} m"
+    exact = free_region(section_polygons(MESH_FILE, None, None, None, TOLERANCE))
+    cloud = free_region(section_polygons(CLOUD_FILE, None, None, None, TOLERANCE))
+    ratio = cloud.symmetric_difference(exact).area / exact.area
+    assert ratio <= 0.04, f"the cloud's default section differs by {ratio:.1%} from the mesh's"
+
+
+def test_too_few_points_for_a_density_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "five.ply"
+    points = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 1], [0, 2, 3]], dtype=float)
+    path.write_bytes(trimesh.PointCloud(points).export(file_type="ply"))
+    with pytest.raises(RbpInputError, match=r"five\.ply: resolution: 5 point\(s\) are too few"):
+        section_polygons(path, None, None, None, TOLERANCE)

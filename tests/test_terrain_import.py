@@ -150,6 +150,26 @@ def test_tunnel_rock_with_a_hole_makes_simple_walls():
     assert len(inside) >= 10, f"only {len(inside)} anchors on the tube's inner wall"
 
 
+def test_framed_rock_has_no_anchors_on_its_frame():
+    """A scan's section is a frame minus the free space: the frame is no rock surface, so a
+    framed import puts anchors on the cave's outline only, as many as its length gives."""
+    from shapely.geometry import Polygon
+
+    outer = [(-2.0, -1.0), (2.0, -1.0), (2.0, 6.0), (-2.0, 6.0)]
+    hole = [(-0.85, 0.0), (0.85, 0.0), (0.8, 2.5), (0.85, 5.0), (-0.85, 5.0), (-0.9, 2.5)]
+    rock = [Polygon(outer, [hole])]
+    scn = scenario_from_rock(rock, seed=2, start=(0.0, 1.0), goal=(0.0, 4.0), source="tube",
+                             framed=True)
+    check_anchors_on_rock(scn, rock)
+    cave = Polygon(hole).exterior
+    gaps = [cave.distance(Point(a.position)) for a in scn.anchors]
+    assert max(gaps) <= ANCHOR_GAP_TOL, f"an anchor {max(gaps):.3f} m off the cave's outline"
+    # Poisson with mean 3 per metre of the 12.4 m outline: 37 +- 6.1
+    expected = 3.0 * cave.length
+    assert abs(len(scn.anchors) - expected) <= 4 * expected ** 0.5, \
+        f"{len(scn.anchors)} anchors on {cave.length:.1f} m of outline"
+
+
 def test_start_in_rock_refused():
     with pytest.raises(RbpInputError, match=r"--start: the body at .* meets rock"):
         import_cave(EXAMPLE, ImportOptions(start=(-1.5, 2.0), goal=(0.0, 4.0)))

@@ -52,7 +52,8 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
                        robot: RobotParams | None = None,
                        start: tuple[float, float] | None = None,
                        goal: tuple[float, float] | None = None,
-                       name: str = "imported", source: str = "<imported>") -> Scenario:
+                       name: str = "imported", source: str = "<imported>",
+                       framed: bool = False) -> Scenario:
     """A cave of the rock `rock` (shapely Polygons in metres, up = +y). Anchors are placed as
     the generator places them (config's density, normal noise and limit-surface ranges) from
     `seed`: the same rock and seed, the same cave. `start` (x, y) is the body's position to
@@ -60,7 +61,9 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     with a feasible stance, START_RISE above the lowest anchor if one there has. `goal` (x, y)
     is chosen when None: the highest free position the body can get to from the start
     (through free space) with anchors in reach of each boom, those of the upper booms
-    GOAL_HEADROOM above it. Raises RbpInputError (file `source`) when the rock makes no cave."""
+    GOAL_HEADROOM above it. `framed`: the rock's bounding box is a frame drawn round the cave
+    (a scan's section: rock is the frame minus the free space), not rock surface, and has no
+    anchors. Raises RbpInputError (file `source`) when the rock makes no cave."""
     from shapely import union_all
 
     from rb_drake.terrain.polygon_files import validity_reason
@@ -74,13 +77,14 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     solid = [p for p in _polygons(union_all(rock)) if p.area > 0]
     if not solid:
         raise RbpInputError("no rock to climb", file=source)
-    perimeter = sum(p.length for p in solid)
+    surfaces = _surfaces(solid, union_all(solid).bounds if framed else None)
+    perimeter = sum(float(np.linalg.norm(np.diff(surf.points, axis=0), axis=1).sum())
+                    for surf in surfaces)
     if perimeter * cfg.anchor_density > MAX_ANCHORS:
         raise RbpInputError(f"{perimeter:.0f} m of rock surface at {cfg.anchor_density:g} "
                             f"anchors per metre is more than {MAX_ANCHORS} anchors; lower "
                             "--anchor-density or import a smaller section", file=source)
     walls = _walls(solid, source)
-    surfaces = _surfaces(solid)
     rng = np.random.default_rng(seed)
     anchors = place_anchors(rng, cfg, surfaces, Rock(walls))
     if len(anchors) < NUM_BOOMS:
@@ -121,16 +125,50 @@ def _polygons(geometry: object) -> list[Polygon]:
     return [g for g in getattr(geometry, "geoms", ()) if isinstance(g, Polygon)]
 
 
-def _surfaces(solid: list[Polygon]) -> list[Surface]:
-    """Every ring of the rock, oriented so that rock is on its left: outward is to the right."""
+def _surfaces(solid: list[Polygon],
+              frame: tuple[float, float, float, float] | None = None) -> list[Surface]:
+    """Every ring of the rock, oriented so that rock is on its left: outward is to the right;
+    without the stretches along the box `frame` (minx, miny, maxx, maxy) when given."""
     from shapely.geometry.polygon import orient
 
     surfaces = []
     for poly in solid:
         poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise
         for ring in (poly.exterior, *poly.interiors):
-            surfaces.append(Surface(np.asarray(ring.coords, dtype=float), -1))
+            pts = np.asarray(ring.coords, dtype=float)
+            surfaces += [Surface(piece, -1) for piece in _off_frame(pts, frame)]
     return surfaces
+
+
+def _off_frame(ring: np.ndarray,
+               frame: tuple[float, float, float, float] | None) -> list[np.ndarray]:
+    """The closed `ring` (last point = first) as polylines without its segments along the
+    box `frame`'s edges (both ends on one edge): the whole ring when `frame` is None."""
+    if frame is None:
+        return [ring]
+    tol = 1e-9 * max(1.0, *(abs(v) for v in frame))
+    minx, miny, maxx, maxy = frame
+    ends = [np.abs(ring[:, 0] - minx) <= tol, np.abs(ring[:, 0] - maxx) <= tol,
+            np.abs(ring[:, 1] - miny) <= tol, np.abs(ring[:, 1] - maxy) <= tol]
+    on_frame = np.zeros(len(ring) - 1, dtype=bool)  # segment k: ring[k] to ring[k + 1]
+    for edge in ends:
+        on_frame |= edge[:-1] & edge[1:]
+    if not on_frame.any():
+        return [ring]
+    first = int(np.flatnonzero(on_frame)[0])  # start the walk on the frame: no run wraps
+    order = np.roll(np.arange(len(ring) - 1), -first)
+    pieces: list[np.ndarray] = []
+    run: list[np.ndarray] = []
+    for k in order:
+        if on_frame[k]:
+            if run:
+                pieces.append(np.array([*run, ring[k]]))
+            run = []
+        else:
+            run.append(ring[k])
+    if run:
+        pieces.append(np.array([*run, ring[order[0]]]))
+    return pieces
 
 
 def _walls(solid: list[Polygon], source: str) -> list[np.ndarray]:

@@ -17,7 +17,6 @@ if TYPE_CHECKING:
     from rb_drake.scenario import Scenario
 
 MAX_ANCHOR_DENSITY = 20.0   # anchors per metre, as `rbp scenario generate` allows
-DEFAULT_RESOLUTION = 0.05   # m: a mesh's section is traced this finely
 MESH_SIMPLIFY = 0.01      # m: a mesh section's outline simplified this far unless --simplify says
 
 
@@ -35,7 +34,8 @@ class ImportOptions:
     name: str | None = None          # the scenario's name (default: the file's stem)
     plane_origin: tuple[float, float, float] | None = None  # meshes: the cutting plane
     plane_normal: tuple[float, float, float] | None = None
-    resolution: float = DEFAULT_RESOLUTION                   # m, meshes only
+    resolution: float | None = None  # m, point clouds only: the slab and the outline's gaps
+    #                                  (None: from the cloud's density, mesh_section's)
 
 
 def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scenario:
@@ -51,7 +51,8 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         import shapely  # noqa: F401  (every reader and the cave's assembly need it)
     except ImportError:
         raise missing_extra("shapely") from None
-    if path.suffix.lower() in MESH_SUFFIXES:
+    scan = path.suffix.lower() in MESH_SUFFIXES
+    if scan:
         rock = _mesh_rock(path, opts)
     else:
         if opts.plane_origin is not None or opts.plane_normal is not None:
@@ -60,7 +61,8 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
     cfg = CaveConfig(anchor_density=opts.anchor_density)
     return scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
-                              goal=opts.goal, name=opts.name or path.stem, source=str(path))
+                              goal=opts.goal, name=opts.name or path.stem, source=str(path),
+                              framed=scan)  # a scan's rock is a frame minus the free space
 
 
 def _check(opts: ImportOptions) -> None:
@@ -69,7 +71,8 @@ def _check(opts: ImportOptions) -> None:
     if not 0 < opts.anchor_density <= MAX_ANCHOR_DENSITY:
         raise RbpInputError(f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per "
                             f"metre, got {opts.anchor_density:g}", field="--anchor-density")
-    if not (math.isfinite(opts.resolution) and opts.resolution > 0):
+    if opts.resolution is not None and not (math.isfinite(opts.resolution)
+                                            and opts.resolution > 0):
         raise RbpInputError(f"must be a positive number of metres, got {opts.resolution:g}",
                             field="--resolution")
     for flag, point in (("--start", opts.start), ("--goal", opts.goal),
@@ -104,5 +107,6 @@ def _mesh_rock(path: Path, opts: ImportOptions) -> list[Polygon]:
     # its own, a section is simplified to MESH_SIMPLIFY (0 would keep every facet's vertex)
     simplify = opts.simplify if opts.simplify > 0 else MESH_SIMPLIFY
     section = section_polygons(path, opts.plane_origin, opts.plane_normal,
-                               opts.resolution / factor, simplify / factor)
+                               None if opts.resolution is None else opts.resolution / factor,
+                               simplify / factor)
     return [scaled(p, factor, factor, origin=(0.0, 0.0)) for p in section]

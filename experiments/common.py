@@ -255,7 +255,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "whole", "travel7", "travel5", "travel7-any", "dt", "dt7")
+            "whole", "travel7", "dt7")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -270,8 +270,10 @@ def variant_config(variant: str, time_limit: float | None):
     start), "repair" (the first route repaired window by window: planning.route_repair) and
     "default-repair" (today's default, then repaired); "default-quarter" is today's default with
     its memo capped at a quarter of the most the "default" variant kept on the same cave
-    (`route_variants`: run "default" first); "whole" is today's default with every climb searched
-    whole (no segments: planning.segmented)."""
+    (`route_variants`: run "default" first); "whole" is today's default with every climb
+    searched whole (no segments: planning.segmented); "travel7" orders the first route by the
+    travel bound (weight 7, no anytime passes) and "dt7" the anytime passes after today's first
+    route (weights 7, 4, 2, 1: `ordering: distance+travel`)."""
     from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
@@ -296,10 +298,6 @@ def variant_config(variant: str, time_limit: float | None):
         "default-repair": {"repair": RepairConfig()},
         "whole": {"segments": None},
         "travel7": {"ordering": "travel", "heuristic_weight": 7.0, "anytime": None},
-        "travel5": {"ordering": "travel", "heuristic_weight": 5.0, "anytime": None},
-        "travel7-any": {"ordering": "travel", "heuristic_weight": 7.0,
-                        "anytime": AnytimeConfig(weights=(3.0, 2.0, 1.5, 1.0))},
-        "dt": {"ordering": "distance+travel"},
         "dt7": {"ordering": "distance+travel",
                 "anytime": AnytimeConfig(weights=(7.0, 4.0, 2.0, 1.0))},
     }

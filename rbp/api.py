@@ -366,11 +366,12 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
 
     if not speedup > 0:
         raise RbpInputError(f"must be above 0, got {speedup:g}", field="speedup")
-    server = start_meshcat()
-    frames = 0
     if isinstance(what, Scenario):
+        server = start_meshcat()
         show_scenario(server, what)
-    else:
-        result = what if isinstance(what, SimulationResult) else simulate(what)
-        frames = show_climb(server, result.record, speedup=speedup)
+        return MeshcatView(server.web_url(), server)
+    # simulated before the server starts: a plan that cannot be flown leaves none behind
+    result = what if isinstance(what, SimulationResult) else simulate(what)
+    server = start_meshcat()
+    frames = show_climb(server, result.record, speedup=speedup)
     return MeshcatView(server.web_url(), server, frames)

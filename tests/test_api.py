@@ -160,6 +160,8 @@ def test_a_failed_plan_is_not_simulated(demo: rbp.Scenario) -> None:
     assert not plan.success
     with pytest.raises(rbp.RbpInputError):
         rbp.simulate(plan)
+    with pytest.raises(rbp.RbpInputError):
+        rbp.meshcat(plan)  # replayed only once simulated
 
 
 def test_simulate_with_replanning(full_plan: rbp.Plan) -> None:

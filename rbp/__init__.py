@@ -9,6 +9,7 @@
     rbp.write_plan(plan, "climb.json")
     print(rbp.simulate(plan, trials=1000).monte_carlo.rate)
     rbp.draw(plan, "climb.png")
+    view = rbp.meshcat(plan)                 # the climb replayed in Meshcat: open view.url
 
 Every name is loaded on first use, so `import rbp` imports neither Drake nor numba (the
 command line, `rbp`, starts fast).
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from rb_drake.generate import CaveConfig
     from rb_drake.scenario import Scenario
     from rbp.api import (
+        MeshcatView,
         SimulationResult,
         bundled_caves,
         check,
@@ -34,6 +36,7 @@ if TYPE_CHECKING:
         generate_scenario,
         import_scenario,
         load_scenario,
+        meshcat,
         plan,
         read_plan,
         simulate,
@@ -43,8 +46,9 @@ if TYPE_CHECKING:
 # name -> the module that defines it, imported when the name is first used
 _LAZY = {
     **{name: "rbp.api" for name in (
-        "SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-        "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan")},
+        "MeshcatView", "SimulationResult", "bundled_caves", "check", "draw",
+        "generate_scenario", "import_scenario", "load_scenario", "meshcat", "plan",
+        "read_plan", "simulate", "write_plan")},
     "Scenario": "rb_drake.scenario",
     "CaveConfig": "rb_drake.generate",
     "Plan": "planning.plan_model",
@@ -55,9 +59,10 @@ _LAZY = {
 }
 
 __all__ = [  # the same names as _LAZY (a literal, for linters and type checkers)
-    "CaveConfig", "FootstepConfig", "PipelineConfig", "Plan", "RbpError", "RbpInputError",
-    "Scenario", "SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-    "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
+    "CaveConfig", "FootstepConfig", "MeshcatView", "PipelineConfig", "Plan", "RbpError",
+    "RbpInputError", "Scenario", "SimulationResult", "bundled_caves", "check", "draw",
+    "generate_scenario", "import_scenario", "load_scenario", "meshcat", "plan", "read_plan",
+    "simulate", "write_plan"]
 
 
 def __getattr__(name: str) -> Any:

@@ -9,6 +9,7 @@ and read and write plan files; `import rbp` exports these functions (`rbp.plan`,
     rbp.write_plan(plan, "climb.json")
     result = rbp.simulate(plan)            # one simulated climb (trials=N: Monte Carlo)
     rbp.draw(plan, "climb.png")
+    view = rbp.meshcat(result)             # the climb replayed in Meshcat: open view.url
 
 The command line (`rbp plan`, `rbp check`, ...) is built on the same functions. Only the
 standard library is imported here at the top: each function imports what it needs when
@@ -33,8 +34,9 @@ if TYPE_CHECKING:
     from systems.diagram import SimulationRecord
     from systems.montecarlo import MonteCarloResult
 
-__all__ = ["SimulationResult", "bundled_caves", "check", "draw", "generate_scenario",
-           "import_scenario", "load_scenario", "plan", "read_plan", "simulate", "write_plan"]
+__all__ = ["MeshcatView", "SimulationResult", "bundled_caves", "check", "draw",
+           "generate_scenario", "import_scenario", "load_scenario", "meshcat", "plan",
+           "read_plan", "simulate", "write_plan"]
 
 PLAN_DPI = 110  # `rbp plan`'s pictures
 SCENARIO_DPI = 120  # `rbp scenario show`'s default
@@ -313,3 +315,63 @@ def draw(scenario_or_plan: Scenario | Plan | dict[str, Any], path: str | Path,
     data = plan_dict(scenario_or_plan)
     fig = snapshots_figure(plan_scenario(data), data)
     return atomic_save_figure(fig, path, dpi=dpi or PLAN_DPI)
+
+
+@dataclasses.dataclass
+class MeshcatView:
+    """A Meshcat server showing a cave or a climb: open `url` in a browser (127.0.0.1 only).
+    The server runs while this object (or its `server`) is referenced: `close()`, leaving a
+    `with` block or dropping the last reference stops it. `frames` is the replay's length
+    (0 for a cave alone)."""
+
+    url: str
+    server: Any  # pydrake.geometry.Meshcat; None once closed
+    frames: int = 0
+
+    def save_html(self, path: str | Path) -> Path:
+        """The scene and its replay as one self-contained HTML page (as `rbp simulate --html`),
+        written atomically; returns the path."""
+        from systems.meshcat_view import save_html
+
+        if self.server is None:
+            raise RuntimeError("this Meshcat view is closed")
+        return save_html(self.server, path)
+
+    def close(self) -> None:
+        """Stop the server (Drake stops it when its last reference goes; keep none elsewhere)."""
+        import gc
+
+        self.server = None
+        gc.collect()
+
+    def __enter__(self) -> MeshcatView:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
+            speedup: float = 4.0) -> MeshcatView:
+    """Show a cave or a climb in Meshcat, as `rbp simulate --meshcat` does: a Scenario is drawn
+    alone; a plan is simulated once (`simulate(plan)`, the deterministic climb) and replayed;
+    a `SimulationResult` replays its run without simulating again. The replay runs `speedup`
+    times faster than the climb. The server listens on 127.0.0.1 and a free port only (never
+    every interface). Returns a `MeshcatView` with the `url` to open; it serves until closed
+    (`view.close()` or `with rbp.meshcat(plan) as view:`). Raises `RbpInputError` for a plan
+    that cannot be simulated (as `simulate`)."""
+    from rb_drake.errors import RbpInputError
+    from rb_drake.scenario import Scenario
+    from systems.meshcat_view import show_climb, show_scenario, start_meshcat
+
+    if not speedup > 0:
+        raise RbpInputError(f"must be above 0, got {speedup:g}", field="speedup")
+    if isinstance(what, Scenario):
+        server = start_meshcat()
+        show_scenario(server, what)
+        return MeshcatView(server.web_url(), server)
+    # simulated before the server starts: a plan that cannot be flown leaves none behind
+    result = what if isinstance(what, SimulationResult) else simulate(what)
+    server = start_meshcat()
+    frames = show_climb(server, result.record, speedup=speedup)
+    return MeshcatView(server.web_url(), server, frames)

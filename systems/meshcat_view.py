@@ -243,11 +243,11 @@ def view_from_front(meshcat: Meshcat, bounds: tuple[float, float, float, float])
     meshcat.Set2dRenderMode(RigidTransform(R_WC, [0.0, 0.0, CAMERA_HEIGHT]), *bounds)
 
 
-def show_climb(meshcat: Meshcat, record: SimulationRecord, speedup: float = 4.0) -> int:
-    """The cave, the robot and the animated climb, seen as in the 2-D figures (x right, y up)."""
+def show_scenario(meshcat: Meshcat, scn: Scenario) -> None:
+    """The cave alone (what was shown before cleared), seen as in the 2-D figures (x right,
+    y up)."""
     meshcat.Delete(ROOT)
     meshcat.DeleteRecording()
-    scn = record.plan.scenario
     draw_scenario(meshcat, scn)
     view_from_front(meshcat, view_bounds(scn))
     # Flat colours, as in the 2-D figures: only the ambient light (it does not depend on the
@@ -255,6 +255,11 @@ def show_climb(meshcat: Meshcat, record: SimulationRecord, speedup: float = 4.0)
     for light in ("SpotLight", "PointLightNegativeX", "PointLightPositiveX", "FillLight"):
         meshcat.SetProperty(f"/Lights/{light}/<object>", "intensity", 0.0)
     meshcat.SetProperty("/Lights/AmbientLight/<object>", "intensity", AMBIENT)
+
+
+def show_climb(meshcat: Meshcat, record: SimulationRecord, speedup: float = 4.0) -> int:
+    """The cave, the robot and the animated climb, seen as in the 2-D figures (x right, y up)."""
+    show_scenario(meshcat, record.plan.scenario)
     return animate(meshcat, record, speedup=speedup)
 
 

@@ -255,7 +255,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "whole", "travel7", "dt7")
+            "segments", "travel7", "dt7")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -270,13 +270,14 @@ def variant_config(variant: str, time_limit: float | None):
     start), "repair" (the first route repaired window by window: planning.route_repair) and
     "default-repair" (today's default, then repaired); "default-quarter" is today's default with
     its memo capped at a quarter of the most the "default" variant kept on the same cave
-    (`route_variants`: run "default" first); "whole" is today's default with every climb
-    searched whole (no segments: planning.segmented); "travel7" orders the first route by the
+    (`route_variants`: run "default" first); "segments" is today's default with climbs
+    over 7 m searched in segments (planning.segmented); "travel7" orders the first route by the
     travel bound (weight 7, no anytime passes) and "dt7" the anytime passes after today's first
     route (weights 7, 4, 2, 1: `ordering: distance+travel`)."""
     from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
+    from planning.segmented import SegmentConfig
 
     limit = 600.0 if time_limit is None else time_limit
     exhaustive = AnytimeConfig(improve_factor=None)
@@ -296,7 +297,7 @@ def variant_config(variant: str, time_limit: float | None):
                       "heuristic_weight": 1.0},
         "repair": {"anytime": None, "repair": RepairConfig()},
         "default-repair": {"repair": RepairConfig()},
-        "whole": {"segments": None},
+        "segments": {"segments": SegmentConfig()},
         "travel7": {"ordering": "travel", "heuristic_weight": 7.0, "anytime": None},
         "dt7": {"ordering": "distance+travel",
                 "anytime": AnytimeConfig(weights=(7.0, 4.0, 2.0, 1.0))},

@@ -97,9 +97,11 @@ class FootstepConfig:
     # optimum (planning.route_repair); None: the route as the search found it
     repair: RepairConfig | None = None
     # complete search with a budget (not --thorough, not min_success): a long climb searched in
-    # segments a few metres ahead (planning.segmented), so that its work and its regrasps grow
-    # with its length; None: every climb searched whole
-    segments: SegmentConfig | None = dataclasses.field(default_factory=SegmentConfig)
+    # segments a few metres ahead (planning.segmented; `segments: {}` in a --config file for
+    # the defaults of SegmentConfig); None, the default: every climb searched whole (on the
+    # long-climb benchmark, segments changed regrasps by -10 % to +7 % and took up to 2x the
+    # time: docs/benchmarks.md)
+    segments: SegmentConfig | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
     # complete search: at most this many MiB of lattice work kept for reuse (components and

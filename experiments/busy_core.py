@@ -8,12 +8,15 @@ order from cave to cave so that drift in the machine's load falls on both alike.
 (default 1) N processes spin on a core each for the whole run, as another user's job would.
 Each worker plans a cave first to warm its compiled kernels; that cave is not counted.
 
-Reports, per cave, both footstep times and whether both made the same decisions (route,
-regrasps, expansions: the thread count must not change a plan), and the median and the
-total-time ratio of default over one thread (issue 32 asks at most 1.2 with a core busy).
+Reports, per cave, each mode's footstep time and whether it made the default's decisions
+(route, regrasps, expansions: the thread count must not change a plan), and the median and the
+total-time ratio of the default over each other mode (issue 32 asks at most 1.2 over one thread
+with a core busy, and idle at least as fast as before: `--modes default,one,active`, where
+`active` is the default's threads spinning between parallel regions, as before issue 32).
 
     python -m experiments.busy_core --trials 100 --busy 1 --out docs/figures/busy-core.json
-    python -m experiments.busy_core --trials 100 --busy 0 --out out/idle.json
+    python -m experiments.busy_core --trials 100 --busy 0 --modes default,one,active \
+        --out docs/figures/idle-threads.json
 """
 
 from __future__ import annotations
@@ -33,7 +36,9 @@ from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 
-MODES = ("default", "one")  # RBP_THREADS unset; RBP_THREADS=1
+# RBP_THREADS unset; RBP_THREADS=1; RBP_THREADS unset with OpenMP's threads spinning between
+# parallel regions (OMP_WAIT_POLICY=ACTIVE: the default before issue 32)
+MODES = ("default", "one", "active")
 
 
 def _spin() -> None:
@@ -43,16 +48,20 @@ def _spin() -> None:
 
 def _pool(mode: str) -> Any:
     """One spawned worker whose environment has the mode's RBP_THREADS (read at its start)."""
-    saved = os.environ.get("RBP_THREADS")
-    os.environ.pop("RBP_THREADS", None)
+    saved = {k: os.environ.get(k) for k in ("RBP_THREADS", "OMP_WAIT_POLICY")}
+    for k in saved:
+        os.environ.pop(k, None)
     if mode == "one":
         os.environ["RBP_THREADS"] = "1"
+    if mode == "active":
+        os.environ["OMP_WAIT_POLICY"] = "ACTIVE"
     try:
         return multiprocessing.get_context("spawn").Pool(1)
     finally:
-        os.environ.pop("RBP_THREADS", None)
-        if saved is not None:
-            os.environ["RBP_THREADS"] = saved
+        for k, v in saved.items():
+            os.environ.pop(k, None)
+            if v is not None:
+                os.environ[k] = v
 
 
 def _threads() -> dict[str, Any]:
@@ -66,15 +75,19 @@ def decisions(run: dict[str, Any]) -> tuple:
     return (run["success"], run["stop"], run["regrasps"], run["expansions"], run["stances"])
 
 
-def summarise(caves: list[dict[str, Any]]) -> dict[str, Any]:
-    ratios = [c["default"]["seconds"] / c["one"]["seconds"] for c in caves]
-    total = {m: sum(c[m]["seconds"] for c in caves) for m in MODES}
-    return {"caves": len(caves),
-            "same_decisions": sum(decisions(c["default"]) == decisions(c["one"]) for c in caves),
+def summarise(caves: list[dict[str, Any]], modes: tuple[str, ...]) -> dict[str, Any]:
+    """Per mode but the default: the default's time over the mode's, cave by cave (median and
+    quartiles) and in total, and on how many caves both made the same decisions."""
+    total = {m: sum(c[m]["seconds"] for c in caves) for m in modes}
+    out: dict[str, Any] = {"caves": len(caves), "total_seconds": total}
+    for m in modes[1:]:
+        ratios = [c["default"]["seconds"] / c[m]["seconds"] for c in caves]
+        out[f"default_over_{m}"] = {
+            "same_decisions": sum(decisions(c["default"]) == decisions(c[m]) for c in caves),
             "median_ratio": statistics.median(ratios) if ratios else None,
-            "ratio_quartiles": (statistics.quantiles(ratios, n=4) if len(ratios) > 1 else None),
-            "total_seconds": total,
-            "total_ratio": total["default"] / total["one"] if total["one"] else None}
+            "ratio_quartiles": statistics.quantiles(ratios, n=4) if len(ratios) > 1 else None,
+            "total_ratio": total["default"] / total[m] if total[m] else None}
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,17 +99,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
     parser.add_argument("--variant", default="default", choices=ROUTE_VARIANTS)
     parser.add_argument("--busy", type=int, default=1, help="cores kept spinning (default 1)")
+    parser.add_argument("--modes", default="default,one",
+                        help="comma-separated, the first 'default': default (the default "
+                             "threads), one (RBP_THREADS=1), active (OMP_WAIT_POLICY=ACTIVE)")
     parser.add_argument("--out", default="out/busy_core.json")
     args = parser.parse_args(argv)
     if args.trials < 1 or args.busy < 0:
         parser.error("--trials must be at least 1 and --busy at least 0")
+    modes = tuple(args.modes.split(","))
+    if modes[0] != "default" or len(modes) < 2 or not set(modes) <= set(MODES) or \
+            len(set(modes)) < len(modes):
+        parser.error(f"--modes: 'default' first, then one or more of {MODES[1:]}")
     ctx = multiprocessing.get_context("spawn")
-    pools = {m: _pool(m) for m in MODES}
+    pools = {m: _pool(m) for m in modes}
     spinners = []
     try:
-        threads = {m: pools[m].apply(_threads) for m in MODES}
+        threads = {m: pools[m].apply(_threads) for m in modes}
         warm = ("shaft", args.first_seed, tuple(args.length), [args.variant], None)
-        for m in MODES:
+        for m in modes:
             pools[m].apply(run_cave, (warm,))
         for _ in range(args.busy):
             spinners.append(ctx.Process(target=_spin, daemon=True))
@@ -107,19 +127,19 @@ def main(argv: list[str] | None = None) -> int:
             job = (cave_kind(i, args.kind), args.first_seed + i, tuple(args.length),
                    [args.variant], None)
             cave: dict[str, Any] = {"kind": job[0], "seed": job[1]}
-            for m in (MODES if i % 2 == 0 else MODES[::-1]):
+            for m in (modes if i % 2 == 0 else modes[::-1]):
                 cave[m] = pools[m].apply(run_cave, (job,))[args.variant]
             caves.append(cave)
-            print(f"[{i + 1}/{args.trials}] {cave['kind']} {cave['seed']}: "
-                  f"default {cave['default']['seconds']:.2f} s, "
-                  f"one thread {cave['one']['seconds']:.2f} s", file=sys.stderr)
+            times = ", ".join(f"{m} {cave[m]['seconds']:.2f} s" for m in modes)
+            print(f"[{i + 1}/{args.trials}] {cave['kind']} {cave['seed']}: {times}",
+                  file=sys.stderr)
     finally:
         for p in spinners:
             p.terminate()
         for pool in pools.values():
             pool.terminate()
     result = {"machine": machine_info(), "args": vars(args), "threads": threads,
-              "wall_seconds": time.perf_counter() - t0, "summary": summarise(caves),
+              "wall_seconds": time.perf_counter() - t0, "summary": summarise(caves, modes),
               "caves": caves}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -41,17 +41,18 @@ def no_route_caves(labels: Path = LABELS) -> list[tuple[str, int]]:
 def run_cave(kind: str, seed: int, length: tuple[float, float] = (4.5, 5.0)) -> dict[str, Any]:
     """One cave: `rbp plan --partial`'s plan (default configuration) and its verification."""
     from experiments.common import make_cave
-    from rbp.api import check, plan
+    from planning.check import check_plan
+    from planning.pipeline import PipelineConfig, plan_climb
 
     scn = make_cave(kind, seed, length)
     searches: list[Any] = []
     t0 = time.perf_counter()
-    made = plan(scn, partial=True, footsteps_done=searches.append)
+    made = plan_climb(scn, "rbp", PipelineConfig(), footsteps_done=searches.append, partial=True)
     seconds = time.perf_counter() - t0
     fp = searches[0]  # the first search's: the one the partial climb comes from
     start = tuple(scn.start_stance)
     moved = any(tuple(e.stance) != start for e in fp.explored or [])
-    problems = check(made)
+    problems = check_plan(made)
     part = made.partial
     return {"kind": kind, "seed": seed, "success": made.success, "stop": str(fp.stop),
             "expansions": int(fp.expansions), "start_can_move": moved,

@@ -85,6 +85,17 @@ def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
 def read_text(path: str | Path, max_bytes: int | None = None) -> str:
     """The UTF-8 text of a regular file of at most `max_bytes` (default `max_input_bytes()`);
     raises InputFileError("(file)", reason) for anything else."""
+    data = read_bytes(path, max_bytes)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputFileError("(file)", f"not UTF-8 text (byte {e.start}): is this the right "
+                             "file?") from None
+
+
+def read_bytes(path: str | Path, max_bytes: int | None = None) -> bytes:
+    """The bytes of a regular file of at most `max_bytes` (default `max_input_bytes()`);
+    raises InputFileError("(file)", reason) for anything else."""
     limit = check_input_file(path, max_bytes)
     path = Path(path)
     try:
@@ -98,11 +109,7 @@ def read_text(path: str | Path, max_bytes: int | None = None) -> str:
         raise InputFileError("(file)", f"cannot read: {e.strerror or e}") from None
     if len(data) > limit:
         raise InputFileError("(file)", f"grew past the {_size(limit)} limit while being read")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise InputFileError("(file)", f"not UTF-8 text (byte {e.start}): is this the right "
-                             "file?") from None
+    return data
 
 
 def _size(n: int) -> str:

@@ -33,15 +33,13 @@ from __future__ import annotations
 import heapq
 import io
 import math
-import os
-import stat
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rb_drake.errors import RbpInputError
-from rb_drake.input_files import InputFileError, check_input_file
+from rb_drake.input_files import InputFileError, check_input_file, read_bytes
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -139,20 +137,9 @@ def load_scan(path: Path) -> tuple[str, Any]:
 def _read_bytes(path: Path) -> bytes:
     """The bytes of a regular file within the input size limit (rb_drake.input_files)."""
     try:
-        limit = check_input_file(path)
-        # O_NONBLOCK: should the path become a FIFO after the check, open returns at once
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise InputFileError("(file)", "is not a regular file")
-            data = f.read(limit + 1)
+        return read_bytes(path)
     except InputFileError as e:
         raise _error(path, e.field, e.reason) from None
-    except OSError as e:
-        raise _error(path, "(file)", f"cannot read: {e.strerror or e}") from None
-    if len(data) > limit:
-        raise _error(path, "(file)", "grew past the input size limit while being read")
-    return data
 
 
 def cloud_resolution(points: np.ndarray) -> float:

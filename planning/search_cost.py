@@ -170,6 +170,24 @@ def goal_targets(scn: Scenario, cells: int = ORIENTATION_CELLS) -> np.ndarray:
     return out
 
 
+class _CellTable:
+    """min_k sum_j table[k, j, a_j] for a stance (a_0..a_3), memoised: both bounds' regrasps,
+    a per-boom table over the anchors for each orientation cell of the goal."""
+
+    def __init__(self, scn: Scenario, table: np.ndarray) -> None:
+        self.table = table
+        self._booms = np.arange(NUM_BOOMS)
+        self._row = scn.anchor_index
+        self._cache: dict[tuple, float] = {}
+
+    def __call__(self, stance: tuple[str, ...]) -> float:
+        h = self._cache.get(stance)
+        if h is None:
+            rows = [self._row[a] for a in stance]
+            h = self._cache[stance] = float(self.table[:, self._booms, rows].sum(axis=1).min())
+        return h
+
+
 class RegraspHeuristic:
     """A lower bound on the cost to go from the regrasps each boom still needs.
 
@@ -199,17 +217,11 @@ class RegraspHeuristic:
         for k in range(cells):
             for j in range(NUM_BOOMS):
                 self.hops[k, j] = hops_from(adjacent, targets[k, j])
-        self._booms = np.arange(NUM_BOOMS)
-        self._row = scn.anchor_index
-        self._cache: dict[tuple, float] = {}
+        self._regrasps = _CellTable(scn, self.hops)
 
     def regrasps(self, stance: tuple[str, ...]) -> float:
         """min_k sum_j hops_jk(a_j): the fewest regrasps the relaxed graphs allow (inf: none)."""
-        h = self._cache.get(stance)
-        if h is None:
-            rows = [self._row[a] for a in stance]
-            h = self._cache[stance] = float(self.hops[:, self._booms, rows].sum(axis=1).min())
-        return h
+        return self._regrasps(stance)
 
     def __call__(self, stance: tuple[str, ...]) -> float:
         return self.c_attach * self.regrasps(stance)
@@ -249,18 +261,11 @@ class TravelHeuristic:
                 if len(sources):
                     self.travel[k, j] = dijkstra(lengths, directed=False, indices=sources,
                                                  min_only=True)
-        self._booms = np.arange(NUM_BOOMS)
-        self._row = scn.anchor_index
-        self._cache: dict[tuple, float] = {}
+        self._regrasps = _CellTable(scn, self.travel / self.hop)
 
     def regrasps(self, stance: tuple[str, ...]) -> float:
         """min_k sum_j travel_jk(a_j) / H: the fewest regrasps the travel allows (inf: none)."""
-        h = self._cache.get(stance)
-        if h is None:
-            rows = [self._row[a] for a in stance]
-            h = self._cache[stance] = float(
-                self.travel[:, self._booms, rows].sum(axis=1).min()) / self.hop
-        return h
+        return self._regrasps(stance)
 
     def __call__(self, stance: tuple[str, ...]) -> float:
         return self.c_attach * self.regrasps(stance)

@@ -35,6 +35,7 @@ from experiments.common import ROUTE_VARIANTS, cave_kind
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
+from rb_drake.files import atomic_write_text
 
 # RBP_THREADS unset; RBP_THREADS=1; RBP_THREADS unset with OpenMP's threads spinning between
 # parallel regions (OMP_WAIT_POLICY=ACTIVE: the default before issue 32)
@@ -143,9 +144,7 @@ def main(argv: list[str] | None = None) -> int:
               "caves": caves}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    tmp.replace(out)
+    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
     print(json.dumps(result["summary"], indent=1))
     print(f"wrote {out}")
     return EXIT_OK

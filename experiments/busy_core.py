@@ -2,8 +2,9 @@
 
 The benchmark's caves (`route_quality`'s: the same kinds, seeds and lengths), the footstep
 stage of one search variant (default: today's `rbp plan`), run twice per cave in the same run:
-once by a worker with the default kernel threads (RBP_THREADS unset: numba's count, the cores)
-and once by a worker with RBP_THREADS=1, one after the other (never at once), in alternating
+once by a worker with the default kernel threads (RBP_THREADS unset: up to numba's count, the
+cores, as many as other processes leave free) and once by a worker with RBP_THREADS=1 (and
+other modes: `--modes`), one after the other (never at once), in alternating
 order from cave to cave so that drift in the machine's load falls on both alike. With `--busy N`
 (default 1) N processes spin on a core each for the whole run, as another user's job would.
 Each worker plans a cave first to warm its compiled kernels; that cave is not counted.
@@ -11,11 +12,12 @@ Each worker plans a cave first to warm its compiled kernels; that cave is not co
 Reports, per cave, each mode's footstep time and whether it made the default's decisions
 (route, regrasps, expansions: the thread count must not change a plan), and the median and the
 total-time ratio of the default over each other mode (issue 32 asks at most 1.2 over one thread
-with a core busy, and idle at least as fast as before: `--modes default,one,active`, where
-`active` is the default's threads spinning between parallel regions, as before issue 32).
+with a core busy, and idle at least as fast as before: `--modes default,one,before`, where
+`before` is every thread always, waiting as libgomp does by default, as before issue 32).
 
-    python -m experiments.busy_core --trials 100 --busy 1 --out docs/figures/busy-core.json
-    python -m experiments.busy_core --trials 100 --busy 0 --modes default,one,active \
+    python -m experiments.busy_core --trials 100 --busy 1 --modes default,one,passive \
+        --out docs/figures/busy-core.json
+    python -m experiments.busy_core --trials 100 --busy 0 --modes default,one,before \
         --out docs/figures/idle-threads.json
 """
 
@@ -37,9 +39,19 @@ from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 from rb_drake.files import atomic_write_text
 
-# RBP_THREADS unset; RBP_THREADS=1; RBP_THREADS unset with OpenMP's threads spinning between
-# parallel regions (OMP_WAIT_POLICY=ACTIVE: the default before issue 32)
-MODES = ("default", "one", "active")
+# The default (every thread the free cores allow, libgomp's spin: rb_drake.kernel.free_cores);
+# RBP_THREADS=1; and every thread always (RBP_THREADS_ADAPT=0) with OpenMP's threads waiting
+# as libgomp does by default ("before": a few ms of spinning, the default before issue 32),
+# spinning without end (OMP_WAIT_POLICY=ACTIVE), sleeping at once (OMP_WAIT_POLICY=PASSIVE,
+# the first fix of issue 32) or spinning N times ("spinN": GOMP_SPINCOUNT=N, about 100,000
+# spins a millisecond)
+MODES = ("default", "one", "before", "active", "passive", "spinN")
+_ENVIRONMENT = ("RBP_THREADS", "RBP_THREADS_ADAPT", "OMP_WAIT_POLICY", "GOMP_SPINCOUNT")
+
+
+def valid_mode(mode: str) -> bool:
+    """One of MODES, "spinN" with N a whole number of spins."""
+    return mode in MODES[:-1] or (mode.startswith("spin") and mode[4:].isdigit())
 
 
 def _spin() -> None:
@@ -49,13 +61,20 @@ def _spin() -> None:
 
 def _pool(mode: str) -> Any:
     """One spawned worker whose environment has the mode's RBP_THREADS (read at its start)."""
-    saved = {k: os.environ.get(k) for k in ("RBP_THREADS", "OMP_WAIT_POLICY")}
+    saved = {k: os.environ.get(k) for k in _ENVIRONMENT}
     for k in saved:
         os.environ.pop(k, None)
     if mode == "one":
         os.environ["RBP_THREADS"] = "1"
+    elif mode != "default":
+        os.environ["RBP_THREADS_ADAPT"] = "0"
     if mode == "active":
         os.environ["OMP_WAIT_POLICY"] = "ACTIVE"
+    if mode == "passive":
+        os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+        os.environ["GOMP_SPINCOUNT"] = "0"
+    if mode.startswith("spin"):
+        os.environ["GOMP_SPINCOUNT"] = mode[4:]
     try:
         return multiprocessing.get_context("spawn").Pool(1)
     finally:
@@ -101,14 +120,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variant", default="default", choices=ROUTE_VARIANTS)
     parser.add_argument("--busy", type=int, default=1, help="cores kept spinning (default 1)")
     parser.add_argument("--modes", default="default,one",
-                        help="comma-separated, the first 'default': default (the default "
-                             "threads), one (RBP_THREADS=1), active (OMP_WAIT_POLICY=ACTIVE)")
+                        help="comma-separated, the first 'default': default (today's threads), "
+                             "one (RBP_THREADS=1); every thread always, waiting as: before "
+                             "(libgomp's default), active (OMP_WAIT_POLICY=ACTIVE), passive "
+                             "(OMP_WAIT_POLICY=PASSIVE), spinN (GOMP_SPINCOUNT=N)")
     parser.add_argument("--out", default="out/busy_core.json")
     args = parser.parse_args(argv)
     if args.trials < 1 or args.busy < 0:
         parser.error("--trials must be at least 1 and --busy at least 0")
     modes = tuple(args.modes.split(","))
-    if modes[0] != "default" or len(modes) < 2 or not set(modes) <= set(MODES) or \
+    if modes[0] != "default" or len(modes) < 2 or not all(map(valid_mode, modes)) or \
             len(set(modes)) < len(modes):
         parser.error(f"--modes: 'default' first, then one or more of {MODES[1:]}")
     ctx = multiprocessing.get_context("spawn")

@@ -285,8 +285,9 @@ class Provenance(Part):
     scenario_source: str = spec()
     config: dict[str, Any] = spec(required=["footstep", "seed", "scp"],
                                   description="the PipelineConfig (planning.config_io)")
-    threads: int | None = spec(None, minimum=1, description="the threads the compiled search "
-                               "kernels ran on (RBP_THREADS, or the cores numba sees)")
+    threads: int | None = spec(None, minimum=1, description="the most threads the compiled "
+                               "search kernels could use (RBP_THREADS, or the cores numba "
+                               "sees; fewer while other processes held cores)")
     cores: int | None = spec(None, minimum=1, description="the cores of the machine it ran on")
     load: float | None = spec(None, minimum=0, description="the machine's load average over "
                               "the last minute when the plan was made (this run included): "

@@ -24,3 +24,14 @@ def threads_setting() -> int | None:
         raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS}, "
                             f"got {value!r}", field="RBP_THREADS (environment)")
     return threads
+
+
+def threads_adapt_setting() -> bool:
+    """RBP_THREADS_ADAPT: whether the kernels drop to the cores other processes leave free
+    (`rb_drake.kernel.free_cores`; "1", the default) or always use every allowed thread ("0":
+    for measuring a fixed thread count)."""
+    value = os.environ.get("RBP_THREADS_ADAPT", "").strip()
+    if value not in ("", "0", "1"):
+        raise RbpInputError(f"must be 0 or 1, got {value!r}", field="RBP_THREADS_ADAPT "
+                            "(environment)")
+    return value != "0"

@@ -550,9 +550,10 @@ def _main(argv: list[str] | None) -> int:
     from rb_drake.scenario import ScenarioError
 
     try:
-        from rb_drake.environment import threads_setting
+        from rb_drake.environment import threads_adapt_setting, threads_setting
 
         threads_setting()  # a malformed RBP_THREADS is refused before any work
+        threads_adapt_setting()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {e}", file=sys.stderr)

@@ -14,23 +14,36 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from rb_drake.environment import threads_setting
+from rb_drake.environment import threads_adapt_setting, threads_setting
+from rb_drake.kernel.free_cores import FreeCores
 from rb_drake.kernel.pose_kernel import score_kernel
 
 MIN_ROWS_PER_THREAD = 12  # fewer: one thread scores them (a launch and join cost a few us)
 
 
-def kernel_threads() -> int:
-    """Threads the complete search's compiled flood fills and moves use: RBP_THREADS if set,
-    else numba's count (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker
-    pool gives each worker its share of the cores (`experiments.sweep`). Results are the
-    same, row for row, on any number of threads. Inside `held_kernel_threads`, the count read
-    as the block began."""
-    if _HELD_THREADS:
-        return _HELD_THREADS[-1]
+def allowed_threads() -> int:
+    """The most threads the compiled searches may use: RBP_THREADS if set, else numba's count
+    (this machine's cores unless NUMBA_NUM_THREADS says fewer); a worker pool gives each worker
+    its share of the cores (`experiments.sweep`)."""
     setting = threads_setting()
     threads = numba.config.NUMBA_NUM_THREADS if setting is None else setting
     return max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+_FREE: list[FreeCores] = []
+
+
+def kernel_threads() -> int:
+    """Threads the complete search's compiled flood fills and moves use now: of the
+    `allowed_threads()` (inside `held_kernel_threads`, the count read as the block began),
+    as many as there are cores other processes leave free (`rb_drake.kernel.free_cores`),
+    at least one. Results are the same, row for row, on any number of threads."""
+    allowed = _HELD_THREADS[-1] if _HELD_THREADS else allowed_threads()
+    if allowed <= 1:
+        return 1
+    if not _FREE:
+        _FREE.append(FreeCores(enabled=threads_adapt_setting()))
+    return _FREE[0].threads(allowed)
 
 
 _HELD_THREADS: list[int] = []
@@ -38,14 +51,15 @@ _HELD_THREADS: list[int] = []
 
 def run_conditions() -> dict[str, Any]:
     """The threads and the load a run had, for its record (a plan's provenance, a sweep
-    worker's record): the compiled kernels' threads (`kernel_threads`), the machine's cores,
+    worker's record): the most threads the compiled kernels may use (`allowed_threads`; fewer
+    while other processes hold cores), the machine's cores,
     and the load average over the last minute when the record is made (None where the system
     has none), so that a time is read against what else ran."""
     try:
         load: float | None = round(os.getloadavg()[0], 2)
     except OSError:
         load = None
-    return {"threads": kernel_threads(), "cores": os.cpu_count() or 1, "load": load}
+    return {"threads": allowed_threads(), "cores": os.cpu_count() or 1, "load": load}
 
 
 def worker_threads(workers: int, cores: int | None = None) -> int:
@@ -62,9 +76,9 @@ def worker_threads(workers: int, cores: int | None = None) -> int:
 
 @contextmanager
 def held_kernel_threads() -> Iterator[int]:
-    """`kernel_threads()` read once and held for a block: a search asks for it thousands of
+    """`allowed_threads()` read once and held for a block: a search asks for it thousands of
     times, and reading the environment each time cost 1 % of a proof."""
-    _HELD_THREADS.append(kernel_threads())
+    _HELD_THREADS.append(allowed_threads())
     try:
         yield _HELD_THREADS[-1]
     finally:

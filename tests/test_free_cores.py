@@ -1,0 +1,109 @@
+"""The kernels' thread count follows the cores other processes leave free (issue 32)."""
+
+from __future__ import annotations
+
+import multiprocessing
+import subprocess
+import sys
+import time
+
+import pytest
+
+import rb_drake.kernel.free_cores as free_cores
+from rb_drake.errors import RbpInputError
+from rb_drake.kernel.free_cores import FreeCores
+
+
+def _counters(monkeypatch: pytest.MonkeyPatch, machine: list[tuple[float, float]],
+              own: list[float]) -> None:
+    """Feed FreeCores these (busy, total) clock-tick samples and own CPU seconds, in order."""
+    machine_it, own_it = iter(machine), iter(own)
+    monkeypatch.setattr(free_cores, "_busy_jiffies", lambda: next(machine_it))
+    monkeypatch.setattr(free_cores, "_own_seconds", lambda: next(own_it))
+
+
+@pytest.mark.parametrize("others, expected", [(0.0, 2), (0.2, 2), (0.8, 1), (1.0, 1), (2.0, 1)])
+def test_threads_from_the_cores_others_leave(monkeypatch: pytest.MonkeyPatch, others: float,
+                                             expected: int) -> None:
+    # 2 cores, a 1 s window (200 ticks at 100 a second), this process used 1 CPU-second
+    ticks = 100.0
+    busy = (1.0 + others) * ticks
+    _counters(monkeypatch, [(0.0, 0.0), (busy, 2 * ticks)], [0.0, 1.0])
+    fc = FreeCores(cores=2, period=0.0)
+    fc._ticks = ticks
+    assert fc.threads(2) == expected, (
+        f"others using {others} cores of 2 should leave {expected} thread(s), got "
+        f"{fc.threads(2)} (free estimate {fc.free:.2f})")
+    assert abs(fc.free - max(0.0, 2.0 - others)) < 1e-9, fc.free
+
+
+def test_never_more_than_allowed_nor_fewer_than_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    _counters(monkeypatch, [(0.0, 0.0), (0.0, 800.0)], [0.0, 0.0])
+    fc = FreeCores(cores=8, period=0.0)
+    fc._ticks = 100.0
+    assert fc.threads(3) == 3, "an idle 8-core machine gives every allowed thread, no more"
+    assert fc.threads(1) == 1 and fc.threads(0) == 1, "at least one thread"
+
+
+def test_estimate_held_between_refreshes(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = []
+
+    def sample() -> tuple[float, float]:
+        calls.append(1)
+        return (0.0, 0.0)
+
+    monkeypatch.setattr(free_cores, "_busy_jiffies", sample)
+    fc = FreeCores(cores=2, period=3600.0)
+    for _ in range(100):
+        fc.threads(2)
+    assert len(calls) == 1, f"the counters were read {len(calls)} times within one period"
+
+
+def test_off_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:
+    _counters(monkeypatch, [(0.0, 0.0), (200.0, 200.0)], [0.0, 0.0])  # others use both cores
+    fc = FreeCores(cores=2, period=0.0, enabled=False)
+    fc._ticks = 100.0
+    assert fc.threads(2) == 2, "RBP_THREADS_ADAPT=0 keeps every allowed thread"
+
+
+def test_malformed_setting_is_one_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    from rb_drake.environment import threads_adapt_setting
+
+    monkeypatch.setenv("RBP_THREADS_ADAPT", "yes")
+    with pytest.raises(RbpInputError, match="RBP_THREADS_ADAPT"):
+        threads_adapt_setting()
+    monkeypatch.setenv("RBP_THREADS_ADAPT", "0")
+    assert threads_adapt_setting() is False
+
+
+def _spin() -> None:
+    while True:
+        pass
+
+
+@pytest.mark.skipif(not free_cores._PROC_STAT.exists(), reason="needs /proc/stat")
+def test_a_spinning_process_is_seen() -> None:
+    """On this machine: a process spinning on a core is counted as another's work, and this
+    process's own work is not."""
+    cores = FreeCores(period=0.2)
+    if cores.cores < 2:
+        pytest.skip("needs 2 cores")
+    spinner = multiprocessing.get_context("spawn").Process(target=_spin, daemon=True)
+    spinner.start()
+    try:
+        time.sleep(1.0)  # the spawned interpreter's start-up is over
+        cores.update()
+        time.sleep(0.5)
+        free = cores.update()
+    finally:
+        spinner.terminate()
+    assert free <= cores.cores - 0.5, (
+        f"a process spinning on a core left {free:.2f} of {cores.cores} cores free")
+
+
+def test_rbp_refuses_a_malformed_adapt_setting(tmp_path) -> None:
+    out = subprocess.run([sys.executable, "-m", "rbp", "scenario", "list"],
+                         env={"RBP_THREADS_ADAPT": "2", "PATH": "/usr/bin:/bin"},
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, (out.returncode, out.stderr)
+    assert "RBP_THREADS_ADAPT" in out.stderr and "Traceback" not in out.stderr, out.stderr

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import subprocess
 import sys
@@ -29,7 +30,7 @@ def test_threads_from_the_cores_others_leave(monkeypatch: pytest.MonkeyPatch, ot
     ticks = 100.0
     busy = (1.0 + others) * ticks
     _counters(monkeypatch, [(0.0, 0.0), (busy, 2 * ticks)], [0.0, 1.0])
-    fc = FreeCores(cores=2, period=0.0)
+    fc = FreeCores(cores=2, period=0.0, stale_after=math.inf)
     fc._ticks = ticks
     assert fc.threads(2) == expected, (
         f"others using {others} cores of 2 should leave {expected} thread(s), got "
@@ -39,7 +40,7 @@ def test_threads_from_the_cores_others_leave(monkeypatch: pytest.MonkeyPatch, ot
 
 def test_never_more_than_allowed_nor_fewer_than_one(monkeypatch: pytest.MonkeyPatch) -> None:
     _counters(monkeypatch, [(0.0, 0.0), (0.0, 800.0)], [0.0, 0.0])
-    fc = FreeCores(cores=8, period=0.0)
+    fc = FreeCores(cores=8, period=0.0, stale_after=math.inf)
     fc._ticks = 100.0
     assert fc.threads(3) == 3, "an idle 8-core machine gives every allowed thread, no more"
     assert fc.threads(1) == 1 and fc.threads(0) == 1, "at least one thread"
@@ -61,7 +62,7 @@ def test_estimate_held_between_refreshes(monkeypatch: pytest.MonkeyPatch) -> Non
 
 def test_off_when_asked(monkeypatch: pytest.MonkeyPatch) -> None:
     _counters(monkeypatch, [(0.0, 0.0), (200.0, 200.0)], [0.0, 0.0])  # others use both cores
-    fc = FreeCores(cores=2, period=0.0, enabled=False)
+    fc = FreeCores(cores=2, period=0.0, enabled=False, stale_after=math.inf)
     fc._ticks = 100.0
     assert fc.threads(2) == 2, "RBP_THREADS_ADAPT=0 keeps every allowed thread"
 
@@ -107,3 +108,21 @@ def test_rbp_refuses_a_malformed_adapt_setting(tmp_path) -> None:
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, (out.returncode, out.stderr)
     assert "RBP_THREADS_ADAPT" in out.stderr and "Traceback" not in out.stderr, out.stderr
+
+
+def test_a_stale_window_is_started_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """After a pause (the process did no kernel work), the window shows what ran meanwhile:
+    it is started again and the last estimate kept until a fresh window has passed."""
+    clock = [0.0]
+    monkeypatch.setattr(free_cores.time, "monotonic", lambda: clock[0])
+    # others: idle for the first window, both cores during the pause, idle after it
+    _counters(monkeypatch, [(0.0, 0.0), (20.0, 40.0), (820.0, 840.0), (840.0, 880.0)],
+              [0.0, 0.2, 0.2, 0.6])
+    fc = FreeCores(cores=2, period=0.2)
+    fc._ticks = 100.0
+    clock[0] = 0.2
+    assert fc.threads(2) == 2, f"an idle first window gives 2 threads (free {fc.free:.2f})"
+    clock[0] = 4.2  # a 4 s pause while others used both cores
+    assert fc.threads(2) == 2, "the stale window is not read: the last estimate stands"
+    clock[0] = 4.4
+    assert fc.threads(2) == 2, f"the fresh window is idle (free {fc.free:.2f})"

@@ -25,6 +25,7 @@ SAMPLE_SECONDS = 0.2  # how often the estimate is refreshed (and the window it i
 # busy core costs far more (its spinning takes the working thread's CPU) than one too few on
 # an idle machine, and a 0.2 s window of 10 ms clock ticks is noisy.
 MARGIN = 0.25
+STALE_PERIODS = 5  # a window longer than this many periods is started again
 _PROC_STAT = Path("/proc/stat")
 
 
@@ -54,8 +55,9 @@ class FreeCores:
     `cores` the other processes left free over the last window."""
 
     def __init__(self, cores: int | None = None, period: float = SAMPLE_SECONDS,
-                 enabled: bool = True) -> None:
+                 enabled: bool = True, stale_after: float | None = None) -> None:
         self.cores = cores or os.cpu_count() or 1
+        self.stale_after = STALE_PERIODS * period if stale_after is None else stale_after
         self.enabled = enabled
         self.period = period
         self._ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
@@ -77,6 +79,12 @@ class FreeCores:
             return self.free
         sample, own = _busy_jiffies(), _own_seconds()
         if sample is None:
+            return self.free
+        if now - self._last > self.stale_after:
+            # this process did no kernel work for a while (other stages, or waiting for its
+            # next job): the window shows what ran meanwhile, not now; start a fresh one and
+            # keep the last estimate until it has passed
+            self._last, self._sample, self._own = now, sample, own
             return self.free
         busy = (sample[0] - self._sample[0]) / self._ticks
         elapsed = (sample[1] - self._sample[1]) / self._ticks / self.cores

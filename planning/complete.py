@@ -60,7 +60,6 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
-from planning.move_batch import MoveBatch
 from planning.search_cost import (
     DistanceHeuristic,
     RegraspHeuristic,
@@ -79,7 +78,6 @@ class Entry(IntEnum):
 
     REACHED = 0  # a stance reached by an evaluated move, its component not yet known
     MOVE = 1     # a move still to evaluate (its transition poses not yet computed)
-    MOVES = 2    # an expanded vertex's moves still to evaluate, the next one keyed (MoveBatch)
 
 
 def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
@@ -188,8 +186,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
     # the transition's rows it may use (None: all), parent's g, edge cost); Entry.MOVE: a move
     # to evaluate, payload (parent vertex, boom, anchor) (its rows are in `memo.move_table`), g
-    # the parent's g plus the least an edge costs; Entry.MOVES: the moves of an expanded vertex
-    # (payload a MoveBatch), keyed, tied and popped as their Entry.MOVE entries would be.
+    # the parent's g plus the least an edge costs.
     start_pose = np.asarray(scn.start_pose, dtype=float)
 
     def start_entries() -> list:
@@ -200,7 +197,6 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                       for comp in joined)
 
     open_list: list = start_entries()
-    stances: dict[tuple, tuple] = {}  # one tuple per child stance, shared by every move to it
     closed: dict[Vertex, float] = {}
     parent: dict[Vertex, tuple] = {}
     expanded: list[tuple[Vertex, np.ndarray]] = []
@@ -224,10 +220,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         nonlocal proven
         lo = min(best_cost, current)
         for entry in itertools.chain(open_list, deferred):
-            if entry[3] == Entry.MOVES:
-                lo = min(lo, entry[2] + min(map(bound, entry[5].children())))
-            else:
-                lo = min(lo, entry[2] + bound(entry[4]))
+            lo = min(lo, entry[2] + bound(entry[4]))
         proven = max(proven, lo)
         return proven
 
@@ -283,14 +276,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
 
     while open_list:
         popped = heapq.heappop(open_list)
-        f, tie_popped, g, kind, child_stance, payload = popped
-        if kind == Entry.MOVES:  # its next move; the one after it takes its place
-            batch = payload
-            j, anchor = batch.pop()
-            if len(batch):
-                heapq.heappush(open_list, batch.entry(Entry.MOVES))
-            kind, payload = Entry.MOVE, (batch.vertex, j, anchor)
-            popped = (f, tie_popped, g, kind, child_stance, payload)
+        _, _, g, kind, child_stance, payload = popped
         if beaten(g, child_stance):
             continue
         if kind == Entry.MOVE:
@@ -386,7 +372,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                         closed.clear()
                         parent.clear()
                     else:
-                        open_list = [_rekeyed(e, heuristic) for e in open_list]
+                        open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
                         heapq.heapify(open_list)
             current = math.inf
             continue  # a goal's successors cannot be cheaper routes
@@ -417,22 +403,12 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             break
         # A move's rows stay in the memo's move table (bounded), not in the open list: most
         # moves are never evaluated, and their rows are most of a search's memory otherwise.
-        keys: list[float] = []
-        ties: list[int] = []
-        booms: list[int] = []
-        anchors: list[str] = []
-        children: list[tuple] = []
         for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
                                                 memo.move_table(vertex)):
             if not beaten(g + c_attach, child):
-                keys.append(g + c_attach + heuristic(child))
-                ties.append(next(tie))
-                booms.append(j)
-                anchors.append(anchor)
-                children.append(stances.setdefault(child, child))
-        if keys:
-            heapq.heappush(open_list, MoveBatch(vertex, g + c_attach, keys, ties, booms, anchors,
-                                                children).entry(Entry.MOVES))
+                heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
+                                           g + c_attach, Entry.MOVE, child,
+                                           (vertex, j, anchor)))
         current = math.inf  # its successors are in the open list
     if best is not None:
         lo = lower()
@@ -454,13 +430,6 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph,
                           partial=nearest_route() if partial else None)
-
-
-def _rekeyed(entry: tuple, heuristic: Callable[[tuple], float]) -> tuple:
-    """An open-list entry keyed g + heuristic(child) (a new weight), its tie kept."""
-    if entry[3] == Entry.MOVES:
-        return entry[5].rekeyed(heuristic).entry(Entry.MOVES)
-    return (entry[2] + heuristic(entry[4]), *entry[1:])
 
 
 def _rows(tr: LatticeTransition, pick: np.ndarray | None) -> np.ndarray:

@@ -65,12 +65,6 @@ class FreeCores:
         self._sample = _busy_jiffies()
         self._own = _own_seconds()
         self.free: float = float(self.cores)
-        self.tally: dict[int, int] = {}  # how often each thread count was chosen
-
-    @property
-    def available(self) -> bool:
-        """Whether the machine's counters can be read at all."""
-        return self._sample is not None
 
     def update(self) -> float:
         """The cores free of other processes' work (refreshed when the window has passed)."""
@@ -98,8 +92,5 @@ class FreeCores:
         """Threads to use out of `allowed`: the free cores (whole ones, `MARGIN` to spare), at
         least one."""
         if allowed <= 1 or not self.enabled:
-            use = max(1, allowed)
-        else:
-            use = max(1, min(allowed, math.floor(self.update() + MARGIN)))
-        self.tally[use] = self.tally.get(use, 0) + 1
-        return use
+            return max(1, allowed)
+        return max(1, min(allowed, math.floor(self.update() + MARGIN)))

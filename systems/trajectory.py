@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -19,6 +20,12 @@ from planning.between import step_motion
 from planning.plan_file import content_hash
 from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
+from planning.verify_between import (
+    failing_intervals,
+    spline_subdivisions,
+    subdivisions,
+    verification_world,
+)
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -54,6 +61,22 @@ def _ramp_boom(step: Step) -> int:
     return int(step.ramp.boom)
 
 
+class SmoothMotion(NamedTuple):
+    """The knots of a phase of several steps, which `rbp simulate` follows on a smooth path:
+    phase index, times (K,), free gripper (K, 2) and its velocities in a reach phase."""
+
+    phase: int
+    times: np.ndarray
+    tips: np.ndarray | None
+    tip_rates: np.ndarray | None
+
+
+# The velocity scales a knot of the smooth path steps down through where the path fails rule
+# `between` (PlanTrajectory._verified_smooth_motion): the last, 0, makes an interval the
+# straight motion `rbp check` verifies.
+SPLINE_SCALES = (1.0, 0.5, 0.25, 0.0)
+
+
 class PhaseTrajectory(NamedTuple):
     kind: str
     start: float
@@ -84,6 +107,11 @@ def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
     times = times.copy()
     times[-2] += DWELL_MOTION * (times[-1] - times[-2])
     return times
+
+
+def _sampler(trajectory: PiecewisePolynomial) -> Callable[[np.ndarray], np.ndarray]:
+    """trajectory's values at times (S,), as rows (S, n)."""
+    return lambda t: trajectory.vector_values(t).T
 
 
 def _rate(trajectory: PiecewisePolynomial | None) -> PiecewisePolynomial | None:
@@ -204,15 +232,20 @@ class PlanTrajectory:
     def __init__(self, plan: Plan | dict[str, Any], scn: Scenario,
                  resample: float | None = 0.05):
         self.plan = plan_of(plan)  # the replanners continue it (systems.replanning)
+        self.slowed_knots = 0
+        self.smooth_motions: list[SmoothMotion] = []  # the phases of several steps
         self.scenario = scn
         self.phases: list[PhaseTrajectory] = []
         knots_t: list[np.ndarray] = []
         knots_q: list[np.ndarray] = []
         knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
         previous_end = None
+        smooth: list[SmoothMotion] = []
         for k, phase in enumerate(self.plan.phases):
-            traj, t, q, v = self._phase(k, phase, scn, previous_end, resample)
+            traj, t, q, v, motion = self._phase(k, phase, scn, previous_end, resample)
             self.phases.append(traj)
+            if motion is not None:
+                smooth.append(motion)
             if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
                 last = knots_v[-1]
                 last[-1] = np.where(np.isnan(last[-1]), v[0], last[-1])
@@ -230,7 +263,7 @@ class PlanTrajectory:
             estimate = _continuous_acceleration_rates(times, poses)
             for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
                 rates[n] = estimate[n]
-            self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+            self.pose = self._verified_smooth_motion(times, poses, rates, smooth)
         if resample is not None:
             self.phases = [self._refine_tensions(p) for p in self.phases]
         self.velocity = self.pose.derivative(1)
@@ -242,6 +275,109 @@ class PlanTrajectory:
         for h, hold in enumerate(self.holdings):
             self.holding_of[hold.first:hold.last + 1, hold.boom] = h
 
+    def _verified_smooth_motion(self, times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
+                                smooth: list[SmoothMotion]) -> PiecewisePolynomial:
+        """The body's spline through the knots, its velocities `rates` slowed where the smooth
+        motion fails rule `between` (what `rbp check` verifies on the straight motion, at the
+        same resolution): each interval of a phase of several steps (body, and free gripper in
+        a reach phase) is sampled at `spline_subdivisions` and checked as `between` checks a
+        sample; where one fails, both its knots' velocities are scaled down a level
+        (SPLINE_SCALES), and the intervals beside them checked again, until none fails. At
+        scale 0 at both knots an interval's body and gripper move along the straight line
+        between its steps, with one rest-to-rest timing: the configurations that `between`
+        verifies. So every configuration `rbp simulate` commands has been verified at the
+        resolution; `self.slowed_knots` counts the knots whose velocity was scaled."""
+        pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+        if not smooth:
+            return pose
+        scn = self.scenario
+        world = verification_world(scn)
+        level = np.zeros(len(times), dtype=int)  # index into SPLINE_SCALES per knot
+        knots = [np.searchsorted(times, m.times) for m in smooth]
+        pending = [set(range(len(m.times) - 1)) for m in smooth]
+        straight_fails: dict[int, set[int]] = {}  # per phase: intervals whose line fails too
+        while any(pending):
+            scale = np.asarray(SPLINE_SCALES)[level][:, None]
+            pose = PiecewisePolynomial.CubicHermite(times, poses.T, (scale * rates).T)
+            lowered: set[int] = set()
+            for m, idx, todo in zip(smooth, knots, pending, strict=True):
+                if not todo:
+                    continue
+                tip = self._tip_spline(m, scale[idx, 0])
+                parts = spline_subdivisions(
+                    scn.robot, m.times, poses[idx], scale[idx] * rates[idx], m.tips,
+                    None if m.tip_rates is None else scale[idx] * m.tip_rates)
+                bad = failing_intervals(
+                    world, self.phases[m.phase].stance, m.times, parts, todo,
+                    _sampler(pose), None if tip is None else _sampler(tip))
+                for n in self._straight_passes(m, poses[idx], bad, straight_fails, world):
+                    lowered.update((int(idx[n]), int(idx[n + 1])))
+            last = len(SPLINE_SCALES) - 1
+            lowered = {i for i in lowered if level[i] < last}
+            for i in lowered:
+                level[i] += 1
+            # check again every interval beside a slowed knot, unless both its knots rest
+            pending = [{n for n in range(len(idx) - 1)
+                        if (idx[n] in lowered or idx[n + 1] in lowered)
+                        and not (level[idx[n]] == last and level[idx[n + 1]] == last)}
+                       for idx in knots]
+        scale = np.asarray(SPLINE_SCALES)[level]
+        for m, idx in zip(smooth, knots, strict=True):
+            tip = self._tip_spline(m, scale[idx])
+            if tip is not None:
+                self.phases[m.phase] = self.phases[m.phase]._replace(
+                    free_tip=tip, free_tip_rate=_rate(tip))
+        self.slowed_knots = int(np.count_nonzero(level))
+        self.smooth_motions = smooth
+        return pose
+
+    def unverified_intervals(self) -> list[tuple[int, int]]:
+        """(phase, n) of every interval of the smooth path, between knots n and n + 1 of a
+        phase of several steps, that fails rule `between`'s test at the resolution, found
+        again from the finished splines (their velocities at the knots): [] once built."""
+        out: list[tuple[int, int]] = []
+        world = verification_world(self.scenario)
+        velocity = self.pose.derivative(1)
+        for m in self.smooth_motions:
+            phase = self.phases[m.phase]
+            tip = phase.free_tip
+            tip_rates = (None if phase.free_tip_rate is None
+                         else phase.free_tip_rate.vector_values(m.times).T)
+            parts = spline_subdivisions(
+                self.scenario.robot, m.times, self.pose.vector_values(m.times).T,
+                velocity.vector_values(m.times).T,
+                None if tip is None else tip.vector_values(m.times).T, tip_rates)
+            bad = failing_intervals(
+                world, phase.stance, m.times, parts, range(len(m.times) - 1),
+                _sampler(self.pose), None if tip is None else _sampler(tip))
+            out.extend((m.phase, n) for n in bad)
+        return out
+
+    def _straight_passes(self, motion: SmoothMotion, poses: np.ndarray, bad: list[int],
+                         straight_fails: dict[int, set[int]], world: Any) -> list[int]:
+        """Of the smooth path's failing intervals `bad`, those whose straight motion passes:
+        slowing helps only there. Where the straight motion fails too, the plan fails rule
+        `between` (`rbp check` refuses it, and `rbp simulate` with it); a plan built in code
+        and run unchecked keeps its smooth path there."""
+        known = straight_fails.setdefault(motion.phase, set())
+        new = [n for n in bad if n not in known]
+        if new:
+            parts = subdivisions(self.scenario.robot, poses, motion.tips)
+            line = step_motion(motion.times, poses)
+            tips = None if motion.tips is None else step_motion(motion.times, motion.tips)
+            known.update(failing_intervals(world, self.phases[motion.phase].stance, motion.times,
+                                           parts, new, _sampler(line),
+                                           None if tips is None else _sampler(tips)))
+        return [n for n in bad if n not in known]
+
+    @staticmethod
+    def _tip_spline(motion: SmoothMotion, scale: np.ndarray) -> PiecewisePolynomial | None:
+        """A reach phase's free gripper: the cubic through its knots, velocities scaled."""
+        if motion.tips is None or motion.tip_rates is None:
+            return None
+        return PiecewisePolynomial.CubicHermite(motion.times, motion.tips.T,
+                                                (scale[:, None] * motion.tip_rates).T)
+
     @functools.cached_property
     def content_key(self) -> str:
         """The plan's content hash (`plan_file.content_hash`): equal for equal plans, for
@@ -251,8 +387,10 @@ class PlanTrajectory:
     @staticmethod
     def _phase(k: int, phase: Phase, scn: Scenario, previous_end: float | None,
                resample: float | None
-               ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray]:
-        """The phase, and the times, poses and velocities (NaN: not given) of its body."""
+               ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray,
+                          SmoothMotion | None]:
+        """The phase, the times, poses and velocities (NaN: not given) of its body, and the
+        knots of its smooth motion (a phase of several steps) to verify."""
         where = f"phases[{k}]"
         ids = tuple(phase.stance)
         unknown = [a for a in ids if a is not None and a not in scn.anchor_index]
@@ -310,10 +448,15 @@ class PlanTrajectory:
         if len(m_times) > 3 and resample is not None:
             m_times = _finish_over_dwell(m_times, m_poses, m_tips)
         refine = None
+        smooth = None
         if len(m_times) != 2 or resample is None:
             if m_tips is not None:
                 free_tip = (_hold(m_times, m_tips) if resample is None
                             else _smooth(m_times, m_tips, True))
+            if resample is not None and len(m_times) > 2:
+                tip_rates = (None if free_tip is None else
+                             free_tip.derivative(1).vector_values(m_times).T)
+                smooth = SmoothMotion(k, m_times, m_tips, tip_rates)
             if resample is None or len(m_times) < 2:
                 sections_t.append(m_times)
                 sections_f.append(tensions[a:b])
@@ -368,7 +511,7 @@ class PlanTrajectory:
                                _hold(grid, np.vstack(sections_f)), free_tip, _rate(free_tip),
                                _hold(grid, np.vstack(sections_s)), tuple(ramps),
                                (grid, np.vstack(sections_f), refine))
-        return (traj, np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v))
+        return (traj, np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v), smooth)
 
     def _refine_tensions(self, phase: PhaseTrajectory) -> PhaseTrajectory:
         """A trajectory phase's feed-forward between its steps: the most robust allocation at

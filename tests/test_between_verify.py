@@ -36,10 +36,15 @@ PlanFile = dict[str, Any]
 
 
 def _body_phase(poses: list[list[float]], stance: list[str]) -> Phase:
-    """A body phase of these poses one second apart (the rule reads only times, poses and the
-    stance)."""
-    steps = [{"t": float(n), "pose": p, "tension": [1.0] * 4, "p_grasp": [1.0] * 4,
-              "p_success": 1.0} for n, p in enumerate(poses)]
+    """A body phase of these poses one second apart in the test shaft, each step with its most
+    robust tensions (the rule reads times, poses, the stance and the tensions)."""
+    from rb_drake.statics import allocate
+
+    shaft = build_shaft()
+    tensions = allocate(shaft.robot, shaft.gravity_vector, np.array(poses),
+                        shaft.stance(tuple(stance))).tensions
+    steps = [{"t": float(n), "pose": p, "tension": [float(f) for f in tensions[n]],
+              "p_grasp": [1.0] * 4, "p_success": 1.0} for n, p in enumerate(poses)]
     return Phase.from_dict({"kind": "body", "stance": stance, "free_boom": None,
                             "steps": steps})
 
@@ -203,3 +208,68 @@ def test_a_footstep_plan_says_its_motion_between_steps_is_not_verified(tmp_path:
     assert main(["check", "-q", str(path)]) == 0
     out = capsys.readouterr().out
     assert "not the motion between them" in out and resolution_text() not in out, out
+
+
+def test_balance_holds_each_pose_with_the_least_change(shaft, start_stance, start_pose,
+                                                       rng) -> None:
+    from rb_drake.statics import allocate, balance, null_vector, statics_problem
+
+    poses = start_pose + rng.uniform(-0.02, 0.02, (50, 3)) * [1.0, 1.0, 0.2]
+    g = shaft.gravity_vector
+    best = allocate(shaft.robot, g, poses, start_stance)
+    assert best.statics_ok.all(), "the test's poses must hold"
+    given = best.tensions + rng.uniform(-5.0, 5.0, (50, 4))
+    held = balance(shaft.robot, g, poses, start_stance, given)
+    assert held.residual.max() < 1e-6, f"not in equilibrium: {held.residual.max()}"
+    # the least change: the correction is orthogonal to the family's direction
+    A = statics_problem(shaft.robot, g, poses, start_stance).A
+    n = null_vector(A)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    along = np.abs(np.sum((held.tensions - given) * n, axis=1)).max()
+    assert along < 1e-9, f"the correction moves along the family by {along}"
+    again = balance(shaft.robot, g, poses, start_stance, best.tensions)
+    assert np.allclose(again.tensions, best.tensions, atol=1e-9), \
+        "tensions already in equilibrium must be kept"
+
+
+def test_the_plan_tensions_between_steps_are_checked_not_only_the_most_robust(
+        cave_plans: dict[str, PlanFile]) -> None:
+    from planning.plan_model import plan_of
+    from planning.verify_between import between_problems
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    plan = plan_of(copy.deepcopy(cave_plans["demo-shaft"]))
+    k = next(k for k, p in enumerate(plan.phases)
+             if None not in p.stance and len(p.steps) > 2
+             and np.ptp([s.pose for s in p.steps], axis=0).max() > 0.01)
+    found: list[tuple[int, int, str]] = []
+    between_problems(plan.phases, scn, (), lambda *a: found.append(a))
+    assert found == [], f"the planner's plan must pass: {found[:3]}"
+    hi = scn.robot.boom_tension[1]
+    damaged = plan.to_dict()
+    for step in damaged["phases"][k]["steps"]:
+        step["tension"] = [10.0 * hi] * 4  # far past the bound at every step and between
+    found = []
+    between_problems(plan_of(damaged).phases, scn, (), lambda *a: found.append(a))
+    texts = [text for phase, _, text in found if phase == k]
+    assert texts, "tensions past the bound between steps must fail"
+    assert all("the plan's tensions" in t for t in texts), texts[:3]
+
+
+@pytest.mark.parametrize("cave", ["demo-shaft", "rockfall-3"])
+def test_simulate_follows_a_smooth_path_verified_at_the_resolution(
+        cave_plans: dict[str, PlanFile], cave: str, monkeypatch) -> None:
+    import systems.trajectory as trajectory
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    scn = load_scenario(bundled_caves()[cave])
+    traj = trajectory.PlanTrajectory(cave_plans[cave], scn)
+    assert traj.smooth_motions, "the plan must have phases of several steps"
+    assert traj.unverified_intervals() == [], "the simulated path must pass rule between"
+    # the same plan with the path never slowed: the smooth path leaves the verified motion
+    # (a shoulder past its limit), so the test above is not vacuous
+    monkeypatch.setattr(trajectory, "SPLINE_SCALES", (1.0,))
+    unslowed = trajectory.PlanTrajectory(cave_plans[cave], scn)
+    assert unslowed.slowed_knots == 0
+    assert unslowed.unverified_intervals(), f"{cave}: the unslowed path was expected to fail"

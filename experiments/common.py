@@ -118,6 +118,11 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
               "phases": {"body": kinds.count("body"), "reach": kinds.count("reach")},
               "verified": bool(plan["success"]) and not check_plan(plan)}
     rows = motion_summary(plan_of(plan))
+    if plan["success"] and plan.get("time_step") is not None:
+        from systems.trajectory import PlanTrajectory, plan_scenario
+
+        # how far `rbp simulate`'s smooth path strays from the verified straight motion
+        record["departure"] = PlanTrajectory(plan, plan_scenario(plan)).departure
     if rows:
         record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
                                                "seed_mean", "mean", "seed_min_at_end", "room",

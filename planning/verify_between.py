@@ -15,13 +15,6 @@ within max_pull_angle_deg and P at least p_min. `TENSION_SLACK` is the one toler
 lower tension bound only (docs/formats.md says why). An interval in which neither the body
 nor the free gripper moves (a release or attach ramp, a dwell) has nothing between its steps
 to sample: a ramp moves the load linearly at one pose, where the statics hold exactly.
-
-`rbp simulate` follows a smooth path through the steps instead (a cubic through each phase of
-several steps, for a continuous velocity); `systems.trajectory.PlanTrajectory` verifies that
-path at the same resolution with the same test (`spline_subdivisions`, `failing_intervals`)
-as it builds it, and slows its velocity at the knots of any interval that fails until the
-interval passes or, at velocity zero at both knots, runs along this straight motion. So the
-configurations both commands execute are the ones verified here, at the stated resolution.
 """
 
 from __future__ import annotations
@@ -39,8 +32,6 @@ from rb_drake.collision import Rock
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
-from rb_drake.stance import Stance
-from rb_drake.statics import balance
 
 TRANSLATION = 0.005            # m: body translation between successive checked configurations
 ROTATION = math.radians(0.5)   # rad: body rotation between them
@@ -60,9 +51,7 @@ CHUNK = 20_000
 def resolution_text() -> str:
     """The resolution `between` verifies at, in words (for `rbp check`'s output)."""
     return (f"every {TRANSLATION * 1e3:g} mm, {math.degrees(ROTATION):g} deg of body motion "
-            f"and {TRAVEL * 1e3:g} mm of boom or gripper travel (the straight motion rbp "
-            f"rig-run commands; rbp simulate's smooth path is verified at this resolution as "
-            f"it is built and slowed onto the straight motion where it would fail)")
+            f"and {TRAVEL * 1e3:g} mm of boom or gripper travel")
 
 
 class Samples(NamedTuple):
@@ -93,64 +82,47 @@ def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None)
     return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
 
 
-def spline_subdivisions(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
-                        rates: np.ndarray, tips: np.ndarray | None = None,
-                        tip_rates: np.ndarray | None = None) -> np.ndarray:
-    """`subdivisions` for a piecewise cubic Hermite motion (`rbp simulate`'s smooth path):
-    body `poses` (K, 3) and their `rates` at knot `times` (K,), in a reach phase the free
-    gripper's `tips` (K, 2) and `tip_rates`. On an interval of length T the derivative with
-    respect to its fraction s is a quadratic Bezier curve with control points T v0,
-    3 (q1 - q0) - T (v0 + v1) and T v1, so its norm never exceeds the largest of theirs (the
-    convex hull): a bound on each interval's travel per unit of s, cut as `subdivisions` cuts
-    the straight motion."""
-    T = np.diff(np.asarray(times, dtype=float))[:, None]
+def smooth_departure(times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
+                     tips: np.ndarray | None = None,
+                     tip_rates: np.ndarray | None = None) -> np.ndarray:
+    """Per interval (K - 1,), a bound on how far a piecewise cubic Hermite motion (knot
+    `times` (K,), body `poses` (K, 3) and their `rates`; in a reach phase the free gripper's
+    `tips` (K, 2) and `tip_rates`) strays from the straight segment between the same knots,
+    in units of the resolution (a configuration scaled by TRANSLATION in position, ROTATION in
+    angle and TRAVEL in the gripper's position; 1 is one resolution).
 
-    def speed_bound(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
-        return np.stack([T * v[:-1], 3.0 * np.diff(q, axis=0) - T * (v[:-1] + v[1:]),
-                         T * v[1:]])  # (3, K - 1, n)
-
-    c = speed_bound(poses, rates)
-    move = np.hypot(c[..., 0], c[..., 1]).max(axis=0)
-    turn = np.abs(c[..., 2]).max(axis=0)
-    tip = np.zeros_like(move)
+    At fraction s of an interval of length T, with chord velocity c = (q1 - q0) / T, the
+    cubic less the straight line at the same fraction is T (h10(s) (v0 - c) + h11(s) (v1 - c)).
+    Along the chord it only moves the configuration along the segment, except where it
+    overshoots an end (the along-chord coordinate, a cubic in s, is maximised exactly); across
+    it, |h10| and |h11| never exceed 4/27. The bound is the hypotenuse of the two."""
+    times = np.asarray(times, dtype=float)
+    T = np.diff(times)[:, None]
+    scale = [TRANSLATION, TRANSLATION, ROTATION]
+    q, v = np.asarray(poses, dtype=float) / scale, np.asarray(rates, dtype=float) / scale
     if tips is not None and tip_rates is not None:
-        tip = np.linalg.norm(speed_bound(tips, tip_rates), axis=-1).max(axis=0)
-    radius = float(np.linalg.norm(robot.shoulder_array, axis=1).max())
-    travel = move + radius * turn + tip
+        q = np.hstack([q, np.asarray(tips, dtype=float) / TRAVEL])
+        v = np.hstack([v, np.asarray(tip_rates, dtype=float) / TRAVEL])
+    delta = np.diff(q, axis=0)
+    length = np.linalg.norm(delta, axis=1)
+    unit = delta / np.maximum(length, 1e-300)[:, None]
+    u0, u1 = T * v[:-1] - delta, T * v[1:] - delta  # T (v - c)
+    a0, a1 = np.sum(u0 * unit, axis=1), np.sum(u1 * unit, axis=1)
+    across = (4.0 / 27.0) * (np.linalg.norm(u0 - a0[:, None] * unit, axis=1)
+                             + np.linalg.norm(u1 - a1[:, None] * unit, axis=1))
+    # along(s) = s L + a0 h10(s) + a1 h11(s), with h10 = s^3 - 2 s^2 + s, h11 = s^3 - s^2
+    c3, c2, c1 = a0 + a1, -2.0 * a0 - a1, length + a0
+    s = [np.zeros_like(length), np.ones_like(length)]
+    disc = (2.0 * c2) ** 2 - 12.0 * c3 * c1
+    root = np.sqrt(np.maximum(disc, 0.0))
     with np.errstate(all="ignore"):
-        need = np.maximum.reduce([move / TRANSLATION, turn / ROTATION, tip / TRAVEL,
-                                  travel / TRAVEL])
-    need = np.where(np.isfinite(need), need, np.inf)
-    return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
-
-
-def failing_intervals(world: _World, stance: Stance, times: np.ndarray, parts: np.ndarray,
-                      intervals: Collection[int], pose_at: Callable[[np.ndarray], np.ndarray],
-                      tip_at: Callable[[np.ndarray], np.ndarray] | None = None) -> list[int]:
-    """Which of `intervals` (n: between knots n and n + 1 at `times`) of a motion
-    (`pose_at(t)` (S, 3), in a reach phase `tip_at(t)` (S, 2)) fail rule `between`'s test at
-    a sample, each cut into `parts[n]` equal parts in time; an interval too long to sample
-    (over MAX_PARTS) fails."""
-    chosen = np.array(sorted(intervals), dtype=int)
-    if not len(chosen):
-        return []
-    n_parts = parts[chosen]
-    failed = set(map(int, chosen[n_parts > MAX_PARTS]))
-    n_parts = np.where(n_parts > MAX_PARTS, 1, n_parts)
-    interval = np.repeat(chosen, n_parts - 1)
-    first = np.concatenate([[0], np.cumsum(n_parts - 1)])[np.repeat(np.arange(len(chosen)),
-                                                                     n_parts - 1)]
-    j = np.arange(len(interval)) - first + 1
-    w = j / np.repeat(n_parts, n_parts - 1)
-    t = times[interval] + w * (times[interval + 1] - times[interval])
-    for lo in range(0, len(t), CHUNK):
-        rows = slice(lo, lo + CHUNK)
-        with np.errstate(all="ignore"):
-            check = check_poses(world, stance, pose_at(t[rows]),
-                                None if tip_at is None else tip_at(t[rows]))
-        failed.update(map(int, interval[rows][~check.feasible]))
-    return sorted(failed)
+        for sign in (-1.0, 1.0):
+            r = np.where(np.abs(c3) > 1e-12, (-2.0 * c2 + sign * root) / (6.0 * c3),
+                         -c1 / (2.0 * c2))
+            s.append(np.where((disc >= 0) & np.isfinite(r), np.clip(r, 0.0, 1.0), 0.0))
+    along = np.stack([c3 * x**3 + c2 * x**2 + c1 * x for x in s])
+    beyond = np.maximum(np.maximum(-along.min(axis=0), along.max(axis=0) - length), 0.0)
+    return np.hypot(across, beyond)
 
 
 def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
@@ -235,50 +207,7 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
                     continue
                 failed.add(n)
                 fail(k, n, _text(phase, s, lo + i, check, i, robot.p_min))
-        if stance.free_boom is None:
-            for n, text in _commanded_tension_problems(world, stance, phase, s, failed):
-                fail(k, n, text)
     return checked
-
-
-def _commanded_tension_problems(world: _World, stance: Stance, phase: Phase, s: Samples,
-                                failed: set[int]) -> list[tuple[int, str]]:
-    """A 4-stance's tensions as `rbp rig-run` commands them between steps (the plan's step
-    tensions joined linearly, `step_motion`), brought into equilibrium by the least change
-    (`statics.balance`): within the tension bounds and every grasp's P at least p_min at each
-    sample of intervals not already failed. The feasibility test above checks the most robust
-    tensions; these are the ones the plan asks for (a 3-stance has no choice)."""
-    rows = np.flatnonzero(~np.isin(s.interval, list(failed))) if failed else np.arange(len(s.t))
-    if not len(rows):
-        return []
-    times, _, _ = _arrays(phase)
-    steps = np.array([[np.nan if f is None else f for f in st.tension] for st in phase.steps],
-                     dtype=float)
-    if not np.all(np.isfinite(steps[:, stance.attached])):
-        return []  # a step without its tensions: rule `steps` reports it
-    out: list[tuple[int, str]] = []
-    robot = world.robot
-    log_min = math.log(robot.p_min)
-    for lo in range(0, len(rows), CHUNK):
-        part = rows[lo:lo + CHUNK]
-        commanded = step_motion(times, steps).vector_values(s.t[part]).T
-        with np.errstate(all="ignore"):
-            held = balance(robot, world.gravity_vector, s.poses[part], stance, commanded)
-        weak = held.log_probs[:, stance.attached].min(axis=1) < log_min
-        for i in map(int, np.flatnonzero(~held.statics_ok | weak)):
-            n = int(s.interval[part[i]])
-            if n in failed:
-                continue
-            failed.add(n)
-            t0, t1 = phase.steps[n].t, phase.steps[n + 1].t
-            w = (s.t[part[i]] - t0) / (t1 - t0)
-            why = ("out of the tension bounds" if not held.statics_ok[i] else
-                   f"a grasp at P = {math.exp(held.log_probs[i, stance.attached].min()):.5f} "
-                   f"< {robot.p_min}")
-            out.append((n, f"between steps {n} and {n + 1}, at {w:.3f} of the way "
-                        f"(t={s.t[part[i]]:.4f}): the plan's tensions, joined linearly and "
-                        f"balanced, are {why}"))
-    return out
 
 
 def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float) -> str:

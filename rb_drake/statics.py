@@ -186,30 +186,6 @@ def allocate(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance:
     return _finish(robot, stance, prob, f)
 
 
-def balance(robot: RobotParams, gravity: np.ndarray, poses: np.ndarray, stance: Stance,
-            tensions: np.ndarray, free_tip: np.ndarray | None = None) -> Allocation:
-    """The tensions nearest `tensions` (P, 4) that hold each pose: in a 4-stance their
-    projection onto the family f_p + t n (the least change, in the Euclidean norm), in a
-    3-stance the unique solution. What a body under commanded tensions that are not quite in
-    equilibrium (a rig's setpoints interpolated between steps) settles to, to first order;
-    `statics_ok` and `log_probs` say whether those hold within bounds and how firmly."""
-    prob = statics_problem(robot, gravity, poses, stance, free_tip)
-    att = stance.attached
-    if att.sum() == 3:
-        return allocate(robot, gravity, poses, stance, free_tip, problem=prob)
-    A, b = prob.A, prob.b
-    n = null_vector(A)
-    n = n / np.maximum(np.linalg.norm(n, axis=-1), 1e-300)[:, None]
-    AAt = A @ np.swapaxes(A, 1, 2)
-    ok = np.abs(np.linalg.det(AAt)) > 1e-14
-    AAt = np.where(ok[:, None, None], AAt, np.eye(3))
-    fp = (np.swapaxes(A, 1, 2) @ np.linalg.solve(AAt, b[..., None]))[..., 0]
-    given = np.where(att, np.nan_to_num(np.asarray(tensions, dtype=float)), 0.0)
-    f = fp + np.sum((given - fp) * n, axis=1)[:, None] * n
-    f[~ok] = np.nan
-    return _finish(robot, stance, prob, f)
-
-
 def _finish(robot: RobotParams, stance: Stance, prob: StaticsProblem, f: np.ndarray) -> Allocation:
     f_lo, f_hi = robot.boom_tension
     att = stance.attached

@@ -181,8 +181,8 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
     and robot the plan carries (`planning.check.check_plan`); given a `scenario`, the plan must
     also have been made for that cave and robot. `progress` shows a progress line on stderr
     (on a terminal only, after a second)."""
-    from planning.check import check_plan
     from planning.plan_model import plan_of
+    from rbp.commands.common import plan_problems
     from rbp.progress import CheckProgress
 
     model = plan_of(plan)
@@ -191,7 +191,7 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
         problems.append(f"scenario: the plan was made for another cave or robot than "
                         f"{scenario.name} ({scenario.source})")
     with CheckProgress("checking the plan", quiet=not progress) as bar:
-        problems += check_plan(model, progress=bar)
+        problems += plan_problems(model, progress=bar)[0]
     return problems
 
 

@@ -244,14 +244,14 @@ def _print_motion(plan: Plan) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from planning.check import check_plan
     from planning.verify_between import resolution_text
+    from rbp.commands.common import plan_problems
     from rbp.progress import CheckProgress
 
     path = Path(args.plan)
     plan = read_plan(path)
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
-        problems = check_plan(plan, str(path), progress=bar)
+        problems, departure = plan_problems(plan, str(path), progress=bar)
     for p in problems:
         print(f"{path}: {p}")
     if problems:
@@ -264,6 +264,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     n = sum(len(p.steps) for p in model.phases)
     between = (f"and the motion between them {resolution_text()}" if model.time_step is not None
                else "not the motion between them (a footstep plan: end configurations only)")
+    if departure is not None:
+        between += (f" (rbp simulate's smooth path through the steps within {departure:.2f} "
+                    f"of that resolution of it)")
     note = partial_note(model)
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
           f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")

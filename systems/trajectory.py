@@ -10,7 +10,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -20,12 +19,7 @@ from planning.between import step_motion
 from planning.plan_file import content_hash
 from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
-from planning.verify_between import (
-    failing_intervals,
-    spline_subdivisions,
-    subdivisions,
-    verification_world,
-)
+from planning.verify_between import smooth_departure
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -61,20 +55,11 @@ def _ramp_boom(step: Step) -> int:
     return int(step.ramp.boom)
 
 
-class SmoothMotion(NamedTuple):
-    """The knots of a phase of several steps, which `rbp simulate` follows on a smooth path:
-    phase index, times (K,), free gripper (K, 2) and its velocities in a reach phase."""
-
-    phase: int
-    times: np.ndarray
-    tips: np.ndarray | None
-    tip_rates: np.ndarray | None
-
-
-# The velocity scales a knot of the smooth path steps down through where the path fails rule
-# `between` (PlanTrajectory._verified_smooth_motion): the last, 0, makes an interval the
-# straight motion `rbp check` verifies.
-SPLINE_SCALES = (1.0, 0.5, 0.25, 0.0)
+# The most a smooth path may stray from the verified straight motion, in units of rule
+# `between`'s resolution (`verify_between.smooth_departure`): every configuration `rbp
+# simulate` commands then lies within 2.5 resolutions of a configuration `rbp check` verified.
+# The planner's plans of the 100 benchmark caves stray up to 1.27 (docs/formats.md).
+DEPARTURE_LIMIT = 2.0
 
 
 class PhaseTrajectory(NamedTuple):
@@ -107,11 +92,6 @@ def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
     times = times.copy()
     times[-2] += DWELL_MOTION * (times[-1] - times[-2])
     return times
-
-
-def _sampler(trajectory: PiecewisePolynomial) -> Callable[[np.ndarray], np.ndarray]:
-    """trajectory's values at times (S,), as rows (S, n)."""
-    return lambda t: trajectory.vector_values(t).T
 
 
 def _rate(trajectory: PiecewisePolynomial | None) -> PiecewisePolynomial | None:
@@ -232,20 +212,18 @@ class PlanTrajectory:
     def __init__(self, plan: Plan | dict[str, Any], scn: Scenario,
                  resample: float | None = 0.05):
         self.plan = plan_of(plan)  # the replanners continue it (systems.replanning)
-        self.slowed_knots = 0
-        self.smooth_motions: list[SmoothMotion] = []  # the phases of several steps
         self.scenario = scn
         self.phases: list[PhaseTrajectory] = []
         knots_t: list[np.ndarray] = []
         knots_q: list[np.ndarray] = []
         knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
         previous_end = None
-        smooth: list[SmoothMotion] = []
+        smooth: list[tuple[int, np.ndarray]] = []
         for k, phase in enumerate(self.plan.phases):
-            traj, t, q, v, motion = self._phase(k, phase, scn, previous_end, resample)
+            traj, t, q, v, knots = self._phase(k, phase, scn, previous_end, resample)
             self.phases.append(traj)
-            if motion is not None:
-                smooth.append(motion)
+            if knots is not None:
+                smooth.append((k, knots))
             if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
                 last = knots_v[-1]
                 last[-1] = np.where(np.isnan(last[-1]), v[0], last[-1])
@@ -263,7 +241,9 @@ class PlanTrajectory:
             estimate = _continuous_acceleration_rates(times, poses)
             for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
                 rates[n] = estimate[n]
-            self.pose = self._verified_smooth_motion(times, poses, rates, smooth)
+            self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+        # how far the smooth path strays from the verified straight motion (resolutions)
+        self.departure, self.departure_phase = self._departure(times, poses, rates, smooth)
         if resample is not None:
             self.phases = [self._refine_tensions(p) for p in self.phases]
         self.velocity = self.pose.derivative(1)
@@ -275,108 +255,33 @@ class PlanTrajectory:
         for h, hold in enumerate(self.holdings):
             self.holding_of[hold.first:hold.last + 1, hold.boom] = h
 
-    def _verified_smooth_motion(self, times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
-                                smooth: list[SmoothMotion]) -> PiecewisePolynomial:
-        """The body's spline through the knots, its velocities `rates` slowed where the smooth
-        motion fails rule `between` (what `rbp check` verifies on the straight motion, at the
-        same resolution): each interval of a phase of several steps (body, and free gripper in
-        a reach phase) is sampled at `spline_subdivisions` and checked as `between` checks a
-        sample; where one fails, both its knots' velocities are scaled down a level
-        (SPLINE_SCALES), and the intervals beside them checked again, until none fails. At
-        scale 0 at both knots an interval's body and gripper move along the straight line
-        between its steps, with one rest-to-rest timing: the configurations that `between`
-        verifies. So every configuration `rbp simulate` commands has been verified at the
-        resolution; `self.slowed_knots` counts the knots whose velocity was scaled."""
-        pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
-        if not smooth:
-            return pose
-        scn = self.scenario
-        world = verification_world(scn)
-        level = np.zeros(len(times), dtype=int)  # index into SPLINE_SCALES per knot
-        knots = [np.searchsorted(times, m.times) for m in smooth]
-        pending = [set(range(len(m.times) - 1)) for m in smooth]
-        straight_fails: dict[int, set[int]] = {}  # per phase: intervals whose line fails too
-        while any(pending):
-            scale = np.asarray(SPLINE_SCALES)[level][:, None]
-            pose = PiecewisePolynomial.CubicHermite(times, poses.T, (scale * rates).T)
-            lowered: set[int] = set()
-            for m, idx, todo in zip(smooth, knots, pending, strict=True):
-                if not todo:
-                    continue
-                tip = self._tip_spline(m, scale[idx, 0])
-                parts = spline_subdivisions(
-                    scn.robot, m.times, poses[idx], scale[idx] * rates[idx], m.tips,
-                    None if m.tip_rates is None else scale[idx] * m.tip_rates)
-                bad = failing_intervals(
-                    world, self.phases[m.phase].stance, m.times, parts, todo,
-                    _sampler(pose), None if tip is None else _sampler(tip))
-                for n in self._straight_passes(m, poses[idx], bad, straight_fails, world):
-                    lowered.update((int(idx[n]), int(idx[n + 1])))
-            last = len(SPLINE_SCALES) - 1
-            lowered = {i for i in lowered if level[i] < last}
-            for i in lowered:
-                level[i] += 1
-            # check again every interval beside a slowed knot, unless both its knots rest
-            pending = [{n for n in range(len(idx) - 1)
-                        if (idx[n] in lowered or idx[n + 1] in lowered)
-                        and not (level[idx[n]] == last and level[idx[n + 1]] == last)}
-                       for idx in knots]
-        scale = np.asarray(SPLINE_SCALES)[level]
-        for m, idx in zip(smooth, knots, strict=True):
-            tip = self._tip_spline(m, scale[idx])
-            if tip is not None:
-                self.phases[m.phase] = self.phases[m.phase]._replace(
-                    free_tip=tip, free_tip_rate=_rate(tip))
-        self.slowed_knots = int(np.count_nonzero(level))
-        self.smooth_motions = smooth
-        return pose
+    def _departure(self, times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
+                   smooth: list[tuple[int, np.ndarray]]) -> tuple[float, int | None]:
+        """How far the smooth path of the phases of several steps can be from the straight
+        motion `rbp check` verifies, in resolutions (`verify_between.smooth_departure`, a
+        bound), at most, and in which phase (None: no such phase)."""
+        worst, where = 0.0, None
+        for k, knots in smooth:
+            idx = np.searchsorted(times, knots)
+            tip = self.phases[k].free_tip
+            d = float(smooth_departure(
+                knots, poses[idx], rates[idx],
+                None if tip is None else tip.vector_values(knots).T,
+                None if tip is None else tip.derivative(1).vector_values(knots).T).max())
+            if d > worst or where is None:
+                worst, where = d, k
+        return worst, where
 
-    def unverified_intervals(self) -> list[tuple[int, int]]:
-        """(phase, n) of every interval of the smooth path, between knots n and n + 1 of a
-        phase of several steps, that fails rule `between`'s test at the resolution, found
-        again from the finished splines (their velocities at the knots): [] once built."""
-        out: list[tuple[int, int]] = []
-        world = verification_world(self.scenario)
-        velocity = self.pose.derivative(1)
-        for m in self.smooth_motions:
-            phase = self.phases[m.phase]
-            tip = phase.free_tip
-            tip_rates = (None if phase.free_tip_rate is None
-                         else phase.free_tip_rate.vector_values(m.times).T)
-            parts = spline_subdivisions(
-                self.scenario.robot, m.times, self.pose.vector_values(m.times).T,
-                velocity.vector_values(m.times).T,
-                None if tip is None else tip.vector_values(m.times).T, tip_rates)
-            bad = failing_intervals(
-                world, phase.stance, m.times, parts, range(len(m.times) - 1),
-                _sampler(self.pose), None if tip is None else _sampler(tip))
-            out.extend((m.phase, n) for n in bad)
-        return out
-
-    def _straight_passes(self, motion: SmoothMotion, poses: np.ndarray, bad: list[int],
-                         straight_fails: dict[int, set[int]], world: Any) -> list[int]:
-        """Of the smooth path's failing intervals `bad`, those whose straight motion passes:
-        slowing helps only there. Where the straight motion fails too, the plan fails rule
-        `between` (`rbp check` refuses it, and `rbp simulate` with it); a plan built in code
-        and run unchecked keeps its smooth path there."""
-        known = straight_fails.setdefault(motion.phase, set())
-        new = [n for n in bad if n not in known]
-        if new:
-            parts = subdivisions(self.scenario.robot, poses, motion.tips)
-            line = step_motion(motion.times, poses)
-            tips = None if motion.tips is None else step_motion(motion.times, motion.tips)
-            known.update(failing_intervals(world, self.phases[motion.phase].stance, motion.times,
-                                           parts, new, _sampler(line),
-                                           None if tips is None else _sampler(tips)))
-        return [n for n in bad if n not in known]
-
-    @staticmethod
-    def _tip_spline(motion: SmoothMotion, scale: np.ndarray) -> PiecewisePolynomial | None:
-        """A reach phase's free gripper: the cubic through its knots, velocities scaled."""
-        if motion.tips is None or motion.tip_rates is None:
+    def departure_problem(self) -> str | None:
+        """A verifier's line when the smooth path strays further than DEPARTURE_LIMIT from
+        the verified straight motion (steps too far apart for their motion), else None."""
+        if self.departure <= DEPARTURE_LIMIT or self.departure_phase is None:
             return None
-        return PiecewisePolynomial.CubicHermite(motion.times, motion.tips.T,
-                                                (scale[:, None] * motion.tip_rates).T)
+        k = self.departure_phase
+        return (f"phases[{k}] ({self.phases[k].kind}): between: rbp simulate's smooth path "
+                f"through the steps strays up to {self.departure:.2f} resolutions from the "
+                f"verified straight motion (at most {DEPARTURE_LIMIT:g}): the steps are too far "
+                f"apart for their motion")
 
     @functools.cached_property
     def content_key(self) -> str:
@@ -388,9 +293,9 @@ class PlanTrajectory:
     def _phase(k: int, phase: Phase, scn: Scenario, previous_end: float | None,
                resample: float | None
                ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray,
-                          SmoothMotion | None]:
+                          np.ndarray | None]:
         """The phase, the times, poses and velocities (NaN: not given) of its body, and the
-        knots of its smooth motion (a phase of several steps) to verify."""
+        knot times of its smooth path (a phase of several steps; else None)."""
         where = f"phases[{k}]"
         ids = tuple(phase.stance)
         unknown = [a for a in ids if a is not None and a not in scn.anchor_index]
@@ -453,10 +358,6 @@ class PlanTrajectory:
             if m_tips is not None:
                 free_tip = (_hold(m_times, m_tips) if resample is None
                             else _smooth(m_times, m_tips, True))
-            if resample is not None and len(m_times) > 2:
-                tip_rates = (None if free_tip is None else
-                             free_tip.derivative(1).vector_values(m_times).T)
-                smooth = SmoothMotion(k, m_times, m_tips, tip_rates)
             if resample is None or len(m_times) < 2:
                 sections_t.append(m_times)
                 sections_f.append(tensions[a:b])
@@ -473,6 +374,8 @@ class PlanTrajectory:
             knots_t.append(m_times)
             knots_q.append(m_poses)
             knots_v.append(np.full_like(m_poses, np.nan))
+            if resample is not None and len(m_times) > 2:
+                smooth = m_times
         else:
             t, prog, rate = rest_to_rest(m_times[0], m_times[1], resample)
             line = m_poses[0] + prog[:, None] * (m_poses[1] - m_poses[0])

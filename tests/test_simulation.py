@@ -280,6 +280,26 @@ def _one_phase_through(good_plan: dict[str, Any], scn: Scenario, path: list[np.n
     return traj, times, poses
 
 
+def test_a_smooth_path_straying_from_the_straight_motion_is_refused(
+        good_plan: dict[str, Any]) -> None:
+    """Steps far apart around a corner: the smooth path rbp simulate would follow strays
+    further than DEPARTURE_LIMIT from the straight motion rbp check verifies, and the
+    verifier's line names the phase; steps along a line at an even pace do not stray."""
+    from systems.trajectory import DEPARTURE_LIMIT
+
+    scn = plan_scenario(good_plan)
+    a = np.array(good_plan["phases"][0]["steps"][0]["pose"])
+    corner = [a + np.array(d) for d in ([0, 0, 0], [0.08, 0, 0], [0.08, 0.08, 0], [0, 0.08, 0])]
+    traj, _, _ = _one_phase_through(good_plan, scn, corner, 0.5)
+    assert traj.departure > DEPARTURE_LIMIT, f"strays only {traj.departure}"
+    problem = traj.departure_problem()
+    assert problem is not None and problem.startswith("phases[0] (body): between:"), problem
+    straight = [a + k * np.array([0.004, 0.002, 0.001]) for k in range(5)]
+    traj, _, _ = _one_phase_through(good_plan, scn, straight, 0.5)
+    assert traj.departure < 0.05, f"a straight even motion strays {traj.departure}"
+    assert traj.departure_problem() is None
+
+
 def test_the_last_motion_of_a_trajectory_phase_uses_its_dwell(good_plan: dict[str, Any]) -> None:
     """A phase of several steps ending in a dwell (the last step repeated, as planning.plan
     writes them): the pose passes through every earlier step, reaches the last configuration

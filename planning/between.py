@@ -71,6 +71,9 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
         k = int(np.argmin(check.feasible))
         return (f"between steps {k // n_between} and {k // n_between + 1}: "
                 f"{Reason(int(check.reason[k])).name}")
+    dense = _dense_problem(world, stance, poses, tips)
+    if dense:
+        return dense
     att = stance.attached
     ends = np.minimum(log_probs[:-1], log_probs[1:])[:, att]
     floor = np.repeat(ends, n_between, axis=0) - BETWEEN_DIP
@@ -92,3 +95,25 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
         k = int(np.flatnonzero(turned)[0])
         return f"between steps {k} and {k + 1}: the booms' lines meet in one point (SINGULAR)"
     return ""
+
+
+def _dense_problem(world: World, stance: Stance, poses: np.ndarray,
+                   tips: np.ndarray | None) -> str:
+    """Why a configuration fails at `rbp check`'s resolution between the steps ('' when none
+    does): the samples rule `between` checks (planning.verify_between.samples, on the straight
+    motion), feasible as the rule has it (its tension slack included). Three points per
+    interval miss a limit crossed between them (a shoulder past its range on
+    4 of the 69 benchmark plans)."""
+    from planning.verify_between import MAX_PARTS, samples, subdivisions, verification_world
+
+    if np.any(subdivisions(world.robot, poses, tips) > MAX_PARTS):
+        return "between steps: an interval too long to sample"
+    s = samples(world.robot, np.arange(len(poses), dtype=float), poses, tips)
+    if not len(s.t):
+        return ""
+    check = check_poses(verification_world(world), stance, s.poses, s.tips)
+    if check.feasible.all():
+        return ""
+    k = int(np.argmin(check.feasible))
+    n = int(s.interval[k])
+    return f"between steps {n} and {n + 1} (dense): {Reason(int(check.reason[k])).name}"

@@ -29,7 +29,7 @@ import numpy as np
 from planning.between import step_motion
 from planning.plan_model import Phase
 from rb_drake.collision import Rock
-from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
+from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 
@@ -166,7 +166,7 @@ class _World(NamedTuple):
     gravity_vector: np.ndarray
 
 
-def verification_world(scn: Scenario) -> _World:
+def verification_world(scn: Scenario | World) -> _World:
     """The cave and robot the rule checks samples in: the robot's lower tension bound
     TENSION_SLACK lower, all else as it is."""
     robot = scn.robot

@@ -6,22 +6,23 @@ simulation a grasp at P 0.998 at both ends of an interval fell to 0.84 between t
 (shaft-1), losses that p_path, a product over the steps, cannot see. `between_steps` tests
 configurations inside every interval; SCP accepts only iterates that pass it, and easing
 slows a phase (its interpolated configurations become steps, counted by p_path) until it does.
-`step_motion` is the motion between steps as `rbp rig-run` executes it and `rbp check` verifies
-it (rule `between`, planning.verify_between).
+Besides its three points per interval it checks the samples `rbp check` verifies (rule
+`between`, planning.verify_between, on `step_motion`, the motion `rbp rig-run` executes).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from planning.verify_between import (
+    MAX_PARTS,
+    samples,
+    subdivisions,
+    verification_world,
+)
 from rb_drake.feasibility import Reason, World, check_poses
 from rb_drake.stance import Stance
 from rb_drake.statics import null_vector, statics_problem
-
-if TYPE_CHECKING:
-    from pydrake.trajectories import PiecewisePolynomial
 
 BETWEEN = (0.25, 0.5, 0.75)  # where between two steps `between_steps` tests the motion
 BETWEEN_DIP = 1e-3  # log P a grasp may lose between two steps, below the less of its ends
@@ -32,21 +33,6 @@ def between(values: np.ndarray) -> np.ndarray:
     a, b = values[:-1, None, :], values[1:, None, :]
     w = np.asarray(BETWEEN)[None, :, None]
     return ((1.0 - w) * a + w * b).reshape(-1, values.shape[1])
-
-
-def step_motion(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
-    """values (K, n) at step times (K,) joined linearly in time (a first-order hold): the
-    motion between a plan's steps as `rbp rig-run` commands it (pose and tensions of a body
-    phase) and as `rbp check` verifies it (rule `between`), and the simulation's without
-    resampling; a single step holds its value for a second."""
-    from pydrake.trajectories import PiecewisePolynomial
-
-    times = np.asarray(times, dtype=float)
-    values = np.asarray(values, dtype=float)
-    if len(times) == 1:
-        times = np.array([times[0], times[0] + 1.0])
-        values = np.vstack([values, values])
-    return PiecewisePolynomial.FirstOrderHold(times, values.T)
 
 
 def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np.ndarray,
@@ -104,8 +90,6 @@ def _dense_problem(world: World, stance: Stance, poses: np.ndarray,
     motion), feasible as the rule has it (its tension slack included). Three points per
     interval miss a limit crossed between them (a shoulder past its range on
     4 of the 69 benchmark plans)."""
-    from planning.verify_between import MAX_PARTS, samples, subdivisions, verification_world
-
     if np.any(subdivisions(world.robot, poses, tips) > MAX_PARTS):
         return "between steps: an interval too long to sample"
     s = samples(world.robot, np.arange(len(poses), dtype=float), poses, tips)

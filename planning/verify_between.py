@@ -22,16 +22,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Collection
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from planning.between import step_motion
 from planning.plan_model import Phase
 from rb_drake.collision import Rock
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
+
+if TYPE_CHECKING:
+    from pydrake.trajectories import PiecewisePolynomial
 
 TRANSLATION = 0.005            # m: body translation between successive checked configurations
 ROTATION = math.radians(0.5)   # rad: body rotation between them
@@ -46,6 +48,21 @@ TENSION_SLACK = 0.25
 # without bound. Samples are checked in chunks of CHUNK to bound memory.
 MAX_PARTS = 10_000
 CHUNK = 20_000
+
+
+def step_motion(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
+    """values (K, n) at step times (K,) joined linearly in time (a first-order hold): the
+    motion between a plan's steps as `rbp rig-run` commands it (pose and tensions of a body
+    phase) and as `rbp check` verifies it (rule `between`), and the simulation's without
+    resampling; a single step holds its value for a second."""
+    from pydrake.trajectories import PiecewisePolynomial
+
+    times = np.asarray(times, dtype=float)
+    values = np.asarray(values, dtype=float)
+    if len(times) == 1:
+        times = np.array([times[0], times[0] + 1.0])
+        values = np.vstack([values, values])
+    return PiecewisePolynomial.FirstOrderHold(times, values.T)
 
 
 def resolution_text() -> str:

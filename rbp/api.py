@@ -182,8 +182,8 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
     also have been made for that cave and robot. `progress` shows a progress line on stderr
     (on a terminal only, after a second)."""
     from planning.plan_model import plan_of
-    from rbp.commands.common import plan_problems
     from rbp.progress import CheckProgress
+    from systems.plan_check import plan_problems
 
     model = plan_of(plan)
     problems = []

@@ -245,8 +245,8 @@ def _print_motion(plan: Plan) -> None:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.verify_between import resolution_text
-    from rbp.commands.common import plan_problems
     from rbp.progress import CheckProgress
+    from systems.plan_check import plan_problems
 
     path = Path(args.plan)
     plan = read_plan(path)

@@ -37,8 +37,8 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, Leaf
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.trajectories import PiecewisePolynomial
 
-from planning.between import step_motion
 from planning.plan_model import Plan, plan_of, plan_scenario
+from planning.verify_between import step_motion
 from rb_drake import geometry, grasp
 from rb_drake.errors import RbpInputError
 from rb_drake.files import atomic_write

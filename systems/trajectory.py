@@ -15,11 +15,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
-from planning.between import step_motion
 from planning.plan_file import content_hash
 from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
-from planning.verify_between import smooth_departure
+from planning.verify_between import smooth_departure, step_motion
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario

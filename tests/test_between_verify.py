@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from conftest import build_shaft
 
-from planning.between import step_motion
 from planning.check import verify_plan
 from planning.plan import score_plan
 from planning.plan_model import Phase, Plan, plan_scenario
@@ -27,6 +26,7 @@ from planning.verify_between import (
     between_problems,
     resolution_text,
     samples,
+    step_motion,
 )
 from rb_drake import geometry
 from rb_drake.feasibility import Reason, check_poses

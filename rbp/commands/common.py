@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any
 
 from rb_drake.errors import RbpInputError
 
@@ -77,39 +76,6 @@ def read_plan(path: Path) -> dict:
         raise UserError(f"{path}: {e}") from None
 
 
-def smooth_path_check(plan: Any, source: str = "") -> tuple[list[str], float | None]:
-    """What `rbp check` adds to `planning.check.check_plan` for a motion plan that passes it:
-    how far `rbp simulate`'s smooth path through the steps strays from the straight motion
-    rule `between` verified (`systems.trajectory.PlanTrajectory.departure`, in resolutions),
-    and a problem when it strays further than DEPARTURE_LIMIT. ([], None) for a plan without
-    motion (a footstep plan, a failed one)."""
-    from planning.plan_model import plan_of
-
-    model = plan_of(plan)
-    if model.time_step is None or not model.phases:
-        return [], None
-    from systems.trajectory import PlanError, PlanTrajectory, plan_scenario
-
-    try:
-        traj = PlanTrajectory(model, plan_scenario(model, source))
-    except PlanError as e:
-        return [f"phases: between: rbp simulate cannot run the plan: {e}"], None
-    problem = traj.departure_problem()
-    return ([problem] if problem else []), traj.departure
-
-
-def plan_problems(plan: Any, source: str = "", progress: Any = None
-                  ) -> tuple[list[str], float | None]:
-    """`rbp check`'s verdict: `check_plan`'s problems, then, when there are none, the smooth
-    path's (`smooth_path_check`); and the smooth path's departure (None: not measured)."""
-    from planning.check import check_plan
-
-    problems = check_plan(plan, source, progress=progress)
-    if problems:
-        return problems, None
-    return smooth_path_check(plan, source)
-
-
 def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
@@ -123,6 +89,7 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     if has_valid_stamp(plan):
         return False
     from rbp.progress import CheckProgress
+    from systems.plan_check import plan_problems
 
     with CheckProgress(f"verifying {path}") as bar:
         problems, _ = plan_problems(plan, str(path), progress=bar)

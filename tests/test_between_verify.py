@@ -256,3 +256,42 @@ def test_the_planner_plans_smooth_path_stays_near_the_verified_motion(
     path.write_text(json.dumps(plan))
     assert main(["check", "-q", str(path)]) == 0
     assert f"smooth path through the steps within {traj.departure:.2f}" in capsys.readouterr().out
+
+
+def test_a_plan_whose_smooth_path_strays_is_refused_though_its_straight_motion_holds(
+        cave_plans: dict[str, PlanFile], tmp_path: Path, capsys) -> None:
+    """Every eighth motion step of a long phase kept (a continuation, as a converter or a hand
+    edit might write it): the straight motion between the remaining steps still passes every
+    rule, but the smooth path rbp simulate would follow through them strays past
+    DEPARTURE_LIMIT; rbp check and rbp simulate refuse it, naming the phase."""
+    from planning.between_faults import _motion_span
+    from planning.check import check_plan
+    from systems.trajectory import DEPARTURE_LIMIT, PlanTrajectory, plan_scenario
+
+    plan = cave_plans["demo-shaft"]
+    scn = plan_scenario(plan)
+    found = None
+    for k, phase in enumerate(plan["phases"]):
+        a, b = _motion_span(phase["steps"])
+        if b - a < 16:
+            continue
+        cut = copy.deepcopy(plan)
+        cut.setdefault("start", copy.deepcopy(plan["scenario"]["start"]))
+        keep = set(range(a + 1)) | set(range(b, len(phase["steps"]))) | set(range(a, b, 8))
+        cut["phases"][k]["steps"] = [s for i, s in enumerate(phase["steps"]) if i in keep]
+        cut["phases"][k].pop("motion", None)
+        traj = PlanTrajectory(cut, scn)
+        if (traj.departure > DEPARTURE_LIMIT and traj.departure_phase == k
+                and check_plan(cut) == []):
+            found = k, cut
+            break
+    assert found is not None, "no long phase whose thinned steps make the smooth path stray"
+    k, cut = found
+    path = tmp_path / "thinned.json"
+    path.write_text(json.dumps(cut))
+    assert main(["check", "-q", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert f"phases[{k}]" in out and "strays up to" in out, out
+    assert main(["simulate", "--trials", "0", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "strays up to" in err and "refused" in err, err

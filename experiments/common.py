@@ -119,10 +119,10 @@ def plan_record(plan: dict[str, Any]) -> dict[str, Any]:
               "verified": bool(plan["success"]) and not check_plan(plan)}
     rows = motion_summary(plan_of(plan))
     if plan["success"] and plan.get("time_step") is not None:
-        from systems.trajectory import PlanTrajectory, plan_scenario
+        from systems.plan_check import smooth_path_check
 
         # how far `rbp simulate`'s smooth path strays from the verified straight motion
-        record["departure"] = PlanTrajectory(plan, plan_scenario(plan)).departure
+        record["departure"] = smooth_path_check(plan)[1]
     if rows:
         record["motion"] = [{k: r[k] for k in ("phase", "kind", "steps", "seed_min", "min",
                                                "seed_mean", "mean", "seed_min_at_end", "room",

@@ -262,11 +262,11 @@ class PlanTrajectory:
         worst, where = 0.0, None
         for k, knots in smooth:
             idx = np.searchsorted(times, knots)
-            tip = self.phases[k].free_tip
+            tip, tip_rate = self.phases[k].free_tip, self.phases[k].free_tip_rate
             d = float(smooth_departure(
                 knots, poses[idx], rates[idx],
                 None if tip is None else tip.vector_values(knots).T,
-                None if tip is None else tip.derivative(1).vector_values(knots).T).max())
+                None if tip_rate is None else tip_rate.vector_values(knots).T).max())
             if d > worst or where is None:
                 worst, where = d, k
         return worst, where

@@ -25,6 +25,7 @@ import numpy as np
 from planning.plan_model import Plan, Step, plan_of, plan_scenario
 from planning.probability import Configuration, path_probability
 from planning.ramps import ramp_statics
+from planning.smooth_motion import smooth_path_problems
 from planning.verify_between import between_problems
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
@@ -92,6 +93,9 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
 
     if plan.time_step is not None:  # a footstep plan holds end configurations, no motion
         between_problems(plan.phases, scn, bad_form, between)
+        if not problems:  # the phases are well formed and join: the smooth path exists
+            smooth_path_problems(plan, scn, lambda k: scn.stance(tuple(plan.phases[k].stance)),
+                                 between)
     if (plan.success or plan.partial is not None) and recomputed:  # a partial climb's too
         mine = path_probability(recomputed, robot.attach_failure)
         theirs = path_probability(_configurations(plan), robot.attach_failure)

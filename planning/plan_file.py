@@ -20,8 +20,9 @@ from planning.plan_model import Plan
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, read_text
 
-# bump when the rules change: older stamps then no longer count (3: rule between)
-VERIFIER = "rbp-verify/3"
+# bump when the rules change: older stamps then no longer count (3: rule between; 4: rule
+# between on the smooth path `rbp simulate` follows)
+VERIFIER = "rbp-verify/4"
 
 
 class PlanFileError(RbpInputError):

@@ -31,6 +31,7 @@ from rb_drake.collision import Rock
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
+from rb_drake.stance import Stance
 
 if TYPE_CHECKING:
     from pydrake.trajectories import PiecewisePolynomial
@@ -78,6 +79,9 @@ class Samples(NamedTuple):
     poses: np.ndarray           # (S, 3)
     tips: np.ndarray | None     # (S, 2) the free gripper in a reach phase
     interval: np.ndarray        # (S,) n: the sample lies between steps n and n + 1
+    # (S,) how far along its interval each sample lies, where not in proportion to the steps'
+    # times (a smooth path whose last motion is spread over the dwell); None: in proportion
+    fraction: np.ndarray | None = None
 
 
 def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None) -> np.ndarray:
@@ -212,26 +216,38 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
                  f"verify (over {MAX_PARTS} samples at the resolution)")
         s = phase_samples(robot, phase)
         checked += len(s.t)
-        failed: set[int] = set()
-        for lo in range(0, len(s.t), CHUNK):
-            rows = slice(lo, lo + CHUNK)
-            tips = None if s.tips is None else s.tips[rows]
-            with np.errstate(all="ignore"):
-                check = check_poses(world, stance, s.poses[rows], tips)
-            for i in map(int, np.flatnonzero(~check.feasible)):
-                n = int(s.interval[lo + i])
-                if n in failed:  # one problem per interval: its first failing sample
-                    continue
-                failed.add(n)
-                fail(k, n, _text(phase, s, lo + i, check, i, robot.p_min))
+        for n, text in failing_intervals(world, stance, phase, s):
+            fail(k, n, text)
     return checked
 
 
-def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float) -> str:
+def failing_intervals(world: _World | World, stance: Stance, phase: Phase, s: Samples,
+                      what: str = "") -> list[tuple[int, str]]:
+    """The step intervals (n: the first step) of `phase` in which a sample of `s` fails
+    `check_poses` in `world`, each once with its first failing sample in words (`what`
+    names the motion sampled, e.g. rbp simulate's smooth path; empty: the straight one)."""
+    out: list[tuple[int, str]] = []
+    failed: set[int] = set()
+    for lo in range(0, len(s.t), CHUNK):
+        rows = slice(lo, lo + CHUNK)
+        tips = None if s.tips is None else s.tips[rows]
+        with np.errstate(all="ignore"):
+            check = check_poses(world, stance, s.poses[rows], tips)
+        for i in map(int, np.flatnonzero(~check.feasible)):
+            n = int(s.interval[lo + i])
+            if n in failed:  # one problem per interval: its first failing sample
+                continue
+            failed.add(n)
+            out.append((n, _text(phase, s, lo + i, check, i, world.robot.p_min, what)))
+    return out
+
+
+def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float,
+          motion: str = "") -> str:
     """What failed at sample j (row i of `check`), in words."""
     n = int(s.interval[j])
     t0, t1 = phase.steps[n].t, phase.steps[n + 1].t
-    w = (s.t[j] - t0) / (t1 - t0)
+    w = (s.t[j] - t0) / (t1 - t0) if s.fraction is None else float(s.fraction[j])
     reason = Reason(int(check.reason[i]))
     what = REASON_TEXT[reason]
     if check.boom[i] >= 0:
@@ -239,7 +255,7 @@ def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: flo
     if reason == Reason.PROBABILITY:
         what += f" (P = {float(check.probability[i]):.5f} < {p_min})"
     pose = ", ".join(f"{v:.4f}" for v in s.poses[j])
-    return (f"between steps {n} and {n + 1}, at {w:.3f} of the way (t={s.t[j]:.4f}, "
+    return (f"between steps {n} and {n + 1}{motion}, at {w:.3f} of the way (t={s.t[j]:.4f}, "
             f"pose [{pose}]): {what}")
 
 

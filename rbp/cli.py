@@ -262,11 +262,13 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
-    between = (f"and the motion between them {resolution_text()}" if model.time_step is not None
+    between = ("and the motion between them, the straight line rbp rig-run commands and the "
+               f"smooth path rbp simulate follows, {resolution_text()}"
+               if model.time_step is not None
                else "not the motion between them (a footstep plan: end configurations only)")
     if departure is not None:
         between += (f" (rbp simulate's smooth path through the steps within {departure:.2f} "
-                    f"of that resolution of it)")
+                    f"of that resolution of the straight line)")
     note = partial_note(model)
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
           f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")

@@ -1,7 +1,8 @@
-"""`rbp check`'s verdict on a plan: the verifier's rules (`planning.check.check_plan`) and, for a
-motion plan that passes them, how far the smooth path `rbp simulate` follows through its steps
-strays from the straight motion rule `between` verified (`systems.trajectory`), with a problem
-past `DEPARTURE_LIMIT`. `rbp check`, `rbp simulate`, `rbp rig-run` and `rbp.check` share it.
+"""`rbp check`'s verdict on a plan: the verifier's rules (`planning.check.check_plan`, whose rule
+`between` verifies the straight motion `rbp rig-run` executes and the smooth path `rbp
+simulate` follows) and, for a motion plan that passes them, how far that smooth path strays
+from the straight motion (`systems.trajectory`), with a problem past `DEPARTURE_LIMIT`.
+`rbp check`, `rbp simulate`, `rbp rig-run` and `rbp.check` share it.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def smooth_path_check(plan: Any, source: str = "") -> tuple[list[str], float | N
 def plan_problems(plan: Any, source: str = "", progress: Any = None
                   ) -> tuple[list[str], float | None]:
     """`rbp check`'s verdict: `check_plan`'s problems, then, when there are none, the smooth
-    path's (`smooth_path_check`); and the smooth path's departure (None: not measured)."""
+    path's departure (`smooth_path_check`); and that departure (None: not measured)."""
     from planning.check import check_plan
 
     problems = check_plan(plan, source, progress=progress)

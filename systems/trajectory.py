@@ -18,6 +18,14 @@ from pydrake.trajectories import PiecewisePolynomial
 from planning.plan_file import content_hash
 from planning.plan_model import Phase, Plan, Step, plan_of
 from planning.plan_model import plan_scenario as plan_scenario  # re-exported
+from planning.smooth_motion import DWELL_MOTION as DWELL_MOTION  # re-exported
+from planning.smooth_motion import (
+    PhaseKnots,
+    join_knots,
+    phase_knots,
+    ramp_count,
+)
+from planning.smooth_motion import rest_to_rest as rest_to_rest  # re-exported
 from planning.verify_between import smooth_departure, step_motion
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
@@ -25,8 +33,6 @@ from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import allocate
 from systems.holdings import holdings_of
-
-DWELL_MOTION = 0.8  # of a trajectory phase's final dwell spent finishing its last motion
 
 # PlanSource's free_limb output: the limb a shoulder carries (`PlanTrajectory.carried_limb`):
 # the planned free tip (x, y), its velocity, the boom's mass in the plant, the boom (-1: none)
@@ -78,21 +84,6 @@ class PhaseTrajectory(NamedTuple):
     grid: tuple[np.ndarray, np.ndarray, Refine | None] | None = None
 
 
-def _finish_over_dwell(times: np.ndarray, poses: np.ndarray,
-                       tips: np.ndarray | None) -> np.ndarray:
-    """The step times of a phase whose last step repeats the one before it (the plan's
-    dwell), with the motion into the last configuration ending DWELL_MOTION of the way into
-    the dwell: the braking spread over more time, and the robot still rests a while in the
-    last configuration, in that stance, as the plan has it."""
-    same = np.allclose(poses[-1], poses[-2], rtol=0, atol=1e-12) and (
-        tips is None or np.allclose(tips[-1], tips[-2], rtol=0, atol=1e-12))
-    if not same:
-        return times
-    times = times.copy()
-    times[-2] += DWELL_MOTION * (times[-1] - times[-2])
-    return times
-
-
 def _rate(trajectory: PiecewisePolynomial | None) -> PiecewisePolynomial | None:
     return None if trajectory is None else trajectory.derivative(1)
 
@@ -101,54 +92,6 @@ def _hold(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
     """Linear interpolation of values (K, n) at times (K,); one step holds its value: the
     motion between steps that `rbp check` verifies and `rbp rig-run` executes."""
     return step_motion(times, values)
-
-
-def _smooth(times: np.ndarray, values: np.ndarray, rest: bool) -> PiecewisePolynomial:
-    """Shape-preserving cubic ("pchip") through values (K, n): continuous velocity, no
-    overshoot; at rest at both ends when `rest`. Fewer than 3 points: linear."""
-    if len(times) < 3:
-        return _hold(times, values)
-    return PiecewisePolynomial.CubicShapePreserving(times, values.T, rest)
-
-
-def _continuous_acceleration_rates(times: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Velocities (K, n) at the knots of values (K, n): zero where the body rests (a knot equal
-    to its neighbour, as a dwell or a ramp has it, and at both ends), elsewhere the slopes of
-    the cubic spline with continuous second derivatives through each run of knots between
-    two rests, at rest at the run's ends. A shape-preserving ("pchip") estimate sets a slope
-    to zero wherever a coordinate turns, so the acceleration jumps at that knot, and the
-    controller's feed-forward with it: where a body phase turned from rotating to
-    translating, a grasp at P 0.969 at both neighbouring steps fell to 0.952 between them
-    (crevasse-s6), a loss p_path, a product over the steps, cannot see. Within a run the
-    acceleration is continuous, and its peaks are about half pchip's on the calibration
-    plans; the path stays within 5 mm and 0.3 deg of pchip's."""
-    K = len(times)
-    rates = np.zeros_like(values, dtype=float)
-    still = np.all(np.abs(np.diff(values, axis=0)) <= 1e-12, axis=1)
-    rest = np.zeros(K, dtype=bool)
-    rest[[0, -1]] = True
-    rest[1:] |= still
-    rest[:-1] |= still
-    ends = np.flatnonzero(rest)
-    zero = np.zeros((values.shape[1], 1))
-    for i, j in itertools.pairwise(ends):
-        if j - i < 2:
-            continue
-        spline = PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
-            times[i:j + 1], values[i:j + 1].T, zero, zero).derivative(1)
-        for n in range(i + 1, j):
-            rates[n] = spline.value(times[n]).ravel()
-    return rates
-
-
-def _ramp_count(steps: tuple[Step, ...], reverse: bool) -> int:
-    """How many steps at the start (end) of a phase are ramp steps."""
-    n = 0
-    for step in (reversed(steps) if reverse else steps):
-        if step.ramp is None:
-            break
-        n += 1
-    return n
 
 
 def _ramp_grid(times: np.ndarray, tensions: np.ndarray, shares: np.ndarray,
@@ -167,24 +110,14 @@ def _ramp_grid(times: np.ndarray, tensions: np.ndarray, shares: np.ndarray,
     return np.concatenate(t_out), np.vstack(f_out), np.vstack(s_out)
 
 
-def rest_to_rest(t0: float, t1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A grid on [t0, t1] (spacing <= step) with the minimum-jerk progress s (0 -> 1) and its
-    rate ds/dt: 10 tau^3 - 15 tau^4 + 6 tau^5, which starts and ends at rest."""
-    n = max(1, math.ceil((t1 - t0) / step))
-    t = np.linspace(t0, t1, n + 1)
-    tau = (t - t0) / (t1 - t0)
-    s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
-    ds = 30.0 * tau**2 * (1.0 - tau) ** 2 / (t1 - t0)
-    return t, s, ds
-
-
 class PlanTrajectory:
     """A plan file's phases as trajectories of pose, feed-forward tensions and free tip.
 
     Phase k runs over [start_k, start_{k+1}). The body pose passes through every step of the
     plan, but with a continuous velocity, unlike a first-order hold: one cubic Hermite spline
     through all steps, its velocities, where the plan gives none, the slopes of the spline
-    with continuous acceleration through the steps (`_continuous_acceleration_rates`, at rest at the
+    with continuous acceleration through the steps
+    (`smooth_motion.continuous_acceleration_rates`, at rest at the
     start and the end). A velocity step (at every step of a linear interpolation, and at phase
     boundaries of plans whose phases do not end at rest) is answered by the PD with a jolt of
     the tensions that collapses grasp probabilities for nothing; the spline's acceleration
@@ -192,11 +125,11 @@ class PlanTrajectory:
     gets the plan's own tensions and free tip between its steps, tensions interpolated
     linearly. Such a phase ends with a dwell (its last step repeats the one before), and the
     motion into the last configuration is spread over the last interval and most of the dwell
-    (`_finish_over_dwell`): stopping within the last interval, as the plan's knots have it,
-    brakes the body and the free tip at ~0.4 m/s^2, whose inertial loads (in a 3-stance a
-    newton or more on one boom) cost the crevasse plans up to 0.1 in a holding's P. A phase
-    of exactly two steps, as the footstep stage writes today (its two end configurations), is
-    travelled along the straight line between them with a minimum-jerk
+    (`smooth_motion.finish_over_dwell`): stopping within the last interval, as the plan's
+    knots have it, brakes the body and the free tip at ~0.4 m/s^2, whose inertial loads (in a
+    3-stance a newton or more on one boom) cost the crevasse plans up to 0.1 in a holding's P.
+    A phase of exactly two steps, as the footstep stage writes today (its two end
+    configurations), is travelled along the straight line between them with a minimum-jerk
     timing (`rest_to_rest`, sampled every `resample` s), and its feed-forward tensions are
     the plan's own model on that line, the most robust allocation (`statics.allocate`, which
     made the plan's tensions and reproduces them at the two ends): linear interpolation of
@@ -213,34 +146,17 @@ class PlanTrajectory:
         self.plan = plan_of(plan)  # the replanners continue it (systems.replanning)
         self.scenario = scn
         self.phases: list[PhaseTrajectory] = []
-        knots_t: list[np.ndarray] = []
-        knots_q: list[np.ndarray] = []
-        knots_v: list[np.ndarray] = []  # NaN: to be estimated (_continuous_acceleration_rates)
+        knots: list[PhaseKnots] = []
         previous_end = None
-        smooth: list[tuple[int, np.ndarray]] = []
         for k, phase in enumerate(self.plan.phases):
-            traj, t, q, v, knots = self._phase(k, phase, scn, previous_end, resample)
+            traj, kn = self._phase(k, phase, scn, previous_end, resample)
             self.phases.append(traj)
-            if knots is not None:
-                smooth.append((k, knots))
-            if knots_t and abs(t[0] - knots_t[-1][-1]) < 1e-9:  # the shared boundary step
-                last = knots_v[-1]
-                last[-1] = np.where(np.isnan(last[-1]), v[0], last[-1])
-                t, q, v = t[1:], q[1:], v[1:]
-            knots_t.append(t)
-            knots_q.append(q)
-            knots_v.append(v)
+            knots.append(kn)
             previous_end = traj.end
         if not self.phases:
             raise PlanError("phases", "the plan has no phases")
-        times, poses, rates = np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v)
-        if resample is None or len(times) < 3:
-            self.pose = _hold(times, poses)
-        else:
-            estimate = _continuous_acceleration_rates(times, poses)
-            for n in np.flatnonzero(np.isnan(rates).any(axis=1)):
-                rates[n] = estimate[n]
-            self.pose = PiecewisePolynomial.CubicHermite(times, poses.T, rates.T)
+        times, poses, rates, self.pose = join_knots(knots, resample)
+        smooth = [(k, kn.motion_times, kn.lead) for k, kn in enumerate(knots) if kn.smooth]
         # how far the smooth path strays from the verified straight motion (resolutions)
         self.departure, self.departure_phase = self._departure(times, poses, rates, smooth)
         if resample is not None:
@@ -255,12 +171,12 @@ class PlanTrajectory:
             self.holding_of[hold.first:hold.last + 1, hold.boom] = h
 
     def _departure(self, times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
-                   smooth: list[tuple[int, np.ndarray]]) -> tuple[float, int | None]:
+                   smooth: list[tuple[int, np.ndarray, int]]) -> tuple[float, int | None]:
         """How far the smooth path of the phases of several steps can be from the straight
         motion `rbp check` verifies, in resolutions (`verify_between.smooth_departure`, a
         bound), at most, and in which phase (None: no such phase)."""
         worst, where = 0.0, None
-        for k, knots in smooth:
+        for k, knots, _ in smooth:
             idx = np.searchsorted(times, knots)
             tip, tip_rate = self.phases[k].free_tip, self.phases[k].free_tip_rate
             d = float(smooth_departure(
@@ -291,10 +207,8 @@ class PlanTrajectory:
     @staticmethod
     def _phase(k: int, phase: Phase, scn: Scenario, previous_end: float | None,
                resample: float | None
-               ) -> tuple[PhaseTrajectory, np.ndarray, np.ndarray, np.ndarray,
-                          np.ndarray | None]:
-        """The phase, the times, poses and velocities (NaN: not given) of its body, and the
-        knot times of its smooth path (a phase of several steps; else None)."""
+               ) -> tuple[PhaseTrajectory, PhaseKnots]:
+        """The phase and the knots of its body's path (`smooth_motion.phase_knots`)."""
         where = f"phases[{k}]"
         ids = tuple(phase.stance)
         unknown = [a for a in ids if a is not None and a not in scn.anchor_index]
@@ -333,30 +247,21 @@ class PlanTrajectory:
             shares[:, stance.free_boom] = 1.0
         start, end = float(times[0]), float(times[-1])
         # the ramps at either end (planning.ramps), the motion between them
-        lead = _ramp_count(steps, reverse=False)
-        trail = min(_ramp_count(steps, reverse=True), len(steps) - lead - 1)
-        a, b = lead, len(steps) - trail
+        lead = ramp_count(steps, reverse=False)
+        trail = min(ramp_count(steps, reverse=True), len(steps) - lead - 1)
+        kn = phase_knots(times, poses, tips, lead, trail, resample)
+        a, b = kn.lead, kn.end
         sections_t, sections_f, sections_s = [], [], []
-        knots_t, knots_q, knots_v = [], [], []
         if lead:
             t, f, sh = _ramp_grid(times[:a + 1], tensions[:a + 1], shares[:a + 1], resample)
             sections_t.append(t[:-1])
             sections_f.append(f[:-1])
             sections_s.append(sh[:-1])
-            knots_t.append(times[:a])
-            knots_q.append(poses[:a])
-            knots_v.append(np.zeros((a, 3)))
-        m_times, m_poses = times[a:b], poses[a:b]
+        m_times, m_poses = kn.motion_times, poses[a:b]
         m_tips = None if tips is None else tips[a:b]
-        free_tip = None
-        if len(m_times) > 3 and resample is not None:
-            m_times = _finish_over_dwell(m_times, m_poses, m_tips)
+        free_tip = kn.free_tip
         refine = None
-        smooth = None
         if len(m_times) != 2 or resample is None:
-            if m_tips is not None:
-                free_tip = (_hold(m_times, m_tips) if resample is None
-                            else _smooth(m_times, m_tips, True))
             if resample is None or len(m_times) < 2:
                 sections_t.append(m_times)
                 sections_f.append(tensions[a:b])
@@ -370,18 +275,9 @@ class PlanTrajectory:
                 sections_f.append(_hold(m_times, tensions[a:b]).vector_values(dense).T)
                 sections_s.append(np.repeat(shares[a:a + 1], len(dense), axis=0))
                 refine = (start_row, m_times, tensions[a:b])
-            knots_t.append(m_times)
-            knots_q.append(m_poses)
-            knots_v.append(np.full_like(m_poses, np.nan))
-            if resample is not None and len(m_times) > 2:
-                smooth = m_times
         else:
-            t, prog, rate = rest_to_rest(m_times[0], m_times[1], resample)
+            t, prog, _ = rest_to_rest(m_times[0], m_times[1], resample)
             line = m_poses[0] + prog[:, None] * (m_poses[1] - m_poses[0])
-            if m_tips is not None:
-                delta = m_tips[1] - m_tips[0]
-                free_tip = PiecewisePolynomial.CubicHermite(
-                    t, (m_tips[0] + prog[:, None] * delta).T, (rate[:, None] * delta).T)
             ff = tensions[a] + prog[:, None] * (tensions[a + 1] - tensions[a])
             inner = slice(1, len(t) - 1)
             grid_tips = (None if m_tips is None
@@ -392,17 +288,11 @@ class PlanTrajectory:
             sections_t.append(t)
             sections_f.append(ff)
             sections_s.append(np.repeat(shares[a:a + 1], len(t), axis=0))
-            knots_t.append(t)
-            knots_q.append(line)
-            knots_v.append(rate[:, None] * (m_poses[1] - m_poses[0]))
         if trail:
             t, f, sh = _ramp_grid(times[b - 1:], tensions[b - 1:], shares[b - 1:], resample)
             sections_t.append(t[1:])
             sections_f.append(f[1:])
             sections_s.append(sh[1:])
-            knots_t.append(times[b:])
-            knots_q.append(poses[b:])
-            knots_v.append(np.zeros((trail, 3)))
         grid = np.concatenate(sections_t)
         ramps = []
         if lead:
@@ -413,7 +303,7 @@ class PlanTrajectory:
                                _hold(grid, np.vstack(sections_f)), free_tip, _rate(free_tip),
                                _hold(grid, np.vstack(sections_s)), tuple(ramps),
                                (grid, np.vstack(sections_f), refine))
-        return (traj, np.concatenate(knots_t), np.vstack(knots_q), np.vstack(knots_v), smooth)
+        return traj, kn
 
     def _refine_tensions(self, phase: PhaseTrajectory) -> PhaseTrajectory:
         """A trajectory phase's feed-forward between its steps: the most robust allocation at

@@ -258,6 +258,8 @@ def test_the_planner_plans_smooth_path_stays_near_the_verified_motion(
     assert main(["check", "-q", str(path)]) == 0
     out = capsys.readouterr().out
     stated = re.search(r"smooth path through the steps within ([0-9.]+) of that resolution", out)
+    assert "the straight line rbp rig-run commands and the smooth path rbp simulate follows" \
+        in out, out
     assert stated is not None, out
     assert abs(float(stated.group(1)) - traj.departure) <= 0.006, (stated.group(1),
                                                                    traj.departure)

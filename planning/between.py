@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from planning.smooth_motion import smooth_problem
 from planning.verify_between import (
     MAX_PARTS,
     samples,
@@ -36,7 +37,8 @@ def between(values: np.ndarray) -> np.ndarray:
 
 
 def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np.ndarray,
-                  tips: np.ndarray | None = None) -> str:
+                  tips: np.ndarray | None = None, times: np.ndarray | None = None,
+                  dwell: bool = True, smooth: bool = True) -> str:
     """Why the motion between successive steps fails ('' when it does not): at BETWEEN of
     each interval (poses and free tip linear, `tips` (N, 2) at the steps in a 3-stance; the
     most robust tensions), a configuration must be feasible and each grasp hold with log P at
@@ -45,7 +47,12 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
     determinant) must keep its direction from each of these configurations to the next. A
     direction that turns back means the segment passes where the booms' lines meet in one
     point, which can lie between the samples (crevasse-s6: conditioning 0.016 at 0.9 of an
-    interval whose samples held 0.12 and more)."""
+    interval whose samples held 0.12 and more). Then the samples `rbp check` verifies on the
+    straight motion (`dense_problem`) and on the smooth path `rbp simulate` follows through
+    the steps (`smooth_motion.smooth_problem`, the steps at `times`, default one per unit, and
+    with the final dwell added when `dwell`; not when `smooth` is False): a path that rounds a
+    corner where a limit is active crosses it (a shoulder by up to 0.96 deg on the bundled
+    plans)."""
     N = len(poses)
     if N < 2:
         return ""
@@ -57,7 +64,8 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
         k = int(np.argmin(check.feasible))
         return (f"between steps {k // n_between} and {k // n_between + 1}: "
                 f"{Reason(int(check.reason[k])).name}")
-    dense = _dense_problem(world, stance, poses, tips)
+    dense = (dense_problem(world, stance, poses, tips)
+             or (smooth_problem(world, stance, poses, tips, times, dwell) if smooth else ""))
     if dense:
         return dense
     att = stance.attached
@@ -83,8 +91,8 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
     return ""
 
 
-def _dense_problem(world: World, stance: Stance, poses: np.ndarray,
-                   tips: np.ndarray | None) -> str:
+def dense_problem(world: World, stance: Stance, poses: np.ndarray,
+                  tips: np.ndarray | None) -> str:
     """Why a configuration fails at `rbp check`'s resolution between the steps ('' when none
     does): the samples rule `between` checks (planning.verify_between.samples, on the straight
     motion), feasible as the rule has it (its tension slack included). Three points per

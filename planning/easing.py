@@ -23,10 +23,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from planning.between import BETWEEN_DIP, between_steps
+from planning.between import BETWEEN_DIP, between_steps, dense_problem
 from planning.plan_model import Phase, Plan
 from planning.plan_steps import steps_with_tensions
 from planning.ramps import CONTROL_TENSION_FLOOR
+from planning.smooth_motion import smooth_problem
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -185,17 +186,37 @@ def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np
     return Inertial(np.where(ok, out, np.inf) if P else out, np.where(ok, dip, np.inf))
 
 
-def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:
-    """(whether the motion between the steps fails `between_steps`, the inertial excess, the
-    inertial dip beyond BETWEEN_DIP): the smaller the better; (False, 0.0, 0.0) passes."""
+def _verifier_fails(scn: Scenario, phase: Phase) -> bool:
+    """Whether the motion between a phase's steps fails rule `between` of `rbp check`: the
+    straight motion or the smooth path at the rule's resolution, with its tolerance."""
     steps = phase.steps
+    poses = np.array([st.pose for st in steps], dtype=float)
+    tips = (np.array([st.free_tip for st in steps], dtype=float)
+            if phase.kind == "reach" else None)
+    times = np.array([st.t for st in steps], dtype=float)
     stance = scn.stance(tuple(phase.stance))
+    return bool(dense_problem(scn, stance, poses, tips)
+                or smooth_problem(scn, stance, poses, tips, times, dwell=False))
+
+
+def _between_fails(scn: Scenario, phase: Phase) -> bool:
+    """Whether the motion between a phase's steps (at their times, its dwell included) fails
+    `between_steps`."""
+    steps = phase.steps
     poses = np.array([st.pose for st in steps], dtype=float)
     tips = (np.array([st.free_tip for st in steps], dtype=float)
             if phase.kind == "reach" else None)
     with np.errstate(divide="ignore"):
         lp = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp] for st in steps]))
-    failed = between_steps(scn, stance, poses, lp, tips)
+    times = np.array([st.t for st in steps], dtype=float)
+    return bool(between_steps(scn, scn.stance(tuple(phase.stance)), poses, lp, tips, times,
+                              dwell=False))
+
+
+def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:
+    """(whether the motion between the steps fails `between_steps`, the inertial excess, the
+    inertial dip beyond BETWEEN_DIP): the smaller the better; (False, 0.0, 0.0) passes."""
+    failed = _between_fails(scn, phase)
     motion = phase.motion
     if motion is None or motion.inertial_excess is None or motion.inertial_dip is None:
         raise ValueError("an eased phase without its inertial record")
@@ -235,7 +256,11 @@ def ease_motions(plan: Plan, scn: Scenario, ease: int = EASE_STEPS) -> Plan:
                 eased, best = candidate, score
             if best == (False, 0.0, 0.0):
                 break
-        if eased is None:
+        if eased is None or (best[0] and _verifier_fails(scn, eased)
+                             and not _verifier_fails(scn, phase)):
+            # no easing, or the eased timing's motion between steps fails `rbp check`'s rule
+            # where the planned one passes (its smooth path, re-timed, crossed a limit SCP's
+            # steps ride)
             phases.append(phase)
             continue
         shift += float(eased.steps[-1].t) - float(phase.steps[-1].t)

@@ -27,6 +27,7 @@ from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.plan_model import PhaseKind, Plan
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
+from planning.smooth_motion import smooth_path_problems
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.statics import allocate, statics_problem
@@ -178,7 +179,10 @@ def _seed_between(scn: Scenario, motion: PhaseMotion) -> str:
     stance = scn.stance(motion.stance)
     tips = motion.seed.tips
     lp = check_poses(scn, stance, motion.seed.poses, tips).allocation.log_probs
-    failed = between_steps(scn, stance, motion.seed.poses, lp, tips)
+    # the straight motion only: a seed whose smooth path fails is eased (planning.easing),
+    # and searching another route for it loses good routes (crevasse-8m-s2 went from 26 to
+    # 27 regrasps, and its new route's feed-forward overloaded a grasp in simulation)
+    failed = between_steps(scn, stance, motion.seed.poses, lp, tips, smooth=False)
     return f"its seed fails between steps ({failed})" if failed else ""
 
 
@@ -239,7 +243,7 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
     if planner == "naive" or not fp.success:
         timing["total"] = time.perf_counter() - t_start
         return build_plan(scn, fp, planner, timing)
-    motions, failure = phase_motions(scn, fp, cfg, timing, progress)
+    failure, done, built = _fly(scn, fp, cfg, timing, planner, progress)
     memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
     excluded: list[tuple[tuple[str, ...], int, str]] = []
     last_search = ""  # how the last search again ended, when it found no route
@@ -248,7 +252,7 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
             break
         # A transition holds at its pose, but the motion through it may not (a reach arc whose
         # intermediate cantilevers no tensions balance): search again without that move.
-        move = failed_move(fp, len(motions))
+        move = failed_move(fp, done)
         excluded.append(move)
         if progress is not None:
             progress(f"{failure[:100]}...; searching footsteps again without boom {move[1]} "
@@ -265,15 +269,37 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         fp = retry
         for stage in ("seed_body", "scp_body", "seed_reach", "scp_reach"):
             timing.pop(stage, None)  # the plan's stages are those of the footsteps it keeps
-        motions, failure = phase_motions(scn, fp, cfg, timing, progress)
-    if failure:
+        failure, done, built = _fly(scn, fp, cfg, timing, planner, progress)
+    if failure or built is None:
         timing["total"] = time.perf_counter() - t_start
         reason = f"motion planning failed: {failure}" + retries_made(
             excluded, last_search, cfg.motion_retries)
         return build_plan(scn, fp, planner, timing).failed(reason)
     timing["total"] = time.perf_counter() - t_start
-    return build_motion_plan(scn, fp, motions, planner, timing, cfg.dt,
-                             step_limits(cfg.seed.step, cfg.seed.turn_step))
+    return built.replace(timing=built.timing | timing)
+
+
+def _fly(scn: Scenario, fp: FootstepPlan, cfg: PipelineConfig, timing: dict[str, float],
+         planner: str, progress: Progress | None
+         ) -> tuple[str, int, Plan | None]:
+    """Why the motions of a route (`phase_motions`) failed ('' when they did not), how many
+    phases came before the failure, and the plan they make (None when they failed).
+    Motions that succeed are built into the plan's phases (eased, ramps added) and their
+    smooth paths tested as `rbp check` does: a phase whose path fails (a kept seed whose path
+    rounds a corner across a limit, which no easing helps: crevasse-78) fails as a motion
+    does, and the route is searched again."""
+    motions, failure = phase_motions(scn, fp, cfg, timing, progress)
+    if failure:
+        return failure, len(motions), None
+    built = build_motion_plan(scn, fp, motions, planner, dict(timing), cfg.dt,
+                              step_limits(cfg.seed.step, cfg.seed.turn_step))
+    found: list[tuple[int, str]] = []
+    smooth_path_problems(built, scn, lambda k: scn.stance(tuple(built.phases[k].stance)),
+                         lambda k, n, text: found.append((k, text)))
+    if not found:
+        return "", len(motions), built
+    k, text = min(found)
+    return f"{built.phases[k].kind} phase {k}: {text[:160]}", k, None
 
 
 def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None = None,

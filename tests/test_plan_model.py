@@ -4,8 +4,11 @@
 `reachbot-plan/1`, the robot stored twice): `rbp plan CAVE -o CAVE.json` for demo-shaft,
 demo-crevasse, shaft-1 and rockfall-3, and `systems.rig.rig_plan` on the rig's scenario
 (rig.json; `rbp plan rig` failed on that commit). Each must read through the model and write
-back to the same content, and planning demo-shaft again must give its plan again (in today's
-format, the robot stored once).
+back to the same content. `demo-shaft-current.json` is what `rbp plan demo-shaft` makes today,
+in today's format (the robot stored once): planning demo-shaft again must give it again. It is
+made anew only when the planner's plans change on purpose (session 18: the planner tests the
+smooth path `rbp simulate` follows between steps, issue 28), with
+`rbp plan demo-shaft -o tests/data/golden/demo-shaft-current.json --no-pictures`.
 """
 
 from __future__ import annotations
@@ -95,13 +98,17 @@ def test_golden_plan_in_todays_format_stores_the_robot_once(cave: str, tmp_path:
 
 @pytest.mark.parametrize("cave", CAVES)
 def test_golden_plan_verifies_in_either_format(cave: str) -> None:
-    """rbp check's verifier, which reads the typed model, passes the golden plans as they are
-    (format 1, two robots) and upgraded (format 2, one robot)."""
+    """rbp check's verifier, which reads the typed model, finds the same in the golden plans
+    as they are (format 1, two robots) and upgraded (format 2, one robot): every rule holds
+    but, in plans made before the planner tested the smooth path between steps, rule
+    `between` on that path (their SCP steps ride a shoulder limit the path crosses)."""
     from planning.check import verify_plan
 
     plan = read_plan(GOLDEN / f"{cave}.json")
-    assert [str(p) for p in verify_plan(plan)] == []
-    assert [str(p) for p in verify_plan(plan.upgraded().to_dict())] == []
+    problems = [str(p) for p in verify_plan(plan)]
+    assert problems == [str(p) for p in verify_plan(plan.upgraded().to_dict())]
+    other = [p for p in problems if ": between: " not in p or "smooth path" not in p]
+    assert other == [], other
 
 
 def test_an_unknown_field_is_refused(tmp_path: Path) -> None:
@@ -132,13 +139,13 @@ RESULT_NEUTRAL = {"footstep.search_memory_mb", "footstep.ordering"}
 
 
 def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None:
-    """`rbp plan demo-shaft` today makes the golden plan again (to floating-point noise), in
+    """`rbp plan demo-shaft` today makes its golden plan again (to floating-point noise), in
     today's format; slow (a whole plan)."""
     from rbp import cli
 
     out = tmp_path / "demo-shaft.json"
     assert cli.main(["plan", "demo-shaft", "-o", str(out), "--no-pictures", "--quiet"]) == 0
-    new, golden = read_plan(out), read_plan(GOLDEN / "demo-shaft.json")
+    new, golden = read_plan(out), read_plan(GOLDEN / "demo-shaft-current.json")
     assert new.format == FORMAT and new.scenario_robot is None
     added = _added_settings(new.provenance.config, golden.provenance.config)
     # footstep.search_memory_mb caps the search's memo; what it drops is rebuilt with the same

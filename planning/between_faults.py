@@ -1,6 +1,8 @@
-"""Fault class `between-cut`: intermediate steps of a phase removed, so that the straight motion
-between the steps that remain leaves feasibility (cuts through rock, sweeps a boom across
-rock, passes a pose no tensions hold or a grasp below p_min) while every remaining step holds.
+"""Fault classes of the motion between steps. `between-cut`: intermediate steps of a phase
+removed, so that the straight motion between the steps that remain leaves feasibility (cuts
+through rock, sweeps a boom across rock, passes a pose no tensions hold or a grasp below
+p_min) while every remaining step holds. `between-smooth` (`between_excursion`): the
+straight motion holds too, but the smooth path `rbp simulate` follows does not.
 
 The damaged plan becomes a continuation (`start`, set to the scenario's own start: the same
 climb) and the phase holds its end configurations and ramps only, without its trajectory
@@ -93,4 +95,111 @@ def between_cut(plan: PlanFile, rng: np.random.Generator
                 return out, k, n, (f"phases[{k}]: steps {a + 1} to {b - 1} removed but "
                                 f"{[int(i) for i in kept]}; the straight motion from step "
                                 f"{remain[m]} to step {remain[m + 1]} leaves feasibility")
+    return None
+
+
+def _first_failing(world, stance, poses: np.ndarray, tips: np.ndarray | None,
+                   interval: np.ndarray, parts: np.ndarray) -> tuple[int, bool] | None:
+    """The first interval in which configurations (`poses`, `tips`, FINE per interval, each
+    with its `interval`) fail, and whether they fail over a stretch longer than 1/parts of
+    it (so that one of the rule's samples must land in it); None when none fails."""
+    bad = ~check_poses(world, stance, poses, tips).feasible
+    if not bad.any():
+        return None
+    n = int(interval[np.argmax(bad)])
+    run = bad[interval == n]
+    edges = np.diff(np.concatenate([[0], run.astype(int), [0]]))
+    runs = np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)
+    return n, bool((runs.max() + 1) / FINE > 1.0 / parts[n] + 1.0 / FINE)
+
+
+def between_excursion(plan: PlanFile, rng: np.random.Generator
+                      ) -> tuple[PlanFile, int, int, str] | None:
+    """Fault class `between-smooth`: two intermediate motion steps of a phase replaced by an
+    excursion of the body's angle to the edge of feasibility (found by bisection: the step
+    holds, P at p_min or a limit reached) and part of the way back. Every step holds, and so
+    does the straight motion between them (checked FINE times per interval), but the smooth
+    path `rbp simulate` follows through the steps (`smooth_motion`) overshoots the edge. The
+    damaged plan is a continuation whose phase has lost its trajectory record, as in
+    `between_cut`. A candidate is kept only if the smooth path fails over a stretch longer
+    than the rule's sample spacing in its first failing interval. The damaged copy (summary
+    not yet rescored), the phase, the step that starts that interval, and the fault in
+    words; None when no tried excursion qualifies."""
+    from planning.plan_model import Step
+    from planning.plan_steps import allocation_step
+    from planning.smooth_motion import phase_path, spline_parts
+
+    if not plan["success"] or not plan["phases"] or "time_step" not in plan:
+        return None
+    scn = plan_scenario(Plan.from_dict(plan))
+    world = verification_world(scn)
+    spans = {k: _motion_span(p["steps"]) for k, p in enumerate(plan["phases"])}
+    choices = [k for k, (a, b) in spans.items() if b - a >= 6]
+    if not choices:
+        return None
+    w = np.arange(1, FINE) / FINE
+    for _ in range(TRIES):
+        k = int(rng.choice(choices))
+        a, b = spans[k]
+        phase = plan["phases"][k]
+        n = int(rng.integers(a + 1, b - 3))  # steps n + 1 and n + 2 replaced
+        stance = scn.stance(tuple(phase["stance"]))
+        reach = phase["kind"] == "reach"
+        base = np.array(phase["steps"][n]["pose"], dtype=float)
+        sign = float(rng.choice([-1.0, 1.0]))
+        back = float(rng.uniform(0.2, 0.6))
+
+        def holds(turn: float, base=base, n=n, phase=phase, stance=stance, reach=reach) -> bool:
+            tip = (np.array(phase["steps"][n + 1]["free_tip"], dtype=float)[None]
+                   if reach else None)
+            return bool(check_poses(scn, stance, (base + np.array([0.0, 0.0, turn]))[None],
+                                    tip).feasible[0])
+
+        lo, hi = 0.0, sign * 0.5
+        if holds(hi) or not holds(lo):
+            continue
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+        out = copy.deepcopy(plan)
+        out.setdefault("start", copy.deepcopy(plan["scenario"]["start"]))
+        damaged = out["phases"][k]
+        damaged.pop("motion", None)
+        for m, share in ((n + 1, 1.0), (n + 2, back)):
+            old = damaged["steps"][m]
+            pose = base + np.array([0.0, 0.0, share * lo])
+            tip = np.array(old["free_tip"], dtype=float) if reach else None
+            check = check_poses(scn, stance, pose[None], None if tip is None else tip[None],
+                                full=True)
+            if not check.feasible[0]:
+                break
+            damaged["steps"][m] = allocation_step(stance, check.allocation, 0, old["t"], pose,
+                                                  tip).to_dict()
+        else:
+            steps = [Step.from_dict(s) for s in damaged["steps"][a:b + 1]]
+            times = np.array([s.t for s in steps], dtype=float)
+            poses = np.array([s.pose for s in steps], dtype=float)
+            tips = np.array([s.free_tip for s in steps], dtype=float) if reach else None
+            interval = np.repeat(np.arange(len(steps) - 1), FINE - 1)
+            frac = np.tile(w, len(steps) - 1)
+            straight = poses[interval] + frac[:, None] * (poses[interval + 1] - poses[interval])
+            straight_tips = (None if tips is None else
+                             tips[interval] + frac[:, None] * (tips[interval + 1]
+                                                                - tips[interval]))
+            if _first_failing(world, stance, straight, straight_tips, interval,
+                              np.ones(len(steps), dtype=int)) is not None:
+                continue
+            path = phase_path(times, poses, tips)
+            knots = path.knots
+            t = knots[interval] + frac * (knots[interval + 1] - knots[interval])
+            smooth_tips = None if path.tip is None else path.tip.vector_values(t).T
+            first = _first_failing(world, stance, path.pose.vector_values(t).T, smooth_tips,
+                                   interval, spline_parts(scn.robot, path))
+            if first is None or not first[1]:
+                continue
+            step = a + first[0]
+            return out, k, step, (
+                f"phases[{k}]: steps {n + 1} and {n + 2} replaced by a turn of "
+                f"{np.degrees(lo):+.2f} deg to the edge of feasibility and {back:.2f} of the way "
+                f"back; the smooth path from step {step} to step {step + 1} overshoots it")
     return None

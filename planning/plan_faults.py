@@ -388,6 +388,18 @@ def between_cut(plan: PlanFile, rng: Rng) -> Fault | None:
     return Fault("between-cut", out, frozenset({"between"}), k, what, step=n)
 
 
+def between_smooth(plan: PlanFile, rng: Rng) -> Fault | None:
+    """Two steps replaced by an excursion to the edge of feasibility and part of the way back:
+    every step and the straight motion between them hold, the smooth path through them does
+    not (`planning.between_faults.between_excursion`)."""
+    bent = between_faults.between_excursion(plan, rng)
+    if bent is None:
+        return None
+    out, k, n, what = bent
+    rescore(out)
+    return Fault("between-smooth", out, frozenset({"between"}), k, what, step=n)
+
+
 FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "step-removed": step_removed,
     "step-duplicated": step_duplicated,
@@ -407,6 +419,7 @@ FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {
     "ramp-removed": ramp_removed,
     "release-loaded": release_loaded,
     "between-cut": between_cut,
+    "between-smooth": between_smooth,
 }
 
 

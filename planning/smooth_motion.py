@@ -29,6 +29,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from planning.plan_model import Plan, Step
 from planning.verify_between import (
     MAX_PARTS,
+    MAX_PHASE_SAMPLES,
     ROTATION,
     TRANSLATION,
     TRAVEL,
@@ -308,11 +309,16 @@ def spline_parts(robot: RobotParams, path: SmoothPath) -> np.ndarray:
 def path_samples(robot: RobotParams, path: SmoothPath) -> tuple[Samples, int]:
     """The path's samples strictly inside its knots' intervals, each cut into `spline_parts`
     (intervals numbered by the phase's steps, from `path.first_step`), and how many intervals
-    are too long to sample (over MAX_PARTS parts: left out)."""
+    are too long to sample (over MAX_PARTS parts: left out; all of them when the phase needs
+    over MAX_PHASE_SAMPLES samples)."""
     knots = path.knots
     parts = spline_parts(robot, path)
     too_long = int(np.count_nonzero(parts > MAX_PARTS))
     parts = np.where(parts > MAX_PARTS, 1, parts)
+    if np.sum(parts - 1) > MAX_PHASE_SAMPLES:  # a hostile file: every interval left out
+        empty = np.zeros(0)
+        return Samples(empty, np.zeros((0, 3)), None if path.tip is None else np.zeros((0, 2)),
+                       np.zeros(0, dtype=int), empty), len(parts)
     interval = np.repeat(np.arange(len(parts)), parts - 1)
     first = np.concatenate([[0], np.cumsum(parts - 1)])[interval]
     fraction = (np.arange(len(interval)) - first + 1) / parts[interval]
@@ -365,7 +371,8 @@ def smooth_path_problems(plan: Plan, world: World, stance_of, fail) -> int:
         s, too_long = path_samples(world.robot, path)
         if too_long:
             fail(k, path.first_step, f"{too_long} interval(s) of rbp simulate's smooth path too "
-                 f"long to verify (over {MAX_PARTS} samples at the resolution)")
+                 f"long to verify (over {MAX_PARTS} samples an interval, or "
+                 f"{MAX_PHASE_SAMPLES} a phase, at the resolution)")
         checked += len(s.t)
         for n, text in failing_intervals(vworld, stance_of(k), plan.phases[k], s,
                                          " on rbp simulate's smooth path"):

@@ -49,6 +49,10 @@ TENSION_SLACK = 0.25
 # without bound. Samples are checked in chunks of CHUNK to bound memory.
 MAX_PARTS = 10_000
 CHUNK = 20_000
+# A phase needing more samples than this in all (5 km of travel) is reported, not sampled: a
+# hostile file of many long intervals, each under MAX_PARTS, must not allocate without bound
+# either (400,000 steps 40 m apart fit in a 64 MiB file).
+MAX_PHASE_SAMPLES = 1_000_000
 
 
 def step_motion(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
@@ -211,9 +215,14 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
             continue
         stance = scn.stance(tuple(phase.stance))
-        for long in np.flatnonzero(subdivisions(robot, *_arrays(phase)[1:]) > MAX_PARTS):
+        parts = subdivisions(robot, *_arrays(phase)[1:])
+        for long in np.flatnonzero(parts > MAX_PARTS):
             fail(k, int(long), f"between steps {long} and {long + 1}: the motion is too long to "
                  f"verify (over {MAX_PARTS} samples at the resolution)")
+        if np.sum(np.where(parts > MAX_PARTS, 0, parts - 1)) > MAX_PHASE_SAMPLES:
+            fail(k, 0, f"the phase's motion is too long to verify (over {MAX_PHASE_SAMPLES} "
+                 f"samples at the resolution)")
+            continue
         s = phase_samples(robot, phase)
         checked += len(s.t)
         for n, text in failing_intervals(world, stance, phase, s):

@@ -195,6 +195,19 @@ def test_an_interval_too_long_to_sample_is_reported_not_sampled(shaft) -> None:
     assert [(k, n) for k, n, _ in found] == [(0, 0)] and "too long" in found[0][2], found
 
 
+def test_a_phase_of_many_long_intervals_is_reported_not_sampled(shaft) -> None:
+    """A hostile file's 150 steps 40 m apart, each interval under the per-interval cap but
+    1.2 million samples in all: the phase is reported once, and nothing is sampled."""
+    from planning.verify_between import MAX_PHASE_SAMPLES
+
+    found: list[tuple[int, int, str]] = []
+    phase = _body_phase([[40.0 * n, 1.0, 0.0] for n in range(151)], list(shaft.start_stance))
+    checked = between_problems((phase,), shaft, set(), lambda k, n, t: found.append((k, n, t)))
+    assert checked == 0, checked
+    assert len(found) == 1 and found[0][:2] == (0, 0), found
+    assert f"over {MAX_PHASE_SAMPLES} samples" in found[0][2], found
+
+
 def test_a_footstep_plan_says_its_motion_between_steps_is_not_verified(tmp_path: Path,
                                                                        capsys) -> None:
     """A footstep plan (no time_step) states end configurations only: rule `between` does not

@@ -117,3 +117,12 @@ def test_a_plan_whose_smooth_path_leaves_feasibility_is_refused(
     assert main(["simulate", "--trials", "0", str(path)]) == 1
     err = capsys.readouterr().err
     assert "smooth path" in err and "refused" in err, err
+
+
+def test_a_smooth_path_too_long_in_all_is_left_out_not_sampled(robot) -> None:
+    """150 knots 40 m apart (a hostile file): each interval is under the per-interval cap but
+    the phase needs over MAX_PHASE_SAMPLES samples: none is made, every interval reported."""
+    times = np.arange(152, dtype=float)
+    poses = np.array([[40.0 * min(n, 150), 1.0, 0.0] for n in range(152)])  # the dwell last
+    s, too_long = path_samples(robot, phase_path(times, poses, None))
+    assert len(s.t) == 0 and too_long == 151, (len(s.t), too_long)

@@ -17,6 +17,7 @@ import numpy as np
 from planning.smooth_motion import smooth_problem
 from planning.verify_between import (
     MAX_PARTS,
+    first_failure,
     samples,
     subdivisions,
     verification_world,
@@ -101,11 +102,4 @@ def dense_problem(world: World, stance: Stance, poses: np.ndarray,
     if np.any(subdivisions(world.robot, poses, tips) > MAX_PARTS):
         return "between steps: an interval too long to sample"
     s = samples(world.robot, np.arange(len(poses), dtype=float), poses, tips)
-    if not len(s.t):
-        return ""
-    check = check_poses(verification_world(world), stance, s.poses, s.tips)
-    if check.feasible.all():
-        return ""
-    k = int(np.argmin(check.feasible))
-    n = int(s.interval[k])
-    return f"between steps {n} and {n + 1} (dense): {Reason(int(check.reason[k])).name}"
+    return first_failure(verification_world(world), stance, s, "dense")

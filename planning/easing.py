@@ -28,6 +28,7 @@ from planning.plan_model import Phase, Plan
 from planning.plan_steps import steps_with_tensions
 from planning.ramps import CONTROL_TENSION_FLOOR
 from planning.smooth_motion import smooth_problem
+from planning.verify_between import phase_arrays
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
@@ -189,11 +190,7 @@ def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np
 def _verifier_fails(scn: Scenario, phase: Phase) -> bool:
     """Whether the motion between a phase's steps fails rule `between` of `rbp check`: the
     straight motion or the smooth path at the rule's resolution, with its tolerance."""
-    steps = phase.steps
-    poses = np.array([st.pose for st in steps], dtype=float)
-    tips = (np.array([st.free_tip for st in steps], dtype=float)
-            if phase.kind == "reach" else None)
-    times = np.array([st.t for st in steps], dtype=float)
+    times, poses, tips = phase_arrays(phase)
     stance = scn.stance(tuple(phase.stance))
     return bool(dense_problem(scn, stance, poses, tips)
                 or smooth_problem(scn, stance, poses, tips, times, dwell=False))
@@ -202,13 +199,10 @@ def _verifier_fails(scn: Scenario, phase: Phase) -> bool:
 def _between_fails(scn: Scenario, phase: Phase) -> bool:
     """Whether the motion between a phase's steps (at their times, its dwell included) fails
     `between_steps`."""
-    steps = phase.steps
-    poses = np.array([st.pose for st in steps], dtype=float)
-    tips = (np.array([st.free_tip for st in steps], dtype=float)
-            if phase.kind == "reach" else None)
+    times, poses, tips = phase_arrays(phase)
     with np.errstate(divide="ignore"):
-        lp = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp] for st in steps]))
-    times = np.array([st.t for st in steps], dtype=float)
+        lp = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp]
+                              for st in phase.steps]))
     return bool(between_steps(scn, scn.stance(tuple(phase.stance)), poses, lp, tips, times,
                               dwell=False))
 

@@ -380,24 +380,24 @@ def release_loaded(plan: PlanFile, rng: Rng) -> Fault | None:
 def between_cut(plan: PlanFile, rng: Rng) -> Fault | None:
     """One step replaced by another valid configuration so that the motion to or from it
     leaves feasibility while every step holds (`planning.between_faults`)."""
-    cut = between_faults.between_cut(plan, rng)
-    if cut is None:
-        return None
-    out, k, n, what = cut
-    rescore(out)
-    return Fault("between-cut", out, frozenset({"between"}), k, what, step=n)
+    return _between_fault("between-cut", between_faults.between_cut(plan, rng))
 
 
 def between_smooth(plan: PlanFile, rng: Rng) -> Fault | None:
     """Two steps replaced by an excursion to the edge of feasibility and part of the way back:
     every step and the straight motion between them hold, the smooth path through them does
     not (`planning.between_faults.between_excursion`)."""
-    bent = between_faults.between_excursion(plan, rng)
-    if bent is None:
+    return _between_fault("between-smooth", between_faults.between_excursion(plan, rng))
+
+
+def _between_fault(kind: str, made: tuple[PlanFile, int, int, str] | None) -> Fault | None:
+    """A `planning.between_faults` damage (plan, phase, step, words) as a Fault of rule
+    between, its summary rescored; None when none was made."""
+    if made is None:
         return None
-    out, k, n, what = bent
+    out, k, n, what = made
     rescore(out)
-    return Fault("between-smooth", out, frozenset({"between"}), k, what, step=n)
+    return Fault(kind, out, frozenset({"between"}), k, what, step=n)
 
 
 FAULTS: dict[str, Callable[[PlanFile, Rng], Fault | None]] = {

@@ -30,14 +30,13 @@ from planning.plan_model import Plan, Step
 from planning.verify_between import (
     MAX_PARTS,
     MAX_PHASE_SAMPLES,
-    ROTATION,
-    TRANSLATION,
-    TRAVEL,
     Samples,
     failing_intervals,
+    first_failure,
+    parts_for,
     verification_world,
 )
-from rb_drake.feasibility import Reason, World, check_poses
+from rb_drake.feasibility import World
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
 
@@ -114,8 +113,7 @@ def continuous_acceleration_rates(times: np.ndarray, values: np.ndarray) -> np.n
             continue
         spline = PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
             times[i:j + 1], values[i:j + 1].T, zero, zero).derivative(1)
-        for n in range(i + 1, j):
-            rates[n] = spline.value(times[n]).ravel()
+        rates[i + 1:j] = spline.vector_values(times[i + 1:j]).T
     return rates
 
 
@@ -291,19 +289,12 @@ def spline_parts(robot: RobotParams, path: SmoothPath) -> np.ndarray:
     q, v = path.pose.vector_values(knots).T, path.velocity.vector_values(knots).T
     body = _largest_rate(q[:-1], q[1:], v[:-1], v[1:], T)
     move = np.hypot(body[:, 0], body[:, 1])
-    turn = body[:, 2]
     tip = np.zeros_like(move)
     if path.tip is not None and path.tip_rate is not None:
         g, w = path.tip.vector_values(knots).T, path.tip_rate.vector_values(knots).T
         gripper = _largest_rate(g[:-1], g[1:], w[:-1], w[1:], T)
         tip = np.hypot(gripper[:, 0], gripper[:, 1])
-    radius = float(np.linalg.norm(robot.shoulder_array, axis=1).max())
-    travel = move + radius * turn + tip
-    with np.errstate(all="ignore"):
-        need = np.maximum.reduce([move / TRANSLATION, turn / ROTATION, tip / TRAVEL,
-                                  travel / TRAVEL])
-    need = np.where(np.isfinite(need), need, np.inf)
-    return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
+    return parts_for(robot, move, body[:, 2], tip)
 
 
 def path_samples(robot: RobotParams, path: SmoothPath) -> tuple[Samples, int]:
@@ -351,14 +342,7 @@ def smooth_problem(world: World, stance: Stance, poses: np.ndarray,
     s, too_long = path_samples(world.robot, phase_path(times, poses, tips))
     if too_long:
         return "between steps: an interval of the smooth path too long to sample"
-    if not len(s.t):
-        return ""
-    check = check_poses(verification_world(world), stance, s.poses, s.tips)
-    if check.feasible.all():
-        return ""
-    k = int(np.argmin(check.feasible))
-    n = int(s.interval[k])
-    return f"between steps {n} and {n + 1} (smooth path): {Reason(int(check.reason[k])).name}"
+    return first_failure(verification_world(world), stance, s, "smooth path")
 
 
 def smooth_path_problems(plan: Plan, world: World, stance_of, fail) -> int:

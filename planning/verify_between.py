@@ -95,9 +95,17 @@ def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None)
     shoulder's radius times the rotation) plus its gripper's (the free tip's travel)."""
     d = np.diff(poses, axis=0)
     move = np.hypot(d[:, 0], d[:, 1])
-    turn = np.abs(d[:, 2])
     tip = (np.zeros_like(move) if tips is None
            else np.linalg.norm(np.diff(tips, axis=0), axis=1))
+    return parts_for(robot, move, np.abs(d[:, 2]), tip)
+
+
+def parts_for(robot: RobotParams, move: np.ndarray, turn: np.ndarray,
+              tip: np.ndarray) -> np.ndarray:
+    """Per interval, how many equal parts keep successive samples within the resolution, from
+    bounds on the interval's body translation `move`, rotation `turn` and gripper travel
+    `tip`: a boom's length changes at most by its shoulder's travel (translation plus the
+    shoulder's radius times the rotation) plus its gripper's. Capped at MAX_PARTS + 1."""
     radius = float(np.linalg.norm(robot.shoulder_array, axis=1).max())
     travel = move + radius * turn + tip
     with np.errstate(all="ignore"):
@@ -105,6 +113,19 @@ def subdivisions(robot: RobotParams, poses: np.ndarray, tips: np.ndarray | None)
                                   travel / TRAVEL])
     need = np.where(np.isfinite(need), need, np.inf)
     return np.clip(np.ceil(need - 1e-12), 1, MAX_PARTS + 1).astype(int)
+
+
+def first_failure(world: _World | World, stance: Stance, s: Samples, label: str) -> str:
+    """'' when every sample of `s` passes `check_poses` in `world`, else where the first fails
+    and why, in the planner's words: "between steps N and N+1 (label): REASON"."""
+    if not len(s.t):
+        return ""
+    check = check_poses(world, stance, s.poses, s.tips)
+    if check.feasible.all():
+        return ""
+    k = int(np.argmin(check.feasible))
+    n = int(s.interval[k])
+    return f"between steps {n} and {n + 1} ({label}): {Reason(int(check.reason[k])).name}"
 
 
 def smooth_departure(times: np.ndarray, poses: np.ndarray, rates: np.ndarray,
@@ -171,7 +192,7 @@ def samples(robot: RobotParams, times: np.ndarray, poses: np.ndarray,
     return Samples(t, out_poses, out_tips, interval)
 
 
-def _arrays(phase: Phase) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def phase_arrays(phase: Phase) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """A phase's step times, poses and (in a reach phase) free gripper positions."""
     times = np.array([s.t for s in phase.steps], dtype=float)
     poses = np.array([s.pose for s in phase.steps], dtype=float)
@@ -182,7 +203,7 @@ def _arrays(phase: Phase) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
 
 def phase_samples(robot: RobotParams, phase: Phase) -> Samples:
     """`samples` of a phase's steps."""
-    return samples(robot, *_arrays(phase))
+    return samples(robot, *phase_arrays(phase))
 
 
 class _World(NamedTuple):
@@ -215,7 +236,7 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
         if k in skip or len(phase.steps) < 2 or not _well_formed(phase):
             continue
         stance = scn.stance(tuple(phase.stance))
-        parts = subdivisions(robot, *_arrays(phase)[1:])
+        parts = subdivisions(robot, *phase_arrays(phase)[1:])
         for long in np.flatnonzero(parts > MAX_PARTS):
             fail(k, int(long), f"between steps {long} and {long + 1}: the motion is too long to "
                  f"verify (over {MAX_PARTS} samples at the resolution)")
@@ -276,5 +297,5 @@ def _well_formed(phase: Phase) -> bool:
     if phase.kind == "reach" and any(s.free_tip is None for s in phase.steps):
         return False
     poses = np.array([s.pose for s in phase.steps], dtype=float)
-    tips = _arrays(phase)[2]
+    tips = phase_arrays(phase)[2]
     return bool(np.all(np.isfinite(poses)) and (tips is None or np.all(np.isfinite(tips))))

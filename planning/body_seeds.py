@@ -181,7 +181,10 @@ def _ompl_waypoints(scn: Scenario, stance: Stance, start: np.ndarray, goal: np.n
 
 def _rrt_connect(scn: Scenario, stance: Stance, start: np.ndarray, goal: np.ndarray,
                  cfg: SeedConfig) -> tuple[np.ndarray | None, str]:
+    checked = [0]  # poses given the full check: RRTConnect's budget, the same on any machine
+
     def feasible(poses: np.ndarray) -> np.ndarray:
+        checked[0] += len(poses)
         return check_poses(scn, stance, poses).feasible
 
     reach = _ReachFilter(scn, stance)
@@ -213,9 +216,16 @@ def _rrt_connect(scn: Scenario, stance: Stance, start: np.ndarray, goal: np.ndar
         st.setYaw(float(pose[2]))
         states.append(st)
     ss.setStartAndGoalStates(*states)
-    status = ss.solve(cfg.ompl_time)
+    # Stopped on the work done, not on the clock, so that a seed gives the same path on a busy
+    # machine as on an idle one (same seed, same plan); `ompl_time` only as a safety net.
+    done = ob.PlannerTerminationCondition(lambda: checked[0] >= cfg.ompl_checks)
+    if cfg.ompl_time is not None:
+        done = ob.plannerOrTerminationCondition(
+            done, ob.timedPlannerTerminationCondition(cfg.ompl_time))
+    status = ss.solve(done)
     if not (bool(status) and ss.haveExactSolutionPath()):
-        return None, f"OMPL RRTConnect found no path in {cfg.ompl_time} s"
+        return None, (f"OMPL RRTConnect found no path within {cfg.ompl_checks} checked poses"
+                      + ("" if cfg.ompl_time is None else f" or {cfg.ompl_time} s"))
     path = np.array([[s.getX(), s.getY(), s.getYaw()] for s in ss.getSolutionPath().getStates()])
     path[:, 2] = start[2] + np.unwrap(path[:, 2] - start[2])
     path[0] = start

@@ -6,10 +6,12 @@ step apart (`subdivide`), and how configurations are checked and a failure descr
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import NamedTuple
 
 import numpy as np
 
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -24,11 +26,22 @@ class SeedConfig:
     local_samples: int = 24     # candidates per round
     local_spread: float = 0.05  # m, first round's std (a detour's first mode); phi's: x turn/step
     local_modes: int = 3        # half-sine modes of a body detour
-    ompl_time: float = 0.5      # s, RRTConnect's budget
+    ompl_checks: int = 1000     # RRTConnect's budget: poses given the full check (about 0.5 s)
+    ompl_time: float | None = None  # s, a wall-clock cap besides (None: none; a run stopped by
+    # it depends on the machine's speed and load, so the same seed may give another plan)
     ompl_range: float = 0.3     # RRTConnect's extension length (SE(2) distance)
     ompl_margin: float = 0.5    # m, the SE(2) bounds: start and goal's box grown by this
     arc_heights: tuple[float, ...] = (0.1, 0.2, 0.35, 0.5)  # tip arc heights / chord, tried
     arc_min_height: float = 0.05  # m
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ompl_checks, bool) or not isinstance(self.ompl_checks, int) or \
+                self.ompl_checks < 1:
+            raise RbpInputError(f"must be a whole number of at least 1, got {self.ompl_checks!r}",
+                                field="seed.ompl_checks")
+        if self.ompl_time is not None and not 0.0 < self.ompl_time < math.inf:
+            raise RbpInputError(f"must be a positive number of seconds (or null: none), got "
+                                f"{self.ompl_time!r}", field="seed.ompl_time")
 
 
 class Seed(NamedTuple):

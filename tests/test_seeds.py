@@ -33,13 +33,14 @@ from planning.seeds import (
 from planning.transition import find_transition
 from rb_drake import geometry
 from rb_drake.collision import Rock
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility import Reason, check_poses
 from rb_drake.scenario import Scenario, load_scenario, scenario_from_dict
 
 STEP_TOL = 1e-9       # m or rad over the step bounds
 PROB_RTOL = 1e-9
 CFG = SeedConfig()
-OMPL_ONLY = SeedConfig(local_rounds=0, ompl_time=2.0)  # RRTConnect stops once solved (~0.1 s)
+OMPL_ONLY = SeedConfig(local_rounds=0)  # RRTConnect stops once solved (~0.1 s)
 # Both poses feasible in the shaft's start stance; the straight line between them is not.
 BLOCKED_PAIR = (np.array([0.774, 1.182, 0.272]), np.array([0.206, 1.134, 0.106]))
 POST = [[-0.05, 0.95], [0.05, 0.95], [0.05, 1.05], [-0.05, 1.05]]
@@ -167,6 +168,33 @@ def test_body_seed_deterministic(shaft: Scenario, blocked_local: Seed,
                                         seed=3))
 
 
+def test_ompl_seed_does_not_depend_on_the_machines_speed(shaft: Scenario, blocked_ompl: Seed,
+                                                         monkeypatch) -> None:
+    """RRTConnect stops on the poses it checked, not on the clock: with every check 50 ms
+    slower (a loaded machine; the 0.5 s it had before ended its search after 10 checks, with
+    no path) the same seed gives the same path."""
+    import time
+
+    import planning.body_seeds as body_seeds
+
+    def slow_check(*args, **kwargs):
+        time.sleep(0.05)
+        return check_poses(*args, **kwargs)
+
+    monkeypatch.setattr(body_seeds, "check_poses", slow_check)
+    slowed = body_seed(shaft, shaft.start_stance, *BLOCKED_PAIR, OMPL_ONLY, seed=3)
+    assert slowed.method == "ompl", (slowed.method, slowed.reason)
+    assert_same(blocked_ompl, slowed)
+
+
+def test_ompl_seed_budget_is_checked() -> None:
+    for bad in (0, -5, 2.5, True):
+        with pytest.raises(RbpInputError, match="seed.ompl_checks"):
+            SeedConfig(ompl_checks=bad)
+    with pytest.raises(RbpInputError, match="seed.ompl_time"):
+        SeedConfig(ompl_time=0.0)
+
+
 def test_rock_between_poses_fails_with_reason(make_scenario) -> None:
     scn = make_scenario(extra_walls=[POST])
     ids = scn.start_stance
@@ -176,7 +204,7 @@ def test_rock_between_poses_fails_with_reason(make_scenario) -> None:
     check = check_poses(scn, stance, line)
     assert check.feasible[[0, -1]].all(), "precondition: both poses feasible next to the post"
     assert Reason.BODY_COLLISION in check.reason, "precondition: the body hits the post"
-    seed = body_seed(scn, ids, start, goal, SeedConfig(ompl_time=0.2))
+    seed = body_seed(scn, ids, start, goal, SeedConfig(ompl_checks=300))
     assert not seed.success and seed.method == "", f"a path around the post: {seed.method}"
     assert seed.poses.shape == (0, 3) and seed.log_probs.shape == (0,), seed
     for words in ("straight line infeasible", "collides with rock", "local samples", "OMPL"):

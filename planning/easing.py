@@ -19,6 +19,7 @@ each end adds EASE_STEPS / 2 time steps.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -27,16 +28,17 @@ from planning.between import BETWEEN_DIP, between_steps, dense_problem
 from planning.plan_model import Phase, Plan
 from planning.plan_steps import steps_with_tensions
 from planning.ramps import CONTROL_TENSION_FLOOR
-from planning.smooth_motion import smooth_problem
+from planning.smooth_motion import phase_path, smooth_problem
 from planning.verify_between import phase_arrays
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 from rb_drake.statics import null_vector, statics_problem
 
 EASE_STEPS = 4  # time steps over which a reach's speed grows from (falls to) rest
-SLOW_FACTORS = (1, 2, 3, 4)  # cruise speeds tried, 1 / factor of the planned
+SLOW_FACTORS = (1, 2, 3, 4, 6, 8)  # cruise speeds tried, 1 / factor of the planned
 
 
 def _progress(intervals: int, ease: int, slow: int = 1) -> np.ndarray:
@@ -67,11 +69,14 @@ def _interpolate(values: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def ease_phase(scn: Scenario, phase: Phase, dt: float, t0: float,
-               ease: int = EASE_STEPS, slow: int = 1) -> Phase | None:
+               ease: int = EASE_STEPS, slow: int = 1,
+               floor: np.ndarray | None = None) -> Phase | None:
     """The phase re-timed to start and stop gently, its first step at t0, cruising at 1 /
     `slow` of its planned speed (None when its path is too short to ease or an interpolated
     configuration is infeasible). The phase's last step is its dwell (a repeat of the one
-    before), kept. `motion.inertial_excess` records `inertial_excess` of the result."""
+    before), kept. `motion.inertial_excess` and `motion.inertial_dip` record `inertial_load`
+    of the result, the dip below `floor` (per boom, log P: its holding's smallest planned P,
+    `holding_floors`; NaN or None: no floor) or the phase's own steps', the lesser."""
     path = phase.steps[:-1]  # the dwell is added again below
     intervals = len(path) - 1
     ease = min(ease, 2 * (intervals // 2))
@@ -97,7 +102,15 @@ def ease_phase(scn: Scenario, phase: Phase, dt: float, t0: float,
     tensions[exact] = planned[np.round(s[exact]).astype(int)]
     new = steps_with_tensions(scn, tuple(phase.stance), new_poses, tensions, new_tips, t0, dt)
     new.append(new[-1].replace(t=round(t0 + len(new) * dt, 6)))
-    load = inertial_load(scn, stance, new_poses, tensions, new_tips, dt)
+    times = np.array([st.t for st in new])
+    with np.errstate(divide="ignore"):
+        own = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp] for st in new]))
+    lowest = own.min(axis=0)
+    if floor is not None:
+        lowest = np.fmin(lowest, floor)
+    load = inertial_load(scn, stance, times, np.vstack([new_poses, new_poses[-1:]]),
+                         None if new_tips is None else np.vstack([new_tips, new_tips[-1:]]),
+                         lowest)
     motion = phase.motion
     if motion is not None:  # the seed's record on the same path, for SCP's statistics
         m = len(path)
@@ -118,48 +131,70 @@ def ease_phase(scn: Scenario, phase: Phase, dt: float, t0: float,
 
 
 class Inertial(NamedTuple):
-    """What accelerating a phase's configurations costs, per configuration."""
+    """What accelerating a phase's configurations costs, per sample of its smooth path."""
 
     excess: np.ndarray  # N (summed over booms) by which the tensions leave the bounds
-    dip: np.ndarray     # the largest loss of a grasp's log P to the least tension change
+    dip: np.ndarray     # the largest log P by which a grasp falls below its floor (or, with
+    # no floor, below its static log P there) with the least tension change
 
 
-def inertial_excess(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
-                    tips: np.ndarray | None, dt: float) -> np.ndarray:
+# Where in each interval of the smooth path the inertial load is evaluated: both sides of each
+# knot (a cubic Hermite piece's acceleration jumps there: a body coming to rest while its
+# gripper still swings) and between them.
+INERTIAL_FRACTIONS = (1e-6, 0.25, 0.5, 0.75, 1.0 - 1e-6)
+
+
+def inertial_excess(scn: Scenario, stance: Stance, times: np.ndarray, poses: np.ndarray,
+                    tips: np.ndarray | None) -> np.ndarray:
     """`inertial_load(...).excess`."""
-    return inertial_load(scn, stance, poses, tensions, tips, dt).excess
+    return inertial_load(scn, stance, times, poses, tips).excess
 
 
-def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np.ndarray,
-                  tips: np.ndarray | None, dt: float) -> Inertial:
-    """Per configuration of a phase executed one every dt from rest to rest, by how much (N,
-    summed over booms; 0 where none) the tensions that also accelerate the body, and the free
-    limb, as the configurations' second differences say leave the execution's bounds
-    [CONTROL_TENSION_FLOOR, boom_tension[1]]. The plan's tensions hold each configuration
-    statically; accelerating the body needs the wrench diag(m, m, I) a more, and a free limb
-    (its gripper and the tip half of its boom, m_t, at the tip) m_t a_t more at the tip.
-    In a 3-stance the change is unique; in a 4-stance the best member of the family counts.
-    `dip` is each configuration's largest loss of a grasp's log P to the least tension change
-    (what the tension controller adds to the plan's tensions), against the plan's."""
+def inertial_load(scn: Scenario, stance: Stance, times: np.ndarray, poses: np.ndarray,
+                  tips: np.ndarray | None, floor: np.ndarray | None = None) -> Inertial:
+    """Along the smooth path `rbp simulate` follows through a phase's steps (`times`, `poses`,
+    `tips`, its dwell last: `planning.smooth_motion.phase_path`), at INERTIAL_FRACTIONS of
+    each interval: by how much (N, summed over booms; 0 where none) the tensions that also
+    accelerate the body, and the free limb, as the path's second derivatives say, leave the
+    execution's bounds [CONTROL_TENSION_FLOOR, boom_tension[1]], and `dip`, each sample's
+    largest log P by which a grasp falls below `floor` (per boom; the least planned log P of
+    its holding: what p_path counts of it) with that least tension change (what the tension
+    controller adds to the feed-forward, the most robust tensions there); with no floor, its
+    loss against the static log P there. Accelerating the body needs the
+    wrench diag(m, m, I) a more, and a free limb (its gripper and the tip half of its boom,
+    m_t, at the tip) m_t a_t more at the tip. In a 3-stance the change is unique; in a
+    4-stance the best member of the family counts. Second differences of the steps, used
+    before, saw a tenth of the dip where a body came to rest while its gripper swung on
+    (shaft-8m-s1's reach phase 57: log P 0.0008 estimated, 0.009 simulated). Samples that
+    do not hold statically count 0 here: the test between steps refuses them."""
+    path = phase_path(times, poses, tips)
+    knots = path.knots
+    t = (knots[:-1, None] + np.asarray(INERTIAL_FRACTIONS)[None, :]
+         * np.diff(knots)[:, None]).ravel()
+    q = path.pose.vector_values(t).T
+    acc = path.pose.derivative(2).vector_values(t).T
+    tip = a_t = None
+    if path.tip is not None and stance.free_boom is not None:
+        tip = path.tip.vector_values(t).T
+        a_t = path.tip.derivative(2).vector_values(t).T
+    with np.errstate(all="ignore"):
+        check = check_poses(scn, stance, q, tip)
+    held = check.feasible
     robot = scn.robot
-    P = len(poses)
-    q = np.vstack([poses[:1], poses, poses[-1:]])  # at rest before and after
-    acc = (q[2:] - 2.0 * q[1:-1] + q[:-2]) / (dt * dt)
     m = robot.body_mass
     w, h = robot.body_size
     wrench = np.column_stack([m * acc[:, 0], m * acc[:, 1], m * (w * w + h * h) / 12.0 * acc[:, 2]])
-    if tips is not None and stance.free_boom is not None:
-        t = np.vstack([tips[:1], tips, tips[-1:]])
-        a_t = (t[2:] - 2.0 * t[1:-1] + t[:-2]) / (dt * dt)
-        shoulder = geometry.shoulder_positions(robot, poses)[:, stance.free_boom]
+    if tip is not None and a_t is not None:
+        shoulder = geometry.shoulder_positions(robot, q)[:, stance.free_boom]
         m_t = robot.gripper_mass + 0.5 * robot.boom_linear_density * np.linalg.norm(
-            tips - shoulder, axis=1)
+            tip - shoulder, axis=1)
         push = m_t[:, None] * a_t
         wrench[:, :2] += push
-        wrench[:, 2] += geometry.cross2(tips - poses[:, :2], push)
-    A = statics_problem(robot, scn.gravity_vector, poses, stance, tips).A
+        wrench[:, 2] += geometry.cross2(tip - q[:, :2], push)
+    statics = statics_problem(robot, scn.gravity_vector, q, stance, tip)
+    A = statics.A
     att = stance.attached
-    f = np.where(att, np.nan_to_num(tensions), 0.0)
+    f = np.where(att & held[:, None], np.nan_to_num(check.allocation.tensions), 0.0)
     lo, hi = CONTROL_TENSION_FLOOR, robot.boom_tension[1]
 
     def excess(g: np.ndarray) -> np.ndarray:
@@ -179,12 +214,15 @@ def inertial_load(scn: Scenario, stance: Stance, poses: np.ndarray, tensions: np
             ts = np.concatenate([(lo - g) / n, (hi - g) / n], axis=1)
         ts = np.nan_to_num(ts, nan=0.0, posinf=0.0, neginf=0.0)
         out = np.minimum(out, excess(g[:, None, :] + ts[:, :, None] * n[:, None, :]).min(axis=1))
-    psi = np.nan_to_num(statics_problem(robot, scn.gravity_vector, poses, stance, tips)
-                        .pull_angles)
+    psi = np.nan_to_num(statics.pull_angles)
     with np.errstate(divide="ignore", invalid="ignore"):
-        loss = (stance.log_prob(f, psi) - stance.log_prob(np.where(att, g, 0.0), psi))[:, att]
-    dip = np.nan_to_num(loss.max(axis=1), nan=np.inf) if P else np.zeros(0)
-    return Inertial(np.where(ok, out, np.inf) if P else out, np.where(ok, dip, np.inf))
+        moving = stance.log_prob(np.where(att, g, 0.0), psi)
+        reference = stance.log_prob(f, psi) if floor is None else np.broadcast_to(
+            np.asarray(floor, dtype=float), moving.shape)
+        loss = np.maximum(0.0, reference - moving)[:, att]
+    dip = np.nan_to_num(loss.max(axis=1), nan=np.inf) if len(t) else np.zeros(0)
+    return Inertial(np.where(held, np.where(ok, out, np.inf), 0.0),
+                    np.where(held, np.where(ok, dip, np.inf), 0.0))
 
 
 def _verifier_fails(scn: Scenario, phase: Phase) -> bool:
@@ -218,6 +256,33 @@ def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:
             max(0.0, float(motion.inertial_dip) - BETWEEN_DIP))
 
 
+def holding_floors(plan: Plan) -> np.ndarray:
+    """(phases, 4): at each phase, the log of the least planned P of the holding each boom is
+    in (boom i on one anchor over consecutive phases: `planning.probability`), NaN where free:
+    what p_path counts of that grasp, so what its execution must not fall below."""
+    out = np.full((len(plan.phases), NUM_BOOMS), np.nan)
+    anchor: list[str | None] = [None] * NUM_BOOMS
+    first = [0] * NUM_BOOMS
+    worst = [1.0] * NUM_BOOMS
+
+    def close(i: int, last: int) -> None:
+        if anchor[i] is not None:
+            out[first[i]:last + 1, i] = math.log(worst[i]) if worst[i] > 0 else -math.inf
+
+    for k, phase in enumerate(plan.phases):
+        for i in range(NUM_BOOMS):
+            if phase.stance[i] != anchor[i]:
+                close(i, k - 1)
+                anchor[i], first[i], worst[i] = phase.stance[i], k, 1.0
+            for step in phase.steps:
+                p = step.p_grasp[i]
+                if anchor[i] is not None and p is not None:
+                    worst[i] = min(worst[i], float(p))
+    for i in range(NUM_BOOMS):
+        close(i, len(plan.phases) - 1)
+    return out
+
+
 def ease_motions(plan: Plan, scn: Scenario, ease: int = EASE_STEPS) -> Plan:
     """The plan with every trajectory phase (body and reach) eased (`ease_phase`) where it can
     be, later steps shifted in time. Plans without a time step (end poses only) are left as
@@ -227,7 +292,8 @@ def ease_motions(plan: Plan, scn: Scenario, ease: int = EASE_STEPS) -> Plan:
         return plan
     phases = []
     shift = 0.0
-    for phase in plan.phases:
+    floors = holding_floors(plan)
+    for k, phase in enumerate(plan.phases):
         if shift:
             phase = dataclasses.replace(phase, steps=tuple(
                 step.replace(t=round(float(step.t) + shift, 6)) for step in phase.steps))
@@ -240,7 +306,7 @@ def ease_motions(plan: Plan, scn: Scenario, ease: int = EASE_STEPS) -> Plan:
         for slow in SLOW_FACTORS:  # slower where the motion between steps or its inertia fails
             candidate = None
             for e in range(ease, 0, -2):  # gentler where an interpolated configuration fails
-                candidate = ease_phase(scn, phase, dt, t0, e, slow)
+                candidate = ease_phase(scn, phase, dt, t0, e, slow, floors[k])
                 if candidate is not None:
                     break
             if candidate is None:

@@ -155,8 +155,12 @@ class Motion(Part):
     scp_iterations: int = spec(minimum=0)
     eased: int | None = spec(None, description="planning.easing: the easing's strength")
     slowed: float | None = spec(None, description="planning.easing: the slow-down factor")
-    inertial_excess: float | None = spec(None)
-    inertial_dip: float | None = spec(None)
+    inertial_excess: float | None = spec(None, description=(
+        "planning.easing: N by which the tensions that also accelerate the body and the free "
+        "limb along the executed smooth path leave the tension bounds"))
+    inertial_dip: float | None = spec(None, description=(
+        "planning.easing: log P by which those tensions take a grasp below its holding's "
+        "least planned P (what p_path counts of it)"))
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

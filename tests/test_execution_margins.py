@@ -147,12 +147,44 @@ def test_inertial_excess_counts_the_tensions_acceleration_needs() -> None:
     stance = four.without(j)
     poses = np.tile(start, (5, 1))
     tips = np.tile(four.positions[j], (5, 1))
-    f = check_poses(scn, stance, poses, tips).allocation.tensions
-    assert np.all(inertial_excess(scn, stance, poses, f, tips, 0.5) == 0.0)
+    times = 0.5 * np.arange(len(poses))  # the last step is the phase's dwell
+    assert np.all(inertial_excess(scn, stance, times, poses, tips) == 0.0)
     excess = []
     for push in (1e-4, 0.01, 0.1, 1.0):
         moved = poses.copy()
         moved[2, :2] += push
-        excess.append(inertial_excess(scn, stance, moved, f, tips, 0.5).max())
+        excess.append(inertial_excess(scn, stance, times, moved, tips).max())
     assert excess[0] == 0.0 and excess[-1] > 1.0, excess
     assert all(x <= y + 1e-12 for x, y in itertools.pairwise(excess)), excess
+
+
+@pytest.mark.parametrize("name", ["demo-crevasse.json", "rockfall-3.json"])
+def test_holding_floors_are_what_p_path_counts(name: str) -> None:
+    """Each holding's floor (the log of its least planned P, at every phase it spans) is the
+    minimum `planning.probability` counts for it: the same holdings, the same values."""
+    from pathlib import Path
+
+    from planning.easing import holding_floors
+    from planning.plan_file import read_plan
+    from planning.probability import Configuration, path_probability
+
+    plan = read_plan(Path(__file__).parent / "data" / "golden" / name)
+    floors = holding_floors(plan)
+    ends: list[tuple[int, str, float]] = []
+    for k, phase in enumerate(plan.phases):
+        for i in range(4):
+            anchor = phase.stance[i]
+            last = k + 1 == len(plan.phases) or plan.phases[k + 1].stance[i] != anchor
+            if anchor is None:
+                assert math.isnan(floors[k, i]), (k, i, floors[k, i])
+                continue
+            for step in phase.steps:  # nothing in the holding is below its floor
+                if step.p_grasp[i] is not None:
+                    assert math.log(step.p_grasp[i]) >= floors[k, i] - 1e-12, (k, i)
+            if last:
+                ends.append((i, anchor, math.exp(floors[k, i])))
+    counted = path_probability((Configuration(ph.stance, st.p_grasp, st.p_success)
+                                for ph in plan.phases for st in ph.steps), 0.0).holdings
+    assert len(ends) == len(counted) > 4, (ends, counted)
+    for (i, a, p), (j, b, q) in zip(sorted(ends), sorted(counted), strict=True):
+        assert (i, a) == (j, b) and abs(p - q) <= 1e-12, ((i, a, p), (j, b, q))

@@ -195,6 +195,19 @@ def test_rbp_experiment_command_runs_the_script(tmp_path: Path,
         assert "def main(" in module.read_text(), f"{module}: no main()"
 
 
+def test_calibration_intervals_are_simultaneous() -> None:
+    """The intervals of n plans hold all n rates with probability at least 95 %: each misses
+    with probability at most 0.05 / n (the union bound), and one plan's is the 95 % interval."""
+    from scipy.stats import norm
+
+    from experiments.calibration import simultaneous_z
+
+    assert abs(simultaneous_z(1) - 1.959963984540054) < 1e-9
+    for n in (1, 2, 12, 100):
+        miss = 2.0 * norm.sf(simultaneous_z(n))
+        assert abs(n * miss - 0.05) < 1e-12, (n, miss)
+
+
 def test_calibration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                      capsys: pytest.CaptureFixture[str]) -> None:
     """The calibration experiment on one short cave (the set patched in): a row per plan whose
@@ -213,6 +226,8 @@ def test_calibration(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     for row in result["plans"]:
         lo, hi = row["ci95"]
         assert row["runs"] == 200 and lo <= row["rate"] <= hi, row
+        flo, fhi = row["ci_simultaneous"]  # one plan: the simultaneous interval is the 95 %
+        assert abs(flo - lo) < 1e-9 and abs(fhi - hi) < 1e-9, row
         expected = lo <= row["p_path"] <= hi and abs(row["p_sim"] - row["p_path"]) <= 0.005
         assert row["calibrated"] == expected, row
         assert row["verified"], f"the plan passes rbp check: {row}"

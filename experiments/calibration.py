@@ -199,7 +199,8 @@ def calibration_figure(rows: list[dict[str, Any]]):
     ax.set_aspect("equal")
     ax.set_xlabel("predicted p_path")
     ax.set_ylabel("success")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2,
+              frameon=False)  # outside: the plans lie along the whole diagonal
     runs = rows[0]["runs"] if rows else 0
     ax.set_title(f"{len(rows)} plans, {runs} simulated climbs each", fontsize=10)
     order = np.argsort(x)
@@ -208,7 +209,8 @@ def calibration_figure(rows: list[dict[str, Any]]):
                 label=f"|p_sim - p_path| <= {TOLERANCE}")
     res.axhline(0.0, color="k", lw=0.8)
     res.errorbar(k - 0.12, (y - x)[order], yerr=[(y - cf[:, 0])[order], (cf[:, 1] - y)[order]],
-                 fmt="none", ecolor="#9ecae1", elinewidth=4)
+                 fmt="none", ecolor="#9ecae1", elinewidth=4,
+                 label="rate - p_path, simultaneous 95 % CI")
     res.errorbar(k - 0.12, (y - x)[order], yerr=[(y - ci[:, 0])[order], (ci[:, 1] - y)[order]],
                  fmt="o", ms=4, color="#2171b5", capsize=2, label="rate - p_path, 95 % CI")
     res.plot(k + 0.12, (ps - x)[order], "x", color="#cb181d", ms=6, label="p_sim - p_path")
@@ -224,7 +226,8 @@ def calibration_figure(rows: list[dict[str, Any]]):
                    rotation=60, ha="right", fontsize=7)
     res.set_ylabel("against p_path")
     res.set_title("by plan (regrasps), in order of p_path", fontsize=10)
-    res.legend(fontsize=7, loc="upper left")
+    res.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.42), ncol=2,
+               frameon=False)  # below the plan names: the bars fill the panel
     fig.tight_layout()
     return fig
 

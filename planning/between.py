@@ -22,7 +22,8 @@ from planning.verify_between import (
     subdivisions,
     verification_world,
 )
-from rb_drake.feasibility import Reason, World, check_poses
+from rb_drake.feasibility import Reason, World
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.stance import Stance
 from rb_drake.statics import null_vector, statics_problem
 
@@ -60,7 +61,7 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
     n_between = len(BETWEEN)
     mid = between(poses)
     mid_tips = None if tips is None else between(tips)
-    check = check_poses(world, stance, mid, mid_tips)
+    check = score_poses(world, stance, mid, mid_tips)  # compiled: check_poses' decisions
     if not check.feasible.all():
         k = int(np.argmin(check.feasible))
         return (f"between steps {k // n_between} and {k // n_between + 1}: "
@@ -72,7 +73,7 @@ def between_steps(world: World, stance: Stance, poses: np.ndarray, log_probs: np
     att = stance.attached
     ends = np.minimum(log_probs[:-1], log_probs[1:])[:, att]
     floor = np.repeat(ends, n_between, axis=0) - BETWEEN_DIP
-    low = check.allocation.log_probs[:, att] < floor
+    low = check.log_probs[:, att] < floor
     if low.any():
         k = int(np.flatnonzero(low.any(axis=1))[0])
         return f"a grasp weaker between steps {k // n_between} and {k // n_between + 1}"

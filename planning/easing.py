@@ -32,6 +32,7 @@ from planning.smooth_motion import phase_path, smooth_problem
 from planning.verify_between import phase_arrays
 from rb_drake import geometry
 from rb_drake.feasibility import check_poses
+from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -177,8 +178,7 @@ def inertial_load(scn: Scenario, stance: Stance, times: np.ndarray, poses: np.nd
     if path.tip is not None and stance.free_boom is not None:
         tip = path.tip.vector_values(t).T
         a_t = path.tip.derivative(2).vector_values(t).T
-    with np.errstate(all="ignore"):
-        check = check_poses(scn, stance, q, tip)
+    check = score_poses(scn, stance, q, tip)  # compiled: check_poses' decisions
     held = check.feasible
     robot = scn.robot
     m = robot.body_mass
@@ -194,7 +194,7 @@ def inertial_load(scn: Scenario, stance: Stance, times: np.ndarray, poses: np.nd
     statics = statics_problem(robot, scn.gravity_vector, q, stance, tip)
     A = statics.A
     att = stance.attached
-    f = np.where(att & held[:, None], np.nan_to_num(check.allocation.tensions), 0.0)
+    f = np.where(att & held[:, None], np.nan_to_num(check.tensions), 0.0)
     lo, hi = CONTROL_TENSION_FLOOR, robot.boom_tension[1]
 
     def excess(g: np.ndarray) -> np.ndarray:

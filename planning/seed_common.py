@@ -16,6 +16,8 @@ from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
+MAX_OMPL_CHECKS = 1_000_000  # RRTConnect's budget at most: minutes, not hours, per seed
+
 
 @dataclasses.dataclass(frozen=True)
 class SeedConfig:
@@ -36,8 +38,9 @@ class SeedConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.ompl_checks, bool) or not isinstance(self.ompl_checks, int) or \
-                self.ompl_checks < 1:
-            raise RbpInputError(f"must be a whole number of at least 1, got {self.ompl_checks!r}",
+                not 1 <= self.ompl_checks <= MAX_OMPL_CHECKS:
+            raise RbpInputError(f"must be a whole number from 1 to {MAX_OMPL_CHECKS:,} (about "
+                                f"a millisecond each), got {self.ompl_checks!r}",
                                 field="seed.ompl_checks")
         if self.ompl_time is not None and not 0.0 < self.ompl_time < math.inf:
             raise RbpInputError(f"must be a positive number of seconds (or null: none), got "

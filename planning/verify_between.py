@@ -29,7 +29,6 @@ import numpy as np
 from planning.plan_model import Phase
 from rb_drake.collision import Rock
 from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
-from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -123,6 +122,9 @@ def first_failure(world: _World | World, stance: Stance, s: Samples, label: str)
     90 times faster on the few dozen samples of an interval); `rbp check` keeps check_poses."""
     if not len(s.t):
         return ""
+    # here, not at the top: `rbp check` reads this module and needs no compiled kernel (numba)
+    from rb_drake.kernel.scoring import score_poses
+
     check = score_poses(world, stance, s.poses, s.tips)
     if check.feasible.all():
         return ""

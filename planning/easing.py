@@ -27,6 +27,7 @@ import numpy as np
 from planning.between import BETWEEN_DIP, between_steps, dense_problem
 from planning.plan_model import Phase, Plan
 from planning.plan_steps import steps_with_tensions
+from planning.probability import holdings_of
 from planning.ramps import CONTROL_TENSION_FLOOR
 from planning.smooth_motion import phase_path, smooth_problem
 from planning.verify_between import phase_arrays
@@ -258,28 +259,14 @@ def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:
 
 def holding_floors(plan: Plan) -> np.ndarray:
     """(phases, 4): at each phase, the log of the least planned P of the holding each boom is
-    in (boom i on one anchor over consecutive phases: `planning.probability`), NaN where free:
-    what p_path counts of that grasp, so what its execution must not fall below."""
+    in (`planning.probability.holdings_of`), NaN where free: what p_path counts of that grasp,
+    so what its execution must not fall below."""
     out = np.full((len(plan.phases), NUM_BOOMS), np.nan)
-    anchor: list[str | None] = [None] * NUM_BOOMS
-    first = [0] * NUM_BOOMS
-    worst = [1.0] * NUM_BOOMS
-
-    def close(i: int, last: int) -> None:
-        if anchor[i] is not None:
-            out[first[i]:last + 1, i] = math.log(worst[i]) if worst[i] > 0 else -math.inf
-
-    for k, phase in enumerate(plan.phases):
-        for i in range(NUM_BOOMS):
-            if phase.stance[i] != anchor[i]:
-                close(i, k - 1)
-                anchor[i], first[i], worst[i] = phase.stance[i], k, 1.0
-            for step in phase.steps:
-                p = step.p_grasp[i]
-                if anchor[i] is not None and p is not None:
-                    worst[i] = min(worst[i], float(p))
-    for i in range(NUM_BOOMS):
-        close(i, len(plan.phases) - 1)
+    for h in holdings_of([phase.stance for phase in plan.phases]):
+        worst = min((float(p) for phase in plan.phases[h.first:h.last + 1]
+                     for step in phase.steps if (p := step.p_grasp[h.boom]) is not None),
+                    default=1.0)
+        out[h.first:h.last + 1, h.boom] = math.log(worst) if worst > 0 else -math.inf
     return out
 
 

@@ -21,6 +21,33 @@ from typing import NamedTuple
 from rb_drake.params import NUM_BOOMS
 
 
+class Holding(NamedTuple):
+    """Boom `boom` on `anchor` during phases first..last; `attach` when it starts by a regrasp."""
+
+    boom: int
+    anchor: str
+    first: int
+    last: int
+    attach: bool
+
+
+def holdings_of(stances: Sequence[Sequence[str | None]]) -> list[Holding]:
+    """Maximal runs of phases (their stances, in order) in which a boom stays on one anchor:
+    the holdings `path_probability` counts."""
+    out: list[Holding] = []
+    for i in range(NUM_BOOMS):
+        k = 0
+        while k < len(stances):
+            anchor = stances[k][i]
+            end = k
+            while end + 1 < len(stances) and stances[end + 1][i] == anchor:
+                end += 1
+            if anchor is not None:
+                out.append(Holding(i, anchor, k, end, attach=k > 0))
+            k = end + 1
+    return sorted(out, key=lambda h: (h.first, h.boom))
+
+
 class PathProbability(NamedTuple):
     p_path: float
     p_grasps: float    # p_path without the attach term: prod_holdings min_t P_i(t)

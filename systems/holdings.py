@@ -1,43 +1,18 @@
-"""A plan's holdings (a boom on one anchor over a run of phases, `Holding`) and one trial's
-drawn strengths laid out per phase (`StrengthDraws`; module `montecarlo` explains the draws)."""
+"""One trial's drawn strengths laid out per phase (`StrengthDraws`; module `montecarlo` explains
+the draws), over a plan's holdings (`planning.probability.Holding`, re-exported here)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from planning.probability import Holding as Holding  # re-exported
+from planning.probability import holdings_of as holdings_of  # re-exported
 from rb_drake.params import NUM_BOOMS
 
 if TYPE_CHECKING:
     from systems.trajectory import PlanTrajectory
-
-
-class Holding(NamedTuple):
-    """Boom `boom` on `anchor` during phases first..last; `attach` when it starts by a regrasp."""
-
-    boom: int
-    anchor: str
-    first: int
-    last: int
-    attach: bool
-
-
-def holdings_of(stances: Sequence[tuple[str | None, ...]]) -> list[Holding]:
-    """Maximal runs of phases in which a boom stays on one anchor (as planning.probability)."""
-    out: list[Holding] = []
-    for i in range(NUM_BOOMS):
-        k = 0
-        while k < len(stances):
-            anchor = stances[k][i]
-            end = k
-            while end + 1 < len(stances) and stances[end + 1][i] == anchor:
-                end += 1
-            if anchor is not None:
-                out.append(Holding(i, anchor, k, end, attach=k > 0))
-            k = end + 1
-    return sorted(out, key=lambda h: (h.first, h.boom))
 
 
 class StrengthDraws(NamedTuple):

@@ -5,12 +5,18 @@ Every reader of a user's file (scenario, planner configuration, plan, rig log, r
 goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (docs/formats.md):
 - only regular files: a directory, a FIFO (which would block on open with no writer) or a
   device (`/dev/zero` never ends) is refused before it is opened for reading;
-- at most `max_input_bytes()` bytes (64 MiB unless `RBP_MAX_INPUT_MB` says otherwise), checked
+- at most `max_input_bytes()` bytes (32 MiB unless `RBP_MAX_INPUT_MB` says otherwise), checked
   on the file's size and again while reading, so a file that grows cannot get past it;
-- YAML whose aliases expand to at most MAX_NODES values (a few kB of nested aliases can
-  expand to gigabytes once walked: the "billion laughs"; yaml.safe_dump writes aliases for
-  shared objects, so they are not refused as such), nested at most MAX_DEPTH levels, without
-  duplicate keys in a mapping (the last one would silently win).
+- YAML of at most MAX_NODES values, counted on the parser's event stream before any tree is
+  built (PyYAML's composed nodes take about 500 bytes each: a 60 MB file of `0,0,0,...` would
+  need 9 GB), and whose aliases expand to at most MAX_NODES values too (a few kB of nested
+  aliases can expand to gigabytes once walked: the "billion laughs"; yaml.safe_dump writes
+  aliases for shared objects, so they are not refused as such), nested at most MAX_DEPTH
+  levels, with no scalar over MAX_SCALAR_CHARS characters nor a number over MAX_NUMBER_CHARS
+  (Python refuses to convert an integer of more than 4,300 digits), without duplicate keys in
+  a mapping (the last one would silently win);
+- JSON of at most MAX_JSON_VALUES values, bounded by counting its separators before parsing
+  (a parsed number takes about 60 bytes).
 A refusal raises InputFileError(field, reason); each reader turns it into its own error class,
 so the user sees one line naming the file, the field (or "(file)") and the reason.
 """
@@ -27,10 +33,17 @@ import yaml
 
 from rb_drake.errors import RbpInputError
 
-DEFAULT_MAX_INPUT_MB = 64.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
+DEFAULT_MAX_INPUT_MB = 32.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
-MAX_NODES = 1_000_000   # values of a YAML document, aliases expanded (bundled caves: < 10,000)
+MAX_NODES = 250_000     # values of a YAML document, aliases expanded (bundled caves: < 10,000;
+#                         an imported cave of 50,000 outline vertices about 150,000)
 MAX_ALIASES = 10_000    # alias uses in a YAML document
+MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
+MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit
+MAX_JSON_VALUES = 2_000_000  # values of a JSON document (a 300-phase plan: about 230,000)
+# A YAML document's nodes are counted on its events (which need no tree) only when a cheap
+# bound on them, from its structural characters, could exceed MAX_NODES, or it is long.
+EVENT_COUNT_ABOVE_CHARS = 1_000_000
 
 # libyaml's loader when PyYAML was built with it: 3 ms for a bundled cave instead of 22 ms.
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -46,7 +59,7 @@ class InputFileError(RbpInputError):
 
 
 def max_input_bytes() -> int:
-    """The size limit of an input file: RBP_MAX_INPUT_MB (megabytes) if set, else 64 MiB."""
+    """The size limit of an input file: RBP_MAX_INPUT_MB (megabytes) if set, else 32 MiB."""
     value = os.environ.get("RBP_MAX_INPUT_MB", "").strip()
     try:
         megabytes = float(value) if value else DEFAULT_MAX_INPUT_MB
@@ -120,6 +133,11 @@ def load_yaml(text: str) -> Any:
     """The one YAML document of `text`, refused (InputFileError naming the line and column) if
     it is not valid YAML, repeats a key in a mapping, nests deeper than MAX_DEPTH or expands
     (aliases included) to more than MAX_NODES values."""
+    try:
+        if len(text) > EVENT_COUNT_ABOVE_CHARS or _node_bound(text) > MAX_NODES:
+            _count_events(text)
+    except yaml.YAMLError as e:
+        raise _yaml_error(e) from None
     loader = SAFE_LOADER(text)
     try:
         node = loader.get_single_node()
@@ -128,14 +146,56 @@ def load_yaml(text: str) -> Any:
         _check_tree(node)
         return loader.construct_document(node)
     except yaml.YAMLError as e:
-        mark = getattr(e, "problem_mark", None)
-        where = _where(mark) if mark else "(file)"
-        problem = getattr(e, "problem", None) or " ".join(str(e).split())
-        raise InputFileError(where, f"not valid YAML: {problem}") from None
+        raise _yaml_error(e) from None
     except RecursionError:  # the pure-Python parser, without libyaml's nesting limit
         raise InputFileError("(file)", f"nested deeper than {MAX_DEPTH} levels") from None
+    except InputFileError:
+        raise
+    except ValueError as e:  # a value the constructor cannot convert (none known after the
+        # checks above; kept so that no parser error escapes as a traceback)
+        raise InputFileError("(file)", f"not valid YAML: {' '.join(str(e).split())[:200]}"
+                             ) from None
     finally:
         loader.dispose()
+
+
+def _yaml_error(e: yaml.YAMLError) -> InputFileError:
+    mark = getattr(e, "problem_mark", None)
+    where = _where(mark) if mark else "(file)"
+    problem = getattr(e, "problem", None) or " ".join(str(e).split())
+    return InputFileError(where, f"not valid YAML: {problem}")
+
+
+def _node_bound(text: str) -> int:
+    """An upper bound on the nodes of a YAML document: every node but the root follows a
+    structural character (a block entry's "-", a key's "?" or value's ":", a flow
+    collection's "[", "{" or ","), and a flow mapping's "," can open a key and its empty
+    value; so nodes <= 2 x those characters + 1 ("-" of a negative number only adds)."""
+    return 2 * sum(text.count(c) for c in ",:-?[{") + 1
+
+
+def _count_events(text: str) -> None:
+    """Refuse a YAML document with more than MAX_NODES nodes (aliases counted once), nested
+    deeper than MAX_DEPTH, or holding a scalar over MAX_SCALAR_CHARS characters, from the
+    parser's events: constant memory, however large the document."""
+    nodes = depth = 0
+    for event in yaml.parse(text, Loader=SAFE_LOADER):
+        if isinstance(event, yaml.ScalarEvent | yaml.AliasEvent | yaml.CollectionStartEvent):
+            nodes += 1
+            if nodes > MAX_NODES:
+                raise InputFileError(_where(event.start_mark), f"holds more than "
+                                     f"{MAX_NODES:,} values")
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    raise InputFileError(_where(event.start_mark), f"nested deeper than "
+                                         f"{MAX_DEPTH} levels")
+            elif isinstance(event, yaml.ScalarEvent) and len(event.value) > MAX_SCALAR_CHARS:
+                raise InputFileError(_where(event.start_mark), f"a value of "
+                                     f"{len(event.value):,} characters (at most "
+                                     f"{MAX_SCALAR_CHARS:,})")
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
 
 
 def _where(mark: Any) -> str:
@@ -163,7 +223,9 @@ def _check_tree(root: yaml.Node) -> None:
             open_nodes.add(key)
             size, height = 1, 1
             children: list[yaml.Node] = []
-            if isinstance(node, yaml.MappingNode):
+            if isinstance(node, yaml.ScalarNode):
+                _check_scalar(node)
+            elif isinstance(node, yaml.MappingNode):
                 _refuse_duplicate_keys(node)
                 children = [n for pair in node.value for n in pair]
             elif isinstance(node, yaml.SequenceNode):
@@ -187,6 +249,19 @@ def _check_tree(root: yaml.Node) -> None:
         return size, height
 
     measure(root, 1)
+
+
+_NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+
+
+def _check_scalar(node: yaml.ScalarNode) -> None:
+    if len(node.value) > MAX_SCALAR_CHARS:
+        raise InputFileError(_where(node.start_mark), f"a value of {len(node.value):,} "
+                             f"characters (at most {MAX_SCALAR_CHARS:,})")
+    if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
+        raise InputFileError(_where(node.start_mark), f"a number of {len(node.value):,} "
+                             f"characters (at most {MAX_NUMBER_CHARS}): no physical quantity "
+                             "needs so many digits")
 
 
 def _refuse_duplicate_keys(node: yaml.MappingNode) -> None:
@@ -213,6 +288,19 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def load_json(text: str, **options: Any) -> Any:
-    """The JSON value of `text` (json.loads with `options`), a key repeated in an object refused
-    (InputFileError); the caller handles json.JSONDecodeError and RecursionError."""
-    return json.loads(text, object_pairs_hook=no_duplicate_keys, **options)
+    """The JSON value of `text` (json.loads with `options`); refused (InputFileError) if it may
+    hold more than MAX_JSON_VALUES values (every value but the first follows a "[", "{" or
+    ",", so their count bounds the values before any is built), repeats a key in an object or
+    holds an integer Python will not convert (over 4,300 digits); the caller handles
+    json.JSONDecodeError and RecursionError."""
+    bound = sum(text.count(c) for c in ",[{") + 1
+    if bound > MAX_JSON_VALUES:
+        raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
+                             f"brackets), over the limit of {MAX_JSON_VALUES:,}")
+    try:
+        return json.loads(text, object_pairs_hook=no_duplicate_keys, **options)
+    except ValueError as e:
+        if isinstance(e, json.JSONDecodeError | InputFileError):
+            raise
+        raise InputFileError("(file)", f"a number Python cannot convert: "
+                             f"{' '.join(str(e).split())[:160]}") from None

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import struct
 import tempfile
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -42,6 +43,7 @@ from planning.verify_between import step_motion
 from rb_drake import geometry, grasp
 from rb_drake.errors import RbpInputError
 from rb_drake.files import atomic_write
+from rb_drake.input_files import InputFileError, load_json
 from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
 from rb_drake.stance import Stance
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
@@ -55,6 +57,11 @@ from systems.rig_messages import (
     decode_status,
 )
 from systems.rig_safety import RigCommandSource, SafetyReport
+
+# A log's events, at most: a rig run logs a command and a status each period (0.1 s), so this
+# is over 2.5 hours of running, and replaying it takes seconds, not the minutes a log of
+# millions of tiny events would.
+MAX_LOG_EVENTS = 200_000
 
 
 class RigInputError(RbpInputError):
@@ -309,24 +316,39 @@ class RigLog(NamedTuple):
 def replay_log(path: str | Path,
                config: RigLcmConfig = RigLcmConfig()) -> RigLog:  # noqa: B008 (frozen)
     """Read a log written by `run_rig` and pass each good status through a `GraspMonitor`
-    (statuses that do not decode or are out of range are skipped, as the live run did)."""
+    (statuses that do not decode or are out of range are skipped, as the live run did). A
+    setup or command message that does not decode, or a log past MAX_LOG_EVENTS events, is
+    refused (RigInputError naming the channel and the event): such a log was not written by
+    `run_rig`, or was damaged since."""
     path = Path(path)
     setup, commands, raw_statuses = None, [], []
-    for event in lcm.EventLog(str(path), "r"):
+    try:
+        events = lcm.EventLog(str(path), "r")
+    except (OSError, ValueError) as e:
+        raise RigInputError("(file)", f"not an LCM log: {e}") from None
+    for number, event in enumerate(events):
+        if number >= MAX_LOG_EVENTS:
+            raise RigInputError("(file)", f"more than {MAX_LOG_EVENTS:,} events: longer than "
+                                "any rig run rbp writes")
         if event.channel == config.setup_channel and setup is None:
-            setup = rig_setup_t.decode(event.data)
+            setup = _decoded(rig_setup_t, event.data, config.setup_channel, number)
         elif event.channel == config.command_channel:
-            commands.append(rig_command_t.decode(event.data))
+            commands.append(_decoded(rig_command_t, event.data, config.command_channel, number))
         elif event.channel == config.status_channel:
             raw_statuses.append(event.data)
     if setup is None:
         raise RigInputError(config.setup_channel, "no setup message: not a log written by "
                             "rbp rig-run (or not an LCM log at all)")
     try:
-        scn = scenario_from_dict(json.loads(setup.scenario_json), "log scenario",
+        scn = scenario_from_dict(load_json(setup.scenario_json), "log scenario",
                                  check_start=False)
+    except InputFileError as e:
+        raise RigInputError(f"{config.setup_channel}.scenario_json", e.reason) from None
     except (ScenarioError, json.JSONDecodeError) as e:
         raise RigInputError(f"{config.setup_channel}.scenario_json", str(e)) from None
+    except RecursionError:
+        raise RigInputError(f"{config.setup_channel}.scenario_json", "nested too deeply to "
+                            "be a scenario") from None
     stance_ids = tuple(setup.stance)
     unknown = [a for a in stance_ids if a not in scn.anchor_index]
     if unknown:
@@ -345,6 +367,18 @@ def replay_log(path: str | Path,
                   np.array([c.boom_length for c in commands]).reshape(-1, 4),
                   np.array([c.tension_setpoint for c in commands]).reshape(-1, 4),
                   _record(rows), np.array([s.winch_length for s in statuses]).reshape(-1, 4))
+
+
+def _decoded(message_type: Any, data: bytes, channel: str, number: int) -> Any:
+    """`data` decoded as `message_type`, or RigInputError naming the channel and the event."""
+    try:
+        return message_type.decode(data)
+    except (ValueError, struct.error, IndexError, OverflowError):
+        # lcm-gen's decoders raise ValueError on a wrong fingerprint, struct.error on a
+        # truncated message and UnicodeDecodeError (a ValueError) on a damaged string
+        raise RigInputError(channel, f"event {number} does not decode as "
+                            f"{message_type.__name__}: the log is damaged or not rbp's"
+                            ) from None
 
 
 def report_figure(log: RigLog):

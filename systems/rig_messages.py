@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import struct
 from pathlib import Path
 from typing import NamedTuple
 
@@ -65,7 +66,7 @@ def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
     tension limit."""
     try:
         status = rig_status_t.decode(data)
-    except ValueError:
+    except (ValueError, struct.error, IndexError, OverflowError):  # garbage, truncated
         return None
     values = np.array([*status.winch_length, *status.load_cell_force, *status.hinge_angle])
     if not np.all(np.isfinite(values)):

@@ -12,6 +12,7 @@ import resource
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -244,3 +245,134 @@ def test_rig_log_readers_refuse_hostile_files_in_one_line(tmp_path, monkeypatch)
             assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
                 (command, path, result.stderr)
             assert time.perf_counter() - start < 30, f"{command} {path} took too long"
+
+
+def _refused_in_one_line(result, path: Path, words: str) -> None:
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, (path, result.returncode, result.stderr[-2000:])
+    assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
+        (path, words, result.stderr[-2000:])
+
+
+def test_long_flat_yaml_refused_before_its_tree_is_built():
+    """A file of many plain values (no alias) is counted on the parser's events: PyYAML's
+    tree of a 60 MB `[0,0,...]` took 9 GB before this bound."""
+    text = "walls: [" + ",".join(["0"] * 300_000) + "]\n"
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(InputFileError, match="holds more than 250,000 values"):
+        load_yaml(text)
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    # building the tree of 300,000 values takes about 150 MB; counting events, a few
+    assert grown_mb < 60, f"refusing 300,000 values grew the peak memory by {grown_mb:.0f} MB"
+
+
+def test_long_value_and_huge_integer_refused_with_their_line():
+    with pytest.raises(InputFileError, match="a value of 1,000,001 characters") as caught:
+        load_yaml("name: " + "x" * 1_000_001 + "\n")
+    assert caught.value.field == "line 1, column 7", caught.value.field
+    # Python refuses to convert an integer of more than 4,300 digits: a ValueError traceback
+    # before this check
+    with pytest.raises(InputFileError, match="a number of 6,001 characters") as caught:
+        load_yaml("gravity: [0, 1" + "2" * 6000 + "]\n")
+    assert caught.value.field == "line 1, column 14", caught.value.field
+    with pytest.raises(InputFileError, match="a number Python cannot convert"):
+        load_json('{"x": 1' + "2" * 6000 + "}")
+
+
+def test_json_with_millions_of_values_refused_before_parsing():
+    text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(InputFileError, match="over the limit of 2,000,000"):
+        load_json(text)
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mb < 60, f"refusing 2.1 million values grew the peak memory by {grown_mb:.0f} MB"
+
+
+def test_cli_refuses_large_and_numeric_monsters_in_one_line(tmp_path):
+    """On the command line: a scenario of a million values, one with a 6,000-digit number and
+    a plan with one; exit 2, one line naming the file, no traceback."""
+    flat = tmp_path / "flat.yaml"
+    flat.write_text("walls: [" + ",".join(["0"] * 1_000_000) + "]\n")
+    digits = tmp_path / "digits.yaml"
+    digits.write_text(_with_top("gravity", "[0.0, -3" + "1" * 6000 + "]"))
+    plan = tmp_path / "digits.json"
+    plan.write_text('{"format": 1' + "2" * 6000 + "}")
+    for path, command, words in ((flat, "scenario", "holds more than 250,000 values"),
+                                 (digits, "scenario", "a number of 6,002 characters"),
+                                 (plan, "check", "a number Python cannot convert")):
+        start = time.perf_counter()
+        args = ("scenario", "check", str(path)) if command == "scenario" else ("check", str(path))
+        result = run_rbp(*args, cwd=tmp_path)
+        _refused_in_one_line(result, path, words)
+        assert time.perf_counter() - start < 30, f"{path} took too long"
+
+
+def test_damaged_rig_logs_refused_in_one_line(tmp_path):
+    """A log whose setup or command message does not decode, or whose scenario repeats a key,
+    was a traceback (lcm-gen's ValueError) before."""
+    import json
+
+    import lcm
+
+    from systems.reachbot_lcm import rig_setup_t
+    from systems.rig_interface import RigLcmConfig
+
+    channels = RigLcmConfig()
+
+    def setup(scenario_json: str) -> bytes:
+        msg = rig_setup_t()
+        msg.scenario_json, msg.plan_source = scenario_json, ""
+        msg.stance = ["a30", "a6", "a1", "a20"]  # four booms: a fixed-size field
+        return msg.encode()
+
+    good = setup(json.dumps(load_scenario(DEMO).to_dict()))
+    cases = {
+        "setup.lcmlog": ([(channels.setup_channel, b"garbage")], "does not decode"),
+        "command.lcmlog": ([(channels.setup_channel, good),
+                            (channels.command_channel, b"garbage")], "does not decode"),
+        "repeated.lcmlog": ([(channels.setup_channel, setup('{"a": 1, "a": 2}'))],
+                            "duplicate key 'a'"),
+    }
+    for name, (events, words) in cases.items():
+        path = tmp_path / name
+        log = lcm.EventLog(str(path), "w", overwrite=True)
+        for channel, data in events:
+            log.write_event(0, channel, data)
+        log.close()
+        _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path, words)
+
+
+def test_hostile_terrain_files_refused_quickly_in_one_line(tmp_path):
+    """`rbp scenario import`: a mesh of loose facets (trimesh's assembly of its section is
+    quadratic in the pieces: 81 s for 100,000 facets), coordinates of 1e308 (numpy's overflow
+    warnings came first) and drawings of too many numbers, each refused in one line."""
+    pytest.importorskip("trimesh")
+    rng = np.random.default_rng(0)
+    loose = tmp_path / "loose.stl"
+    _write_stl(loose, rng.uniform(-5.0, 5.0, size=(20_000, 3, 3)))
+    many = tmp_path / "many.stl"
+    _write_stl(many, rng.uniform(-5.0, 5.0, size=(80_000, 3, 3)))
+    huge = tmp_path / "huge.obj"
+    huge.write_text("v 0 0 0\nv 1e308 0 0\nv 0 1e308 1e308\nf 1 2 3\n")
+    svg = tmp_path / "many.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 500 500">'
+                   + "".join(f'<path d="M{i % 500} {i // 500} l1 0 l0 1 z"/>'
+                             for i in range(70_000)) + "</svg>")
+    for path, words in ((loose, "separate pieces"), (many, "the plane cuts"),
+                        (huge, "a coordinate beyond"), (svg, "numbers, more than")):
+        start = time.perf_counter()
+        result = run_rbp("scenario", "import", str(path), "-o", str(tmp_path / "cave.yaml"),
+                         cwd=tmp_path)
+        _refused_in_one_line(result, path, words)
+        # each takes well under a second of its own; the bound allows for a loaded machine
+        assert time.perf_counter() - start < 30, f"importing {path} took too long"
+    assert not (tmp_path / "cave.yaml").exists(), "a refused import wrote its output"
+
+
+def _write_stl(path: Path, triangles: np.ndarray) -> None:
+    """A binary STL of `triangles` (n, 3, 3), zero normals."""
+    records = np.zeros(len(triangles), dtype=[("normal", "<f4", 3), ("points", "<f4", (3, 3)),
+                                              ("attribute", "<u2")])
+    records["points"] = triangles
+    with path.open("wb") as f:
+        f.write(b"\0" * 80 + np.uint32(len(triangles)).tobytes() + records.tobytes())

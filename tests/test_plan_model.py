@@ -31,6 +31,7 @@ GOLDEN = ROOT / "tests" / "data" / "golden"
 CAVES = ("demo-shaft", "demo-crevasse", "shaft-1", "rockfall-3", "rig")
 # Fields that depend on when, where and how fast a plan was made, not on what was planned.
 VOLATILE = ("timing", "provenance")
+SOLVER_REL = SOLVER_ABS = 1e-6  # a planned plan's numbers, across machines
 
 
 def assert_close(a: Any, b: Any, where: str = "plan", rel: float = 1e-9,
@@ -158,7 +159,10 @@ def test_planning_demo_shaft_again_gives_its_golden_plan(tmp_path: Path) -> None
     assert dataclasses.replace(new.provenance, command="", scenario_source="", **machine,
                                config=_without(new.provenance.config, added)) == \
         dataclasses.replace(golden.provenance, command="", scenario_source="", **machine)
-    assert_close(_comparable(new), _comparable(golden))
+    # The numbers come out of Clarabel's and OSQP's solves (tolerances about 1e-8), whose last
+    # digits differ between CPUs' floating-point paths (a tension 0.50072803542 here, 0.50072803082
+    # on another machine): equal to 1e-6, far below anything a change of the planner moves.
+    assert_close(_comparable(new), _comparable(golden), rel=SOLVER_REL, abs_tol=SOLVER_ABS)
 
 
 def _added_settings(config: dict, golden: dict, prefix: str = "") -> dict[str, object]:

@@ -33,6 +33,7 @@ from __future__ import annotations
 import heapq
 import io
 import math
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -65,6 +66,14 @@ SPACINGS = 2.0
 DENSITY_NEIGHBOURS = 6  # the rho estimate: the distance to a point's 6th nearest neighbour
 DENSITY_SAMPLES = 20_000  # points whose neighbours are counted, at most
 DENSITY_SUBSET = 200_000  # a larger cloud's density is its random subset's, scaled
+# A mesh's section, bounded before trimesh assembles it (its curve assembly takes time
+# quadratic in the number of separate pieces: 75,000 pieces of a mesh of random triangles took
+# 81 s, a million would take hours): at most MAX_SECTION_SEGMENTS facets cut by the plane
+# (as a drawing's vertices, polygon_files.MAX_VERTICES) in at most MAX_SECTION_PIECES separate
+# curves (a cave's outline and its pillars: a few; 2,000 pieces take a fraction of a second).
+MAX_SECTION_SEGMENTS = 50_000
+MAX_SCAN_COORDINATE = 1e7  # in the file's unit, whatever --unit says: 10 km in millimetres
+MAX_SECTION_PIECES = 2_000
 
 
 def _error(path: Path, field: str, reason: str) -> RbpInputError:
@@ -113,6 +122,32 @@ def load_scan(path: Path) -> tuple[str, Any]:
                      "(pip install trimesh)") from None
     data = _read_bytes(path)
     try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            # overflows while trimesh merges vertices of 1e308 or NaN: refused below instead
+            warnings.simplefilter("ignore")
+            loaded = _load_mesh(trimesh, data, suffix)
+    except _UnreadableError as e:
+        raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {e}") from None
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
+    if vertices.ndim != 2 or len(vertices) == 0:
+        raise _error(path, "mesh", "holds no triangles or points: is this the right file?")
+    if not np.all(np.isfinite(vertices)):
+        raise _error(path, "mesh", "has vertices with non-finite coordinates (nan or inf)")
+    if np.abs(vertices).max() > MAX_SCAN_COORDINATE:
+        raise _error(path, "mesh", f"has a coordinate beyond {MAX_SCAN_COORDINATE:g} (in the "
+                     "file's unit): 10 km in millimetres; is this the right file?")
+    if isinstance(loaded, trimesh.Trimesh) and len(faces) > 0:
+        return "mesh", loaded
+    return "cloud", vertices
+
+
+class _UnreadableError(Exception):
+    """A mesh file trimesh could not read; the message says why."""
+
+
+def _load_mesh(trimesh: Any, data: bytes, suffix: str) -> Any:
+    try:
         # from memory, without a resolver: the files an OBJ names (materials, textures) are
         # not opened, so a hostile `mtllib /dev/zero` cannot hang the reader
         loaded: Any = trimesh.load(io.BytesIO(data), file_type=suffix[1:], resolver=None)
@@ -122,16 +157,8 @@ def load_scan(path: Path) -> tuple[str, Any]:
         # an ImportError is trimesh trying an optional decoder on bytes that are not a mesh
         detail = ("" if isinstance(e, ImportError) else " ".join(str(e).split())[:200]
                   ) or "its content does not parse"
-        raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {detail}") from None
-    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
-    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
-    if vertices.ndim != 2 or len(vertices) == 0:
-        raise _error(path, "mesh", "holds no triangles or points: is this the right file?")
-    if not np.all(np.isfinite(vertices)):
-        raise _error(path, "mesh", "has vertices with non-finite coordinates (nan or inf)")
-    if isinstance(loaded, trimesh.Trimesh) and len(faces) > 0:
-        return "mesh", loaded
-    return "cloud", vertices
+        raise _UnreadableError(detail) from None
+    return loaded
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -239,6 +266,7 @@ def _mesh_free_space(path: Path, mesh: Any, o: np.ndarray, x2: np.ndarray, y2: n
     from shapely import make_valid
     from shapely.geometry import Polygon
 
+    _check_section_size(path, mesh, o, n)
     section = mesh.section(plane_origin=o, plane_normal=n)
     if section is None:
         raise _error(path, "plane", misses)
@@ -258,6 +286,35 @@ def _mesh_free_space(path: Path, mesh: Any, o: np.ndarray, x2: np.ndarray, y2: n
         raise _error(path, "mesh", "the section has no closed outline with an inside: the plane "
                      "only grazes the mesh")
     return free
+
+
+def _check_section_size(path: Path, mesh: Any, o: np.ndarray, n: np.ndarray) -> None:
+    """Refuse a section of more than MAX_SECTION_SEGMENTS segments or MAX_SECTION_PIECES
+    separate curves, counted on trimesh's segments (vectorised) before it assembles them."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from trimesh.intersections import mesh_plane
+
+    cut = np.sum(np.ptp(np.sign((mesh.vertices - o) @ n)[mesh.faces], axis=1) > 0)
+    if cut > MAX_SECTION_SEGMENTS:
+        raise _error(path, "mesh", f"the plane cuts {cut:,} facets, over the limit of "
+                     f"{MAX_SECTION_SEGMENTS:,} outline segments: decimate the mesh (a cave's "
+                     "outline needs a few thousand)")
+    segments = np.asarray(mesh_plane(mesh, n, o)).reshape(-1, 3)
+    if len(segments) == 0:
+        return
+    scale = max(float(np.ptp(segments, axis=0).max()), 1e-12)
+    # endpoints shared by neighbouring facets agree to rounding: merged on a 1e-9 grid of the
+    # section's size (an end split by the grid only adds a piece: the bound stays safe)
+    _, ends = np.unique(np.round(segments / scale * 1e9), axis=0, return_inverse=True)
+    ends = ends.reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])),
+                       shape=(ends.max() + 1,) * 2)
+    pieces, _ = connected_components(graph, directed=False)
+    if pieces > MAX_SECTION_PIECES:
+        raise _error(path, "mesh", f"the section falls into {pieces:,} separate pieces, over "
+                     f"the limit of {MAX_SECTION_PIECES:,}: is this a cave's surface? (a "
+                     "mesh of loose facets, or a plane through debris)")
 
 
 def _thin(pts: np.ndarray, cell: float) -> np.ndarray:

@@ -66,7 +66,10 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     try:
         return dataclasses.replace(base, **changes)
     except RbpInputError as e:  # a dataclass that checks its own values (RepairConfig)
-        raise ConfigError(source, e.field or where, e.reason) from None
+        field = e.field or where
+        if prefix and e.field and not e.field.startswith(prefix):  # LatticeConfig's own name
+            field = f"{prefix}.{e.field}"
+        raise ConfigError(source, field, e.reason) from None
 
 
 def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:

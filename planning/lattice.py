@@ -40,6 +40,18 @@ class LatticeConfig:
     position_step: float = 0.02      # m
     angle_step_deg: float = 2.5      # deg; 360 / angle_step_deg must be an even integer
 
+    def __post_init__(self) -> None:
+        # Outside these, a lattice is either meaningless (a step of 0 or below, which searched
+        # as if no pose held) or so fine that one stance's poses alone exhaust the memory
+        # (1e-9 m took 16 GB before a MemoryError).
+        for name, value, (lo, hi), unit in (
+                ("position_step", self.position_step, POSITION_STEP_RANGE, "m"),
+                ("angle_step_deg", self.angle_step_deg, ANGLE_STEP_RANGE, "deg")):
+            if not (isinstance(value, int | float) and lo <= value <= hi):
+                raise RbpInputError(f"must be between {lo:g} and {hi:g} {unit}, got {value!r}",
+                                    field=name)
+        self.angle_count  # noqa: B018 (raises unless the step divides 180 deg)
+
     @property
     def angle_step(self) -> float:
         return math.radians(self.angle_step_deg)
@@ -52,6 +64,10 @@ class LatticeConfig:
             raise RbpInputError(f"must divide 180 deg, got {self.angle_step_deg}",
                                 field="angle_step_deg")
         return n
+
+
+POSITION_STEP_RANGE = (0.005, 0.5)  # m: 5 mm is 16 times the default's positions
+ANGLE_STEP_RANGE = (0.5, 45.0)       # deg: 0.5 deg is 5 times the default's orientations
 
 
 # Lattice indices are packed into one int64 key, so that sets of poses intersect by sorting.

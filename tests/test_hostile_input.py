@@ -376,3 +376,19 @@ def _write_stl(path: Path, triangles: np.ndarray) -> None:
     records["points"] = triangles
     with path.open("wb") as f:
         f.write(b"\0" * 80 + np.uint32(len(triangles)).tobytes() + records.tobytes())
+
+
+@pytest.mark.parametrize(("lattice", "words"), [
+    ("{position_step: -0.02}", "position_step: must be between 0.005 and 0.5 m"),
+    ("{position_step: 1.0e-9}", "position_step: must be between 0.005 and 0.5 m"),
+    ("{angle_step_deg: 7}", "angle_step_deg: must divide 180 deg"),
+])
+def test_lattice_outside_its_range_refused_naming_the_key(tmp_path, lattice, words):
+    """A negative step answered "no route" and 1e-9 m took 16 GB and ended in a traceback; a
+    step that does not divide 180 deg was refused without the file's name."""
+    config = tmp_path / "planner.yaml"
+    config.write_text(f"footstep: {{lattice: {lattice}}}\n")
+    result = run_rbp("plan", "demo-shaft", "--config", str(config), "--footsteps-only", "-o",
+                     str(tmp_path / "p.json"), "--no-pictures", cwd=tmp_path)
+    _refused_in_one_line(result, config, f"footstep.lattice.{words}")
+    assert not (tmp_path / "p.json").exists(), "a refused configuration wrote a plan"

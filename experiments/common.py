@@ -260,7 +260,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "segments", "travel7", "dt7")
+            "segments", "travel7", "dt7", "corridorR-fF")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -307,6 +307,10 @@ def variant_config(variant: str, time_limit: float | None):
         "dt7": {"ordering": "distance+travel",
                 "anytime": AnytimeConfig(weights=(7.0, 4.0, 2.0, 1.0))},
     }
+    if variant.startswith("corridor"):  # corridorR-fF: a corridor of R m, F x the first's
+        radius, _, factor = variant.removeprefix("corridor").partition("-f")
+        return FootstepConfig(anytime=AnytimeConfig(corridor=float(radius),
+                                                    improve_factor=float(factor or 2.0)))
     return FootstepConfig(**table[variant])
 
 

@@ -214,11 +214,28 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     # no list, yet it may be the optimal route's only vertex left to expand
     current = math.inf
 
+    # The corridor (AnytimeConfig.corridor): the best route's centroids, and the least
+    # g + bound of the moves a pass left out for lying outside it (they count in the bound)
+    guide: np.ndarray | None = None
+    inside: dict[tuple, bool] = {}
+    left_out = math.inf
+
+    corridor = anytime.corridor if anytime is not None else None
+
+    def in_corridor(stance: tuple) -> bool:
+        if guide is None or corridor is None:
+            return True
+        hit = inside.get(stance)
+        if hit is None:
+            centroid = scn.anchor_positions[[scn.anchor_index[a] for a in stance]].mean(axis=0)
+            hit = inside[stance] = _polyline_distance(centroid, guide) <= corridor
+        return hit
+
     def lower() -> float:
-        """min over the open list (and the vertex being expanded) of g + bound, and the best
-        cost: the optimum is no lower."""
+        """min over the open list (and the vertex being expanded, and the moves left out of
+        the corridor) of g + bound, and the best cost: the optimum is no lower."""
         nonlocal proven
-        lo = min(best_cost, current)
+        lo = min(best_cost, current, left_out)
         for entry in itertools.chain(open_list, deferred):
             lo = min(lo, entry[2] + bound(entry[4]))
         proven = max(proven, lo)
@@ -364,6 +381,10 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     open_list.extend(deferred)
                     deferred.clear()
                     heapq.heapify(open_list)
+                if corridor is not None and anytime.restart:
+                    guide = np.array([scn.anchor_positions[[scn.anchor_index[a] for a in v[0]]]
+                                      .mean(axis=0) for v in found.path])
+                    inside.clear()
                 if schedule:
                     weight = schedule.pop(0)
                     exact = weight <= 1.0
@@ -371,6 +392,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                         open_list = start_entries()
                         closed.clear()
                         parent.clear()
+                        left_out = math.inf  # this pass's own moves left out, from here on
                     else:
                         open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
                         heapq.heapify(open_list)
@@ -406,6 +428,9 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
                                                 memo.move_table(vertex)):
             if not beaten(g + c_attach, child):
+                if not in_corridor(child):
+                    left_out = min(left_out, g + c_attach + bound(child))
+                    continue
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
                                            g + c_attach, Entry.MOVE, child,
                                            (vertex, j, anchor)))
@@ -430,6 +455,17 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
                           _frontier(open_list, closed), graph,
                           partial=nearest_route() if partial else None)
+
+
+def _polyline_distance(point: np.ndarray, points: np.ndarray) -> float:
+    """The distance from `point` to the polyline through `points` (n, 2)."""
+    if len(points) == 1:
+        return float(np.linalg.norm(point - points[0]))
+    a, b = points[:-1], points[1:]
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.maximum(
+        np.einsum("ij,ij->i", ab, ab), 1e-18), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(a + t[:, None] * ab - point, axis=1)))
 
 
 def _rows(tr: LatticeTransition, pick: np.ndarray | None) -> np.ndarray:

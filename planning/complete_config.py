@@ -36,6 +36,11 @@ class AnytimeConfig:
     # leaves poor g-values behind that a lower weight has to undo one vertex at a time (Richter,
     # Thayer and Ruml, "The joy of forgetting", ICAPS 2010).
     restart: bool = True
+    # m, or None: after a route, a pass expands only stances whose anchors' centroid lies
+    # within `corridor` of the best route's centroids (joined by segments); what it leaves out
+    # keeps its part of the lower bound (the least g + bound of the moves left out), so the
+    # bound stays proven while the passes spend their budget near the route they improve.
+    corridor: float | None = None
 
     def improve_expansions(self, first: int) -> float:
         """Expansions to look for better routes once the first took `first` expansions."""

@@ -202,6 +202,29 @@ def test_lower_bound_counts_the_vertex_being_expanded(demo: Scenario, optimal, m
         "a lower bound above the optimum")
 
 
+@pytest.mark.parametrize("corridor", [0.0, 0.2, 0.6])
+def test_corridor_keeps_the_lower_bound_proven(demo: Scenario, optimal, monkeypatch,
+                                               corridor: float) -> None:
+    """Passes confined to a corridor about the best route leave moves out; their least
+    g + bound stays in the lower bound, so no bound exceeds the optimum (refreshed at every
+    expansion, the strictest test), and a narrow corridor may leave the optimum unproven. A
+    corridor of width 0 keeps the passes on the first route's own line: there, a bound that
+    forgot the moves left out would call the first route (1.27x the optimum) optimal."""
+    import planning.complete as complete_module
+
+    monkeypatch.setattr(complete_module, "BOUND_EVERY", 1)
+    found = complete_search(demo, CompleteConfig(
+        COARSE, heuristic_weight=300.0,
+        anytime=AnytimeConfig(improve_factor=None, corridor=corridor)))
+    assert found.success
+    assert found.cost >= optimal.cost * (1 - 1e-9), "a route cheaper than the optimum"
+    assert all(lo <= optimal.cost * (1 + 1e-9) for _, _, lo, _ in found.history), (
+        f"a lower bound above the optimum {optimal.cost:.6f}: {found.history}")
+    assert found.lower_bound <= optimal.cost * (1 + 1e-9)
+    if found.quality == "optimal":
+        assert found.cost == pytest.approx(optimal.cost, rel=1e-9)
+
+
 def test_target_bound_stops_within_it(demo: Scenario, optimal) -> None:
     found = complete_search(demo, CompleteConfig(
         COARSE, heuristic_weight=300.0,
@@ -230,7 +253,8 @@ def test_plan_file_records_cost_and_bound(demo: Scenario, optimal) -> None:
 
 @pytest.mark.parametrize("setting, field", [("{target_bound: 0.5}", "target_bound"),
                                             ("{improve_factor: -1}", "improve_factor"),
-                                            ("{weights: [10, 0]}", "weights")])
+                                            ("{weights: [10, 0]}", "weights"),
+                                            ("{corridor: -0.5}", "corridor")])
 def test_bad_anytime_settings_get_one_line(tmp_path, setting: str, field: str) -> None:
     from cli_helpers import run_rbp
 

@@ -145,6 +145,8 @@ def anytime_problem(anytime) -> str:
         return f"improve_min: must be 0 or more, got {anytime.improve_min}"
     if not all(w > 0 for w in anytime.weights):
         return f"weights: must all be positive, got {list(anytime.weights)}"
+    if anytime.corridor is not None and not anytime.corridor >= 0:
+        return f"corridor: must be 0 or more metres, or null, got {anytime.corridor}"
     return ""
 
 

@@ -260,7 +260,7 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "segments", "travel7", "dt7", "corridorR-fF")
+            "segments", "travel7", "dt7", "corridorR-fF", "x-wW-fF-cR")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -311,6 +311,12 @@ def variant_config(variant: str, time_limit: float | None):
         radius, _, factor = variant.removeprefix("corridor").partition("-f")
         return FootstepConfig(anytime=AnytimeConfig(corridor=float(radius),
                                                     improve_factor=float(factor or 2.0)))
+    if variant.startswith("x-"):  # x-wW-fF-cR: today's default, any of its first route's
+        # weight W, improvement budget F and corridor R changed
+        settings = {part[0]: float(part[1:]) for part in variant.split("-")[1:]}
+        anytime = AnytimeConfig(improve_factor=settings.get("f", 2.0),
+                                corridor=settings.get("c"))
+        return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime)
     return FootstepConfig(**table[variant])
 
 

@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(against_oracle(runs), indent=1))
         return EXIT_OK
     variants = args.variants.split(",")
-    bad = [v for v in variants if v not in VARIANTS and not v.startswith("corridor")]
+    bad = [v for v in variants if v not in VARIANTS and not v.startswith(("corridor", "x-"))]
     if bad:
         parser.error(f"--variants: unknown {bad}; choose from {list(VARIANTS)}")
     indices = (range(args.trials) if args.seeds is None

@@ -5,6 +5,7 @@ An interrupted run therefore leaves either the old file or the complete new one,
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Callable
@@ -32,15 +33,18 @@ def output_problem(path: str | Path) -> str | None:
     missing folder is fine if it can be created."""
     try:
         target = output_target(path)
-    except OSError:
+        if target.is_dir():
+            return "is a directory; give a file name"
+        if target.exists() and not target.is_file():
+            return "is not a regular file (a device or a pipe?)"
+        folder = target.parent
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent  # the nearest existing folder must let us create the rest
+    except RuntimeError:  # Python 3.11's symlink loop
         return "is a symlink loop"
-    if target.is_dir():
-        return "is a directory; give a file name"
-    if target.exists() and not target.is_file():
-        return "is not a regular file (a device or a pipe?)"
-    folder = target.parent
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent  # the nearest existing folder must let us create the rest
+    except OSError as e:  # a name too long, a loop, no permission on a folder on the way
+        return "is a symlink loop" if e.errno == errno.ELOOP or e.errno is None else \
+            f"cannot be written: {e.strerror}"
     if not folder.is_dir():
         return f"{folder} is not a folder"
     if not os.access(folder, os.W_OK | os.X_OK):
@@ -53,7 +57,10 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     target: the link stays)."""
     path = output_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # name the output, not the temporary file (a folder such as /proc)
+        raise OSError(e.errno, f"cannot write a file there ({e.strerror})", str(path)) from None
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)

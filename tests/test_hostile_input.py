@@ -392,3 +392,17 @@ def test_lattice_outside_its_range_refused_naming_the_key(tmp_path, lattice, wor
                      str(tmp_path / "p.json"), "--no-pictures", cwd=tmp_path)
     _refused_in_one_line(result, config, f"footstep.lattice.{words}")
     assert not (tmp_path / "p.json").exists(), "a refused configuration wrote a plan"
+
+
+def test_unwritable_outputs_named_with_their_reason(tmp_path):
+    """An output name too long for the file system was called a symlink loop, and a folder
+    where no file can be made (/proc) was reported under the temporary file's name."""
+    long_name = tmp_path / ("x" * 300 + ".yaml")
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "--seed", "3", "-o",
+                     str(long_name), cwd=tmp_path)
+    _refused_in_one_line(result, long_name, "File name too long")
+    if Path("/proc/version").exists():
+        result = run_rbp("scenario", "generate", "--kind", "shaft", "--seed", "3", "-o",
+                         "/proc/version", cwd=tmp_path)
+        _refused_in_one_line(result, Path("/proc/version"), "cannot write a file there")
+        assert ".tmp" not in result.stderr, result.stderr

@@ -98,7 +98,7 @@ class _HopTable:
         target = self.row[anchor]
         table = self._from.get(target)
         if table is None:
-            sources = np.zeros(len(self.adjacent), dtype=bool)
+            sources = np.zeros(self.adjacent.shape[0], dtype=bool)
             sources[target] = True
             table = self._from[target] = hops_from(self.adjacent, sources)
         return table

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import csr_matrix
 
 from planning.lattice_kernels import transition_boom_costs
 from rb_drake.kernel.collision import packed_rock
@@ -109,24 +110,34 @@ def boom_hop_length(robot: RobotParams) -> float:
     return robot.boom_length[1] * max(1.0, 2.0 * math.sin(spread / 2.0))
 
 
-def hop_graph(scn: Scenario) -> np.ndarray:
-    """(anchors, anchors) bool: the relaxed graph's edges, anchors at most `boom_hop_length`
-    apart (every move of a boom joins two of them)."""
-    pts = scn.anchor_positions
+def hop_graph(scn: Scenario) -> csr_matrix:
+    """(anchors, anchors) sparse: the relaxed graph's edges, anchors at most `boom_hop_length`
+    apart (every move of a boom joins two of them), each stored with its length (an anchor's
+    edge to itself is left out; two anchors at the same point get a length of 1e-12, since a
+    sparse matrix's zero means no edge). Found with a k-d tree, so that memory grows with the
+    edges, not with the square of the anchors (a 300 m cave holds 12,000)."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(scn.anchor_positions, dtype=float)
     hop = boom_hop_length(scn.robot) * (1.0 + 1e-9) + 1e-9
-    diff = pts[:, None, :] - pts[None, :, :]
-    return np.einsum("ijk,ijk->ij", diff, diff) <= hop * hop
+    pairs = cKDTree(pts).query_pairs(hop, output_type="ndarray")
+    lengths = np.maximum(np.linalg.norm(pts[pairs[:, 0]] - pts[pairs[:, 1]], axis=1), 1e-12)
+    n = len(pts)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    return csr_matrix((np.concatenate([lengths, lengths]), (rows, cols)), shape=(n, n))
 
 
-def hops_from(adjacent: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """The fewest edges of `adjacent` from any anchor of `sources` (bool) to each anchor
-    (breadth-first; inf where none leads)."""
-    hops = np.full(len(adjacent), np.inf)
-    frontier, level = sources, 0
-    while frontier.any():
+def hops_from(adjacent: csr_matrix, sources: np.ndarray) -> np.ndarray:
+    """The fewest edges of `adjacent` (`hop_graph`) from any anchor of `sources` (bool) to each
+    anchor (breadth-first; inf where none leads)."""
+    hops = np.full(adjacent.shape[0], np.inf)
+    frontier, level = np.flatnonzero(sources), 0
+    while len(frontier):
         hops[frontier] = level
         level += 1
-        frontier = adjacent[frontier].any(axis=0) & np.isinf(hops)
+        reached = np.unique(adjacent[frontier].indices)
+        frontier = reached[np.isinf(hops[reached])]
     return hops
 
 
@@ -250,9 +261,7 @@ class TravelHeuristic:
 
         self.c_attach = attach_cost(scn.robot)
         self.hop = boom_hop_length(scn.robot)
-        pts = scn.anchor_positions
-        lengths = np.where(hop_graph(scn), np.linalg.norm(pts[:, None] - pts[None], axis=2), 0.0)
-        np.fill_diagonal(lengths, 0.0)  # zero: no edge (csgraph's convention)
+        lengths = hop_graph(scn)  # each edge its length: csgraph's convention
         targets = goal_targets(scn, cells)
         self.travel = np.full(targets.shape, np.inf)
         for k in range(cells):

@@ -35,8 +35,9 @@ from rb_drake.errors import RbpInputError
 
 DEFAULT_MAX_INPUT_MB = 32.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
-MAX_NODES = 250_000     # values of a YAML document, aliases expanded (bundled caves: < 10,000;
-#                         an imported cave of 50,000 outline vertices about 150,000)
+MAX_NODES = 1_000_000   # values of a YAML document, aliases expanded (bundled caves: < 10,000;
+#                         `rbp scenario generate`'s largest, 1000 m at 20 anchors a metre, about
+#                         900,000; an imported cave of 50,000 outline vertices about 150,000)
 MAX_ALIASES = 10_000    # alias uses in a YAML document
 MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
 MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit

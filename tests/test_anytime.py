@@ -51,6 +51,23 @@ def test_hop_length_is_the_chord_of_the_shoulder_range(demo: Scenario) -> None:
     assert boom_hop_length(robot) == pytest.approx(math.sqrt(2) * robot.boom_length[1], 1e-12)
 
 
+def test_hop_graph_joins_exactly_the_anchors_within_a_hop(demo: Scenario) -> None:
+    """The sparse hop graph (a k-d tree's pairs) has an edge, of the anchors' distance, for
+    every pair of distinct anchors at most `boom_hop_length` apart and for no other."""
+    from experiments.common import make_cave
+    from planning.search_cost import hop_graph
+
+    for scn in (demo, make_cave("crevasse", 5001, (20.0, 20.0))):
+        pts = scn.anchor_positions
+        distance = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+        within = distance <= boom_hop_length(scn.robot) * (1 + 1e-9) + 1e-9
+        np.fill_diagonal(within, False)
+        graph = hop_graph(scn).toarray()
+        assert within.sum() >= 2 * len(pts), "too few edges for the check to mean anything"
+        assert np.array_equal(graph > 0, within), "the graph's edges differ from the pairs"
+        assert np.allclose(graph[within], np.maximum(distance[within], 1e-12), rtol=1e-12)
+
+
 def test_bound_is_consistent_on_every_evaluated_edge(demo: Scenario, optimal) -> None:
     bound = RegraspHeuristic(demo)
     edges = [(u, v, c) for u, v, c in optimal.graph.edges(data="cost") if c is not None]

@@ -132,8 +132,10 @@ def _size(n: int) -> str:
 
 def load_yaml(text: str) -> Any:
     """The one YAML document of `text`, refused (InputFileError naming the line and column) if
-    it is not valid YAML, repeats a key in a mapping, nests deeper than MAX_DEPTH or expands
-    (aliases included) to more than MAX_NODES values."""
+    it is not valid YAML, holds or expands (aliases included) to more than MAX_NODES values,
+    nests deeper than MAX_DEPTH, repeats a key in a mapping, or holds a value longer than
+    MAX_SCALAR_CHARS or a number longer than MAX_NUMBER_CHARS. A long document's values are
+    counted on its events first (`_count_events`), before any tree is built."""
     try:
         if len(text) > EVENT_COUNT_ABOVE_CHARS or _node_bound(text) > MAX_NODES:
             _count_events(text)

@@ -254,14 +254,19 @@ def _refused_in_one_line(result, path: Path, words: str) -> None:
         (path, words, result.stderr[-2000:])
 
 
+def _refusal_growth_mb(load, text: str, match: str) -> float:
+    """How far the peak memory grew (MB) while `load(text)` refused `text` with `match`."""
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(InputFileError, match=match):
+        load(text)
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+
+
 def test_long_flat_yaml_refused_before_its_tree_is_built():
     """A file of many plain values (no alias) is counted on the parser's events: PyYAML's
     tree of a 60 MB `[0,0,...]` took 9 GB before this bound."""
     text = "walls: [" + ",".join(["0"] * 1_100_000) + "]\n"
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    with pytest.raises(InputFileError, match="holds more than 1,000,000 values"):
-        load_yaml(text)
-    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    grown_mb = _refusal_growth_mb(load_yaml, text, "holds more than 1,000,000 values")
     # building the tree of 1,100,000 values takes about 600 MB; counting events, a few
     assert grown_mb < 60, f"refusing 1.1 million values grew the peak memory by {grown_mb:.0f} MB"
 
@@ -281,10 +286,7 @@ def test_long_value_and_huge_integer_refused_with_their_line():
 
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    with pytest.raises(InputFileError, match="over the limit of 2,000,000"):
-        load_json(text)
-    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")
     assert grown_mb < 60, f"refusing 2.1 million values grew the peak memory by {grown_mb:.0f} MB"
 
 

@@ -428,7 +428,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
                                                 memo.move_table(vertex)):
             if not beaten(g + c_attach, child):
-                if not in_corridor(child):
+                if guide is not None and not in_corridor(child):
                     left_out = min(left_out, g + c_attach + bound(child))
                     continue
                 heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),

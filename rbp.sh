@@ -6,8 +6,10 @@
 #                      args go to pytest
 #   ./rbp.sh ARGS...   any rbp command, e.g. ./rbp.sh scenario show demo-shaft -o cave.png
 set -euo pipefail
+CALLER_DIR="$PWD"  # rbp commands run here, so that relative paths mean what the user typed
 cd "$(dirname "$0")"
 VENV="${RBP_VENV:-.venv}"
+case "$VENV" in /*) ;; *) VENV="$PWD/$VENV" ;; esac
 
 find_python() {
     for py in python3.11 python3.12 python3.13 python3; do
@@ -46,6 +48,7 @@ case "${1:-}" in
         exec "$VENV/bin/rbp" demo "$@"
         ;;
     *)
+        cd "$CALLER_DIR"
         exec "$VENV/bin/rbp" "$@"
         ;;
 esac

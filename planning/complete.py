@@ -34,7 +34,6 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Collection
-from enum import IntEnum
 
 import networkx as nx
 import numpy as np
@@ -60,6 +59,7 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
+from planning.open_list import Entry, MoveGroup, anchor_row, frontier, rekeyed
 from planning.search_cost import (
     DistanceHeuristic,
     RegraspHeuristic,
@@ -71,13 +71,6 @@ from planning.search_outcome import Quality, Stop
 from rb_drake.scenario import Scenario
 
 BOUND_EVERY = 100  # expansions between two updates of the anytime search's lower bound
-
-
-class Entry(IntEnum):
-    """What an open-list entry holds (its fourth field; the search's comment on `open_list`)."""
-
-    REACHED = 0  # a stance reached by an evaluated move, its component not yet known
-    MOVE = 1     # a move still to evaluate (its transition poses not yet computed)
 
 
 def _adds_nothing(labels: np.ndarray, child: tuple, closed: dict[Vertex, float],
@@ -237,7 +230,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         nonlocal proven
         lo = min(best_cost, current, left_out)
         for entry in itertools.chain(open_list, deferred):
-            lo = min(lo, entry[2] + bound(entry[4]))
+            lo = min(lo, entry[5].least() if entry[3] == Entry.MOVES
+                     else entry[2] + bound(entry[4]))
         proven = max(proven, lo)
         return proven
 
@@ -293,6 +287,11 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
 
     while open_list:
         popped = heapq.heappop(open_list)
+        if popped[3] == Entry.MOVES:  # a vertex's first waiting move; its next one goes back
+            group = popped[5]
+            popped = group.pop(scn, Entry.MOVE)
+            if len(group):
+                heapq.heappush(open_list, group.entry(scn, Entry.MOVES))
         _, _, g, kind, child_stance, payload = popped
         if beaten(g, child_stance):
             continue
@@ -362,7 +361,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if goal_pose is not None:
             found = finished(vertex, goal_pose)
             if anytime is None:
-                return found._replace(frontier=_frontier(open_list, closed))
+                return found._replace(frontier=frontier(open_list, closed))
             if found.cost < best_cost:
                 best, best_cost = found, found.cost
                 now = time.perf_counter() - t0
@@ -394,7 +393,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                         parent.clear()
                         left_out = math.inf  # this pass's own moves left out, from here on
                     else:
-                        open_list = [(e[2] + heuristic(e[4]), *e[1:]) for e in open_list]
+                        open_list = [rekeyed(scn, e, heuristic) for e in open_list]
                         heapq.heapify(open_list)
             current = math.inf
             continue  # a goal's successors cannot be cheaper routes
@@ -423,17 +422,21 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if best is not None and anytime is not None and \
                 expansions - first_expansions >= anytime.improve_expansions(first_expansions):
             break
-        # A move's rows stay in the memo's move table (bounded), not in the open list: most
-        # moves are never evaluated, and their rows are most of a search's memory otherwise.
+        # A move's rows stay in the memo's move table (bounded), not in the open list, and
+        # the moves wait as one entry (`MoveGroup`): most are never evaluated, and one tuple
+        # each was most of what a long search kept per vertex outside its memo.
+        waiting = []
         for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
                                                 memo.move_table(vertex)):
             if not beaten(g + c_attach, child):
                 if guide is not None and not in_corridor(child):
                     left_out = min(left_out, g + c_attach + bound(child))
                     continue
-                heapq.heappush(open_list, (g + c_attach + heuristic(child), next(tie),
-                                           g + c_attach, Entry.MOVE, child,
-                                           (vertex, j, anchor)))
+                waiting.append((g + c_attach + heuristic(child), next(tie), j,
+                                anchor_row(scn, anchor), bound(child)))
+        if waiting:
+            group = MoveGroup(vertex, g + c_attach, waiting)
+            heapq.heappush(open_list, group.entry(scn, Entry.MOVES))
         current = math.inf  # its successors are in the open list
     if best is not None:
         lo = lower()
@@ -442,7 +445,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             history.append((now, best_cost, lo, expansions))
         quality = Quality.OPTIMAL if best_cost <= lo * (1.0 + 1e-12) else Quality.BOUNDED
         return best._replace(expansions=expansions, transitions_tested=tested,
-                             expanded=expanded, frontier=_frontier(open_list, closed),
+                             expanded=expanded, frontier=frontier(open_list, closed),
                              lower_bound=lo, first_cost=history[0][1], history=history,
                              quality=quality)
     if stop == Stop.NOROUTE:
@@ -453,7 +456,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             stop = Stop.EXHAUSTED
             reason += f" ({len(excluded)} moves excluded)"
     return CompleteResult(False, stop, reason, [], [], [], None, expansions, tested, expanded,
-                          _frontier(open_list, closed), graph,
+                          frontier(open_list, closed), graph,
                           partial=nearest_route() if partial else None)
 
 
@@ -485,18 +488,6 @@ def _ratio(cost: float, lower_bound: float) -> float:
     if lower_bound > 0:
         return cost / lower_bound
     return 1.0 if cost <= 0 else math.inf
-
-
-def _frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
-    """The vertices reached (by an evaluated move) but never expanded, for pictures."""
-    out, seen = [], set()
-    for entry in open_list:
-        if entry[3] == Entry.REACHED:
-            vertex, _, pose = entry[5][:3]
-            if vertex not in closed and vertex not in seen:
-                seen.add(vertex)
-                out.append((vertex, pose))
-    return out
 
 
 __all__ = ["AnytimeConfig", "CompleteConfig", "LatticeMemo", "complete_search"]

@@ -1,0 +1,120 @@
+"""The complete search's open list: what its entries hold (`Entry`), and the moves an
+expanded vertex leaves there, held as one entry (`MoveGroup`).
+
+The complete search (`planning.complete`) pushes every move of an expanded vertex into its open
+list, keyed (f, tie), and evaluates a move only when it is popped; most are never popped. As
+one tuple each (with its child stance and payload) they were the largest thing a long search
+kept per vertex outside its memo: about 2.3 kB per expanded vertex, 230 MB for a search of
+100,000 (docs/benchmarks.md, issue 31). `MoveGroup` keeps them in two arrays, about 16 bytes a
+move, sorted by (f, tie), and only its first move sits in the open list; popping it puts the
+next one back. The open list then pops exactly the moves, in exactly the order, that it would
+have popped with one entry per move: the search's decisions do not change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from enum import IntEnum
+
+import numpy as np
+
+from planning.lattice_search import Vertex
+from rb_drake.scenario import Scenario
+
+
+class Entry(IntEnum):
+    """What an open-list entry holds (its fourth field; the search's comment on `open_list`)."""
+
+    REACHED = 0  # a stance reached by an evaluated move, its component not yet known
+    MOVE = 1     # a move still to evaluate (its transition poses not yet computed)
+    MOVES = 2    # an expanded vertex's moves still to evaluate, as one entry (`MoveGroup`)
+
+
+_J_BITS, _K_BITS = 4, 24  # a move's code: tie << 28 | boom << 24 | anchor row
+
+
+class MoveGroup:
+    """The moves of `vertex` (a (stance, component) pair) reached at `g` (its cost plus the
+    least an edge costs) still waiting in the open list: per move, its key f, its tie number,
+    its boom and the anchor's row, and the admissible bound of its child stance."""
+
+    __slots__ = ("bound", "code", "f", "g", "pos", "vertex")
+
+    def __init__(self, vertex: tuple, g: float, moves: list[tuple[float, int, int, int, float]]
+                 ) -> None:
+        """`moves`: (f, tie, boom, anchor row, bound of the child), in any order."""
+        self.vertex, self.g = vertex, g
+        self._fill(moves)
+
+    def _fill(self, moves: list[tuple[float, int, int, int, float]]) -> None:
+        moves.sort()  # by (f, tie): the order the open list pops them in
+        self.pos = 0
+        self.f = np.array([m[0] for m in moves], dtype=np.float64)
+        self.code = np.array([(m[1] << (_J_BITS + _K_BITS)) | (m[2] << _K_BITS) | m[3]
+                              for m in moves], dtype=np.int64)
+        self.bound = np.array([m[4] for m in moves], dtype=np.float64)
+
+    def __len__(self) -> int:
+        return len(self.f) - self.pos
+
+    def move(self, scn: Scenario, n: int) -> tuple[int, int, str, tuple]:
+        """The n-th waiting move (0: the first): its tie number, boom, anchor id and child."""
+        code = int(self.code[self.pos + n])
+        tie, j, k = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15, code & (2**_K_BITS - 1)
+        anchor = scn.anchors[k].id
+        stance = self.vertex[0]
+        return tie, j, anchor, tuple(anchor if i == j else a for i, a in enumerate(stance))
+
+    def entry(self, scn: Scenario, kind: int) -> tuple:
+        """The open-list entry of the first waiting move: (f, tie, g, kind, child, self)."""
+        tie, _, _, child = self.move(scn, 0)
+        return (float(self.f[self.pos]), tie, self.g, kind, child, self)
+
+    def pop(self, scn: Scenario, kind: int) -> tuple:
+        """The first waiting move as one move's entry (f, tie, g, kind, child, (vertex, boom,
+        anchor)), taken out of the group."""
+        tie, j, anchor, child = self.move(scn, 0)
+        f = float(self.f[self.pos])
+        self.pos += 1
+        return (f, tie, self.g, kind, child, (self.vertex, j, anchor))
+
+    def least(self) -> float:
+        """The least g + bound over the waiting moves (inf: none wait)."""
+        return float(self.g + self.bound[self.pos:].min()) if len(self) else float("inf")
+
+    def rekey(self, scn: Scenario, key: Callable[[tuple], float]) -> None:
+        """Each waiting move keyed again, f = g + key(child), and sorted again by (f, tie)."""
+        moves = []
+        for i in range(len(self)):
+            tie, j, anchor, child = self.move(scn, i)
+            moves.append((self.g + key(child), tie, j, scn.anchor_index[anchor],
+                          float(self.bound[self.pos + i])))
+        self._fill(moves)
+
+
+def anchor_row(scn: Scenario, anchor: str) -> int:
+    """The anchor's row, as a move's code holds it (at most 2**24 anchors)."""
+    k = scn.anchor_index[anchor]
+    if k >= 2**_K_BITS:
+        raise ValueError(f"a cave of more than {2**_K_BITS} anchors")
+    return k
+
+
+def rekeyed(scn: Scenario, entry: tuple, key: Callable[[tuple], float]) -> tuple:
+    """An open-list entry keyed again by `key` (f = g + key(child)); a group's moves too."""
+    if entry[3] == Entry.MOVES:
+        entry[5].rekey(scn, key)
+        return entry[5].entry(scn, Entry.MOVES)
+    return (entry[2] + key(entry[4]), *entry[1:])
+
+
+def frontier(open_list: list, closed: dict) -> list[tuple[Vertex, np.ndarray]]:
+    """The vertices reached (by an evaluated move) but never expanded, for pictures."""
+    out, seen = [], set()
+    for entry in open_list:
+        if entry[3] == Entry.REACHED:
+            vertex, _, pose = entry[5][:3]
+            if vertex not in closed and vertex not in seen:
+                seen.add(vertex)
+                out.append((vertex, pose))
+    return out

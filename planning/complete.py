@@ -35,7 +35,6 @@ import math
 import time
 from collections.abc import Callable, Collection
 
-import networkx as nx
 import numpy as np
 
 from planning.complete_config import AnytimeConfig, CompleteConfig
@@ -51,6 +50,7 @@ from planning.lattice_search import (
     CompleteResult,
     LatticeMemo,
     PartialRoute,
+    SearchGraph,
     Stance4,
     Vertex,
     best_poses,
@@ -119,7 +119,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_lat = stance_components(scn, memo, start, cfg, ignore_grasps)
     joined = start_components(scn, start_lat, cfg)
-    graph = nx.DiGraph()
+    graph = SearchGraph()
     tested = 0
 
     distance = distance_heuristic.distance
@@ -245,8 +245,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         pose = poses[0].copy()  # not a view: it would keep all the alternatives alive
         cost = edge_cost(scn, stance, j, anchor, pose)
         g_child = g_parent + cost
-        data = graph.edges[move[0], child]
-        data["cost"] = min(data.get("cost", math.inf), cost)
+        graph.add(move[0], child, cost)
         return (g_child + heuristic(child), next(tie), g_child, Entry.REACHED, child,
                 ((child, comp), move, pose, p4, pick, g_parent, cost))
 
@@ -319,7 +318,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 tested += 1
             if not len(tr.keys):
                 continue
-            graph.add_edge((stance, comp), child, boom=j, anchor=anchor)
+            graph.add((stance, comp), child)
             # The child's lattice (and so which of its components the move enters) waits until
             # the child is popped: most children are never expanded.
             heapq.heappush(open_list, edge_entry(g - c_attach, move, tr, None, child, None))

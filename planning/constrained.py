@@ -31,7 +31,6 @@ import math
 import time
 from collections.abc import Callable, Collection
 
-import networkx as nx
 import numpy as np
 
 from planning.complete_config import CompleteConfig
@@ -45,6 +44,7 @@ from planning.lattice_moves import (
 from planning.lattice_search import (
     CompleteResult,
     LatticeMemo,
+    SearchGraph,
     best_poses,
     goal_pose_of,
     stance_components,
@@ -79,7 +79,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     budget = -math.log(min_success)
     slack = budget * (1.0 + 1e-12)
     bound = RegraspHeuristic(scn)
-    graph = nx.DiGraph()
+    graph = SearchGraph()
     start = tuple(scn.start_stance)
     joined = start_components(scn, stance_components(scn, memo, start, cfg, ignore_grasps), cfg)
     if not goal_is_holdable(scn, cfg):
@@ -153,7 +153,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
             for c2 in np.unique(comps):
                 poses, p4 = best_poses(tr, np.flatnonzero(comps == c2), cfg)
                 step = edge_cost(scn, stance, j, anchor, poses[0])
-                graph.add_edge(vertex, (child, int(c2)), cost=step, boom=j, anchor=anchor)
+                graph.add(vertex, (child, int(c2)), step)
                 push((child, int(c2)), k + 1, base + step, index, poses[0], p4, poses)
             continue
         vertex, k, _, _, pose, _, _ = labels[index]

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any, NamedTuple
 
 import networkx as nx
@@ -123,6 +123,45 @@ def same_world(a: Scenario, b: Scenario) -> bool:
                       and tuple(a.gravity) == tuple(b.gravity))
 
 
+class SearchGraph:
+    """The moves a lattice search evaluated and found to hold: (vertex, child) -> the least
+    cost it found for the edge (the child a stance, or a vertex where the search knows its
+    component), in one dict. A networkx graph kept about 1.3 kB a vertex of a long search (its
+    node and adjacency dicts); this keeps about 0.25 kB. `as_networkx()` for analysis."""
+
+    __slots__ = ("costs",)
+
+    def __init__(self) -> None:
+        self.costs: dict[tuple, float] = {}
+
+    def add(self, u: Vertex, v: tuple, cost: float = math.inf) -> None:
+        """Edge u -> v, its cost the least of `cost` and what it had."""
+        old = self.costs.get((u, v))
+        if old is None or cost < old:
+            self.costs[u, v] = cost
+
+    def update(self, other: SearchGraph) -> None:
+        for (u, v), cost in other.costs.items():
+            self.add(u, v, cost)
+
+    def __len__(self) -> int:
+        return len(self.costs)
+
+    def edges(self) -> Iterator[tuple[Vertex, tuple, float]]:
+        """(u, v, cost) for each edge."""
+        for (u, v), cost in self.costs.items():
+            yield u, v, cost
+
+    def as_networkx(self) -> nx.DiGraph:
+        """The edges as a networkx DiGraph, each with its cost, boom and anchor."""
+        graph = nx.DiGraph()
+        for (u, v), cost in self.costs.items():
+            child = v if isinstance(v[0], str) else v[0]
+            j = next((i for i, (a, b) in enumerate(zip(u[0], child, strict=True)) if a != b), -1)
+            graph.add_edge(u, v, cost=cost, boom=j, anchor=child[j] if j >= 0 else None)
+        return graph
+
+
 class CompleteResult(NamedTuple):
     """A lattice search's result: the route as vertices and the transition poses between them,
     or why there is none (`stop`, `reason`), with what the search explored."""
@@ -138,7 +177,7 @@ class CompleteResult(NamedTuple):
     transitions_tested: int
     expanded: list[tuple[Vertex, np.ndarray]]   # (vertex, pose reached at), in order
     frontier: list[tuple[Vertex, np.ndarray]]
-    graph: nx.DiGraph
+    graph: SearchGraph
     # per edge, its most robust lattice poses in the component entered, best first (the
     # first is `poses`'): others for the pipeline where the gripper's path fails at the first
     alternatives: list[np.ndarray] | None = None
@@ -221,7 +260,7 @@ def threads_held(search: Callable[..., CompleteResult]) -> Callable[..., Complet
 def search_result(result: CompleteResult) -> SearchResult[Stance4]:
     """The result in `planning.astar`'s form, stances as nodes."""
     graph = nx.DiGraph()
-    for (a, _), b in result.graph.edges():
+    for (a, _), b, _cost in result.graph.edges():
         graph.add_edge(a, b, cost=0.0, data=None)
     return SearchResult(result.success, [v[0] for v in result.path], list(result.poses),
                         None, float("nan"), result.expansions, result.transitions_tested, graph,

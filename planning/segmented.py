@@ -27,13 +27,12 @@ import time
 from collections.abc import Callable, Collection
 from typing import Any
 
-import networkx as nx
 import numpy as np
 
 from planning.complete import complete_search
 from planning.complete_config import CompleteConfig
 from planning.lattice_moves import goal_is_holdable
-from planning.lattice_search import CompleteResult, LatticeMemo, Vertex
+from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Vertex
 from planning.search_cost import RegraspHeuristic, edge_cost
 from planning.search_outcome import Quality, Stop
 from rb_drake.errors import RbpInputError
@@ -132,7 +131,7 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
     probabilities: list[np.ndarray] = []
     alternatives: list[np.ndarray] = []
     expanded: list[tuple[Vertex, np.ndarray]] = []
-    graph = nx.DiGraph()
+    graph = SearchGraph()
     current = scn
     lookahead = segment.lookahead
     while True:
@@ -176,7 +175,7 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
 
 def _joined(scn: Scenario, last: CompleteResult, path: list[Vertex], poses: list[np.ndarray],
             probabilities: list[np.ndarray], alternatives: list[np.ndarray],
-            expanded: list[tuple[Vertex, np.ndarray]], graph: nx.DiGraph,
+            expanded: list[tuple[Vertex, np.ndarray]], graph: SearchGraph,
             done: dict[str, int], seconds: float) -> CompleteResult:
     """The segments' kept parts as one route, its cost, and the start's admissible bound."""
     cost = 0.0

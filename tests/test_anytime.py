@@ -70,7 +70,7 @@ def test_hop_graph_joins_exactly_the_anchors_within_a_hop(demo: Scenario) -> Non
 
 def test_bound_is_consistent_on_every_evaluated_edge(demo: Scenario, optimal) -> None:
     bound = RegraspHeuristic(demo)
-    edges = [(u, v, c) for u, v, c in optimal.graph.edges(data="cost") if c is not None]
+    edges = [(u, v, c) for u, v, c in optimal.graph.edges() if c is not None]
     assert len(edges) >= 20, f"only {len(edges)} edges evaluated: the check would be vacuous"
     worst = max(bound(u[0]) - c - bound(v) for u, v, c in edges)
     assert worst <= 1e-12, f"h(u) exceeds cost(u, v) + h(v) by {worst:.3g} on some edge"
@@ -83,7 +83,7 @@ def test_travel_bound_is_consistent_and_below_the_hop_bound(demo: Scenario, opti
     """The travel bound (the search's order): consistent on every evaluated edge, 0 at the goal
     stance, and never above the regrasp bound (a path of n hops is at most n hops long)."""
     travel, hops = TravelHeuristic(demo), RegraspHeuristic(demo)
-    edges = [(u, v, c) for u, v, c in optimal.graph.edges(data="cost") if c is not None]
+    edges = [(u, v, c) for u, v, c in optimal.graph.edges() if c is not None]
     assert len(edges) >= 20, f"only {len(edges)} edges evaluated: the check would be vacuous"
     worst = max(travel(u[0]) - c - travel(v) for u, v, c in edges)
     assert worst <= 1e-12, f"travel h(u) exceeds cost(u, v) + h(v) by {worst:.3g} on some edge"
@@ -106,7 +106,7 @@ def test_bound_never_exceeds_the_cost_to_go(demo: Scenario, optimal, name: str) 
         return node[0] if len(node) == 2 else node
 
     graph = nx.DiGraph()  # over stances (components merged: a cost to go no higher)
-    for u, v, c in optimal.graph.edges(data="cost"):
+    for u, v, c in optimal.graph.edges():
         if c is not None:
             graph.add_edge(stance(u), stance(v), cost=c)
     goal = stance(optimal.path[-1])

@@ -82,7 +82,7 @@ def test_a_loose_p_gives_the_fewest_regrasps(loose, fewest: int) -> None:
     assert len(loose.path) - 1 == fewest, (
         f"{len(loose.path) - 1} regrasps where the unconstrained fewest is {fewest}")
     # the edges' costs add up to the reported cost
-    total = sum(loose.graph.edges[u, v]["cost"]
+    total = sum(loose.graph.costs[u, v]
                 for u, v in zip(loose.path[:-1], loose.path[1:], strict=True))
     assert total == pytest.approx(loose.cost, rel=1e-9)
 

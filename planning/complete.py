@@ -59,7 +59,14 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
-from planning.open_list import Entry, MoveGroup, anchor_row, frontier, rekeyed
+from planning.open_list import (
+    DeferredMoves,
+    Entry,
+    MoveGroup,
+    anchor_row,
+    frontier,
+    rekeyed,
+)
 from planning.search_cost import (
     DistanceHeuristic,
     RegraspHeuristic,
@@ -148,6 +155,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     # expanded again when reached more cheaply: so the lower bound below stays valid.
     reopen = exact
     deferred: list = []
+    deferred_moves = DeferredMoves()  # the moves among them, in columns
 
     def redundant(vertex: Vertex, g: float, entry: tuple) -> bool:
         """Whether `entry`, reaching `vertex` at `g`, adds nothing to the search now."""
@@ -228,7 +236,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         """min over the open list (and the vertex being expanded, and the moves left out of
         the corridor) of g + bound, and the best cost: the optimum is no lower."""
         nonlocal proven
-        lo = min(best_cost, current, left_out)
+        lo = min(best_cost, current, left_out, deferred_moves.least)
         for entry in itertools.chain(open_list, deferred):
             lo = min(lo, entry[5].least() if entry[3] == Entry.MOVES
                      else entry[2] + bound(entry[4]))
@@ -311,7 +319,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     # the first route, nothing new now: it waits if it might lower their cost)
                     if not reopen and anytime is not None and \
                             not _adds_nothing(labels, child, closed, g):
-                        deferred.append(popped)
+                        deferred_moves.add(popped, scn.anchor_index[anchor], bound(child))
                     continue
                 tr = memo.transitions[key] = lattice_transition(
                     scn, lat, stance, j, anchor, ignore_grasps, rows, known, labels)
@@ -377,7 +385,9 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 if not reopen:
                     reopen = True
                     open_list.extend(deferred)
+                    open_list.extend(deferred_moves.entries(scn, Entry.MOVE))
                     deferred.clear()
+                    deferred_moves.clear()
                     heapq.heapify(open_list)
                 if corridor is not None and anytime.restart:
                     guide = np.array([scn.anchor_positions[[scn.anchor_index[a] for a in v[0]]]
@@ -392,7 +402,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                         parent.clear()
                         left_out = math.inf  # this pass's own moves left out, from here on
                     else:
-                        open_list = [rekeyed(scn, e, heuristic) for e in open_list]
+                        open_list = [rekeyed(scn, e, heuristic, bound) for e in open_list]
                         heapq.heapify(open_list)
             current = math.inf
             continue  # a goal's successors cannot be cheaper routes

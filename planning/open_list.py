@@ -5,7 +5,7 @@ The complete search (`planning.complete`) pushes every move of an expanded verte
 list, keyed (f, tie), and evaluates a move only when it is popped; most are never popped. As
 one tuple each (with its child stance and payload) they were the largest thing a long search
 kept per vertex outside its memo: about 2.3 kB per expanded vertex, 230 MB for a search of
-100,000 (docs/benchmarks.md, issue 31). `MoveGroup` keeps them in two arrays, about 16 bytes a
+100,000 (docs/benchmarks.md, issue 31). `MoveGroup` keeps them in two arrays, 24 bytes a
 move, sorted by (f, tie), and only its first move sits in the open list; popping it puts the
 next one back. The open list then pops exactly the moves, in exactly the order, that it would
 have popped with one entry per move: the search's decisions do not change.
@@ -13,6 +13,8 @@ have popped with one entry per move: the search's decisions do not change.
 
 from __future__ import annotations
 
+import math
+from array import array
 from collections.abc import Callable
 from enum import IntEnum
 
@@ -35,10 +37,11 @@ _J_BITS, _K_BITS = 4, 24  # a move's code: tie << 28 | boom << 24 | anchor row
 
 class MoveGroup:
     """The moves of `vertex` (a (stance, component) pair) reached at `g` (its cost plus the
-    least an edge costs) still waiting in the open list: per move, its key f, its tie number,
-    its boom and the anchor's row, and the admissible bound of its child stance."""
+    least an edge costs) still waiting in the open list, sorted by (f, tie): per move its key
+    f, and a code holding its tie number, boom and anchor row; and, for the search's lower
+    bound, the least admissible bound of the child stances from each move on."""
 
-    __slots__ = ("bound", "code", "f", "g", "pos", "vertex")
+    __slots__ = ("code", "g", "pos", "values", "vertex")
 
     def __init__(self, vertex: tuple, g: float, moves: list[tuple[float, int, int, int, float]]
                  ) -> None:
@@ -49,17 +52,21 @@ class MoveGroup:
     def _fill(self, moves: list[tuple[float, int, int, int, float]]) -> None:
         moves.sort()  # by (f, tie): the order the open list pops them in
         self.pos = 0
-        self.f = np.array([m[0] for m in moves], dtype=np.float64)
-        self.code = np.array([(m[1] << (_J_BITS + _K_BITS)) | (m[2] << _K_BITS) | m[3]
-                              for m in moves], dtype=np.int64)
-        self.bound = np.array([m[4] for m in moves], dtype=np.float64)
+        least, suffix = math.inf, []
+        for m in reversed(moves):
+            least = min(least, m[4])
+            suffix.append(least)
+        # f of each move, then the least bound from each move on (array: 64 bytes a header)
+        self.values = array("d", [m[0] for m in moves] + suffix[::-1])
+        self.code = array("q", [(m[1] << (_J_BITS + _K_BITS)) | (m[2] << _K_BITS) | m[3]
+                                for m in moves])
 
     def __len__(self) -> int:
-        return len(self.f) - self.pos
+        return len(self.code) - self.pos
 
     def move(self, scn: Scenario, n: int) -> tuple[int, int, str, tuple]:
         """The n-th waiting move (0: the first): its tie number, boom, anchor id and child."""
-        code = int(self.code[self.pos + n])
+        code = self.code[self.pos + n]
         tie, j, k = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15, code & (2**_K_BITS - 1)
         anchor = scn.anchors[k].id
         stance = self.vertex[0]
@@ -68,28 +75,67 @@ class MoveGroup:
     def entry(self, scn: Scenario, kind: int) -> tuple:
         """The open-list entry of the first waiting move: (f, tie, g, kind, child, self)."""
         tie, _, _, child = self.move(scn, 0)
-        return (float(self.f[self.pos]), tie, self.g, kind, child, self)
+        return (self.values[self.pos], tie, self.g, kind, child, self)
 
     def pop(self, scn: Scenario, kind: int) -> tuple:
         """The first waiting move as one move's entry (f, tie, g, kind, child, (vertex, boom,
         anchor)), taken out of the group."""
         tie, j, anchor, child = self.move(scn, 0)
-        f = float(self.f[self.pos])
+        f = self.values[self.pos]
         self.pos += 1
         return (f, tie, self.g, kind, child, (self.vertex, j, anchor))
 
     def least(self) -> float:
         """The least g + bound over the waiting moves (inf: none wait)."""
-        return float(self.g + self.bound[self.pos:].min()) if len(self) else float("inf")
+        return self.g + self.values[len(self.code) + self.pos] if len(self) else math.inf
 
-    def rekey(self, scn: Scenario, key: Callable[[tuple], float]) -> None:
+    def rekey(self, scn: Scenario, key: Callable[[tuple], float],
+              bound: Callable[[tuple], float]) -> None:
         """Each waiting move keyed again, f = g + key(child), and sorted again by (f, tie)."""
         moves = []
         for i in range(len(self)):
             tie, j, anchor, child = self.move(scn, i)
-            moves.append((self.g + key(child), tie, j, scn.anchor_index[anchor],
-                          float(self.bound[self.pos + i])))
+            moves.append((self.g + key(child), tie, j, scn.anchor_index[anchor], bound(child)))
         self._fill(moves)
+
+
+class DeferredMoves:
+    """Moves popped before the first route that wait for it (the anytime search's INCONS
+    list), in columns: a long search defers a few per expanded vertex, and as entries they
+    were ~300 bytes each. `least` is the least g + bound among them, for the lower bound."""
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        self.vertices: list[tuple] = []
+        self.values = array("d")  # f, g per move
+        self.code = array("q")
+        self.least = math.inf
+
+    def __len__(self) -> int:
+        return len(self.code)
+
+    def add(self, entry: tuple, row: int, bound: float) -> None:
+        """A popped move's entry (f, tie, g, kind, child, (vertex, boom, anchor)), its anchor's
+        row and its child's bound."""
+        f, tie, g, _, _, (vertex, j, _) = entry
+        self.vertices.append(vertex)
+        self.values.extend((f, g))
+        self.code.append((tie << (_J_BITS + _K_BITS)) | (j << _K_BITS) | row)
+        self.least = min(self.least, g + bound)
+
+    def entries(self, scn: Scenario, kind: int) -> list[tuple]:
+        """The moves as open-list entries again, as they were popped."""
+        out = []
+        for n, vertex in enumerate(self.vertices):
+            code = self.code[n]
+            tie, j = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15
+            anchor = scn.anchors[code & (2**_K_BITS - 1)].id
+            child = tuple(anchor if i == j else a for i, a in enumerate(vertex[0]))
+            out.append((self.values[2 * n], tie, self.values[2 * n + 1], kind, child,
+                        (vertex, j, anchor)))
+        return out
 
 
 def anchor_row(scn: Scenario, anchor: str) -> int:
@@ -100,10 +146,11 @@ def anchor_row(scn: Scenario, anchor: str) -> int:
     return k
 
 
-def rekeyed(scn: Scenario, entry: tuple, key: Callable[[tuple], float]) -> tuple:
+def rekeyed(scn: Scenario, entry: tuple, key: Callable[[tuple], float],
+            bound: Callable[[tuple], float]) -> tuple:
     """An open-list entry keyed again by `key` (f = g + key(child)); a group's moves too."""
     if entry[3] == Entry.MOVES:
-        entry[5].rekey(scn, key)
+        entry[5].rekey(scn, key, bound)
         return entry[5].entry(scn, Entry.MOVES)
     return (entry[2] + key(entry[4]), *entry[1:])
 

@@ -31,6 +31,10 @@ from rb_drake.kernel.layout import ALL_SEGMENTS, robot_params
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.scenario import Scenario
 
+# Stances whose heuristic values a search keeps for reuse: past it they are forgotten and
+# computed again (the same values), so that a long search's caches stay within ~50 MB
+CACHED_STANCES = 1 << 17
+
 
 def attach_cost(robot: RobotParams) -> float:
     """-log(1 - p_att): what every regrasp costs before its grasps (at least 1e-9, so that the
@@ -94,6 +98,8 @@ class DistanceHeuristic:
     def distance(self, stance: tuple[str, ...]) -> float:
         d = self._distances.get(stance)
         if d is None:
+            if len(self._distances) >= CACHED_STANCES:
+                self._distances.clear()
             d = self._distances[stance] = goal_distance(self.scn, stance)
         return d
 
@@ -194,6 +200,8 @@ class _CellTable:
     def __call__(self, stance: tuple[str, ...]) -> float:
         h = self._cache.get(stance)
         if h is None:
+            if len(self._cache) >= CACHED_STANCES:
+                self._cache.clear()
             rows = [self._row[a] for a in stance]
             h = self._cache[stance] = float(self.table[:, self._booms, rows].sum(axis=1).min())
         return h

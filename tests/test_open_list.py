@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from planning.lattice_search import SearchGraph
-from planning.open_list import Entry, MoveGroup, rekeyed
+from planning.open_list import DeferredMoves, Entry, MoveGroup, rekeyed
 from rb_drake.scenario import bundled_caves, load_scenario
 
 
@@ -79,9 +79,30 @@ def test_least_and_rekey_cover_exactly_the_waiting_moves(demo) -> None:
     assert group.least() == math.inf and len(group) == 0
     # keyed again: each f = g + key(child), sorted again, ties kept
     group = MoveGroup(vertex, g, list(moves))
-    entry = rekeyed(demo, group.entry(demo, Entry.MOVES), lambda child: 0.0)
+    entry = rekeyed(demo, group.entry(demo, Entry.MOVES), lambda child: 0.0,
+                    lambda child: 1.0)
     assert entry[0] == pytest.approx(g) and entry[1] == min(m[1] for m in moves), (
         "with a constant key the first move is the one with the least tie number")
+    assert group.least() == pytest.approx(g + 1.0), "the bounds are taken again too"
+
+
+def test_deferred_moves_come_back_as_they_were_popped(demo) -> None:
+    rng = np.random.default_rng(11)
+    popped = []
+    for vertex, g, moves in _groups(demo, rng, 10):
+        group = MoveGroup(vertex, g, list(moves))
+        while len(group):
+            popped.append(group.pop(demo, Entry.MOVE))
+    store = DeferredMoves()
+    bounds = rng.uniform(0, 3, len(popped))
+    for entry, b in zip(popped, bounds, strict=True):
+        store.add(entry, demo.anchor_index[entry[5][2]], float(b))
+    assert len(store) == len(popped) > 20
+    assert store.entries(demo, Entry.MOVE) == popped, "a deferred move came back changed"
+    want = min(e[2] + b for e, b in zip(popped, bounds, strict=True))
+    assert store.least == pytest.approx(want, abs=1e-15)
+    store.clear()
+    assert len(store) == 0 and store.least == math.inf
 
 
 def test_search_graph_keeps_each_edges_least_cost(demo) -> None:

@@ -11,6 +11,11 @@ rebuild needs to give back the same value: for a stance's components, the lattic
 components were grown from, in order, so that they are numbered as before (a search's vertex
 names its component by number).
 
+A cache that can pack its values (`pack`, `unpack`: a stance's components, by
+`planning.packing`, about a fifth of their size) keeps the entries it would drop packed
+instead, until packed entries fill a share of the cap (`MemoryPool`): unpacking takes about a
+tenth of the time of deciding an entry again.
+
 To the code that uses it the cache is a dict that never forgets: `get` and `[]` rebuild a
 dropped key, `in` counts it, and the search's decisions do not change
 (tests/test_bounded_cache.py, and the benchmark of docs/benchmarks.md: the same routes capped
@@ -46,16 +51,24 @@ def array_bytes(value: Any) -> int:
     return sum(v.nbytes for v in value if isinstance(v, np.ndarray))
 
 
+PACKED_SHARE = 2.0 / 3.0  # of the cap, the most that packed entries may hold
+
+
 class MemoryPool:
     """One cap shared by several caches (`BoundedCache(pool=...)`): past it, the least
-    recently used entry of any of them is dropped first, so that a cache whose entries are
-    used more keeps more of the memory (None: no cap)."""
+    recently used entry of any of them goes first, so that a cache whose entries are used more
+    keeps more of the memory (None: no cap). An entry of a cache that can pack its values is
+    packed (kept compressed, `planning.packing`) rather than dropped, while packed entries hold
+    at most `PACKED_SHARE` of the cap; past that the least recently packed are dropped. Live
+    and packed bytes both count against the cap."""
 
     def __init__(self, cap_bytes: float | None = None) -> None:
         self.cap_bytes = cap_bytes
         self.protected = PROTECTED  # the most recently used entries, never dropped
         self._order: OrderedDict[tuple[str, Hashable], BoundedCache[Any, Any]] = OrderedDict()
-        self.total_bytes = 0
+        self._packed: OrderedDict[tuple[str, Hashable], BoundedCache[Any, Any]] = OrderedDict()
+        self.total_bytes = 0   # live entries
+        self.packed_bytes = 0  # packed entries
         self.peak_bytes = 0
 
     def touched(self, cache: BoundedCache[Any, Any], key: Hashable, grew: int) -> None:
@@ -64,50 +77,81 @@ class MemoryPool:
         self._order[slot] = cache
         self._order.move_to_end(slot)
         self.total_bytes += grew
-        if self.cap_bytes is not None and self.total_bytes > self.cap_bytes:
-            while self.total_bytes > self.cap_bytes and len(self._order) > self.protected:
-                (_, oldest), owner = self._order.popitem(last=False)
-                self.total_bytes -= owner.drop(oldest)
-        self.peak_bytes = max(self.peak_bytes, self.total_bytes)
+        if self.cap_bytes is not None and self.total_bytes + self.packed_bytes > self.cap_bytes:
+            self._shrink(self.cap_bytes)
+        self.peak_bytes = max(self.peak_bytes, self.total_bytes + self.packed_bytes)
+
+    def unpacked(self, cache: BoundedCache[Any, Any], key: Hashable, nbytes: int) -> None:
+        """`cache`'s packed entry `key` (`nbytes`) is packed no more."""
+        del self._packed[(cache.name, key)]
+        self.packed_bytes -= nbytes
+
+    def _shrink(self, cap: float) -> None:
+        while self.total_bytes + self.packed_bytes > cap:
+            if self._packed and (self.packed_bytes > PACKED_SHARE * cap
+                                 or len(self._order) <= self.protected):
+                (_, key), owner = self._packed.popitem(last=False)
+                self.packed_bytes -= owner.drop_packed(key)
+            elif len(self._order) > self.protected:
+                (name, oldest), owner = self._order.popitem(last=False)
+                freed, packed = owner.drop(oldest)
+                self.total_bytes -= freed
+                if packed is not None:
+                    self._packed[(name, oldest)] = owner
+                    self.packed_bytes += packed
+            else:
+                return
 
     def stats(self) -> dict[str, float]:
-        return {"bytes": self.total_bytes, "peak_bytes": self.peak_bytes,
-                "live": len(self._order)}
+        return {"bytes": self.total_bytes + self.packed_bytes, "peak_bytes": self.peak_bytes,
+                "live": len(self._order), "packed": len(self._packed),
+                "packed_bytes": self.packed_bytes}
 
 
 class BoundedCache(Generic[K, V]):
     """A dict of at most `cap_bytes` of values (`size(value)`: its bytes; None: no cap), or
     sharing `pool`'s cap with other caches, that rebuilds a dropped entry with
     `rebuild(key, tombstone)` (module doc). `grows`: a stored value may grow (a stance's
-    components do), so its size is measured again each time it is used."""
+    components do), so its size is measured again each time it is used. `pack(value)` and
+    `unpack(key, bytes)`, if given, keep an entry packed before it is dropped (`MemoryPool`);
+    `unpack` must give back a value equal to the one packed."""
 
     def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
                  tombstone: Callable[[V], Any] = lambda value: None,
                  cap_bytes: float | None = None, pool: MemoryPool | None = None,
-                 name: str = "", grows: bool = False) -> None:
+                 name: str = "", grows: bool = False,
+                 pack: Callable[[V], bytes] | None = None,
+                 unpack: Callable[[K, bytes], V] | None = None) -> None:
         self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
+        if (pack is None) != (unpack is None):
+            raise ValueError("a cache that packs its entries must unpack them too")
+        self._pack, self._unpack = pack, unpack
         self.pool = pool if pool is not None else MemoryPool(cap_bytes)
         self.name, self.grows = name, grows
         self._live: OrderedDict[K, V] = OrderedDict()
         self._bytes: dict[K, int] = {}
+        self._packed: dict[K, tuple[bytes, Any]] = {}  # key -> (packed value, tombstone)
         self._dropped: dict[K, Any] = {}
         self.total_bytes = 0
         self.peak_bytes = 0
         self.drops = 0
         self.rebuilds = 0
+        self.packs = 0
+        self.unpacks = 0
 
     @property
     def cap_bytes(self) -> float | None:
         return self.pool.cap_bytes
 
     def __len__(self) -> int:
-        return len(self._live) + len(self._dropped)
+        return len(self._live) + len(self._packed) + len(self._dropped)
 
     def __contains__(self, key: object) -> bool:
-        return key in self._live or key in self._dropped
+        return key in self._live or key in self._packed or key in self._dropped
 
     def __iter__(self) -> Iterator[K]:
         yield from list(self._live)
+        yield from list(self._packed)
         yield from list(self._dropped)
 
     def items(self) -> Iterator[tuple[K, V]]:
@@ -119,6 +163,14 @@ class BoundedCache(Generic[K, V]):
             value = self._live[key]
             self._live.move_to_end(key)
             self._account(key, value if self.grows else None)
+            return value
+        if key in self._packed:
+            assert self._unpack is not None  # set with `pack` (__init__)
+            blob, _ = self._packed.pop(key)
+            self.pool.unpacked(self, key, len(blob))
+            value = self._unpack(key, blob)
+            self.unpacks += 1
+            self._store(key, value)
             return value
         if key in self._dropped:
             tomb = self._dropped.pop(key)
@@ -136,6 +188,9 @@ class BoundedCache(Generic[K, V]):
 
     def __setitem__(self, key: K, value: V) -> None:
         self._dropped.pop(key, None)
+        if key in self._packed:
+            blob, _ = self._packed.pop(key)
+            self.pool.unpacked(self, key, len(blob))
         self._store(key, value)
 
     def _store(self, key: K, value: V) -> None:
@@ -154,17 +209,31 @@ class BoundedCache(Generic[K, V]):
         self.pool.touched(self, key, grew)
         self.peak_bytes = max(self.peak_bytes, self.total_bytes)
 
-    def drop(self, key: K) -> int:
-        """Drop live `key` (keeping its tombstone); its bytes."""
+    def drop(self, key: K) -> tuple[int, int | None]:
+        """Pack live `key` if this cache packs (else drop it, keeping its tombstone): the
+        bytes it held live, and those it holds packed (None: dropped)."""
         value = self._live.pop(key)
         size = self._bytes.pop(key)
         self.total_bytes -= size
+        if self._pack is not None:
+            blob = self._pack(value)
+            self._packed[key] = (blob, self._tombstone(value))
+            self.packs += 1
+            return size, len(blob)
         self._dropped[key] = self._tombstone(value)
         self.drops += 1
-        return size
+        return size, None
+
+    def drop_packed(self, key: K) -> int:
+        """Drop packed `key`, keeping its tombstone: the bytes it held."""
+        blob, tomb = self._packed.pop(key)
+        self._dropped[key] = tomb
+        self.drops += 1
+        return len(blob)
 
     def stats(self) -> dict[str, float]:
         """Bytes held now and at most, entries held and dropped, drops and rebuilds."""
         return {"bytes": self.total_bytes, "peak_bytes": self.peak_bytes,
-                "live": len(self._live), "dropped": len(self._dropped),
-                "drops": self.drops, "rebuilds": self.rebuilds}
+                "live": len(self._live), "packed": len(self._packed),
+                "dropped": len(self._dropped), "drops": self.drops, "rebuilds": self.rebuilds,
+                "packs": self.packs, "unpacks": self.unpacks}

@@ -16,6 +16,7 @@ import numpy as np
 from planning.flood import grow_component, reach_box
 from planning.flood_kernel import component_arrays
 from planning.lattice import SPAN, LatticeConfig, poses_of, unpack
+from planning.packing import pack_arrays, unpack_arrays
 from planning.transition_score import pack_rows
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -82,6 +83,31 @@ class StanceComponents:
         out = cls(scn, stance, cfg, ignore_grasps)
         for key in seeds:
             out._grow(key)
+        return out
+
+    def packed(self) -> bytes:
+        """What it knows, packed losslessly (`planning.packing`; `unpacked` reads it back)."""
+        arrays: list[np.ndarray] = [self._keys, self._labels,
+                                    np.asarray(self.seeds, dtype=np.int64)]
+        modes = ["delta", "plain", "plain"]
+        for c in self.components:
+            arrays += [c.keys, c.robustness, c.release, c.release_r, c.box, c.release_rows,
+                       c.release_starts]
+            modes += ["delta", "plain", "bits", "neginf", "plain", "delta", "plain"]
+        return pack_arrays(arrays, modes)
+
+    @classmethod
+    def unpacked(cls, scn: Scenario, stance: tuple[str, ...], cfg: LatticeConfig,
+                 ignore_grasps: bool, blob: bytes) -> StanceComponents:
+        """The components `packed` holds, exactly as they were (the same numbers)."""
+        out = cls(scn, stance, cfg, ignore_grasps)
+        arrays = unpack_arrays(blob)
+        out._keys, out._labels = arrays[0], arrays[1]
+        out.seeds = [int(k) for k in arrays[2]]
+        for at in range(3, len(arrays), 7):
+            keys, r, release, release_r, box, rows, starts = arrays[at:at + 7]
+            out.components.append(Component(keys, r, release, release_r, cfg, box, rows,
+                                            starts))
         return out
 
     @property

@@ -58,7 +58,8 @@ class LatticeMemo:
         self.pool = MemoryPool()
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
             lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds,
-            pool=self.pool, name="components", grows=True)
+            pool=self.pool, name="components", grows=True, pack=StanceComponents.packed,
+            unpack=self._components_unpacked)
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
             array_bytes, self._transition_again, pool=self.pool, name="transitions")
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
@@ -103,6 +104,10 @@ class LatticeMemo:
     def _components_again(self, stance: tuple, seeds: list[int]) -> StanceComponents:
         scn, cfg = self._bound()
         return StanceComponents.replay(scn, stance, cfg, self._ignore_grasps, seeds)
+
+    def _components_unpacked(self, stance: tuple, blob: bytes) -> StanceComponents:
+        scn, cfg = self._bound()
+        return StanceComponents.unpacked(scn, stance, cfg, self._ignore_grasps, blob)
 
     def _moves_again(self, vertex: Vertex, _: object) -> MoveTable:
         scn, _cfg = self._bound()

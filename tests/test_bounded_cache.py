@@ -84,3 +84,45 @@ def test_a_replayed_stance_numbers_its_components_as_before() -> None:
         np.testing.assert_array_equal(again.known_component(found._keys), found._labels,
                                       err_msg=f"{stance}: what is known of its poses changed")
     assert several > 0, "no stance with several components: the numbering is not tested"
+
+
+def test_a_packed_stance_unpacks_exactly() -> None:
+    scn = load_scenario(bundled_caves()["shaft-1"])
+    memo = LatticeMemo(memory_mb=None)
+    complete_search(scn, CompleteConfig(COARSE), memo=memo)
+    checked = raw = packed = 0
+    for stance, found in memo.components.items():
+        blob = found.packed()
+        back = StanceComponents.unpacked(scn, stance, COARSE, False, blob)
+        assert back.seeds == found.seeds, stance
+        for a, b in ((back._keys, found._keys), (back._labels, found._labels)):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), f"{stance}: poses known"
+        assert len(back.components) == len(found.components), stance
+        for ca, cb in zip(back.components, found.components, strict=True):
+            for name in ("keys", "robustness", "release", "release_r", "box", "release_rows",
+                         "release_starts"):
+                a, b = getattr(ca, name), getattr(cb, name)
+                assert a.dtype == b.dtype and a.shape == b.shape and \
+                    a.tobytes() == b.tobytes(), f"{stance}: {name} changed when unpacked"
+        raw += found.nbytes
+        packed += len(blob)
+        checked += 1
+    assert checked >= 5, f"only {checked} stances packed"
+    assert packed < 0.5 * raw, f"packed {packed} B of {raw} B: packing saves little"
+
+
+def test_a_packing_cache_packs_before_it_drops() -> None:
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    config = CompleteConfig(COARSE, anytime=AnytimeConfig())
+    free = complete_search(scn, config, memo=LatticeMemo(memory_mb=None))
+    memo = LatticeMemo(memory_mb=0.2)
+    memo.pool.protected = 2
+    capped = complete_search(scn, config, memo=memo)
+    stats = memo.stats()["components"]
+    assert stats["packs"] > 0 and stats["unpacks"] > 0, f"nothing packed and unpacked: {stats}"
+    pool = memo.pool.stats()
+    assert pool["peak_bytes"] <= 0.2 * 2**20 + max(
+        sc.nbytes for _, sc in memo.components.items()) * 2, f"the pool outgrew its cap: {pool}"
+    assert (capped.path, capped.expansions, capped.transitions_tested, capped.cost) == \
+        (free.path, free.expansions, free.transitions_tested, free.cost), \
+        "a search whose memo packed entries decided otherwise"

@@ -26,6 +26,7 @@ from planning.lattice_kernels import (
     lattice_reach_rows,
     reach_violation,
 )
+from planning.packing import pack_arrays, unpack_arrays
 from rb_drake.feasibility import body_in_rock
 from rb_drake.kernel.collision import packed_rock
 from rb_drake.kernel.layout import robot_params
@@ -172,6 +173,23 @@ def move_dict(scn: Scenario, lat: Component, stance: tuple) -> MoveTable:
     """`move_table` as one dict, boom by boom in its order: (boom, anchor index) -> rows."""
     return {(j, k): rows for j, moves in enumerate(move_table(scn, lat, stance))
             for k, rows in moves}
+
+
+def pack_moves(table: MoveTable) -> bytes:
+    """A move table packed losslessly, its order kept (`unpack_moves`; `planning.packing`)."""
+    keys = np.array(list(table), dtype=np.int64).reshape(-1, 2)
+    lengths = np.array([len(rows) for rows in table.values()], dtype=np.int64)
+    rows = np.concatenate(list(table.values())) if table else np.zeros(0, dtype=np.int64)
+    return pack_arrays([keys, lengths, rows], ["plain", "plain", "delta"])
+
+
+def unpack_moves(blob: bytes) -> MoveTable:
+    """The move table `pack_moves` packed, in its order (views of one array, as built)."""
+    keys, lengths, rows = unpack_arrays(blob)
+    ends = np.cumsum(lengths).tolist()
+    starts = [0, *ends[:-1]] if ends else []
+    return {(int(j), int(k)): rows[a:b]
+            for (j, k), a, b in zip(keys.tolist(), starts, ends, strict=True)}
 
 
 def vertex_moves(scn: Scenario, lat: Component, stance: tuple,

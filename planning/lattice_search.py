@@ -25,7 +25,14 @@ from planning.astar import SearchResult
 from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes
 from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, unpack
-from planning.lattice_moves import LatticeTransition, MoveTable, lattice_transition, move_dict
+from planning.lattice_moves import (
+    LatticeTransition,
+    MoveTable,
+    lattice_transition,
+    move_dict,
+    pack_moves,
+    unpack_moves,
+)
 from planning.search_outcome import Quality, Stop
 from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.scenario import Scenario
@@ -64,7 +71,8 @@ class LatticeMemo:
             array_bytes, self._transition_again, pool=self.pool, name="transitions")
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
             lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again,
-            pool=self.pool, name="moves")
+            pool=self.pool, name="moves", pack=pack_moves,
+            unpack=lambda _vertex, blob: unpack_moves(blob))
         self.set_memory(memory_mb)
 
     def set_memory(self, memory_mb: float | None) -> None:

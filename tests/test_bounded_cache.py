@@ -12,6 +12,7 @@ from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.components import StanceComponents
 from planning.lattice import LatticeConfig
+from planning.lattice_moves import pack_moves, unpack_moves
 from planning.lattice_search import LatticeMemo
 from rb_drake.scenario import bundled_caves, load_scenario
 
@@ -126,3 +127,17 @@ def test_a_packing_cache_packs_before_it_drops() -> None:
     assert (capped.path, capped.expansions, capped.transitions_tested, capped.cost) == \
         (free.path, free.expansions, free.transitions_tested, free.cost), \
         "a search whose memo packed entries decided otherwise"
+
+
+def test_a_packed_move_table_unpacks_in_its_order() -> None:
+    scn = load_scenario(bundled_caves()["shaft-1"])
+    memo = LatticeMemo(memory_mb=None)
+    complete_search(scn, CompleteConfig(COARSE), memo=memo)
+    tables = [table for _, table in memo.moves.items() if table]
+    assert len(tables) >= 5, "too few move tables to check"
+    for table in tables:
+        back = unpack_moves(pack_moves(table))
+        assert list(back) == list(table), "the moves' order changed (it orders the search)"
+        for key, rows in table.items():
+            assert back[key].dtype == rows.dtype and np.array_equal(back[key], rows), key
+    assert unpack_moves(pack_moves({})) == {}

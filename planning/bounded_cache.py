@@ -114,23 +114,27 @@ class BoundedCache(Generic[K, V]):
     `rebuild(key, tombstone)` (module doc). `grows`: a stored value may grow (a stance's
     components do), so its size is measured again each time it is used. `pack(value)` and
     `unpack(key, bytes)`, if given, keep an entry packed before it is dropped (`MemoryPool`);
-    `unpack` must give back a value equal to the one packed."""
+    `unpack` must give back a value equal to the one packed. An unpacked entry keeps its
+    packed bytes (counted as its own), so that packing it again costs nothing while
+    `version(value)` is unchanged (a value that grows must change its version)."""
 
     def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
                  tombstone: Callable[[V], Any] = lambda value: None,
                  cap_bytes: float | None = None, pool: MemoryPool | None = None,
                  name: str = "", grows: bool = False,
                  pack: Callable[[V], bytes] | None = None,
-                 unpack: Callable[[K, bytes], V] | None = None) -> None:
+                 unpack: Callable[[K, bytes], V] | None = None,
+                 version: Callable[[V], Hashable] = lambda value: None) -> None:
         self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
         if (pack is None) != (unpack is None):
             raise ValueError("a cache that packs its entries must unpack them too")
-        self._pack, self._unpack = pack, unpack
+        self._pack, self._unpack, self._version = pack, unpack, version
         self.pool = pool if pool is not None else MemoryPool(cap_bytes)
         self.name, self.grows = name, grows
         self._live: OrderedDict[K, V] = OrderedDict()
         self._bytes: dict[K, int] = {}
         self._packed: dict[K, tuple[bytes, Any]] = {}  # key -> (packed value, tombstone)
+        self._kept: dict[K, tuple[bytes, Hashable]] = {}  # unpacked: (its bytes, version)
         self._dropped: dict[K, Any] = {}
         self.total_bytes = 0
         self.peak_bytes = 0
@@ -170,6 +174,7 @@ class BoundedCache(Generic[K, V]):
             self.pool.unpacked(self, key, len(blob))
             value = self._unpack(key, blob)
             self.unpacks += 1
+            self._kept[key] = (blob, self._version(value))
             self._store(key, value)
             return value
         if key in self._dropped:
@@ -191,6 +196,7 @@ class BoundedCache(Generic[K, V]):
         if key in self._packed:
             blob, _ = self._packed.pop(key)
             self.pool.unpacked(self, key, len(blob))
+        self._kept.pop(key, None)
         self._store(key, value)
 
     def _store(self, key: K, value: V) -> None:
@@ -202,7 +208,8 @@ class BoundedCache(Generic[K, V]):
         """`key` used; its size measured again if `value` is given (stored, or may grow)."""
         grew = 0
         if value is not None:
-            size = self._size(value)
+            kept = self._kept.get(key)
+            size = self._size(value) + (len(kept[0]) if kept is not None else 0)
             grew = size - self._bytes.get(key, 0)
             self.total_bytes += grew
             self._bytes[key] = size
@@ -216,9 +223,13 @@ class BoundedCache(Generic[K, V]):
         size = self._bytes.pop(key)
         self.total_bytes -= size
         if self._pack is not None:
-            blob = self._pack(value)
+            kept = self._kept.pop(key, None)
+            if kept is not None and kept[1] == self._version(value):
+                blob = kept[0]  # unchanged since it was unpacked
+            else:
+                blob = self._pack(value)
+                self.packs += 1
             self._packed[key] = (blob, self._tombstone(value))
-            self.packs += 1
             return size, len(blob)
         self._dropped[key] = self._tombstone(value)
         self.drops += 1

@@ -175,6 +175,18 @@ def move_dict(scn: Scenario, lat: Component, stance: tuple) -> MoveTable:
             for k, rows in moves}
 
 
+def pack_transition(tr: LatticeTransition) -> bytes:
+    """A transition packed losslessly (`unpack_transition`; `planning.packing`)."""
+    return pack_arrays([tr.keys, tr.worst, tr.r4, np.array([tr.tested], dtype=np.int64)],
+                       ["delta", "plain", "plain", "plain"])
+
+
+def unpack_transition(blob: bytes) -> LatticeTransition:
+    """The transition `pack_transition` packed."""
+    keys, worst, r4, tested = unpack_arrays(blob)
+    return LatticeTransition(keys, worst, r4, int(tested[0]))
+
+
 def pack_moves(table: MoveTable) -> bytes:
     """A move table packed losslessly, its order kept (`unpack_moves`; `planning.packing`)."""
     keys = np.array(list(table), dtype=np.int64).reshape(-1, 2)

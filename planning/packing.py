@@ -66,7 +66,10 @@ def pack_arrays(arrays: Sequence[np.ndarray], modes: Sequence[str]) -> bytes:
         header.append((a.dtype.str, a.shape, mode, [len(c) for c in chunks]))
         parts += chunks
     head = pickle.dumps(header, protocol=5)
-    return _COMPRESS.compress(len(head).to_bytes(8, "little") + head + b"".join(parts))
+    packed = _COMPRESS.compress(len(head).to_bytes(8, "little") + head + b"".join(parts))
+    # zstandard allocates its output at the bound of the input's size and only shortens the
+    # length: a right-sized copy, or each kept entry would hold about its unpacked size
+    return memoryview(packed).tobytes()
 
 
 def unpack_arrays(blob: bytes) -> list[np.ndarray]:

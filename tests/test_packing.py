@@ -48,3 +48,20 @@ def test_sorted_keys_pack_small_and_wrong_modes_are_refused() -> None:
         pack_arrays([np.zeros(3)], ["delta"])
     with pytest.raises(ValueError, match="unknown packing mode"):
         pack_arrays([np.zeros(3)], ["zip"])
+
+
+def test_packed_bytes_hold_no_more_memory_than_their_length() -> None:
+    """A packed entry's memory is its length (the memo counts the length against its cap):
+    zstandard's output buffer has the input's bound as its size, so it must be copied."""
+    import tracemalloc
+
+    keys = np.cumsum(np.ones(200_000, dtype=np.int64))
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        blob = pack_arrays([keys], ["delta"])
+        held = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert len(blob) < keys.nbytes / 100
+    assert held < len(blob) + 4096, f"{held} B held for {len(blob)} B packed"

@@ -77,7 +77,8 @@ def run_cave(old: Path, new: Path, cave: tuple[str, int, float], limit: float, e
     return out
 
 
-def memory_figure(runs: list[dict[str, Any]]):
+def memory_figure(runs: list[dict[str, Any]], labels: tuple[str, str] = ("before", "bounded memo"),
+                  title: str = "Footstep search memory (--thorough), before and after issue 31"):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -89,10 +90,10 @@ def memory_figure(runs: list[dict[str, Any]]):
             if curve:
                 x, y = zip(*curve, strict=True)
                 ax.plot(x, [v / 1024 for v in y], style, color=colour,
-                        label=f"{label}, {'before' if side == 'old' else 'bounded memo'}")
+                        label=f"{label}, {labels[0] if side == 'old' else labels[1]}")
     ax.set_xlabel("expanded vertices")
     ax.set_ylabel("peak resident memory (GB)")
-    ax.set_title("Footstep search memory (--thorough), before and after issue 31")
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
@@ -123,11 +124,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="expansions between memory samples")
     parser.add_argument("--memory-mb", default="default",
                         help="the new tree's cap in MiB, 'none' or 'default'")
+    parser.add_argument("--labels", nargs=2, default=["before", "bounded memo"],
+                        metavar=("OLD", "NEW"), help="the two trees' names in the figure")
+    parser.add_argument("--title", default="Footstep search memory (--thorough), before and "
+                        "after issue 31")
     parser.add_argument("--out", type=Path, default=Path("out/search-memory.png"))
     args = parser.parse_args(argv)
     runs = [run_cave(args.old, args.new, cave, args.time_limit, args.every, args.memory_mb)
             for cave in args.caves]
-    atomic_save_figure(memory_figure(runs), args.out, dpi=110)
+    atomic_save_figure(memory_figure(runs, tuple(args.labels), args.title), args.out, dpi=110)
     atomic_write_text(args.out.with_suffix(".json"), json.dumps(
         {"machine": machine_info(), "args": {k: str(v) for k, v in vars(args).items()},
          "runs": runs}, indent=1) + "\n")

@@ -50,7 +50,9 @@ def stance4(ids: Iterable[str]) -> Stance4:
     return a, b, c, d
 
 
-DEFAULT_MEMORY_MB = 1024.0  # the memo's cap: one search per core of a 24 GB machine, with room
+# The memo's cap, MiB: with what a search keeps per vertex outside it, a search of 100,000
+# vertices peaks under 2 GB (docs/benchmarks.md, session 21), one per core of a 24 GB machine
+DEFAULT_MEMORY_MB = 768.0
 CACHES = ("components", "transitions", "moves")  # the memo's caches, sharing one cap
 
 

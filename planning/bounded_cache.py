@@ -11,10 +11,10 @@ rebuild needs to give back the same value: for a stance's components, the lattic
 components were grown from, in order, so that they are numbered as before (a search's vertex
 names its component by number).
 
-A cache that can pack its values (`pack`, `unpack`: a stance's components, by
-`planning.packing`, about a fifth of their size) keeps the entries it would drop packed
-instead, until packed entries fill a share of the cap (`MemoryPool`): unpacking takes about a
-tenth of the time of deciding an entry again.
+A cache that can pack its values (`pack`, `unpack`: the search's components, move tables and
+transitions, by `planning.packing`; a stance's components to about a fifth) keeps the entries
+it would drop packed instead, until packed entries fill a share of the cap (`MemoryPool`):
+unpacking takes about a tenth of the time of deciding an entry again.
 
 To the code that uses it the cache is a dict that never forgets: `get` and `[]` rebuild a
 dropped key, `in` counts it, and the search's decisions do not change

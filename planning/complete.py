@@ -319,7 +319,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     # the first route, nothing new now: it waits if it might lower their cost)
                     if not reopen and anytime is not None and \
                             not _adds_nothing(labels, child, closed, g):
-                        deferred_moves.add(popped, scn.anchor_index[anchor], bound(child))
+                        deferred_moves.add(popped, anchor_row(scn, anchor), bound(child))
                     continue
                 tr = memo.transitions[key] = lattice_transition(
                     scn, lat, stance, j, anchor, ignore_grasps, rows, known, labels)

@@ -35,6 +35,17 @@ class Entry(IntEnum):
 _J_BITS, _K_BITS = 4, 24  # a move's code: tie << 28 | boom << 24 | anchor row
 
 
+def _code(tie: int, boom: int, row: int) -> int:
+    return (tie << (_J_BITS + _K_BITS)) | (boom << _K_BITS) | row
+
+
+def _decoded(scn: Scenario, stance: tuple, code: int) -> tuple[int, int, int, str, tuple]:
+    """A move's code from `stance`: its tie number, boom, anchor row, anchor id and child."""
+    tie, j, k = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15, code & (2**_K_BITS - 1)
+    anchor = scn.anchors[k].id
+    return tie, j, k, anchor, tuple(anchor if i == j else a for i, a in enumerate(stance))
+
+
 class MoveGroup:
     """The moves of `vertex` (a (stance, component) pair) reached at `g` (its cost plus the
     least an edge costs) still waiting in the open list, sorted by (f, tie): per move its key
@@ -58,29 +69,25 @@ class MoveGroup:
             suffix.append(least)
         # f of each move, then the least bound from each move on (array: 64 bytes a header)
         self.values = array("d", [m[0] for m in moves] + suffix[::-1])
-        self.code = array("q", [(m[1] << (_J_BITS + _K_BITS)) | (m[2] << _K_BITS) | m[3]
-                                for m in moves])
+        self.code = array("q", [_code(m[1], m[2], m[3]) for m in moves])
 
     def __len__(self) -> int:
         return len(self.code) - self.pos
 
-    def move(self, scn: Scenario, n: int) -> tuple[int, int, str, tuple]:
-        """The n-th waiting move (0: the first): its tie number, boom, anchor id and child."""
-        code = self.code[self.pos + n]
-        tie, j, k = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15, code & (2**_K_BITS - 1)
-        anchor = scn.anchors[k].id
-        stance = self.vertex[0]
-        return tie, j, anchor, tuple(anchor if i == j else a for i, a in enumerate(stance))
+    def move(self, scn: Scenario, n: int) -> tuple[int, int, int, str, tuple]:
+        """The n-th waiting move (0: the first): its tie number, boom, anchor row, anchor id
+        and child."""
+        return _decoded(scn, self.vertex[0], self.code[self.pos + n])
 
     def entry(self, scn: Scenario, kind: int) -> tuple:
         """The open-list entry of the first waiting move: (f, tie, g, kind, child, self)."""
-        tie, _, _, child = self.move(scn, 0)
+        tie, _, _, _, child = self.move(scn, 0)
         return (self.values[self.pos], tie, self.g, kind, child, self)
 
     def pop(self, scn: Scenario, kind: int) -> tuple:
         """The first waiting move as one move's entry (f, tie, g, kind, child, (vertex, boom,
         anchor)), taken out of the group."""
-        tie, j, anchor, child = self.move(scn, 0)
+        tie, j, _, anchor, child = self.move(scn, 0)
         f = self.values[self.pos]
         self.pos += 1
         return (f, tie, self.g, kind, child, (self.vertex, j, anchor))
@@ -94,8 +101,8 @@ class MoveGroup:
         """Each waiting move keyed again, f = g + key(child), and sorted again by (f, tie)."""
         moves = []
         for i in range(len(self)):
-            tie, j, anchor, child = self.move(scn, i)
-            moves.append((self.g + key(child), tie, j, scn.anchor_index[anchor], bound(child)))
+            tie, j, k, _, child = self.move(scn, i)
+            moves.append((self.g + key(child), tie, j, k, bound(child)))
         self._fill(moves)
 
 
@@ -122,17 +129,14 @@ class DeferredMoves:
         f, tie, g, _, _, (vertex, j, _) = entry
         self.vertices.append(vertex)
         self.values.extend((f, g))
-        self.code.append((tie << (_J_BITS + _K_BITS)) | (j << _K_BITS) | row)
+        self.code.append(_code(tie, j, row))
         self.least = min(self.least, g + bound)
 
     def entries(self, scn: Scenario, kind: int) -> list[tuple]:
         """The moves as open-list entries again, as they were popped."""
         out = []
         for n, vertex in enumerate(self.vertices):
-            code = self.code[n]
-            tie, j = code >> (_J_BITS + _K_BITS), (code >> _K_BITS) & 15
-            anchor = scn.anchors[code & (2**_K_BITS - 1)].id
-            child = tuple(anchor if i == j else a for i, a in enumerate(vertex[0]))
+            tie, j, _, anchor, child = _decoded(scn, vertex[0], self.code[n])
             out.append((self.values[2 * n], tie, self.values[2 * n + 1], kind, child,
                         (vertex, j, anchor)))
         return out

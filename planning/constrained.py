@@ -35,6 +35,7 @@ import numpy as np
 
 from planning.complete_config import CompleteConfig
 from planning.components import UNKNOWN
+from planning.lattice import LatticeConfig
 from planning.lattice_moves import (
     goal_is_holdable,
     lattice_transition,
@@ -91,20 +92,22 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                               "lattice pose of its stance", [], [], [], None, 0, 0, [], [], graph)
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     tie = itertools.count()
-    # a label: (vertex, regrasps, cost, parent label, pose, P4, alternatives); the open list
-    # holds (regrasps + bound, cost, tie, label, None) for a label and (the child's, its parent's
-    # cost plus the least the edge can cost, tie, parent label, move) for a move: first not yet
-    # evaluated (attach term only), then evaluated (its transition known, its poses' least)
+    # a label: (vertex, regrasps, cost, parent label, pose, P4, (boom, anchor) of the edge that
+    # reached it); the open list holds (regrasps + bound, cost, tie, label, None) for a label and
+    # (the child's, its parent's cost plus the least the edge can cost, tie, parent label, move)
+    # for a move: first not yet evaluated (attach term only), then evaluated (its transition's
+    # least known). Neither keeps a transition or its alternatives: the memo's cap bounds them,
+    # and the route's alternatives are decided again at the end (issue 31)
     labels: list[tuple] = []
     open_list: list[tuple] = []
 
-    def push(vertex: tuple, k: int, cost: float, parent: int, pose, p4, alternatives) -> None:
+    def push(vertex: tuple, k: int, cost: float, parent: int, pose, p4, edge) -> None:
         hops = bound.regrasps(vertex[0])
         if not math.isfinite(hops) or cost + bound.c_attach * hops > slack:
             return  # no route through it reaches the goal within the budget
         if cost >= popped_cost.get(vertex, math.inf):
             return  # dominated: popped before with no more regrasps and no higher cost
-        labels.append((vertex, k, cost, parent, pose, p4, alternatives))
+        labels.append((vertex, k, cost, parent, pose, p4, edge))
         heapq.heappush(open_list, (k + hops, cost, next(tie), len(labels) - 1, None))
 
     popped_cost: dict[tuple, float] = {}
@@ -119,13 +122,13 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     while open_list:
         f, cost, _, index, move = heapq.heappop(open_list)
         if move is not None:  # a move: evaluate it, then (when popped again) enter the child
-            j, anchor, rows, child, tr = move
+            j, anchor, rows, child, evaluated = move
             vertex = labels[index][0]
             stance, comp = vertex
             k, base = labels[index][1], labels[index][2]
-            if tr is None:
+            key = (stance, comp, j, anchor)
+            if not evaluated:
                 lat = memo.components[stance].components[comp]
-                key = (stance, comp, j, anchor)
                 tr = memo.transitions.get(key)
                 if tr is None:
                     known = memo.components.get(child)
@@ -139,8 +142,9 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                     # least the worst sum): the child's components wait for that key.
                     least = base + bound.c_attach + max(0.0, -float(tr.worst.max()))
                     heapq.heappush(open_list, (f, least * (1.0 - 1e-12), next(tie), index,
-                                               (j, anchor, rows, child, tr)))
+                                               (j, anchor, rows, child, True)))
                 continue
+            tr = memo.transitions[key]  # decided again, the same, if the memo dropped it
             known = memo.components.get(child)
             if known is not None:  # every component it enters popped as cheaply: dominated
                 seen = known.known_component(tr.keys)
@@ -152,9 +156,10 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                 tr.keys)
             for c2 in np.unique(comps):
                 poses, p4 = best_poses(tr, np.flatnonzero(comps == c2), cfg)
-                step = edge_cost(scn, stance, j, anchor, poses[0])
+                pose = poses[0].copy()  # not a view: it would keep the alternatives alive
+                step = edge_cost(scn, stance, j, anchor, pose)
                 graph.add(vertex, (child, int(c2)), step)
-                push((child, int(c2)), k + 1, base + step, index, poses[0], p4, poses)
+                push((child, int(c2)), k + 1, base + step, index, pose, p4, (j, anchor))
             continue
         vertex, k, _, _, pose, _, _ = labels[index]
         if cost >= popped_cost.get(vertex, math.inf):
@@ -188,7 +193,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
             if not math.isfinite(hops) or least + bound.c_attach * hops > slack:
                 continue
             heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
-                                       (j, anchor, rows, child, None)))
+                                       (j, anchor, rows, child, False)))
     if found is None:
         if stop == Stop.NOROUTE and excluded:
             stop = Stop.EXHAUSTED
@@ -204,12 +209,24 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     index = found[0]
     total = labels[index][2]
     while index >= 0:
-        vertex, _, _, parent, pose, p4, alternatives = labels[index]
+        vertex, _, _, parent, pose, p4, edge = labels[index]
         path.append(vertex)
         if parent >= 0:
             poses.append(pose)
             probs.append(p4)
-            others.append(alternatives)
+            others.append(_alternatives(scn, memo, cfg, ignore_grasps, labels[parent][0],
+                                        edge, vertex))
         index = parent
     return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], found[1],
                           expansions, tested, expanded, [], graph, others[::-1], cost=total)
+
+
+def _alternatives(scn: Scenario, memo: LatticeMemo, cfg: LatticeConfig, ignore_grasps: bool,
+                  parent: tuple, edge: tuple[int, str], child: tuple) -> np.ndarray:
+    """The most robust transition poses of the edge parent -> child (boom, anchor) into the
+    child's component, best first: as the search found them (its decisions are replayed the
+    same when the memo dropped them)."""
+    (stance, comp), (j, anchor) = parent, edge
+    tr = memo.transitions[(stance, comp, j, anchor)]
+    comps = stance_components(scn, memo, child[0], cfg, ignore_grasps).component_of(tr.keys)
+    return best_poses(tr, np.flatnonzero(comps == child[1]), cfg)[0]

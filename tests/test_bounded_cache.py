@@ -11,6 +11,7 @@ from planning.bounded_cache import PROTECTED, BoundedCache
 from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.components import StanceComponents
+from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
 from planning.lattice_moves import (
     pack_moves,
@@ -193,3 +194,25 @@ def test_an_unpacked_entry_is_packed_again_only_once_it_changed() -> None:
     assert cache.packs == packs + 1, "the grown entry was not packed anew"
     assert cache[0] == [0] * 200 + [7], "a grown entry came back as it was before it grew"
     assert built == [], "nothing should have been dropped and rebuilt"
+
+
+def test_a_capped_min_success_search_decides_as_an_uncapped_one() -> None:
+    """`--min-success`'s labels keep no transitions: under a tiny cap its route, cost, poses and
+    each edge's alternatives (decided again at the end) are the uncapped search's."""
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    config = CompleteConfig(COARSE)
+    free = constrained_search(scn, 0.5, config, memo=LatticeMemo(memory_mb=None))
+    capped_memo = LatticeMemo(memory_mb=0.05)
+    capped_memo.pool.protected = 2
+    capped = constrained_search(scn, 0.5, config, memo=capped_memo)
+    stats = capped_memo.stats()
+    assert stats["transitions"]["drops"] > 0, f"the cap never bit on transitions: {stats}"
+    assert free.success and capped.success, (free.reason, capped.reason)
+    assert capped.path == free.path and capped.expansions == free.expansions, \
+        f"another route or search: {capped.expansions} vs {free.expansions} expansions"
+    assert capped.cost == pytest.approx(free.cost, rel=0, abs=0), "the route's cost differs"
+    assert len(capped.alternatives) == len(free.alternatives) == len(free.path) - 1
+    for a, b in zip(capped.alternatives, free.alternatives, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg="an edge's alternatives differ")
+    for a, b in zip(capped.poses, free.poses, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg="a transition pose differs")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,34 @@ EVENT_COUNT_ABOVE_CHARS = 1_000_000
 
 # libyaml's loader when PyYAML was built with it: 3 ms for a bundled cave instead of 22 ms.
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class _Loader(SAFE_LOADER):  # type: ignore[valid-type,misc]
+    """The safe loader, refusing (InputFileError naming the line) a value its constructor
+    cannot build (`!!bool maybe`: KeyError; a long sexagesimal float: OverflowError) and an
+    integer beyond a float's range: hex, octal, binary and sexagesimal forms build integers of
+    thousands of digits from fewer characters, which no physical quantity needs and which
+    crash `str()` or `float()` later."""
+
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
+        try:
+            value = super().construct_object(node, deep)
+        except (yaml.YAMLError, InputFileError, RecursionError):
+            raise
+        except Exception as e:  # any constructor failure is the file's fault
+            raise InputFileError(_where(node.start_mark), f"not valid YAML: cannot read "
+                                 f"{_short(node)} as {node.tag.rsplit(':', 1)[-1]} "
+                                 f"({type(e).__name__})") from None
+        if type(value) is int and not -sys.float_info.max <= value <= sys.float_info.max:
+            raise InputFileError(_where(node.start_mark), "an integer beyond a float's range "
+                                 f"(over {sys.float_info.max:.1e} in magnitude)")
+        return value
+
+
+def _short(node: yaml.Node) -> str:
+    text = repr(node.value) if isinstance(node, yaml.ScalarNode) else "this value"
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 class InputFileError(RbpInputError):
@@ -134,14 +163,15 @@ def load_yaml(text: str) -> Any:
     """The one YAML document of `text`, refused (InputFileError naming the line and column) if
     it is not valid YAML, holds or expands (aliases included) to more than MAX_NODES values,
     nests deeper than MAX_DEPTH, repeats a key in a mapping, or holds a value longer than
-    MAX_SCALAR_CHARS or a number longer than MAX_NUMBER_CHARS. A long document's values are
-    counted on its events first (`_count_events`), before any tree is built."""
+    MAX_SCALAR_CHARS or a number longer than MAX_NUMBER_CHARS, a value its constructor cannot
+    build or an integer beyond a float's range (`_Loader`), or a merge key. A long document's
+    values are counted on its events first (`_count_events`), before any tree is built."""
     try:
         if len(text) > EVENT_COUNT_ABOVE_CHARS or _node_bound(text) > MAX_NODES:
             _count_events(text)
     except yaml.YAMLError as e:
         raise _yaml_error(e) from None
-    loader = SAFE_LOADER(text)
+    loader = _Loader(text)
     try:
         node = loader.get_single_node()
         if node is None:
@@ -152,12 +182,6 @@ def load_yaml(text: str) -> Any:
         raise _yaml_error(e) from None
     except RecursionError:  # the pure-Python parser, without libyaml's nesting limit
         raise InputFileError("(file)", f"nested deeper than {MAX_DEPTH} levels") from None
-    except InputFileError:
-        raise
-    except ValueError as e:  # a value the constructor cannot convert (none known after the
-        # checks above; kept so that no parser error escapes as a traceback)
-        raise InputFileError("(file)", f"not valid YAML: {' '.join(str(e).split())[:200]}"
-                             ) from None
     finally:
         loader.dispose()
 
@@ -270,6 +294,9 @@ def _check_scalar(node: yaml.ScalarNode) -> None:
 def _refuse_duplicate_keys(node: yaml.MappingNode) -> None:
     keys: dict[tuple[str, str], yaml.Node] = {}
     for key, _ in node.value:
+        if key.tag == MERGE_TAG:  # `<<:` can give a key twice, the merged one silently lost
+            raise InputFileError(_where(key.start_mark), "a YAML merge key '<<' (no rbp file "
+                                 "needs one): write the keys out")
         if isinstance(key, yaml.ScalarNode):
             name = (key.tag, key.value)
             if name in keys:

@@ -284,6 +284,26 @@ def test_long_value_and_huge_integer_refused_with_their_line():
         load_json('{"x": 1' + "2" * 6000 + "}")
 
 
+@pytest.mark.parametrize("text, field, words", [
+    # hex, octal, binary and sexagesimal integers of thousands of digits from 4,000 characters:
+    # str() of them raised ValueError (over 4,300 digits) later, a traceback
+    ("gravity: [0x" + "f" * 3572 + ", 0]\n", "line 1, column 11", "beyond a float's range"),
+    ("seed: 0b1" + "0" * 1024 + "\n", "line 1, column 7", "beyond a float's range"),
+    ("seed: -07" + "7" * 400 + "\n", "line 1, column 7", "beyond a float's range"),
+    ("seed: 1" + ":0" * 200 + "\n", "line 1, column 7", "beyond a float's range"),
+    # constructors' own errors: OverflowError, KeyError
+    ("g: [1" + ":0" * 200 + ".5]\n", "line 1, column 5", "cannot read"),
+    ("name: !!bool maybe\n", "line 1, column 7", "cannot read 'maybe' as bool"),
+    # merge keys can give a key twice, the merged one silently dropped
+    ("a: &a {x: 1}\nb: {<<: *a, x: 2}\n", "line 2, column 5", "merge key"),
+])
+def test_yaml_values_the_constructor_cannot_build_refused_with_their_line(text, field, words):
+    with pytest.raises(InputFileError, match=words) as caught:
+        load_yaml(text)
+    assert caught.value.field == field, caught.value.field
+    assert load_yaml("x: 0xff\ny: 0b1" + "0" * 1020 + "\n")["x"] == 255  # within range: read
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")

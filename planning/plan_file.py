@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,9 @@ class PlanFileError(RbpInputError):
         super().__init__(f"{field}: {reason}")
         self.field = field
         self.reason = reason
+
+
+_SCENARIO_FORMAT = re.compile(r"^format:\s*['\"]?reachbot-scenario/", re.MULTILINE)
 
 
 class _Bad:
@@ -82,11 +86,16 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
         raise PlanFileError(e.field, e.reason) from None
     try:
         plan = parse_plan_text(text)
-    except (json.JSONDecodeError, RecursionError) as e:
-        if "reachbot-scenario/" in text[:4096]:
+    except json.JSONDecodeError as e:
+        # a scenario's YAML has `format: reachbot-scenario/1` at the start of a line; a plan
+        # embeds its scenario as JSON, `"format": "reachbot-scenario/1"`
+        if _SCENARIO_FORMAT.search(text[:4096]):
             raise PlanFileError("(file)", "this is a scenario (a cave), not a plan: plan it "
                                 f"with `rbp plan {path}`") from None
-        raise PlanFileError("(file)", f"not a JSON plan: {e}") from None
+        raise PlanFileError(f"line {e.lineno}, column {e.colno}",
+                            f"not a JSON plan: {e.msg}") from None
+    except RecursionError:
+        raise PlanFileError("(file)", "not a JSON plan: nested too deeply") from None
     return validated(plan)
 
 

@@ -318,19 +318,41 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def load_json(text: str, **options: Any) -> Any:
-    """The JSON value of `text` (json.loads with `options`); refused (InputFileError) if it may
-    hold more than MAX_JSON_VALUES values (every value but the first follows a "[", "{" or
-    ",", so their count bounds the values before any is built), repeats a key in an object or
-    holds an integer Python will not convert (over 4,300 digits); the caller handles
-    json.JSONDecodeError and RecursionError."""
+    """The JSON value of `text` (json.loads with `options`; a leading UTF-8 byte-order mark is
+    skipped); refused (InputFileError) if it may hold more than MAX_JSON_VALUES values (every
+    value but the first follows a "[", "{" or ",", so their count bounds the values before any
+    is built), repeats a key in an object or holds an integer beyond a float's range (10**400
+    would raise OverflowError wherever it is used as a number; the field names its line); the
+    caller handles json.JSONDecodeError and RecursionError."""
+    text = text.removeprefix("\ufeff")
     bound = sum(text.count(c) for c in ",[{") + 1
     if bound > MAX_JSON_VALUES:
         raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
                              f"brackets), over the limit of {MAX_JSON_VALUES:,}")
     try:
-        return json.loads(text, object_pairs_hook=no_duplicate_keys, **options)
+        return json.loads(text, object_pairs_hook=no_duplicate_keys, parse_int=_json_int,
+                          **options)
+    except _HugeIntError as e:
+        at = max(text.find(e.digits), 0)
+        where = f"line {text.count(chr(10), 0, at) + 1}, column {at - text.rfind(chr(10), 0, at)}"
+        raise InputFileError(where, "an integer beyond a float's range (over "
+                             f"{sys.float_info.max:.1e} in magnitude)") from None
     except ValueError as e:
         if isinstance(e, json.JSONDecodeError | InputFileError):
             raise
         raise InputFileError("(file)", f"a number Python cannot convert: "
                              f"{' '.join(str(e).split())[:160]}") from None
+
+
+class _HugeIntError(Exception):
+    def __init__(self, digits: str):
+        super().__init__(digits[:40])
+        self.digits = digits
+
+
+def _json_int(digits: str) -> int:
+    # 309 digits reach 1e308; more cannot be a float (nor, past 4,300, be converted at all)
+    value = int(digits) if len(digits) <= 310 else None
+    if value is None or abs(value) > sys.float_info.max:
+        raise _HugeIntError(digits)
+    return value

@@ -153,7 +153,7 @@ def test_device_refused():
 EXTREME = [
     ("goal-1e308", "goal", "{position: [0.0, 1.0e+308]}", "goal.position[1]"),
     ("gravity-1e308", "gravity", "[0.0, -1.0e+308]", "gravity[1]"),
-    ("huge-integer", "gravity", "[0.0, -" + "9" * 400 + "]", "gravity[1]"),
+    ("huge-integer", "gravity", "[0.0, -" + "9" * 308 + "]", "gravity[1]"),
     ("body-mass-1e308", "robot", "{body_mass: 1.0e+308}", "robot.body_mass"),
     ("boom-1e308", "robot", "{boom_length: [0.1, 1.0e+308]}", "robot.boom_length[1]"),
     ("tension-1e308", "robot", "{boom_tension: [0.5, 1.0e+308]}", "robot.boom_tension[1]"),
@@ -280,7 +280,7 @@ def test_long_value_and_huge_integer_refused_with_their_line():
     with pytest.raises(InputFileError, match="a number of 6,001 characters") as caught:
         load_yaml("gravity: [0, 1" + "2" * 6000 + "]\n")
     assert caught.value.field == "line 1, column 14", caught.value.field
-    with pytest.raises(InputFileError, match="a number Python cannot convert"):
+    with pytest.raises(InputFileError, match="beyond a float's range"):
         load_json('{"x": 1' + "2" * 6000 + "}")
 
 
@@ -304,6 +304,30 @@ def test_yaml_values_the_constructor_cannot_build_refused_with_their_line(text, 
     assert load_yaml("x: 0xff\ny: 0b1" + "0" * 1020 + "\n")["x"] == 255  # within range: read
 
 
+def test_json_integers_beyond_a_float_refused_with_their_line(tmp_path):
+    """10**400 in a plan's pose, time step or limits raised OverflowError in `rbp check`,
+    `simulate` and `rig-run` (a traceback) when first used as a float."""
+    from planning.plan_file import PlanFileError, read_plan_file
+
+    with pytest.raises(InputFileError, match="beyond a float's range") as caught:
+        load_json('{"a": 1,\n "b": [0, -1' + "0" * 400 + "]}")
+    assert caught.value.field == "line 2, column 11", caught.value.field
+    assert load_json("[" + "9" * 308 + "]")[0] == int("9" * 308)  # within a float's range
+    golden = (Path(__file__).parent / "data" / "golden" / "rig.json").read_text()
+    path = tmp_path / "plan.json"
+    path.write_text(golden.replace('"footstep": 0.0', '"footstep": 1' + "0" * 400, 1))
+    with pytest.raises(PlanFileError, match="beyond a float's range"):
+        read_plan_file(path)
+    # a JSON syntax error is named with its line, not guessed to be a scenario (every plan
+    # embeds "reachbot-scenario/1"); a UTF-8 byte-order mark is skipped
+    path.write_text(golden.replace('"planner":', '"planner"::', 1))
+    with pytest.raises(PlanFileError, match="not a JSON plan: Expecting value") as plan_error:
+        read_plan_file(path)
+    assert plan_error.value.field.startswith("line "), plan_error.value.field
+    path.write_text("\ufeff" + golden, encoding="utf-8")
+    assert read_plan_file(path)["format"].startswith("reachbot-plan/")
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")
@@ -321,7 +345,7 @@ def test_cli_refuses_large_and_numeric_monsters_in_one_line(tmp_path):
     plan.write_text('{"format": 1' + "2" * 6000 + "}")
     for path, command, words in ((flat, "scenario", "holds more than 1,000,000 values"),
                                  (digits, "scenario", "a number of 6,002 characters"),
-                                 (plan, "check", "a number Python cannot convert")):
+                                 (plan, "check", "an integer beyond a float's range")):
         start = time.perf_counter()
         args = ("scenario", "check", str(path)) if command == "scenario" else ("check", str(path))
         result = run_rbp(*args, cwd=tmp_path)

@@ -42,6 +42,14 @@ def spec(default: Any = dataclasses.MISSING, **schema: Any) -> Any:
 
 
 MAYBE4 = {"$ref": "#/$defs/maybe4"}  # 4 numbers or nulls (plan_schema_gen.COMMON)
+FORCE4 = {"$ref": "#/$defs/force4"}  # 4 tensions (N) or nulls, each within MAX_FORCE
+# Physically meaningful magnitudes of a plan's numbers (docs/formats.md), refused beyond at
+# reading so that nothing overflows later (a pose of 1e300 gave hundreds of warnings in the
+# simulator). The same as rb_drake's scenario and robot bounds (tests/test_plan.py checks).
+MAX_COORDINATE = 1e4  # m for positions and steps, rad for angles (rb_drake.scenario)
+MAX_FORCE = 1e6       # N for tensions, N m for torques (rb_drake.params)
+MAX_TIME = 1e7        # s: a plan's times and time step (115 days; a climb takes minutes)
+COORDINATE = {"type": "number", "minimum": -MAX_COORDINATE, "maximum": MAX_COORDINATE}
 
 
 def _tuple(value: Any) -> Any:
@@ -124,13 +132,13 @@ class Step(Part):
     a free boom), the configuration's probability; in a reach phase the free tip and its
     shoulder's torque."""
 
-    t: float = spec(minimum=0)
-    pose: tuple[float, ...] = spec(minItems=3, maxItems=3)
-    tension: tuple[float | None, ...] = spec(ref="maybe4")
+    t: float = spec(minimum=0, maximum=MAX_TIME)
+    pose: tuple[float, ...] = spec(items=COORDINATE, minItems=3, maxItems=3)
+    tension: tuple[float | None, ...] = spec(ref="force4")
     p_grasp: tuple[float | None, ...] = spec(ref="maybe4")
     p_success: float = spec(minimum=0, maximum=1)
-    free_tip: tuple[float, ...] | None = spec(None, ref="vec2")
-    shoulder_torque: float | None = spec(None)
+    free_tip: tuple[float, ...] | None = spec(None, ref="point")
+    shoulder_torque: float | None = spec(None, minimum=-MAX_FORCE, maximum=MAX_FORCE)
     ramp: Ramp | None = spec(None)
     NESTED: ClassVar[dict[str, type[Part]]] = {"ramp": Ramp}
 
@@ -146,7 +154,7 @@ class Motion(Part):
     seed_method: str = spec()
     seed_p_success: tuple[float, ...] = spec(items={"type": "number", "minimum": 0,
                                                     "maximum": 1})
-    seed_tension: tuple[tuple[float | None, ...], ...] = spec(items=MAYBE4)
+    seed_tension: tuple[tuple[float | None, ...], ...] = spec(items=FORCE4)
     seed_effort: tuple[float, ...] = spec()
     effort: tuple[float, ...] = spec()
     optimised: bool = spec()
@@ -257,8 +265,8 @@ class Partial(Part):
 class Limits(Part):
     """The largest change between successive trajectory steps (`planning.plan.step_limits`)."""
 
-    step: float = spec(exclusiveMinimum=0)
-    turn_step: float = spec(exclusiveMinimum=0)
+    step: float = spec(exclusiveMinimum=0, maximum=MAX_COORDINATE)
+    turn_step: float = spec(exclusiveMinimum=0, maximum=MAX_COORDINATE)
     DESCRIPTION: ClassVar[str] = ("the largest change between successive trajectory steps "
                                   "(full plans; optional when reading)")
 
@@ -271,7 +279,7 @@ class Start(Part):
     """Where a continuation (a replan after a failed grasp) starts, instead of the scenario's
     start."""
 
-    pose: tuple[float, ...] = spec(items={"type": "number"}, minItems=3, maxItems=3)
+    pose: tuple[float, ...] = spec(items=COORDINATE, minItems=3, maxItems=3)
     stance: tuple[str, ...] = spec(minItems=4, maxItems=4)
     DESCRIPTION: ClassVar[str] = ("where a continuation (a replan after a failed grasp) "
                                   "starts, instead of the scenario's start")
@@ -341,7 +349,7 @@ class Plan(Part):
     scenario: dict[str, Any] = spec(ref="scenario")
     robot: dict[str, Any] = spec(ref="robot")
     phases: tuple[Phase, ...] = spec()
-    time_step: float | None = spec(None, exclusiveMinimum=0,
+    time_step: float | None = spec(None, exclusiveMinimum=0, maximum=MAX_TIME,
                                    description="s between trajectory steps (full plans)")
     limits: Limits | None = spec(None)
     start: Start | None = spec(None)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from planning import plan_model
-from planning.plan_model import FORMATS, Part, Phase, Plan
+from planning.plan_model import COORDINATE, FORMATS, MAX_FORCE, Part, Phase, Plan
 
 SCHEMA_FILE = Path(__file__).with_name("plan_schema.json")
 
@@ -88,6 +88,9 @@ COMMON = {
     "vec4": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
     "maybe4": {"type": "array", "items": {"type": ["number", "null"]}, "minItems": 4,
                "maxItems": 4},
+    "force4": {"type": "array", "items": {"type": ["number", "null"], "minimum": -MAX_FORCE,
+                                          "maximum": MAX_FORCE}, "minItems": 4, "maxItems": 4},
+    "point": {"type": "array", "items": COORDINATE, "minItems": 2, "maxItems": 2},
 }
 SCALARS = {float: "number", int: "integer", str: "string", bool: "boolean"}
 

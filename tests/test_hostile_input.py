@@ -328,6 +328,33 @@ def test_json_integers_beyond_a_float_refused_with_their_line(tmp_path):
     assert read_plan_file(path)["format"].startswith("reachbot-plan/")
 
 
+@pytest.mark.parametrize("where, value, field", [
+    (("pose", 0), 1e300, "pose/0"), (("pose", 2), -1e5, "pose/2"), (("t",), 1e300, "t"),
+    (("tension", 0), 1e300, "tension/0"), (("tension", 1), -2e6, "tension/1"),
+])
+def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, value, field):
+    """A pose of 1e300 was read, and `rbp simulate` printed hundreds of overflow warnings."""
+    import json
+
+    from planning import plan_model
+    from planning.plan_file import PlanFileError, read_plan_file
+    from rb_drake import params, scenario
+
+    assert plan_model.MAX_COORDINATE == scenario.MAX_COORDINATE == scenario.MAX_ANGLE
+    assert plan_model.MAX_FORCE == params.MAX_FORCE
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "rig.json").read_text())
+    step = plan["phases"][0]["steps"][1]
+    if len(where) == 1:
+        step[where[0]] = value
+    else:
+        step[where[0]][where[1]] = value
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match="than the m") as caught:
+        read_plan_file(path)
+    assert caught.value.field == f"phases/0/steps/1/{field}", caught.value.field
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")

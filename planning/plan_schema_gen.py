@@ -46,7 +46,7 @@ ROBOT = {
         "shoulder_torque_max": {"type": "number", "minimum": 0},
         "gripper_mass": {"type": "number", "minimum": 0},
         "boom_linear_density": {"type": "number", "minimum": 0},
-        "attach_failure": {"type": "number", "minimum": 0, "maximum": 1},
+        "attach_failure": {"type": "number", "minimum": 0, "exclusiveMaximum": 1},
         "p_min": {"type": "number", "exclusiveMinimum": 0, "maximum": 1},
         "max_pull_angle_deg": {"type": "number", "exclusiveMinimum": 0, "maximum": 90},
     },

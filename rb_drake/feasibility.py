@@ -165,11 +165,12 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
     if stance.free_boom is not None:
         flag(np.abs(part.shoulder_torque) > robot.shoulder_torque_max, Reason.SHOULDER_TORQUE,
              rows, which=stance.free_boom)
-    flag(wrench_conditioning(robot, problem.A[rows], stance.attached) < MIN_CONDITIONING,
+    flag(~(wrench_conditioning(robot, problem.A[rows], stance.attached) >= MIN_CONDITIONING),
          Reason.SINGULAR, rows)
     flag(~part.statics_ok, Reason.STATICS, rows)
     if not ignore_grasps:
-        flag(part.robustness < robot.log_p_min, Reason.PROBABILITY, rows)
+        # `not >=`: a NaN probability (no longer readable, but never a pass) fails
+        flag(~(part.robustness >= robot.log_p_min), Reason.PROBABILITY, rows)
     feasible = reason == Reason.FEASIBLE
     return PoseCheck(feasible, reason, boom, alloc, geo.length, geo.shoulder_angle, problem)
 
@@ -251,13 +252,13 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
         out.append(f"boom {j} (free): shoulder torque {alloc.shoulder_torque[0]:.2f} N m over "
                    f"the limit {robot.shoulder_torque_max} N m")
     kappa = float(wrench_conditioning(robot, check.problem.A, stance.attached)[0])
-    if kappa < MIN_CONDITIONING:
+    if not kappa >= MIN_CONDITIONING:
         out.append(f"the booms nearly meet in one point (wrench conditioning {kappa:.4f} < "
                    f"{MIN_CONDITIONING}): small errors swing the tensions")
     if not alloc.statics_ok[0]:
         out.append(f"statics: no tensions within [{robot.boom_tension[0]}, "
                    f"{robot.boom_tension[1]}] N balance gravity at this pose")
-    elif alloc.robustness[0] < robot.log_p_min:
+    elif not alloc.robustness[0] >= robot.log_p_min:
         probs = ", ".join(f"boom {i} {np.exp(alloc.log_probs[0, i]):.3f}"
                           for i in np.flatnonzero(stance.attached))
         out.append(f"probability {np.exp(alloc.robustness[0]):.3f} below p_min "

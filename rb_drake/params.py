@@ -155,6 +155,20 @@ def _interval(field: str, value: Any, lo: float, hi: float) -> tuple[float, floa
     return a, b
 
 
+MIN_SHOULDER_GAP = 1e-3  # m: shoulders apart and off the body's centre (the statics divide by it)
+
+
+def _check_shoulders(key: str, shoulders: tuple[tuple[float, ...], ...]) -> None:
+    for i, (x, y) in enumerate(shoulders):
+        if not math.hypot(x, y) >= MIN_SHOULDER_GAP:
+            raise ParamError(f"{key}[{i}]", f"at the body's centre: a shoulder must be at least "
+                             f"{MIN_SHOULDER_GAP} m from it")
+        for k in range(i):
+            if not math.dist(shoulders[k], (x, y)) >= MIN_SHOULDER_GAP:
+                raise ParamError(f"{key}[{i}]", f"at shoulder {k}'s place: shoulders must be at "
+                                 f"least {MIN_SHOULDER_GAP} m apart")
+
+
 def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
     """Defaults updated by `overrides` (a scenario's `robot:` block); raises ParamError."""
     if overrides is None:
@@ -176,8 +190,9 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
         elif key == "shoulders":
             if not isinstance(value, list | tuple) or len(value) != NUM_BOOMS:
                 raise ParamError(key, f"expected {NUM_BOOMS} [x, y] pairs, got {_short(value)}")
-            changes[key] = tuple(_vector(f"{key}[{i}]", s, 2, MAX_SIZE)
-                                 for i, s in enumerate(value))
+            changes[key] = shoulders = tuple(_vector(f"{key}[{i}]", s, 2, MAX_SIZE)
+                                             for i, s in enumerate(value))
+            _check_shoulders(key, shoulders)
         elif key == "shoulder_directions_deg":
             changes[key] = _vector(key, value, NUM_BOOMS, MAX_DEGREES)
         elif key == "shoulder_range_deg":
@@ -192,8 +207,10 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
             changes[key] = _number(key, value, 0.0, MAX_FORCE)
         elif key in ("gripper_mass", "boom_linear_density"):
             changes[key] = _number(key, value, 0.0, MAX_MASS)
-        elif key == "attach_failure":
+        elif key == "attach_failure":  # 1 would make every climb fail (p_path 0)
             changes[key] = _number(key, value, 0.0, 1.0)
+            if not changes[key] < 1.0:
+                raise ParamError(key, f"must be < 1 (a grasp that always fails), got {value}")
         elif key == "p_min":
             changes[key] = _number(key, value, 0.0, 1.0, lo_open=True)
         elif key == "max_pull_angle_deg":

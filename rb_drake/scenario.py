@@ -33,6 +33,7 @@ MAX_COORDINATE = 1e4  # m: walls, anchors, start and goal positions, goal tolera
 MAX_ANGLE = 1e4       # rad for the start pose's angle, degrees for an anchor's normal angle
 MAX_GRAVITY = 1e3     # m/s^2 per component (Earth 9.81)
 MAX_FORCE = 1e6       # N: anchor limit surfaces and their spreads
+MIN_FORCE = 1e-3      # N: ... at least (1e-200 or 5e-324 overflowed the grasp model to NaN)
 
 
 class ScenarioError(RbpInputError):
@@ -192,7 +193,8 @@ class _Reader:
         return m[key]
 
     def number(self, field: str, value: Any, positive: bool = False,
-               nonnegative: bool = False, bound: float = MAX_COORDINATE) -> float:
+               nonnegative: bool = False, bound: float = MAX_COORDINATE,
+               least: float = 0.0) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.fail(field, f"expected a number, got {_describe(value)}")
         try:
@@ -207,6 +209,8 @@ class _Reader:
             raise self.fail(field, f"must be positive, got {v}")
         if nonnegative and v < 0:
             raise self.fail(field, f"must not be negative, got {v}")
+        if abs(v) < least:
+            raise self.fail(field, f"must be at least {least:g}, got {v:g}")
         return v
 
     def vector(self, field: str, value: Any, n: int,
@@ -342,13 +346,13 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
     sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
     fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),
-                   positive=True, bound=MAX_FORCE)
+                   positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     ft = rd.number(f"{field}.limit.lateral", rd.require(f"{field}.limit", limit, "lateral"),
-                   positive=True, bound=MAX_FORCE)
+                   positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     sn = rd.number(f"{field}.sigma.normal", rd.require(f"{field}.sigma", sigma, "normal"),
-                   positive=True, bound=MAX_FORCE)
+                   positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     st = rd.number(f"{field}.sigma.lateral", rd.require(f"{field}.sigma", sigma, "lateral"),
-                   positive=True, bound=MAX_FORCE)
+                   positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     p = np.array(pos)
     if rock.polygons and rock.contains(p) and rock.distance(p) > ANCHOR_DEPTH_TOL:
         raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is inside rock "

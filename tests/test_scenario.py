@@ -254,6 +254,18 @@ BAD_CASES: list[tuple[str, Mutation, str, tuple[str, ...]]] = [
     ("robot-boom-length-equal", set_field(("robot",), {"boom_length": [1.0, 1.0]}),
      "robot.boom_length", ("min < max",)),
     ("robot-p-min-over-one", set_field(("robot",), {"p_min": 1.5}), "robot.p_min", ("<= 1",)),
+    # degenerate values that passed and broke the model: a ZeroDivisionError in the wrench
+    # conditioning, p_path 0 reported as a success, NaN probabilities from the grasp model
+    ("robot-shoulders-at-centre", set_field(("robot",), {"shoulders": [[0, 0]] * 4}),
+     "robot.shoulders[0]", ("body's centre",)),
+    ("robot-shoulders-same", set_field(("robot",), {"shoulders": [[0.1, 0.1]] * 4}),
+     "robot.shoulders[1]", ("shoulder 0", "apart")),
+    ("robot-attach-failure-one", set_field(("robot",), {"attach_failure": 1}),
+     "robot.attach_failure", ("< 1",)),
+    ("sigma-tiny", set_field(("anchors", 0, "sigma", "normal"), 5e-324),
+     "anchors[0].sigma.normal", ("at least 0.001",)),
+    ("limit-tiny", set_field(("anchors", 1, "limit", "lateral"), 1e-200),
+     "anchors[1].limit.lateral", ("at least 0.001",)),
 ]
 
 

@@ -187,6 +187,16 @@ class _Reader:
             raise self.fail(field, f"expected a mapping, got {_describe(value)}")
         return value
 
+    def closed(self, field: str, value: Any, known: set[str]) -> Mapping[str, Any]:
+        """A mapping of only `known` keys (a misspelt key, silently ignored, would leave its
+        default in force)."""
+        m = self.mapping(field, value)
+        extra = sorted(str(k) for k in set(m) - known)
+        if extra:
+            raise self.fail(f"{field}.{extra[0]}", f"unknown field; expected one of "
+                            f"{sorted(known)}")
+        return m
+
     def require(self, field: str, m: Mapping[str, Any], key: str) -> Any:
         if key not in m:
             raise self.fail(f"{field}.{key}" if field else key, "missing required field")
@@ -253,7 +263,9 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     gravity = rd.vector("gravity", data.get("gravity", list(MARS_GRAVITY)), 2,
                         (MAX_GRAVITY, MAX_GRAVITY))
 
-    overrides = data.get("robot") or {}
+    overrides = data.get("robot")
+    if overrides is None:  # `robot:` left empty; false, 0 or "" are refused as not a mapping
+        overrides = {}
     try:
         robot = robot_from_dict(overrides)
     except ParamError as e:
@@ -285,7 +297,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     for k, raw in enumerate(anchors_raw):
         anchors.append(_parse_anchor(rd, f"anchors[{k}]", raw, seen, rock))
 
-    start = rd.mapping("start", rd.require("", data, "start"))
+    start = rd.closed("start", rd.require("", data, "start"), {"pose", "stance"})
     pose = rd.vector("start.pose", rd.require("start", start, "pose"), 3,
                      (MAX_COORDINATE, MAX_COORDINATE, MAX_ANGLE))
     stance_raw = rd.require("start", start, "stance")
@@ -298,7 +310,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     if len(set(stance_raw)) != NUM_BOOMS:
         raise rd.fail("start.stance", f"each boom needs its own anchor, got {stance_raw}")
 
-    goal = rd.mapping("goal", rd.require("", data, "goal"))
+    goal = rd.closed("goal", rd.require("", data, "goal"), {"position", "tolerance"})
     goal_pos = rd.vector("goal.position", rd.require("goal", goal, "position"), 2)
     tol = rd.number("goal.tolerance", goal.get("tolerance", 0.5), positive=True)
     _check_goal(rd, rock, np.array(goal_pos), tol)
@@ -318,11 +330,7 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
 
 
 def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock) -> Anchor:
-    raw = rd.mapping(field, raw)
-    known = {"id", "position", "normal", "limit", "sigma"}
-    extra = sorted(str(k) for k in set(raw) - known)
-    if extra:
-        raise rd.fail(f"{field}.{extra[0]}", f"unknown field; expected one of {sorted(known)}")
+    raw = rd.closed(field, raw, {"id", "position", "normal", "limit", "sigma"})
     aid = rd.require(field, raw, "id")
     if not isinstance(aid, str | int) or isinstance(aid, bool):
         raise rd.fail(f"{field}.id", f"expected a string, got {_describe(aid)}")
@@ -343,8 +351,8 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
         # A unit vector (as Scenario.to_dict writes them) is kept bit for bit, so that a plan's
         # embedded scenario reads back exactly (rbp plan --from-plan repeats the plan).
         normal = (nx, ny) if abs(norm - 1.0) <= 1e-15 else (nx / norm, ny / norm)
-    limit = rd.mapping(f"{field}.limit", rd.require(field, raw, "limit"))
-    sigma = rd.mapping(f"{field}.sigma", rd.require(field, raw, "sigma"))
+    limit = rd.closed(f"{field}.limit", rd.require(field, raw, "limit"), {"normal", "lateral"})
+    sigma = rd.closed(f"{field}.sigma", rd.require(field, raw, "sigma"), {"normal", "lateral"})
     fn = rd.number(f"{field}.limit.normal", rd.require(f"{field}.limit", limit, "normal"),
                    positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     ft = rd.number(f"{field}.limit.lateral", rd.require(f"{field}.limit", limit, "lateral"),

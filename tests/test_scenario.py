@@ -266,6 +266,16 @@ BAD_CASES: list[tuple[str, Mutation, str, tuple[str, ...]]] = [
      "anchors[0].sigma.normal", ("at least 0.001",)),
     ("limit-tiny", set_field(("anchors", 1, "limit", "lateral"), 1e-200),
      "anchors[1].limit.lateral", ("at least 0.001",)),
+    # unknown keys below the top level were ignored: a misspelt one left its default in force
+    ("goal-misspelt-key", set_field(("goal", "tolerence"), 0.1), "goal.tolerence",
+     ("unknown field", "tolerance")),
+    ("start-extra-key", set_field(("start", "phi"), 0.1), "start.phi", ("unknown field",)),
+    ("limit-extra-key", set_field(("anchors", 0, "limit", "tangential"), 5),
+     "anchors[0].limit.tangential", ("unknown field",)),
+    ("sigma-extra-key", set_field(("anchors", 0, "sigma", "x"), 5), "anchors[0].sigma.x",
+     ("unknown field",)),
+    ("robot-false", set_field(("robot",), False), "robot", ("mapping",)),
+    ("robot-empty-string", set_field(("robot",), ""), "robot", ("mapping",)),
 ]
 
 

@@ -27,10 +27,20 @@ class RbpInputError(RbpError, ValueError):
     "file: field: reason" with the missing parts left out."""
 
     def __init__(self, reason: str, *, file: str | None = None, field: str | None = None):
-        super().__init__(": ".join(part for part in (file, field, reason) if part is not None))
+        super().__init__(one_line(": ".join(part for part in (file, field, reason)
+                                            if part is not None)))
         self.file = file
         self.field = field
         self.reason = reason
+
+
+def one_line(text: str) -> str:
+    """`text` with its control characters (newline, carriage return, escape, a Unicode line
+    separator, ...) written as Python escapes: a file name, key or value holding them cannot
+    break an error line in two or forge another `error:` line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 # The exit status of an rbp command or an experiment script (`rbp --help` lists them). Plain

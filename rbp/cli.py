@@ -17,7 +17,14 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from rb_drake.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, RbpInputError
+from rb_drake.errors import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    RbpInputError,
+    one_line,
+)
 from rbp.commands.common import (
     UserError,
     check_dpi,
@@ -561,12 +568,12 @@ def _main(argv: list[str] | None) -> int:
         threads_adapt_setting()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {one_line(str(e))}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:
         raise  # the reader went away (`main` handles it), not a file of the user's
     except OSError as e:  # an output that cannot be written, an input that cannot be read
-        print(f"error: {e.filename or ''}: {e.strerror}", file=sys.stderr)
+        print(one_line(f"error: {e.filename or ''}: {e.strerror}"), file=sys.stderr)
         return EXIT_USAGE
 
 

@@ -355,6 +355,26 @@ def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, 
     assert caught.value.field == f"phases/0/steps/1/{field}", caught.value.field
 
 
+def test_control_characters_cannot_forge_error_lines(tmp_path):
+    """A key, a value or a file name holding a newline or carriage return printed a second,
+    forged `error:` line; they are written as escapes, in the message and by the CLI."""
+    from rb_drake.errors import one_line
+
+    assert one_line("a\nb\rc\x1bd\u2028e") == "a\\nb\\rc\\x1bd\\u2028e"
+    assert one_line("ordinary: é, ü") == "ordinary: é, ü"
+    with pytest.raises(ScenarioError) as caught:
+        from rb_drake.scenario import scenario_from_dict
+
+        scenario_from_dict(yaml.safe_load(_with_top('"x\\nerror: forged"', "1")), "c\nd.yaml")
+    assert "\n" not in str(caught.value) and "x\\nerror: forged" in str(caught.value)
+    path = tmp_path / "cave\nerror: forged.yaml"
+    path.write_text(_with_top('"x\\rerror: forged"', "1"))
+    result = run_rbp("scenario", "check", str(path), cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and "\r" not in result.stderr, repr(result.stderr)
+    assert "cave\\nerror: forged.yaml" in result.stderr, result.stderr
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, one_line
 
 
 def plural(n: int, word: str) -> str:
@@ -94,10 +94,10 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     with CheckProgress(f"verifying {path}") as bar:
         problems, _ = plan_problems(plan, str(path), progress=bar)
     for p in problems[:20]:
-        print(f"error: {path}: {p}", file=sys.stderr)
+        print(one_line(f"error: {path}: {p}"), file=sys.stderr)
     if problems:
         count = plural(len(problems), "problem")
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
-        print(f"error: {path}: the plan fails verification ({count}{shown}); "
-              f"refused (rbp check {path} lists them all)", file=sys.stderr)
+        print(one_line(f"error: {path}: the plan fails verification ({count}{shown}); "
+                       f"refused (rbp check {path} lists them all)"), file=sys.stderr)
     return bool(problems)

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rb_drake.errors import EXIT_FAILED, EXIT_OK
+from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
 
 MAX_TRIALS = 1_000_000  # Monte Carlo climbs of one plan; more is a sweep's job
 
@@ -76,8 +76,8 @@ def _progress(label: str):
 def _simulation_failed(path: Path, error: Exception, where: str) -> int:
     """One line on stderr for a simulation whose solver failed (`SimulationError`, naming the
     phase and time), never a traceback; exit status 1, a failed execution."""
-    print(f"error: {path}: {error}{where}; rbp check {path} tells whether the plan fits its "
-          "cave and robot", file=sys.stderr)
+    print(one_line(f"error: {path}: {error}{where}; rbp check {path} tells whether the plan "
+                   "fits its cave and robot"), file=sys.stderr)
     return EXIT_FAILED
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -31,6 +32,9 @@ from numba import njit
 from planning.lattice_kernels import reach_violation
 from rb_drake.errors import RbpInputError
 from rb_drake.params import RobotParams
+
+if TYPE_CHECKING:
+    from rb_drake.scenario import Scenario
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +76,22 @@ ANGLE_STEP_RANGE = (0.5, 45.0)       # deg: 0.5 deg is 5 times the default's ori
 
 # Lattice indices are packed into one int64 key, so that sets of poses intersect by sorting.
 SPAN = 1 << 21  # |i|, |k| < 2^20 cells: 20 km at 2 cm
+
+
+def span_problem(scn: Scenario, cfg: LatticeConfig) -> str:
+    """Why the lattice of `cfg` cannot index every body pose of `scn` ("" if it can): an index
+    beyond SPAN / 2 cells from the origin wraps in `pack` onto another pose (a cave 10 km out
+    at 5 mm steps answered a wrong "start joined to no feasible pose"). The body reaches at
+    most a boom and a shoulder offset beyond an anchor."""
+    reach = float(scn.robot.boom_length[1]) + float(np.abs(scn.robot.shoulder_array).max())
+    points = [scn.anchor_positions, np.array([scn.start_pose[:2], scn.goal_position])]
+    extent = float(max(np.abs(p).max() for p in points if p.size)) + reach
+    cells = extent / cfg.position_step
+    if cells < SPAN // 2 - 2:
+        return ""
+    return (f"the cave reaches {extent:.0f} m from the origin, {cells:,.0f} lattice steps of "
+            f"{cfg.position_step:g} m: the lattice indexes at most {SPAN // 2 - 2:,}; use a step "
+            f"of at least {extent / (SPAN // 2 - 2):.4f} m (or move the cave to the origin)")
 
 
 def pack(idx: np.ndarray, angle_count: int) -> np.ndarray:

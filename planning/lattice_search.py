@@ -24,7 +24,7 @@ import numpy as np
 from planning.astar import SearchResult
 from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes
 from planning.components import Component, StanceComponents
-from planning.lattice import LatticeConfig, poses_of, unpack
+from planning.lattice import LatticeConfig, poses_of, span_problem, unpack
 from planning.lattice_moves import (
     LatticeTransition,
     MoveTable,
@@ -36,6 +36,7 @@ from planning.lattice_moves import (
     unpack_transition,
 )
 from planning.search_outcome import Quality, Stop
+from rb_drake.errors import RbpInputError
 from rb_drake.kernel.threads import held_kernel_threads
 from rb_drake.scenario import Scenario
 
@@ -94,6 +95,8 @@ class LatticeMemo:
 
     def bind(self, scn: Scenario, cfg: LatticeConfig, ignore_grasps: bool) -> None:
         """Serve searches of `scn` on lattice `cfg`: what it drops is decided again there."""
+        if problem := span_problem(scn, cfg):  # its indices would wrap onto other poses
+            raise RbpInputError(problem, field="footstep.lattice.position_step")
         if self.config is None:
             self.config = cfg
         elif self.config != cfg:

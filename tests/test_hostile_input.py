@@ -487,6 +487,30 @@ def test_lattice_outside_its_range_refused_naming_the_key(tmp_path, lattice, wor
     assert not (tmp_path / "p.json").exists(), "a refused configuration wrote a plan"
 
 
+def test_lattice_whose_indices_would_wrap_refused_naming_the_step(tmp_path):
+    """demo-shaft 9,990 m out at 5 mm steps: its lattice indices wrapped past 2^20 cells and
+    the search answered a wrong "start joined to no feasible pose"."""
+    from planning.lattice import LatticeConfig, span_problem
+
+    far = yaml.safe_load(_demo_text())
+    shift = lambda p: [p[0] + 9990.0, *p[1:]]  # noqa: E731
+    far["walls"] = [[shift(p) for p in wall] for wall in far["walls"]]
+    for anchor in far["anchors"]:
+        anchor["position"] = shift(anchor["position"])
+    far["start"]["pose"], far["goal"]["position"] = (shift(far["start"]["pose"]),
+                                                     shift(far["goal"]["position"]))
+    cave = tmp_path / "far.yaml"
+    cave.write_text(yaml.safe_dump(far))
+    scn = load_scenario(cave)
+    assert span_problem(scn, LatticeConfig()) == ""  # 2 cm steps index 20 km
+    assert "lattice indexes at most" in span_problem(scn, LatticeConfig(position_step=0.005))
+    config = tmp_path / "planner.yaml"
+    config.write_text("footstep: {lattice: {position_step: 0.005}}\n")
+    result = run_rbp("plan", str(cave), "--config", str(config), "--footsteps-only", "-o",
+                     str(tmp_path / "p.json"), "--no-pictures", cwd=tmp_path)
+    _refused_in_one_line(result, config, "footstep.lattice.position_step: the cave reaches")
+
+
 def test_unwritable_outputs_named_with_their_reason(tmp_path):
     """An output name too long for the file system was called a symlink loop, and a folder
     where no file can be made (/proc) was reported under the temporary file's name."""

@@ -132,6 +132,11 @@ def plan_setup(args: argparse.Namespace):
         source = args.config or args.from_plan or "(configuration)"
         raise UserError(f"{source}: footstep.min_success: must lie strictly between 0 and 1, "
                         f"or null, got {wanted}")
+    from planning.lattice import span_problem
+
+    if problem := span_problem(scn, cfg.footstep.lattice):
+        source = args.config or args.from_plan or "(configuration)"
+        raise UserError(f"{source}: footstep.lattice.position_step: {problem}")
     return scn, planner, cfg, motion
 
 

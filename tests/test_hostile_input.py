@@ -37,8 +37,12 @@ def _demo_text() -> str:
 
 def _with_top(field: str, value_yaml: str) -> str:
     """demo-shaft.yaml with its top-level `field` replaced by `value_yaml` (a YAML fragment)."""
-    kept = [line for line in _demo_text().splitlines()
-            if not line.startswith(f"{field}:")]
+    kept, inside = [], False
+    for line in _demo_text().splitlines():
+        if not line.startswith((" ", "-")):  # a top-level key: the field's block ends
+            inside = line.startswith(f"{field}:")
+        if not inside:
+            kept.append(line)
     return "\n".join(kept) + f"\n{field}: {value_yaml}\n"
 
 

@@ -421,7 +421,7 @@ def test_bad_log_input(command: str, tmp_path: Path) -> None:
         handler(parse(command, str(missing), *extra))
     junk = tmp_path / "junk.lcm"
     junk.write_text("not an LCM log\n" * 10)
-    with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: RIG_SETUP: no setup message')}"):
+    with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: (file): event 0 is damaged')}"):
         handler(parse(command, str(junk), *extra))
     assert not (tmp_path / "f.png").exists(), "no figure from a bad log"
 

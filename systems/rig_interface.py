@@ -49,7 +49,6 @@ from rb_drake.stance import Stance
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
 from systems.rig_messages import (
-    MAX_LOG_EVENTS,
     MEMQ,
     LogWriter,
     RawSerializer,

@@ -8,7 +8,9 @@ from __future__ import annotations
 import functools
 import importlib.util
 import json
+import math
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -361,3 +363,43 @@ def test_damaged_drawings_refused_or_read(tmp_path, cut, junk, suffix):
     path.write_text(whole[:at] + junk + whole[at + len(junk):])
     problem = _reading_problem(path)
     assert problem is None, problem
+
+
+def test_drawings_that_would_expand_past_the_limit_refused_quickly(tmp_path):
+    """Arcs and <use> copies are bounded before ezdxf or svgelements expand them: a bulge of
+    1e10 made billions of chords (gigabytes, minutes), six levels of ten <use> a million
+    elements, 2,000 tall Bézier curves 2 million points; a bulge of 1e300 made ezdxf warn."""
+    import time
+
+    def bulge_dxf(name: str, bulge: float) -> Path:
+        doc = ezdxf.new()
+        doc.modelspace().add_lwpolyline([(0, 0, 0, 0, bulge), (1, 0, 0, 0, 0), (1, 1, 0, 0, 0)],
+                                        format="xyseb", close=True)
+        doc.saveas(tmp_path / name)
+        return tmp_path / name
+
+    use = "".join(f'<g id="g{k + 1}">' + f'<use href="#g{k}"/>' * 10 + "</g>" for k in range(6))
+    svg = '<svg xmlns="http://www.w3.org/2000/svg">{}</svg>'
+    cases = [
+        (bulge_dxf("b1e10.dxf", 1e10), "more than 50000 outline vertices"),
+        (bulge_dxf("b1e300.dxf", 1e300), "more than 50000 outline vertices"),
+        (bulge_dxf("bnan.dxf", math.nan), "entity 1 .*: a bulge that is not a finite number"),
+        (tmp_path / "bomb.svg", r"6,802,462 elements once <use> copies are expanded"),
+        (tmp_path / "loop.svg", r"<use> nested more than 8 deep \(or in a loop\)"),
+        (tmp_path / "curves.svg", "more than 50000 outline vertices"),
+    ]
+    (tmp_path / "bomb.svg").write_text(svg.format(
+        '<defs><g id="g0"><rect width="1" height="1"/></g>' + use + '</defs><use href="#g6"/>'))
+    (tmp_path / "loop.svg").write_text(svg.format('<g id="a"><use href="#a"/></g>'))
+    (tmp_path / "curves.svg").write_text(svg.format(
+        '<path d="M0 0 ' + " ".join(f"Q {20 * k + 10} 5000 {20 * k + 20} 0" for k in range(2000))
+        + ' Z"/>'))
+    for path, words in cases:
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # nothing may reach stderr before the refusal
+            with pytest.raises(RbpInputError, match=f"^{path}: {words}"):
+                read_rock(path)
+        assert time.perf_counter() - start < 2, f"{path.name} took too long"
+    semicircle = bulge_dxf("half.dxf", 1.0)  # an ordinary arc still reads
+    assert len(read_rock(semicircle)) == 1

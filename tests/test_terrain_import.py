@@ -403,3 +403,31 @@ def test_drawings_that_would_expand_past_the_limit_refused_quickly(tmp_path):
         assert time.perf_counter() - start < 2, f"{path.name} took too long"
     semicircle = bulge_dxf("half.dxf", 1.0)  # an ordinary arc still reads
     assert len(read_rock(semicircle)) == 1
+
+
+def test_imported_anchors_pass_the_scenario_reader(tmp_path):
+    """Anchors are tested for facing into rock as written (rounded to 0.1 mm): this wavy
+    5,000-vertex shaft's anchor a54 passed before rounding and the reader refused the import's
+    own output ("normal points into the rock")."""
+    from shapely import union_all
+
+    from rb_drake.collision import Rock
+    from rb_drake.generate import CaveConfig, place_anchors
+    from rb_drake.terrain.cave_from_rock import _polygons, _surfaces, _walls
+
+    k = range(1, 2500)
+    left = [(-1.9, -0.5), (-0.9, -0.5),
+            *((-0.9 + 0.02 * math.sin(i), -0.5 + 6 * i / 2499) for i in k), (-1.9, 5.5),
+            (-1.9, -0.5)]
+    right = [(1.9, -0.5), (1.9, 5.5), (0.9, 5.5),
+             *((0.9 + 0.02 * math.sin(j), 5.5 - 6 * j / 2499) for j in k), (1.9, -0.5)]
+    path = tmp_path / "shaft.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]}}
+        for ring in (left, right)]}))
+    solid = [p for p in _polygons(union_all(read_rock(path))) if p.area > 0]
+    rock = Rock(_walls(solid, str(path)))
+    anchors = place_anchors(np.random.default_rng(0), CaveConfig(), _surfaces(solid), rock)
+    inward = [a.id for a in anchors
+              if rock.contains(np.array(a.position) + 0.05 * np.array(a.normal))]
+    assert len(anchors) > 100 and not inward, inward

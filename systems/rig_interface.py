@@ -389,6 +389,8 @@ def report_figure(log: RigLog):
     time, and each boom's measured load-cell force against its commanded tension."""
     import matplotlib.pyplot as plt
 
+    from rb_drake.draw import title_name
+
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7.0, 6.0))
     rec = log.replay
     for i, anchor in enumerate(log.stance_ids):
@@ -398,7 +400,7 @@ def report_figure(log: RigLog):
         bottom.plot(log.command_time, log.tension_setpoint[:, i], color=color, linestyle="--",
                     label=f"boom {i} commanded")
     top.set_ylabel("probability of grasp maintenance")
-    top.set_title(f"{log.scenario.name}: {log.plan_source or 'rig run'}")
+    top.set_title(f"{title_name(log.scenario.name)}: {log.plan_source or 'rig run'}")
     top.legend(loc="lower left", fontsize="small")
     top.grid(alpha=0.3)
     bottom.set_ylabel("tension (N)")

@@ -412,6 +412,25 @@ def test_sim_rig_refuses_a_network_url(plan_file: Path, tmp_path: Path) -> None:
                           str(tmp_path / "x.lcm")))
 
 
+def test_rig_run_checks_its_url_and_log_before_the_run(plan_file: Path, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """An LCM URL of no provider (garbage:// failed after the 9 s verification with LCM's own
+    "Error:" line) and a --log that is a folder (the whole run, then "/.tmp.XXXX.tmp: Is a
+    directory") are refused before the plan is read."""
+    import rbp.commands.common
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("the plan was read before the arguments were checked")
+
+    monkeypatch.setattr(rbp.commands.common, "read_plan", never)
+    log = str(tmp_path / "x.lcm")
+    for url in ("garbage://x", "memq", "udpm:/239.255.76.67"):
+        with pytest.raises(UserError, match=rf"^--lcm-url: '{re.escape(url)}' is not an LCM URL"):
+            cmd_rig_run(parse("rig-run", str(plan_file), "--lcm-url", url, "--log", log))
+    with pytest.raises(UserError, match=f"^{re.escape(str(tmp_path))}: --log: is a directory"):
+        cmd_rig_run(parse("rig-run", str(plan_file), "--sim-rig", "--log", str(tmp_path)))
+
+
 @pytest.mark.parametrize("command", ["rig-replay", "rig-report"])
 def test_bad_log_input(command: str, tmp_path: Path) -> None:
     handler = {"rig-replay": cmd_rig_replay, "rig-report": cmd_rig_report}[command]

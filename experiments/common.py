@@ -15,7 +15,13 @@ import math
 import time
 from typing import Any
 
-from experiments.sweep import Trial, check_sweep_arguments, quantiles
+from experiments.sweep import (
+    RESULT_CHECKS,
+    Trial,
+    check_sweep_arguments,
+    json_type,
+    quantiles,
+)
 
 MIXED = ("shaft", "crevasse", "shaft", "rockfall")  # shafts and passages, alternating
 THRESHOLDS = (0.90, 0.95)
@@ -167,6 +173,42 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
         timing[planner] = {**plan["timing"], "search": search_measures(plan)}
     out["timing"] = timing
     return out
+
+
+def _probability(value: Any) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and 0.0 <= value <= 1.0)  # NaN fails both comparisons
+
+
+# The fields of a planner's plan_record the summaries read: (check, what it must be).
+_RECORD_FIELDS: dict[str, tuple[Any, str]] = {
+    "success": (lambda v: isinstance(v, bool), "true or false"),
+    "reason": (lambda v: isinstance(v, str), "a string"),
+    "p_path": (lambda v: v is None or _probability(v), "null or a number from 0 to 1"),
+    "p_grasps": (lambda v: v is None or _probability(v), "null or a number from 0 to 1"),
+    "regrasps": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 10**6,
+                 "a whole number from 0 to 1,000,000"),
+}
+
+
+def climb_result_problem(params: dict[str, Any], result: dict[str, Any]) -> str | None:
+    """What is wrong with a finished climb trial's result ("FIELD: REASON"), or None: each
+    planner's record holds the fields the summaries read, within their ranges."""
+    for planner in params.get("planners", ()):
+        row = result.get(planner)
+        if not isinstance(row, dict):
+            return f"{planner}: expected the planner's record, got {json_type(row)}"
+        for key, (ok, what) in _RECORD_FIELDS.items():
+            if key not in row:
+                return f"{planner}.{key}: missing"
+            if not ok(row[key]):
+                return f"{planner}.{key}: must be {what}, got {str(row[key])[:40]!r}"
+        if row["success"] and row["p_path"] is None:
+            return f"{planner}.p_path: a successful plan's must be a number from 0 to 1"
+    return None
+
+
+RESULT_CHECKS[CLIMB_TRIAL] = climb_result_problem
 
 
 def cave_kind(i: int, kind: str) -> str:

@@ -28,13 +28,27 @@ from experiments.sweep import (
     write_results,
 )
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
+from rb_drake.scenario import MAX_FORCE, MAX_GRAVITY
+from rb_drake.terrain.import_cave import MAX_ANCHOR_DENSITY
 
-# name -> (label, the check of one value)
+# The ranges of the scenario fields each parameter sets (rb_drake.scenario, docs/formats.md),
+# so that no swept value makes a cave the scenario reader would refuse (gravity 1e4 hung the
+# planner; 1e308 overflowed): an anchor's largest limit (50 N) scaled stays within MAX_FORCE.
+MAX_GRIPPER_SCALE = MAX_FORCE / 100  # x the generator's largest limit, 50 N
+MIN_GRIPPER_SCALE = 1e-6  # x its smallest, 15 N: far below any grip, and never 0 N
+
+# name -> (label, the check of one value, its range in words)
 PARAMETERS = {
-    "p_min": ("required configuration probability p_min", lambda v: 0.0 < v < 1.0),
-    "gripper_scale": ("gripper strength scale (every anchor's limit)", lambda v: v > 0.0),
-    "anchor_density": ("anchor density (per metre of rock)", lambda v: v > 0.0),
-    "gravity": ("gravity magnitude (m/s^2)", lambda v: v > 0.0),
+    "p_min": ("required configuration probability p_min", lambda v: 0.0 < v < 1.0,
+              "above 0 and below 1"),
+    "gripper_scale": ("gripper strength scale (every anchor's limit)",
+                      lambda v: MIN_GRIPPER_SCALE <= v <= MAX_GRIPPER_SCALE,
+                      f"{MIN_GRIPPER_SCALE:g} to {MAX_GRIPPER_SCALE:g}"),
+    "anchor_density": ("anchor density (per metre of rock)",
+                       lambda v: 0.0 < v <= MAX_ANCHOR_DENSITY,
+                       f"above 0 and at most {MAX_ANCHOR_DENSITY:g}"),
+    "gravity": ("gravity magnitude (m/s^2)", lambda v: 0.0 < v <= MAX_GRAVITY,
+                f"above 0 and at most {MAX_GRAVITY:g}"),
 }
 
 
@@ -89,7 +103,8 @@ def parse_values(parser: argparse.ArgumentParser, param: str, text: str) -> list
         parser.error(f"--values: give distinct values, got {text!r}")
     bad = [v for v in values if not PARAMETERS[param][1](v)]
     if bad:
-        parser.error(f"--values: {bad[0]} is not a valid {param}")
+        parser.error(f"--values: {bad[0]:g} is not a valid {param}: must be "
+                     f"{PARAMETERS[param][2]}")
     return values
 
 

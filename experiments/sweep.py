@@ -51,6 +51,13 @@ class SweepError(RbpError):
     """A sweep that cannot run as asked (bad trial names, a folder holding another sweep)."""
 
 
+# A trial function's check of a finished record's result (function path -> check(params,
+# result) -> "FIELD: REASON" or None), registered by the module that makes its trials: a
+# record edited or damaged since (p_path "x", 1e308, missing) is refused on resuming, before
+# the summaries read it.
+RESULT_CHECKS: dict[str, Callable[[dict[str, Any], dict[str, Any]], str | None]] = {}
+
+
 def _resolve(path: str) -> Callable[..., dict[str, Any]]:
     module, _, name = path.partition(":")
     return getattr(importlib.import_module(module), name)
@@ -128,7 +135,31 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     if {"function": record.get("function"), "params": record.get("params")} != wanted:
         raise SweepError(f"{path}: recorded for other parameters ({record.get('params')}), "
                          f"not {trial.params}: use another --out folder or delete it")
-    return None if record.get("error") else record
+    if record.get("error"):
+        return None
+    problem = _record_problem(record, trial)
+    if problem is not None:
+        raise SweepError(f"{path}: {problem}; delete the file to run the trial again")
+    return record
+
+
+def json_type(value: Any) -> str:
+    """The JSON name of `value`'s type, for a refusal."""
+    names = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
+             str: "a string", list: "a list", dict: "an object"}
+    return names.get(type(value), type(value).__name__)
+
+
+def _record_problem(record: dict[str, Any], trial: Trial) -> str | None:
+    """What is wrong with a finished record's fields ("FIELD: REASON"), or None."""
+    if record.get("format") != RECORD_FORMAT:
+        return f"format: expected {RECORD_FORMAT!r}, got {str(record.get('format'))[:40]!r}"
+    for field in ("result", "timing"):
+        if not isinstance(record.get(field), dict):
+            return f"{field}: expected an object, got {json_type(record.get(field))}"
+    check = RESULT_CHECKS.get(trial.function)
+    problem = check(trial.params, record["result"]) if check is not None else None
+    return None if problem is None else f"result.{problem}"
 
 
 class ProgressDisplay:

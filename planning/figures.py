@@ -36,7 +36,7 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         ax = fig.subplots()
         draw.draw_cave(ax, scn, highlight=tuple(scn.start_stance))
         draw.frame_axes(ax, scn)
-        title = f"{scn.name} — {plan['planner']}: no plan ({plan['reason']})"
+        title = f"{draw.title_name(scn.name)} — {plan['planner']}: no plan ({plan['reason']})"
         ax.set_title("\n".join(textwrap.wrap(title, 70)), fontsize=8)
         handles[1].set_label("anchor of the start stance (its normal in red)")
         fig.legend(handles=handles, loc="outside lower center", fontsize=7, frameon=False)
@@ -55,7 +55,8 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
                    f"{part['goal_distance_m']:.2f} m from the goal (the start is "
                    f"{part['start_distance_m']:.2f} m), {summary}")
     width = max(4.0 * cols, 6.0) + 0.5 + 1.45
-    lines = [f"{scn.name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
+    name = draw.title_name(scn.name)
+    lines = [f"{name} — {plan['planner']}: {plan['regrasps']} regrasps, {summary}",
              "each panel: the robot at the last pose of its stance's body move (where the next "
              "boom lets go); P (all grasps hold) at the move's first pose → at that pose"]
     heading = [w for line in lines for w in textwrap.wrap(line, int(width * 11.5))]
@@ -182,7 +183,8 @@ def animation_figure(scn: Scenario, plan: dict[str, Any], max_frames: int = 400)
         draw.draw_robot(ax, scn.robot, np.array(step["pose"]), stance, probs, free_tip=tip,
                         label_booms=False)
         draw.frame_axes(ax, scn)
-        ax.set_title(f"{scn.name}: t = {step['t']:.1f} s, P (all grasps hold) = "
+        name = draw.title_name(scn.name)
+        ax.set_title(f"{name}: t = {step['t']:.1f} s, P (all grasps hold) = "
                      f"{draw.format_prob(step['p_success'])}", fontsize=9)
         return []
 
@@ -300,7 +302,8 @@ def search_figure(scn: Scenario, fp):
     wrap = max(40, int(7.0 * 72 / 4.2 * (max(width, 6.0) - 0.6) / 7.0))  # chars a line holds
     labels = ["\n".join(textwrap.wrap(text, wrap)) for text in labels]
     fig.legend(handles, labels, loc="outside lower center", fontsize=7, frameon=False)
-    title = (f"{scn.name}: footstep search failed after {fp.expansions} expansions, "
+    name = draw.title_name(scn.name)
+    title = (f"{name}: footstep search failed after {fp.expansions} expansions, "
              f"{fp.transitions_tested} transitions tested")
     ax.set_title("\n".join(textwrap.wrap(title, max(40, wrap - 10))), fontsize=9)
     return fig

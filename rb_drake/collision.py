@@ -113,18 +113,57 @@ def polygon_is_simple(poly: np.ndarray) -> tuple[bool, str]:
     q = np.roll(poly, -1, axis=0)
     if np.any(np.linalg.norm(q - poly, axis=1) < 1e-12):
         return False, "has a repeated vertex (an edge of zero length)"
-    cross = _segments_cross(poly, q, poly, q)
-    idx = np.arange(n)
-    adjacent = (np.abs(idx[:, None] - idx[None, :]) <= 1) | (
-        np.abs(idx[:, None] - idx[None, :]) == n - 1)
-    bad = np.argwhere(cross & ~adjacent)
-    if len(bad):
-        i, j = bad[0]
-        return False, f"edges {i} and {j} intersect (the polygon crosses itself)"
+    bad = _first_crossing(poly, q)
+    if bad is not None:
+        return False, f"edges {bad[0]} and {bad[1]} intersect (the polygon crosses itself)"
     area = 0.5 * np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
     if abs(area) < 1e-12:
         return False, "has zero area"
     return True, ""
+
+
+def _first_crossing(start: np.ndarray, end: np.ndarray,
+                    block: int = 1 << 20) -> tuple[int, int] | None:
+    """The first pair (i < j, by i then j) of non-adjacent edges start -> end of a closed
+    polygon that meet, or None. A sweep along the axis on which the edges' extents overlap
+    least tests only the pairs whose bounding boxes meet, `block` pairs at a time: the n x n
+    test took 3.2 s and 1.2 GB for 5,000 vertices, and walls may have 50,000."""
+    n = len(start)
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    sweeps = []
+    for axis in (0, 1):
+        order = np.argsort(lo[:, axis], kind="stable")
+        # edges at sorted positions p + 1 .. stop[p] - 1 start before edge order[p] ends
+        stop = np.searchsorted(lo[order, axis], hi[order, axis], side="right")
+        sweeps.append((axis, order, stop - np.arange(n) - 1))
+    axis, order, counts = min(sweeps, key=lambda sweep: int(sweep[2].sum()))
+    other = 1 - axis
+    best: tuple[int, int] | None = None
+    total = np.cumsum(counts)
+    first = 0
+    while first < n:
+        last = max(first + 1, int(np.searchsorted(total, total[first] - counts[first] + block,
+                                                  side="right")))
+        c = counts[first:last]
+        p = np.repeat(np.arange(first, last), c)
+        offset = np.arange(len(p)) - np.repeat(np.cumsum(c) - c, c)
+        a, b = order[p], order[p + 1 + offset]
+        keep = (lo[b, other] <= hi[a, other]) & (lo[a, other] <= hi[b, other])
+        gap = np.abs(a - b)
+        keep &= (gap > 1) & (gap != n - 1)  # adjacent edges share a vertex
+        a, b = a[keep], b[keep]
+        o1 = _orient(*start[a].T, *end[a].T, *start[b].T)
+        o2 = _orient(*start[a].T, *end[a].T, *end[b].T)
+        o3 = _orient(*start[b].T, *end[b].T, *start[a].T)
+        o4 = _orient(*start[b].T, *end[b].T, *end[a].T)
+        meet = (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0))
+        if np.any(meet):
+            i, j = np.minimum(a[meet], b[meet]), np.maximum(a[meet], b[meet])
+            k = np.lexsort((j, i))[0]
+            if best is None or (int(i[k]), int(j[k])) < best:
+                best = (int(i[k]), int(j[k]))
+        first = last
+    return best
 
 
 def signed_area(poly: np.ndarray) -> float:

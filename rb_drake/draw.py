@@ -27,6 +27,13 @@ from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
 ROCK = "#8c6d4f"
+TITLE_NAME = 80  # characters of a scenario's name in a picture's title
+
+
+def title_name(name: str) -> str:
+    """`name` for a title: its first TITLE_NAME characters, with an ellipsis if cut."""
+    return name if len(name) <= TITLE_NAME else name[:TITLE_NAME - 1] + "…"
+
 GLYPH_SCALE = 0.006  # m of glyph per N of mean limit
 NINES = Normalize(vmin=1.0, vmax=5.0)  # colour scale in -log10(1 - P)
 CMAP = matplotlib.colormaps["RdYlGn"]
@@ -209,7 +216,7 @@ def scenario_figure(scn: Scenario):
                   f"  (r = log P = {r:.2e})")
     else:
         status = "start pose infeasible: " + "; ".join(diagnose_pose(scn, stance, pose))
-    ax.set_title(f"{scn.name}: {len(scn.anchors)} anchors, gravity "
+    ax.set_title(f"{title_name(scn.name)}: {len(scn.anchors)} anchors, gravity "
                  f"{np.linalg.norm(scn.gravity_vector):.2f} m/s²\n{status}", fontsize=10)
     handles = cave_legend_handles(scn)
     handles.append(Line2D(

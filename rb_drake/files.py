@@ -82,7 +82,19 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write(path, lambda f: f.write(text.encode()))
 
 
+def picture_format_problem(path: str | Path) -> str | None:
+    """Why matplotlib cannot write a picture named `path` (its suffix is no format of
+    matplotlib's: .xyz ended in its ValueError after the work), or None; no suffix is PNG."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    suffix = Path(path).suffix.lower().lstrip(".")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if not suffix or suffix in formats:
+        return None
+    return f"a picture's suffix must be one of {', '.join('.' + f for f in sorted(formats))}"
+
+
 def atomic_save_figure(fig, path: str | Path, **kwargs) -> Path:
     """Save a matplotlib figure atomically; the format comes from the file's suffix."""
-    fmt = Path(path).suffix.lstrip(".") or "png"
+    fmt = Path(path).suffix.lower().lstrip(".") or "png"
     return atomic_write(path, lambda f: fig.savefig(f, format=fmt, **kwargs))

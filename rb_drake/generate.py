@@ -165,12 +165,14 @@ def place_anchors(rng: np.random.Generator, cfg: CaveConfig, surfaces: list[Surf
             ft = fn * rng.uniform(*cfg.lateral_ratio)
             sn = rng.uniform(*cfg.sigma_normal)
             st = rng.uniform(*cfg.sigma_lateral)
-            # Skip sites buried under other rock or facing into it (boulder feet, pit rims).
+            # Skip sites buried under other rock or facing into it (boulder feet, pit rims),
+            # tested as written (rounded), as the scenario reader tests them.
+            p = np.array([round(float(p[0]), 4), round(float(p[1]), 4)])
+            n = np.array([round(float(n[0]), 6), round(float(n[1]), 6)])
             if rock.contains(p + 0.05 * n) or (rock.contains(p) and rock.distance(p) > 0.005):
                 continue
-            anchors.append(Anchor(f"a{len(anchors)}", (round(float(p[0]), 4),
-                                                       round(float(p[1]), 4)),
-                                  (round(float(n[0]), 6), round(float(n[1]), 6)),
+            anchors.append(Anchor(f"a{len(anchors)}", (float(p[0]), float(p[1])),
+                                  (float(n[0]), float(n[1])),
                                   round(fn, 3), round(ft, 3), round(sn, 3), round(st, 3)))
     return anchors
 

@@ -34,6 +34,7 @@ MAX_ANGLE = 1e4       # rad for the start pose's angle, degrees for an anchor's 
 MAX_GRAVITY = 1e3     # m/s^2 per component (Earth 9.81)
 MAX_FORCE = 1e6       # N: anchor limit surfaces and their spreads
 MIN_FORCE = 1e-3      # N: ... at least (1e-200 or 5e-324 overflowed the grasp model to NaN)
+MAX_NAME = 200        # characters of a scenario's name (a title, a file stem)
 
 
 class ScenarioError(RbpInputError):
@@ -260,6 +261,8 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str):
         raise rd.fail("name", f"expected a string, got {_describe(name)}")
+    if len(name) > MAX_NAME:  # 999,000 characters took minutes and 1 GB to draw in a title
+        raise rd.fail("name", f"{len(name):,} characters; at most {MAX_NAME}")
     gravity = rd.vector("gravity", data.get("gravity", list(MARS_GRAVITY)), 2,
                         (MAX_GRAVITY, MAX_GRAVITY))
 

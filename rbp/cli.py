@@ -33,6 +33,7 @@ from rbp.commands.common import (
     load_scenario_spec,
     plural,
     read_plan,
+    sigterm_interrupts,
 )
 
 if TYPE_CHECKING:
@@ -524,7 +525,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (EXIT_STATUSES)."""
     try:
-        return _main(argv)
+        with sigterm_interrupts():  # SIGTERM unwinds as Ctrl-C: no temporary file left
+            return _main(argv)
     except KeyboardInterrupt:
         # Outputs are written to a temporary file and renamed, so nothing is left half-written.
         print("interrupted", file=sys.stderr)

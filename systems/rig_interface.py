@@ -54,14 +54,11 @@ from systems.rig_messages import (
     RawSerializer,
     RigLcmConfig,
     StatusFilter,
+    command_problem,
     decode_status,
+    scan_log,
 )
 from systems.rig_safety import RigCommandSource, SafetyReport
-
-# A log's events, at most: a rig run logs a command and a status each period (0.1 s), so this
-# is over 2.5 hours of running, and replaying it takes seconds, not the minutes a log of
-# millions of tiny events would.
-MAX_LOG_EVENTS = 200_000
 
 
 class RigInputError(RbpInputError):
@@ -323,17 +320,18 @@ def replay_log(path: str | Path,
     path = Path(path)
     setup, commands, raw_statuses = None, [], []
     try:
+        damage = scan_log(path)
         events = lcm.EventLog(str(path), "r")
     except (OSError, ValueError) as e:
         raise RigInputError("(file)", f"not an LCM log: {e}") from None
+    if damage is not None:
+        raise RigInputError("(file)", damage)
     for number, event in enumerate(events):
-        if number >= MAX_LOG_EVENTS:
-            raise RigInputError("(file)", f"more than {MAX_LOG_EVENTS:,} events: longer than "
-                                "any rig run rbp writes")
         if event.channel == config.setup_channel and setup is None:
             setup = _decoded(rig_setup_t, event.data, config.setup_channel, number)
         elif event.channel == config.command_channel:
-            commands.append(_decoded(rig_command_t, event.data, config.command_channel, number))
+            commands.append((number, _decoded(rig_command_t, event.data,
+                                                 config.command_channel, number)))
         elif event.channel == config.status_channel:
             raw_statuses.append(event.data)
     if setup is None:
@@ -349,6 +347,11 @@ def replay_log(path: str | Path,
     except RecursionError:
         raise RigInputError(f"{config.setup_channel}.scenario_json", "nested too deeply to "
                             "be a scenario") from None
+    for number, command in commands:  # a command out of range would overflow the plots
+        problem = command_problem(command, scn.robot)
+        if problem is not None:
+            raise RigInputError(config.command_channel, f"event {number}: {problem}: not a "
+                                "command rbp sends")
     stance_ids = tuple(setup.stance)
     unknown = [a for a in stance_ids if a not in scn.anchor_index]
     if unknown:
@@ -363,9 +366,9 @@ def replay_log(path: str | Path,
                      monitor.pull_angle_port.Eval(context).copy(),
                      np.asarray(msg.load_cell_force)))
     return RigLog(scn, stance_ids, setup.plan_source,
-                  np.array([c.utime * 1e-6 for c in commands]),
-                  np.array([c.boom_length for c in commands]).reshape(-1, 4),
-                  np.array([c.tension_setpoint for c in commands]).reshape(-1, 4),
+                  np.array([c.utime * 1e-6 for _, c in commands]),
+                  np.array([c.boom_length for _, c in commands]).reshape(-1, 4),
+                  np.array([c.tension_setpoint for _, c in commands]).reshape(-1, 4),
                   _record(rows), np.array([s.winch_length for s in statuses]).reshape(-1, 4))
 
 
@@ -386,6 +389,8 @@ def report_figure(log: RigLog):
     time, and each boom's measured load-cell force against its commanded tension."""
     import matplotlib.pyplot as plt
 
+    from rb_drake.draw import title_name
+
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7.0, 6.0))
     rec = log.replay
     for i, anchor in enumerate(log.stance_ids):
@@ -395,7 +400,7 @@ def report_figure(log: RigLog):
         bottom.plot(log.command_time, log.tension_setpoint[:, i], color=color, linestyle="--",
                     label=f"boom {i} commanded")
     top.set_ylabel("probability of grasp maintenance")
-    top.set_title(f"{log.scenario.name}: {log.plan_source or 'rig run'}")
+    top.set_title(f"{title_name(log.scenario.name)}: {log.plan_source or 'rig run'}")
     top.legend(loc="lower left", fontsize="small")
     top.grid(alpha=0.3)
     bottom.set_ylabel("tension (N)")

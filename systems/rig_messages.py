@@ -25,6 +25,15 @@ from systems.reachbot_lcm import rig_command_t, rig_status_t
 
 MEMQ = "memq://"
 
+# A log's events, at most: a rig run logs a command and a status each period (0.1 s), so this
+# is over 2.5 hours of running, and replaying it takes seconds, not the minutes a log of
+# millions of tiny events would.
+MAX_LOG_EVENTS = 200_000
+# An LCM event's header: sync word, event number, timestamp, channel and data lengths.
+_EVENT_HEADER = struct.Struct(">Iqqii")
+_LOG_SYNC = 0xEDA1DA01
+MAX_CHANNEL_LENGTH = 255  # bytes; LCM's own channels are at most 63
+
 
 @dataclasses.dataclass(frozen=True)
 class RigLcmConfig:
@@ -41,6 +50,37 @@ class RigLcmConfig:
     # rates of the bundled plans (about 0.13 m/s); twice their tension rates (about 13 N/s).
     max_length_rate: float = 0.5    # m/s per boom
     max_tension_rate: float = 25.0  # N/s per boom
+
+
+def scan_log(path: Path) -> str | None:
+    """None if every event header of the LCM log at `path` is sound, else the reason for the
+    first that is not ("event N: ..."). lcm's C reader trusts the header's lengths (a data
+    length of 2**31 - 1 crashes it) and prints its own complaints on stderr, so the headers
+    are checked here, before lcm reads the log, with one seek per event."""
+    with open(path, "rb") as f:
+        size = f.seek(0, 2)
+        pos, number = 0, 0
+        while pos < size:
+            if number >= MAX_LOG_EVENTS:
+                return (f"more than {MAX_LOG_EVENTS:,} events: longer than any rig run rbp "
+                        "writes")
+            f.seek(pos)
+            head = f.read(_EVENT_HEADER.size)
+            bad = f"event {number} is damaged or not an LCM event:"
+            if len(head) < _EVENT_HEADER.size:
+                return f"{bad} a header of {len(head)} bytes, not {_EVENT_HEADER.size}"
+            sync, _, _, channel, data = _EVENT_HEADER.unpack(head)
+            if sync != _LOG_SYNC:
+                return f"{bad} no LCM sync word (0x{sync:08x})"
+            if not 0 < channel <= MAX_CHANNEL_LENGTH:
+                return f"{bad} channel length {channel} is not 1 to {MAX_CHANNEL_LENGTH} bytes"
+            left = size - pos - _EVENT_HEADER.size - channel
+            if not 0 <= data <= left:
+                return (f"{bad} data length {data} is not 0 to the {max(left, 0)} bytes left "
+                        "in the file")
+            pos += _EVENT_HEADER.size + channel + data
+            number += 1
+    return None
 
 
 class RawSerializer(SerializerInterface):
@@ -76,6 +116,21 @@ def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
     if np.any(np.abs(status.load_cell_force) > 10.0 * robot.boom_tension[1]):
         return None
     return status
+
+
+def command_problem(command: rig_command_t, robot: RobotParams) -> str | None:
+    """None if `command` is one rbp could have sent to `robot` (finite, within its boom-length
+    and tension limits, as `RigCommandSource` clamps them), else what is wrong with it."""
+    for name, values, (low, high) in (("boom_length", command.boom_length, robot.boom_length),
+                                      ("tension_setpoint", command.tension_setpoint,
+                                       robot.boom_tension)):
+        array = np.asarray(values, dtype=float)
+        slack = 1e-6 * high  # rounding, never a different command
+        if not np.all(np.isfinite(array)) or np.any(array < low - slack) or np.any(
+                array > high + slack):
+            return (f"{name} {[float(v) for v in array]} is not within the robot's limits "
+                    f"{low:g} to {high:g}")
+    return None
 
 
 class StatusMemory(NamedTuple):

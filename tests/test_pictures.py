@@ -240,3 +240,43 @@ def test_comparison_histogram_counts() -> None:
         label = " ".join(c.get_label() for c in bars)
         assert f"{plans} plans" in label and f"{failed} failed" in label, label
         assert sorted(heights) == sorted([plans, failed]), (planner, heights, label)
+
+
+def test_picture_suffix_name_and_sigterm(tmp_path: Path, capsys) -> None:
+    """A picture's suffix must be a format matplotlib writes, checked before the work (.xyz
+    ended in matplotlib's ValueError traceback); a scenario's name is at most 200 characters
+    (999,000 took minutes and 1 GB to draw in a title) and titles show 80; SIGTERM during a
+    write removes the temporary file, as Ctrl-C does."""
+    import os
+    import signal
+
+    import yaml
+
+    from rb_drake.draw import title_name
+    from rb_drake.files import atomic_write
+    from rbp.commands.common import Terminated, sigterm_interrupts
+
+    for argv in (["scenario", "show", "demo-shaft"], ["rig-report", str(tmp_path / "no.lcm")]):
+        capsys.readouterr()
+        assert run(*argv, "-o", str(tmp_path / "x.xyz")) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and "x.xyz: -o: a picture's suffix must be one of" in err[0], err
+    assert not list(tmp_path.glob("x.*"))
+
+    scenario = Path(__file__).resolve().parents[1] / "rb_drake/data/caves/demo-shaft.yaml"
+    data = yaml.safe_load(scenario.read_text())
+    data["name"] = "n" * 201
+    long_name = tmp_path / "long.yaml"
+    long_name.write_text(yaml.safe_dump(data))
+    assert run("scenario", "show", str(long_name), "-o", str(tmp_path / "c.png")) == 2
+    assert "name: 201 characters; at most 200" in capsys.readouterr().err
+    assert title_name("n" * 200) == "n" * 79 + "…" and title_name("short") == "short"
+
+    def killed(f) -> None:
+        f.write(b"half a picture")
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    with pytest.raises(Terminated), sigterm_interrupts():
+        atomic_write(tmp_path / "pic.png", killed)
+    assert not list(tmp_path.glob("*.png*")) and not list(tmp_path.glob(".pic.png.*"))
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL, "the handler is put back"

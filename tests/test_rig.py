@@ -412,6 +412,25 @@ def test_sim_rig_refuses_a_network_url(plan_file: Path, tmp_path: Path) -> None:
                           str(tmp_path / "x.lcm")))
 
 
+def test_rig_run_checks_its_url_and_log_before_the_run(plan_file: Path, tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """An LCM URL of no provider (garbage:// failed after the 9 s verification with LCM's own
+    "Error:" line) and a --log that is a folder (the whole run, then "/.tmp.XXXX.tmp: Is a
+    directory") are refused before the plan is read."""
+    import rbp.commands.common
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("the plan was read before the arguments were checked")
+
+    monkeypatch.setattr(rbp.commands.common, "read_plan", never)
+    log = str(tmp_path / "x.lcm")
+    for url in ("garbage://x", "memq", "udpm:/239.255.76.67"):
+        with pytest.raises(UserError, match=rf"^--lcm-url: '{re.escape(url)}' is not an LCM URL"):
+            cmd_rig_run(parse("rig-run", str(plan_file), "--lcm-url", url, "--log", log))
+    with pytest.raises(UserError, match=f"^{re.escape(str(tmp_path))}: --log: is a directory"):
+        cmd_rig_run(parse("rig-run", str(plan_file), "--sim-rig", "--log", str(tmp_path)))
+
+
 @pytest.mark.parametrize("command", ["rig-replay", "rig-report"])
 def test_bad_log_input(command: str, tmp_path: Path) -> None:
     handler = {"rig-replay": cmd_rig_replay, "rig-report": cmd_rig_report}[command]
@@ -421,7 +440,7 @@ def test_bad_log_input(command: str, tmp_path: Path) -> None:
         handler(parse(command, str(missing), *extra))
     junk = tmp_path / "junk.lcm"
     junk.write_text("not an LCM log\n" * 10)
-    with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: RIG_SETUP: no setup message')}"):
+    with pytest.raises(UserError, match=f"^{re.escape(f'{junk}: (file): event 0 is damaged')}"):
         handler(parse(command, str(junk), *extra))
     assert not (tmp_path / "f.png").exists(), "no figure from a bad log"
 

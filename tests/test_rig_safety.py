@@ -348,3 +348,52 @@ def test_monitor_keeps_the_last_good_status(scn: Scenario, plan: dict[str, Any])
     memory = status_filter.memory(status_filter.GetMyContextFromRoot(root))
     assert (memory.good, memory.bad) == (2, len(sequence) - 2), memory[3:]
     assert memory.status.utime == 2, "the last good status is the one with utime 2"
+
+
+def test_damaged_log_headers_and_wild_commands_refused(tmp_path: Path, scn: Scenario,
+                                                      plan: dict[str, Any]) -> None:
+    """Event headers are checked before lcm reads a log (a data length of 2**31 - 1 crashed
+    lcm's C reader with signal 11; a bad channel length printed its complaint on stderr), and a
+    command out of the robot's limits (tension 1e308 overflowed the report's plot) is refused
+    naming its event."""
+    import struct
+    import subprocess
+    import sys
+
+    header = struct.Struct(">IqqII")
+    cases = {
+        "hugelen": (header.pack(0xEDA1DA01, 0, 0, 9, 0x7FFFFFFF) + b"RIG_SETUPxx",
+                    "event 0 is damaged or not an LCM event: data length 2147483647"),
+        "hugechan": (header.pack(0xEDA1DA01, 0, 0, 0x7FFFFFFF, 2) + b"xx", "channel length"),
+        "negdata": (header.pack(0xEDA1DA01, 0, 0, 9, 0xFFFFFFFF) + b"RIG_SETUP", "data length"),
+        "nosync": (b"hello, this is not a log at all", "no LCM sync word"),
+        "short": (header.pack(0xEDA1DA01, 0, 0, 9, 2)[:20], "a header of 20 bytes"),
+    }
+    for name, (data, words) in cases.items():
+        path = tmp_path / f"{name}.lcm"
+        path.write_bytes(data)
+        with pytest.raises(RigInputError, match=r"^\(file\): .*" + words):
+            replay_log(path)
+    # the crash itself, in a process of its own: one line, exit 2, nothing from lcm's C side
+    path = tmp_path / "hugelen.lcm"
+    result = subprocess.run([sys.executable, "-m", "rbp", "rig-replay", str(path)],
+                            capture_output=True, text=True, timeout=120, check=False,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 2 and len(result.stderr.splitlines()) == 1, result.stderr
+
+    log = tmp_path / "good.lcm"
+    run_rig(plan, 0, CONFIG, log, sim_rig=RigSimConfig())
+    events = list(lcm.EventLog(str(log), "r"))
+    number = next(k for k, e in enumerate(events) if e.channel == CONFIG.command_channel)
+    for value in (1e308, math.inf, math.nan, -1.0):
+        command = rig_command_t.decode(events[number].data)
+        command.tension_setpoint = [value, 1.0, 1.0, 1.0]
+        wild = tmp_path / "wild.lcm"
+        out = lcm.EventLog(str(wild), "w", overwrite=True)
+        for k, e in enumerate(events):
+            out.write_event(e.timestamp, e.channel, command.encode() if k == number else e.data)
+        out.close()
+        with pytest.raises(RigInputError, match=rf"^RIG_COMMAND: event {number}: "
+                                                "tension_setpoint .* not within"):
+            replay_log(wild)
+    assert len(replay_log(log).command_time) > 0, "rbp's own log still replays"

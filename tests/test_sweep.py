@@ -202,3 +202,55 @@ def test_a_pool_records_its_workers_threads_and_load(tmp_path: Path,
         worker = record["worker"]
         assert worker["threads"] == max(1, cores // 2), worker
         assert worker["cores"] == cores and (worker["load"] is None or worker["load"] >= 0)
+
+
+def test_an_edited_finished_record_is_refused_naming_its_field(tmp_path: Path) -> None:
+    """A finished climb record edited since (p_path "x", 1e308, NaN or missing, result null)
+    ended the resumed sweep's summary in a traceback: it is refused in one line naming the
+    file and the field; the record as written still resumes."""
+    import math
+
+    from experiments.common import CLIMB_TRIAL
+
+    trial = tiny_climb("c0", "shaft", 1)
+    row = {"success": True, "reason": "", "p_path": 0.92, "p_grasps": 0.99, "regrasps": 7}
+
+    def stored(result: object) -> None:
+        trial_path(tmp_path, trial.name).parent.mkdir(parents=True, exist_ok=True)
+        trial_path(tmp_path, trial.name).write_text(json.dumps(
+            {"format": "rbp-trial/1", "name": trial.name, "function": CLIMB_TRIAL,
+             "params": trial.params, "result": result, "error": None, "timing": {}}))
+
+    stored({"cave": None, "naive": row})
+    assert run_sweep([trial], tmp_path, workers=1, stream=io.StringIO())[0]["result"]["naive"]
+    cases = [(None, r"result: expected an object, got null"),
+             ({"naive": {**row, "p_path": "x"}}, r"result\.naive\.p_path: must be null or a"),
+             ({"naive": {**row, "p_path": 1e308}}, r"result\.naive\.p_path: must be"),
+             ({"naive": {**row, "p_path": math.nan}}, r"result\.naive\.p_path: must be"),
+             ({"naive": {k: v for k, v in row.items() if k != "p_path"}},
+              r"result\.naive\.p_path: missing"),
+             ({"naive": {**row, "regrasps": True}}, r"result\.naive\.regrasps: must be"),
+             ({"naive": [1]}, r"result\.naive: expected the planner's record, got a list")]
+    for result, words in cases:
+        stored(result)
+        with pytest.raises(SweepError, match=rf"c0\.json: {words}.*delete the file"):
+            run_sweep([trial], tmp_path, workers=1, stream=io.StringIO())
+
+
+def test_param_sweep_values_within_the_scenario_ranges() -> None:
+    """Swept values a scenario would refuse (gravity 1e4 hung the planner, 1e308 failed with
+    an unrelated error) are refused with the parameter's range."""
+    from experiments.param_sweep import main
+
+    for param, value, words in (("gravity", "1e4", "at most 1000"),
+                                ("gravity", "1e308", "at most 1000"),
+                                ("gravity", "nan", "above 0"),
+                                ("gripper_scale", "1e9", "1e-06 to 10000"),
+                                ("anchor_density", "50", "at most 20"),
+                                ("p_min", "1", "below 1")):
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), pytest.raises(SystemExit) as exit_info:
+            main(["--param", param, "--values", value, "--trials", "1"])
+        assert exit_info.value.code == 2
+        assert f"--values: {float(value):g} is not a valid {param}: must be" in err.getvalue()
+        assert words in err.getvalue(), err.getvalue()

@@ -8,7 +8,9 @@ from __future__ import annotations
 import functools
 import importlib.util
 import json
+import math
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -361,3 +363,71 @@ def test_damaged_drawings_refused_or_read(tmp_path, cut, junk, suffix):
     path.write_text(whole[:at] + junk + whole[at + len(junk):])
     problem = _reading_problem(path)
     assert problem is None, problem
+
+
+def test_drawings_that_would_expand_past_the_limit_refused_quickly(tmp_path):
+    """Arcs and <use> copies are bounded before ezdxf or svgelements expand them: a bulge of
+    1e10 made billions of chords (gigabytes, minutes), six levels of ten <use> a million
+    elements, 2,000 tall Bézier curves 2 million points; a bulge of 1e300 made ezdxf warn."""
+    import time
+
+    def bulge_dxf(name: str, bulge: float) -> Path:
+        doc = ezdxf.new()
+        doc.modelspace().add_lwpolyline([(0, 0, 0, 0, bulge), (1, 0, 0, 0, 0), (1, 1, 0, 0, 0)],
+                                        format="xyseb", close=True)
+        doc.saveas(tmp_path / name)
+        return tmp_path / name
+
+    use = "".join(f'<g id="g{k + 1}">' + f'<use href="#g{k}"/>' * 10 + "</g>" for k in range(6))
+    svg = '<svg xmlns="http://www.w3.org/2000/svg">{}</svg>'
+    cases = [
+        (bulge_dxf("b1e10.dxf", 1e10), "more than 50000 outline vertices"),
+        (bulge_dxf("b1e300.dxf", 1e300), "more than 50000 outline vertices"),
+        (bulge_dxf("bnan.dxf", math.nan), "entity 1 .*: a bulge that is not a finite number"),
+        (tmp_path / "bomb.svg", r"6,802,462 elements once <use> copies are expanded"),
+        (tmp_path / "loop.svg", r"<use> nested more than 8 deep \(or in a loop\)"),
+        (tmp_path / "curves.svg", "more than 50000 outline vertices"),
+    ]
+    (tmp_path / "bomb.svg").write_text(svg.format(
+        '<defs><g id="g0"><rect width="1" height="1"/></g>' + use + '</defs><use href="#g6"/>'))
+    (tmp_path / "loop.svg").write_text(svg.format('<g id="a"><use href="#a"/></g>'))
+    (tmp_path / "curves.svg").write_text(svg.format(
+        '<path d="M0 0 ' + " ".join(f"Q {20 * k + 10} 5000 {20 * k + 20} 0" for k in range(2000))
+        + ' Z"/>'))
+    for path, words in cases:
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # nothing may reach stderr before the refusal
+            with pytest.raises(RbpInputError, match=f"^{path}: {words}"):
+                read_rock(path)
+        assert time.perf_counter() - start < 2, f"{path.name} took too long"
+    semicircle = bulge_dxf("half.dxf", 1.0)  # an ordinary arc still reads
+    assert len(read_rock(semicircle)) == 1
+
+
+def test_imported_anchors_pass_the_scenario_reader(tmp_path):
+    """Anchors are tested for facing into rock as written (rounded to 0.1 mm): this wavy
+    5,000-vertex shaft's anchor a54 passed before rounding and the reader refused the import's
+    own output ("normal points into the rock")."""
+    from shapely import union_all
+
+    from rb_drake.collision import Rock
+    from rb_drake.generate import CaveConfig, place_anchors
+    from rb_drake.terrain.cave_from_rock import _polygons, _surfaces, _walls
+
+    k = range(1, 2500)
+    left = [(-1.9, -0.5), (-0.9, -0.5),
+            *((-0.9 + 0.02 * math.sin(i), -0.5 + 6 * i / 2499) for i in k), (-1.9, 5.5),
+            (-1.9, -0.5)]
+    right = [(1.9, -0.5), (1.9, 5.5), (0.9, 5.5),
+             *((0.9 + 0.02 * math.sin(j), 5.5 - 6 * j / 2499) for j in k), (1.9, -0.5)]
+    path = tmp_path / "shaft.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]}}
+        for ring in (left, right)]}))
+    solid = [p for p in _polygons(union_all(read_rock(path))) if p.area > 0]
+    rock = Rock(_walls(solid, str(path)))
+    anchors = place_anchors(np.random.default_rng(0), CaveConfig(), _surfaces(solid), rock)
+    inward = [a.id for a in anchors
+              if rock.contains(np.array(a.position) + 0.05 * np.array(a.normal))]
+    assert len(anchors) > 100 and not inward, inward

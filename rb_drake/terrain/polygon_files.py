@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, read_text
+from rb_drake.terrain.drawing_bounds import arc_chords, use_copies
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -194,9 +195,11 @@ def _closed(ring: Ring, tolerance: float) -> bool:
     return len(ring) >= 2 and math.dist(ring[0], ring[-1]) <= tolerance
 
 
-def _count_vertices(total: list[int], ring: Ring) -> None:
+def _count_vertices(total: list[int], ring: Ring, coming: int = 0) -> None:
+    """Adds the ring's vertices to the file's total; refuses a total (with `coming` vertices
+    still to be made) past MAX_VERTICES."""
     total[0] += len(ring)
-    if total[0] > MAX_VERTICES:
+    if total[0] + coming > MAX_VERTICES:
         raise _ReadError(None, f"more than {MAX_VERTICES} outline vertices; simplify the "
                        "drawing first")
 
@@ -363,8 +366,15 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
             continue
         if not entity.is_closed:
             raise _ReadError(where, "open polyline; rock must be closed")
-        try:  # arcs (bulges) become short chords
-            points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
+        # arcs (bulges) become short chords: counted first, as a bulge of 1e10 makes billions
+        chords = arc_chords(entity, CURVE_TOLERANCE / factor, MAX_VERTICES)
+        if chords is None:
+            raise _ReadError(where, "a bulge that is not a finite number")
+        _count_vertices(total, [], chords)
+        try:
+            with warnings.catch_warnings():  # ezdxf's overflow warnings: the error says it
+                warnings.simplefilter("ignore")
+                points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
         except Exception as e:  # a malformed entity
             raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
         ring = _scaled(((p.x, p.y) for p in points), factor)
@@ -386,6 +396,9 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
         import svgelements as se
     except ImportError:
         raise missing_extra("svgelements") from None
+    copies = use_copies(text, MAX_VERTICES)
+    if copies is not None:
+        raise _ReadError(None, copies)
     with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
         warnings.simplefilter("ignore")
         try:
@@ -409,7 +422,10 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
             try:
                 path = se.Path(element) * to_user
                 path.reify()
-                subpaths = [_svg_ring(se, se.Path(sub), factor) for sub in path.as_subpaths()]
+                subpaths = [_svg_ring(se, se.Path(sub), factor, total)
+                            for sub in path.as_subpaths()]
+            except _ReadError:
+                raise
             except Exception as e:  # a degenerate transform or arc svgelements cannot follow
                 raise _ReadError(f"shape {k} ({label}{ident})",
                                  f"cannot be read: {_one_line(e)}") from None
@@ -424,8 +440,9 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
     return polygons, True
 
 
-def _svg_ring(se: Any, sub: Any, factor: float) -> tuple[Ring, bool]:
-    """The subpath's points in metres (up = +y) and whether it closes."""
+def _svg_ring(se: Any, sub: Any, factor: float, total: list[int]) -> tuple[Ring, bool]:
+    """The subpath's points in metres (up = +y) and whether it closes; the points a curve will
+    add are counted against the file's MAX_VERTICES before it is sampled."""
     points: list[Any] = []
     closed = False
     for seg in sub.segments():
@@ -438,7 +455,8 @@ def _svg_ring(se: Any, sub: Any, factor: float) -> tuple[Ring, bool]:
         else:  # a curve: enough chords to stay within CURVE_TOLERANCE of it
             length = seg.length(error=1e-4) * factor
             n = max(2, min(1000, math.ceil(math.sqrt(length / CURVE_TOLERANCE)) * 2))
-            points += [seg.point(t / n) for t in range(1, n + 1)]
-    ring = _scaled(((p.x, p.y) for p in points), factor, flip_y=True)
+            _count_vertices(total, [], len(points) + n)
+            points += list(seg.npoint([t / n for t in range(1, n + 1)]))  # all in one call
+    ring = _scaled(((p[0], p[1]) for p in points), factor, flip_y=True)
     closed = closed or _closed(ring, 1e-9)
     return ring, closed

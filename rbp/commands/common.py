@@ -7,7 +7,12 @@ every module of `rbp.commands` import from here (never from `rbp.cli`, which imp
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 from rb_drake.errors import RbpInputError, one_line
@@ -20,6 +25,34 @@ def plural(n: int, word: str) -> str:
 
 class UserError(RbpInputError):
     """A mistake in the user's input: printed as one line, exit status 2 (`EXIT_USAGE`)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised as an interrupt (`sigterm_interrupts`)."""
+
+
+@contextlib.contextmanager
+def sigterm_interrupts() -> Iterator[None]:
+    """Within: SIGTERM raises `Terminated` in the main thread, so that it unwinds as Ctrl-C
+    does and an output's temporary file is removed (a killed picture write left a 0-byte
+    .NAME.XXXX.tmp). A forked worker that inherits the handler dies of SIGTERM as before."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pid = os.getpid()
+
+    def handler(signum: int, _frame: object) -> None:
+        if os.getpid() != pid:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 MAX_SEED = 2**63 - 1  # numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
@@ -40,17 +73,21 @@ def check_dpi(dpi: int) -> None:
         raise UserError(f"--dpi: must be {MIN_DPI} to {MAX_DPI} dots per inch, got {dpi}")
 
 
-def check_output(path: str | Path, flag: str = "-o", picture: bool = False) -> Path:
+def check_output(path: str | Path, flag: str = "-o", picture: bool = False,
+                 animation: bool = False) -> Path:
     """`path` as an output of option `flag`, refused (UserError naming the user's path) before
     any work if it cannot be written; an image suffix is refused for a data file (`picture`
-    False), so that a plan and its picture never share a path."""
-    from rb_drake.files import IMAGE_SUFFIXES, output_problem
+    False), so that a plan and its picture never share a path, and a picture's suffix must be
+    a format matplotlib writes (an animation's writer is chosen by `check_animation`)."""
+    from rb_drake.files import IMAGE_SUFFIXES, output_problem, picture_format_problem
 
     path = Path(path)
     problem = output_problem(path)
     if problem is None and not picture and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
+    if problem is None and picture and not animation:
+        problem = picture_format_problem(path)
     if problem is not None:
         raise UserError(f"{path}: {flag}: {problem}")
     return path

@@ -257,7 +257,7 @@ def check_animation(path: str) -> None:
     ffmpeg installed (the writer is chosen by the suffix)."""
     from rbp.commands.common import UserError, check_output
 
-    check_output(path, "--animate", picture=True)
+    check_output(path, "--animate", picture=True, animation=True)
     suffix = Path(path).suffix.lower()
     if suffix not in ANIMATION_SUFFIXES:
         raise UserError(f"{path}: --animate: must end in .gif or .mp4, got "

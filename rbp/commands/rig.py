@@ -13,6 +13,20 @@ from pathlib import Path
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 MIN_PERIOD, MAX_PERIOD = 0.01, 1.0  # s between rig commands: 100 a second to one a second
+LCM_PROVIDERS = ("memq", "udpm", "mpudpm", "tcpq", "file")  # what LCM's C library provides
+
+
+def check_lcm_url(url: str) -> None:
+    """`--lcm-url` of a provider LCM has, checked before the plan is verified (garbage://
+    failed after 9 s, with LCM's own "Error: ..." line)."""
+    from rbp.commands.common import UserError
+
+    if not url:
+        return  # LCM's default: $LCM_DEFAULT_URL
+    provider, sep, _ = url.partition("://")
+    if not sep or provider not in LCM_PROVIDERS:
+        raise UserError(f"--lcm-url: {url!r} is not an LCM URL: expected PROVIDER://... with "
+                        f"a provider of {', '.join(LCM_PROVIDERS)}")
 
 
 def add_rig_commands(subparsers) -> None:
@@ -61,7 +75,13 @@ def _summary(record, stance_ids) -> list[str]:
 
 
 def cmd_rig_run(args: argparse.Namespace) -> int:
-    from rbp.commands.common import UserError, check_seed, read_plan, refuse_wrong_plan
+    from rbp.commands.common import (
+        UserError,
+        check_output,
+        check_seed,
+        read_plan,
+        refuse_wrong_plan,
+    )
     from systems.rig import RigSimConfig
     from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
@@ -69,6 +89,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         raise UserError(f"--period: must be {MIN_PERIOD:g} to {MAX_PERIOD:g} s between "
                         f"commands, got {args.period:g}")
     check_seed(args.seed)
+    check_lcm_url(args.lcm_url)
+    check_output(args.log, "--log")  # a folder or an unwritable place, before the run
     path = Path(args.plan)
     plan = read_plan(path)
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):

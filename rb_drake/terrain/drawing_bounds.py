@@ -1,0 +1,77 @@
+"""What a drawing will expand to, bounded before it is expanded (`polygon_files` refuses it).
+
+ezdxf flattens a DXF arc into chords and svgelements copies every `<use>` target before rbp
+sees a vertex: a bulge of 1e10 makes billions of chords and six levels of ten `<use>` a million
+elements, taking gigabytes and minutes before the outline vertex limit could refuse them.
+Only the standard library is imported.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+MAX_USE_DEPTH = 8  # <use> of a <use> ...: a drawing's clones are one or two deep
+XLINK = "http://www.w3.org/1999/xlink"
+
+
+def arc_chords(entity: Any, tolerance: float, limit: int) -> int | None:
+    """About how many chords flattening the DXF polyline's arcs (bulges) within `tolerance`
+    (drawing units) makes, at most `limit` + 1 (past the limit, counting stops); None if a
+    bulge is not a finite number."""
+    if entity.dxftype() == "LWPOLYLINE":
+        vertices = [(x, y, b) for x, y, b in entity.get_points("xyb")]
+    else:
+        vertices = [(*v.dxf.location.vec2, v.dxf.bulge) for v in entity.vertices]
+    chords = 0
+    for (x1, y1, bulge), (x2, y2, _) in zip(vertices, vertices[1:] + vertices[:1], strict=True):
+        if not math.isfinite(bulge):
+            return None
+        chord = math.hypot(x2 - x1, y2 - y1)
+        if chord * abs(bulge) / 2 <= tolerance:  # the arc's sagitta: straight enough
+            continue
+        angle = 4 * math.atan(abs(bulge))  # bulge = tan(angle / 4)
+        radius = chord / (2 * math.sin(angle / 2))
+        step = 4 * math.asin(min(1.0, math.sqrt(tolerance / (2 * radius))))  # sagitta = tol
+        chords += math.ceil(angle / step) if step > 0 else limit + 1
+        if chords > limit:
+            return limit + 1
+    return chords
+
+
+def use_copies(text: str, limit: int) -> str | None:
+    """Why the SVG `text` cannot be expanded (its <use> copies, of copies..., nested more than
+    MAX_USE_DEPTH deep, in a loop, or making more than `limit` elements), or None."""
+    if "use" not in text:
+        return None
+    from xml.etree import ElementTree
+
+    try:
+        root = ElementTree.fromstring(text)
+    except (ElementTree.ParseError, ValueError):
+        return None  # svgelements says what is wrong with it
+    ids = {e.get("id"): e for e in root.iter() if e.get("id")}
+    sizes: dict[int, int] = {}  # elements under an element, its copies expanded
+
+    def size(element: Any, depth: int) -> int:
+        if id(element) not in sizes:
+            if depth > MAX_USE_DEPTH:
+                raise ValueError(f"<use> nested more than {MAX_USE_DEPTH} deep (or in a loop)")
+            n = 1 + sum(size(child, depth) for child in element)
+            if element.tag.rsplit("}", 1)[-1] == "use":
+                href = element.get("href") or element.get(f"{{{XLINK}}}href") or ""
+                target = ids.get(href[1:]) if href.startswith("#") else None
+                n += size(target, depth + 1) if target is not None else 0
+            sizes[id(element)] = n
+        return sizes[id(element)]
+
+    try:
+        elements = size(root, 0)
+    except ValueError as e:
+        return str(e)
+    except RecursionError:
+        return None  # svgelements refuses the nesting itself
+    if elements > limit:
+        return (f"{elements:,} elements once <use> copies are expanded: more than {limit:,}; "
+                "simplify the drawing first")
+    return None

@@ -216,7 +216,7 @@ BAD_FILES = {  # name -> (how to write it, what the message must say)
                      "not JSON"),
     "huge.geojson": (lambda p: p.write_text('{"type": "Polygon", "coordinates": [[[0, 0], '
                                             f'[1{"0" * 400}, 0], [1, 1], [0, 0]]]}}'),
-                     "expected a position [x, y]"),
+                     "beyond a float's range"),
     "notdxf.dxf": (lambda p: p.write_text("0\nSECTION\nnot a dxf\n"), "not a DXF drawing"),
     "open.svg": (lambda p: p.write_text('<svg xmlns="http://www.w3.org/2000/svg">'
                                         '<path d="M 0 0 L 10 0 L 10 10"/></svg>'), "open path"),

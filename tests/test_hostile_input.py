@@ -446,3 +446,41 @@ def test_plan_provenance_outside_its_range_refused(tmp_path):
                          "--footsteps-only", "--no-pictures", cwd=tmp_path)
         _refused_in_one_line(result, path, f"provenance.config.{part}.{key}: must be")
         assert not (tmp_path / "b.json").exists()
+
+
+@pytest.mark.parametrize(("text", "field"), [
+    (_with_top("robot", "{boom_length: [0, 1000]}"), "robot.boom_length[1]"),
+    (_demo_text().replace("tolerance: 0.5", "tolerance: 10000.0"), "goal.tolerance"),
+])
+def test_boom_and_goal_tolerance_beyond_a_cave_refused(tmp_path, text, field):
+    """A 1 km boom and a 10 km goal tolerance were read, then `rbp plan` asked for 1.3 and 7.3
+    TiB (the body cache, the goal's cells) and ended in a MemoryError traceback."""
+    path = tmp_path / "cave.yaml"
+    path.write_text(text)
+    result = run_rbp("plan", str(path), "--footsteps-only", "-o", str(tmp_path / "p.json"),
+                     "--no-pictures", cwd=tmp_path)
+    _refused_in_one_line(result, path, f"{field}: must be")
+
+
+def test_goal_cells_and_body_cache_follow_the_cave_not_the_reach():
+    """What the search allocates is bounded by the cave (the rock's box, the anchors within
+    reach), not by the booms' reach or the goal's tolerance."""
+    import dataclasses
+
+    from planning.flood import body_cache
+    from planning.lattice import LatticeConfig
+    from planning.lattice_moves import goal_is_holdable
+
+    scn = load_scenario(DEMO)
+    cfg = LatticeConfig()
+    huge = dataclasses.replace(scn, goal_tolerance=100.0, robot=dataclasses.replace(
+        scn.robot, boom_length=(0.0, 20.0)))  # the largest the reader takes
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.perf_counter()
+    assert goal_is_holdable(huge, cfg)
+    body, _ = body_cache(huge, cfg)
+    assert time.perf_counter() - start < 30
+    assert (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024 < 200
+    lo, hi = np.min(np.vstack(scn.walls), axis=0), np.max(np.vstack(scn.walls), axis=0)
+    cells = np.prod((hi - lo) / cfg.position_step + 100)
+    assert body.size <= cells * cfg.angle_count, body.shape

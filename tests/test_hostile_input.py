@@ -484,3 +484,20 @@ def test_goal_cells_and_body_cache_follow_the_cave_not_the_reach():
     lo, hi = np.min(np.vstack(scn.walls), axis=0), np.max(np.vstack(scn.walls), axis=0)
     cells = np.prod((hi - lo) / cfg.position_step + 100)
     assert body.size <= cells * cfg.angle_count, body.shape
+
+
+def test_plan_output_is_json_and_not_an_input(tmp_path):
+    """`rbp plan cave.yaml -o cave.yaml` wrote the plan over the scenario."""
+    cave = tmp_path / "cave.yaml"
+    cave.write_text(_demo_text())
+    result = run_rbp("plan", str(cave), "-o", str(cave), "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, cave, "-o: a plan file is JSON")
+    assert cave.read_text() == _demo_text(), "the scenario was overwritten"
+    result = run_rbp("plan", "demo-shaft", "-o", "plan", "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, Path("plan"), "got no suffix")
+    config = tmp_path / "planner.json"
+    config.write_text("{}")
+    result = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(config),
+                     "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, config, "-o: is --config's file; the plan would overwrite it")
+    assert config.read_text() == "{}"

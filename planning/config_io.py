@@ -5,7 +5,8 @@ nests) with `dataclasses.asdict`, infinities as the strings "inf" / "-inf" (JSON
 infinity). `config_from_dict` reads one back, generically over the dataclass's fields and their
 type hints (nested dataclasses, bool, int, float, str, tuples, `X | None`), on top of a base
 configuration: keys left out keep the base's values. A mistake raises `ConfigError` naming the
-file, the dotted key and the reason: unknown keys (with the known ones), wrong types.
+file, the dotted key and the reason: unknown keys (with the known ones), wrong types, and
+values outside the field's range (`planning.config_ranges`: what no type can say).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from planning.config_ranges import field_problem
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
@@ -63,6 +65,9 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
         if key not in fields:
             raise ConfigError(source, field, f"unknown key; expected one of {sorted(fields)}")
         changes[key] = _convert(value, hints[key], source, field, getattr(base, key))
+        problem = field_problem(cls, key, changes[key])  # planning.config_ranges
+        if problem:
+            raise ConfigError(source, field, problem)
     try:
         return dataclasses.replace(base, **changes)
     except RbpInputError as e:  # a dataclass that checks its own values (RepairConfig)

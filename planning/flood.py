@@ -42,6 +42,7 @@ def reach_box(anchors: np.ndarray, max_reach: float, cfg: LatticeConfig) -> np.n
 
 
 _BODY_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+MAX_BODY_CELLS = 1 << 32  # int8 cells: 4 GiB of address space, of which the search touches little
 
 
 def body_cache(scn: Scenario, cfg: LatticeConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -53,10 +54,23 @@ def body_cache(scn: Scenario, cfg: LatticeConfig) -> tuple[np.ndarray, np.ndarra
     key = (tuple(scn.robot.body_size), cfg)
     hit = per_rock.get(key)
     if hit is None:
-        pts = scn.anchor_positions
-        lo = np.floor((pts.min(axis=0) - scn.robot.max_reach) / cfg.position_step) - 1
-        hi = np.ceil((pts.max(axis=0) + scn.robot.max_reach) / cfg.position_step) + 1
-        shape = (*(hi - lo + 1).astype(int), cfg.angle_count)
+        pts, dx = scn.anchor_positions, cfg.position_step
+        lo = np.floor((pts.min(axis=0) - scn.robot.max_reach) / dx) - 1
+        hi = np.ceil((pts.max(axis=0) + scn.robot.max_reach) / dx) + 1
+        # Only poses near rock need the test cached (the kernel tests a pose outside the cache
+        # itself): the cache spans the rock's box, not the booms' reach (a 1 km boom asked for
+        # 1.3 TiB), and at most MAX_BODY_CELLS (untouched pages cost no memory, but the
+        # address space is finite); a cave larger than that tests every pose afresh.
+        if scn.rock.polygons:
+            margin = 0.5 * float(np.hypot(*scn.robot.body_size)) + dx
+            lo = np.maximum(lo, np.floor((scn.rock.edge_lo.min(axis=0) - margin) / dx))
+            hi = np.minimum(hi, np.ceil((scn.rock.edge_hi.max(axis=0) + margin) / dx))
+        else:
+            hi = lo - 1  # nothing to collide with
+        sides = np.maximum(hi - lo + 1, 0).astype(np.int64)
+        if int(sides[0]) * int(sides[1]) * cfg.angle_count > MAX_BODY_CELLS:
+            sides[:] = 0
+        shape = (int(sides[0]), int(sides[1]), cfg.angle_count)
         hit = per_rock[key] = (np.zeros(shape, dtype=np.int8), lo.astype(np.int64))
     return hit
 

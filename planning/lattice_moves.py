@@ -252,16 +252,34 @@ def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     so False proves that no route exists at the lattice's resolution)."""
     goal = np.asarray(scn.goal_position, dtype=float)
     tol, dx = scn.goal_tolerance, cfg.position_step
-    i = np.arange(math.ceil((goal[0] - tol) / dx), math.floor((goal[0] + tol) / dx) + 1)
-    k = np.arange(math.ceil((goal[1] - tol) / dx), math.floor((goal[1] + tol) / dx) + 1)
-    ii, kk = np.meshgrid(i, k, indexing="ij")
-    cells = np.column_stack([ii.ravel(), kk.ravel()])
-    cells = cells[np.linalg.norm(cells * dx - goal, axis=1) <= tol]
-    if not len(cells):
-        return False
     near = np.flatnonzero(np.linalg.norm(scn.anchor_positions - goal, axis=1)
                           <= tol + scn.robot.max_reach + 1e-6)
     if not len(near):
+        return False
+    # The disc clipped to where a boom reaches some anchor: its cells grow with the cave, not
+    # the tolerance (1e4 m asked for 7 TiB); then a few rows of it at a time: bounded memory.
+    reach = scn.anchor_positions[near]
+    lo = np.maximum(goal - tol, reach.min(axis=0) - scn.robot.max_reach)
+    hi = np.minimum(goal + tol, reach.max(axis=0) + scn.robot.max_reach)
+    i = np.arange(math.ceil(lo[0] / dx), math.floor(hi[0] / dx) + 1)
+    k = np.arange(math.ceil(lo[1] / dx), math.floor(hi[1] / dx) + 1)
+    rows = max(1, GOAL_CELLS // max(len(k), 1))
+    starts = sorted(range(0, len(i), rows),  # the goal's own rows first: found sooner
+                    key=lambda s: abs(i[min(s + rows, len(i)) - 1] + i[s] - 2 * goal[0] / dx))
+    return any(_holdable_cells(scn, cfg, i[s:s + rows], k, near) for s in starts)
+
+
+GOAL_CELLS = 100_000  # goal cells tested at once, per orientation
+
+
+def _holdable_cells(scn: Scenario, cfg: LatticeConfig, i: np.ndarray, k: np.ndarray,
+                    near: np.ndarray) -> bool:
+    """`goal_is_holdable` on the lattice cells i x k within the goal tolerance."""
+    goal, dx = np.asarray(scn.goal_position, dtype=float), cfg.position_step
+    ii, kk = np.meshgrid(i, k, indexing="ij")
+    cells = np.column_stack([ii.ravel(), kk.ravel()])
+    cells = cells[np.linalg.norm(cells * dx - goal, axis=1) <= scn.goal_tolerance]
+    if not len(cells):
         return False
     n = cfg.angle_count
     for m in range(-n // 2, n // 2):  # an orientation at a time: bounded memory

@@ -112,7 +112,7 @@ class ParamError(RbpInputError):
 # Physically meaningful magnitudes of robot parameters (docs/formats.md): beyond them a value is
 # a typo, and refusing it at reading keeps overflow out of the statics.
 MAX_SIZE = 100.0      # m: body sides, shoulder offsets
-MAX_BOOM = 1e3        # m: boom length
+MAX_BOOM = 20.0       # m: boom length (ReachBot's are a few metres; the lattice grows with it)
 MAX_FORCE = 1e6       # N: boom tension; N m: shoulder torque
 MAX_MASS = 1e6        # kg: body and gripper; kg/m: boom density
 MAX_DEGREES = 1e4     # shoulder directions

@@ -29,7 +29,8 @@ ANCHOR_GAP_TOL = 0.05    # m: ... and this far off the rock surface (a gripper g
 
 # Physically meaningful magnitudes (docs/formats.md): a value beyond them is a typo or an attack,
 # and refusing it at reading keeps overflow (1e308 squared) out of the planner.
-MAX_COORDINATE = 1e4  # m: walls, anchors, start and goal positions, goal tolerance
+MAX_COORDINATE = 1e4  # m: walls, anchors, start and goal positions
+MAX_GOAL_TOLERANCE = 100.0  # m: a goal region the size of a large cave at most
 MAX_ANGLE = 1e4       # rad for the start pose's angle, degrees for an anchor's normal angle
 MAX_GRAVITY = 1e3     # m/s^2 per component (Earth 9.81)
 MAX_FORCE = 1e6       # N: anchor limit surfaces and their spreads
@@ -315,7 +316,8 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
 
     goal = rd.closed("goal", rd.require("", data, "goal"), {"position", "tolerance"})
     goal_pos = rd.vector("goal.position", rd.require("goal", goal, "position"), 2)
-    tol = rd.number("goal.tolerance", goal.get("tolerance", 0.5), positive=True)
+    tol = rd.number("goal.tolerance", goal.get("tolerance", 0.5), positive=True,
+                    bound=MAX_GOAL_TOLERANCE)
     _check_goal(rd, rock, np.array(goal_pos), tol)
 
     scn = Scenario(name=name, gravity=(gravity[0], gravity[1]), robot=robot, walls=tuple(walls),

@@ -198,9 +198,17 @@ def _route_quality(search: dict) -> str:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
-    from rbp.commands.plan import SearchRecord, plan_setup, provenance, run_planner, write_pictures
+    from rbp.commands.plan import (
+        SearchRecord,
+        check_plan_output,
+        plan_setup,
+        provenance,
+        run_planner,
+        write_pictures,
+    )
 
     check_output(args.output)
+    check_plan_output(args)
     if args.animate:
         from rbp.commands.plan import check_animation
 

@@ -7,6 +7,7 @@ bounds are stated in docs/formats.md.
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import time
@@ -476,8 +477,8 @@ def _write_stl(path: Path, triangles: np.ndarray) -> None:
 
 
 @pytest.mark.parametrize(("lattice", "words"), [
-    ("{position_step: -0.02}", "position_step: must be between 0.005 and 0.5 m"),
-    ("{position_step: 1.0e-9}", "position_step: must be between 0.005 and 0.5 m"),
+    ("{position_step: -0.02}", "position_step: must be a number from 0.005 to 0.5 m"),
+    ("{position_step: 1.0e-9}", "position_step: must be a number from 0.005 to 0.5 m"),
     ("{angle_step_deg: 7}", "angle_step_deg: must divide 180 deg"),
 ])
 def test_lattice_outside_its_range_refused_naming_the_key(tmp_path, lattice, words):
@@ -527,3 +528,95 @@ def test_unwritable_outputs_named_with_their_reason(tmp_path):
                          "/proc/version", cwd=tmp_path)
         _refused_in_one_line(result, Path("/proc/version"), "cannot write a file there")
         assert ".tmp" not in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize(("text", "words"), [
+    ("footstep: {expansions_per_metre: .inf}\n", "footstep.expansions_per_metre: must be"),
+    ("seed: {step: 0.0}\n", "seed.step: must be a number from 0.001 to 1 m, got 0.0"),
+    ("footstep: {search: sampled, goal_samples: 1000000000000}\n", "footstep.goal_samples:"),
+    ("footstep: {segments: {min_climb: 1.0e-300, lookahead: 1.0e-300, commit: 1.0e-300, "
+     "tolerance: 1.0e-300}}\n", "footstep.segments.min_climb: must be"),
+    ("scp: {solver: foo}\n", "scp.solver: must be one of clarabel, osqp, got 'foo'"),
+])
+def test_config_values_outside_their_range_refused_at_reading(tmp_path, text, words):
+    """Values the reader took crashed (OverflowError, ZeroDivisionError, terabyte allocations)
+    or hung `rbp plan` later; planning.config_ranges refuses them when the file is read."""
+    config = tmp_path / "planner.yaml"
+    config.write_text(text)
+    result = run_rbp("plan", "demo-shaft", "--config", str(config), "--footsteps-only", "-o",
+                     str(tmp_path / "p.json"), "--no-pictures", cwd=tmp_path)
+    _refused_in_one_line(result, config, words)
+    assert not (tmp_path / "p.json").exists(), "a refused configuration wrote a plan"
+
+
+def test_plan_provenance_outside_its_range_refused(tmp_path):
+    """The same values in a plan's provenance.config crashed `rbp plan --from-plan`."""
+    made = run_rbp("plan", "demo-crevasse", "-o", "a.json", "--footsteps-only",
+                   "--max-expansions", "3", "--no-pictures", cwd=tmp_path)
+    assert made.returncode in (0, 1), made.stderr
+    plan = json.loads((tmp_path / "a.json").read_text())
+    for key, part, value in (("expansions_per_metre", "footstep", "inf"),
+                             ("step", "seed", 0.0)):
+        forged = json.loads(json.dumps(plan))
+        forged["provenance"]["config"][part][key] = value
+        path = tmp_path / f"{key}.json"
+        path.write_text(json.dumps(forged))
+        result = run_rbp("plan", "--from-plan", str(path), "-o", str(tmp_path / "b.json"),
+                         "--footsteps-only", "--no-pictures", cwd=tmp_path)
+        _refused_in_one_line(result, path, f"provenance.config.{part}.{key}: must be")
+        assert not (tmp_path / "b.json").exists()
+
+
+@pytest.mark.parametrize(("text", "field"), [
+    (_with_top("robot", "{boom_length: [0, 1000]}"), "robot.boom_length[1]"),
+    (_demo_text().replace("tolerance: 0.5", "tolerance: 10000.0"), "goal.tolerance"),
+])
+def test_boom_and_goal_tolerance_beyond_a_cave_refused(tmp_path, text, field):
+    """A 1 km boom and a 10 km goal tolerance were read, then `rbp plan` asked for 1.3 and 7.3
+    TiB (the body cache, the goal's cells) and ended in a MemoryError traceback."""
+    path = tmp_path / "cave.yaml"
+    path.write_text(text)
+    result = run_rbp("plan", str(path), "--footsteps-only", "-o", str(tmp_path / "p.json"),
+                     "--no-pictures", cwd=tmp_path)
+    _refused_in_one_line(result, path, f"{field}: must be")
+
+
+def test_goal_cells_and_body_cache_follow_the_cave_not_the_reach():
+    """What the search allocates is bounded by the cave (the rock's box, the anchors within
+    reach), not by the booms' reach or the goal's tolerance."""
+    import dataclasses
+
+    from planning.flood import body_cache
+    from planning.lattice import LatticeConfig
+    from planning.lattice_moves import goal_is_holdable
+
+    scn = load_scenario(DEMO)
+    cfg = LatticeConfig()
+    huge = dataclasses.replace(scn, goal_tolerance=100.0, robot=dataclasses.replace(
+        scn.robot, boom_length=(0.0, 20.0)))  # the largest the reader takes
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.perf_counter()
+    assert goal_is_holdable(huge, cfg)
+    body, _ = body_cache(huge, cfg)
+    assert time.perf_counter() - start < 30
+    assert (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024 < 200
+    lo, hi = np.min(np.vstack(scn.walls), axis=0), np.max(np.vstack(scn.walls), axis=0)
+    cells = np.prod((hi - lo) / cfg.position_step + 100)
+    assert body.size <= cells * cfg.angle_count, body.shape
+
+
+def test_plan_output_is_json_and_not_an_input(tmp_path):
+    """`rbp plan cave.yaml -o cave.yaml` wrote the plan over the scenario."""
+    cave = tmp_path / "cave.yaml"
+    cave.write_text(_demo_text())
+    result = run_rbp("plan", str(cave), "-o", str(cave), "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, cave, "-o: a plan file is JSON")
+    assert cave.read_text() == _demo_text(), "the scenario was overwritten"
+    result = run_rbp("plan", "demo-shaft", "-o", "plan", "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, Path("plan"), "got no suffix")
+    config = tmp_path / "planner.json"
+    config.write_text("{}")
+    result = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(config),
+                     "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, config, "-o: is --config's file; the plan would overwrite it")
+    assert config.read_text() == "{}"

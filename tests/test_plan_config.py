@@ -205,3 +205,91 @@ def test_provenance_records_the_threads_and_load(monkeypatch: pytest.MonkeyPatch
     assert (prov.threads, prov.cores) == (1, os.cpu_count()), prov
     assert prov.load is None or prov.load >= 0, prov
     assert {"threads", "cores", "load"} <= set(prov.to_dict()), prov.to_dict()
+
+
+def _config_classes(cls: type, seen: dict[str, type]) -> dict[str, type]:
+    """Every configuration dataclass reachable from `cls` (nested, also as `X | None`)."""
+    import typing
+
+    seen[cls.__name__] = cls
+    for hint in typing.get_type_hints(cls).values():
+        for tp in (hint, *typing.get_args(hint)):
+            if dataclasses.is_dataclass(tp) and tp.__name__ not in seen:
+                _config_classes(tp, seen)  # type: ignore[arg-type]
+    return seen
+
+
+def test_every_field_has_a_range_and_the_defaults_are_in_it() -> None:
+    """planning.config_ranges states every number's range and every word's choices, so that
+    nothing the reader accepts can crash or hang the planner; the defaults lie within them."""
+    from planning.complete_config import AnytimeConfig
+    from planning.config_ranges import FIELDS, field_problem
+    from planning.route_repair import RepairConfig
+    from planning.segmented import SegmentConfig
+
+    classes = _config_classes(PipelineConfig, {})
+    assert set(classes) == set(FIELDS), set(classes) ^ set(FIELDS)
+    for name, cls in classes.items():
+        unbounded = [f.name for f in dataclasses.fields(cls)
+                     if f.type not in ("bool", "LatticeConfig", "TransitionConfig",
+                                       "SeedConfig", "ScpConfig", "FootstepConfig")
+                     and not f.type.endswith("Config | None")
+                     and f.name not in FIELDS[name]]
+        assert not unbounded, f"{name}: fields without a range: {unbounded}"
+        assert set(FIELDS[name]) <= {f.name for f in dataclasses.fields(cls)}, name
+    defaults = [PipelineConfig(), AnytimeConfig(), RepairConfig(), SegmentConfig()]
+    for config in defaults:
+        for cfg in [config, *(getattr(config, f.name) for f in dataclasses.fields(config))]:
+            if dataclasses.is_dataclass(cfg):
+                for f in dataclasses.fields(cfg):
+                    assert not field_problem(type(cfg), f.name, getattr(cfg, f.name)), \
+                        (type(cfg).__name__, f.name)
+    assert config_from_dict(PipelineConfig, config_to_dict(PipelineConfig()), "p.yaml") == \
+        PipelineConfig()
+
+
+def test_docs_list_every_range() -> None:
+    from planning.config_ranges import range_lines
+
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "formats.md").read_text()
+    missing = [line for line in range_lines() if line not in docs]
+    assert not missing, "docs/formats.md lacks these rows:\n" + "\n".join(missing)
+
+
+# Values the reader took that then crashed or hung `rbp plan` (the hostile probe of session 28)
+@pytest.mark.parametrize("data, field, words", [
+    ({"footstep": {"expansions_per_metre": "inf"}}, "footstep.expansions_per_metre",
+     "from 0 to 1,000,000"),
+    ({"seed": {"step": 0.0}}, "seed.step", "from 0.001 to 1 m, got 0.0"),
+    ({"seed": {"step": 1.0e-300}}, "seed.step", "from 0.001"),
+    ({"seed": {"step": -0.02}}, "seed.step", "from 0.001"),
+    ({"seed": {"turn_step": "inf"}}, "seed.turn_step", "got inf"),
+    ({"seed": {"local_samples": 0}}, "seed.local_samples", "whole number from 1"),
+    ({"seed": {"arc_heights": ["inf"]}}, "seed.arc_heights", "got inf"),
+    ({"seed": {"arc_heights": []}}, "seed.arc_heights", "1 to 32 numbers"),
+    ({"footstep": {"goal_samples": -5}}, "footstep.goal_samples", "got -5"),
+    ({"footstep": {"goal_samples": 10**12}}, "footstep.goal_samples", "to 100,000"),
+    ({"footstep": {"transition": {"release_candidates": 0}}},
+     "footstep.transition.release_candidates", "got 0"),
+    ({"footstep": {"transition": {"elite": -3}}}, "footstep.transition.elite", "got -3"),
+    ({"footstep": {"transition": {"phi_range": "inf"}}}, "footstep.transition.phi_range",
+     "to 3.1416 rad"),
+    ({"footstep": {"transition": {"spread": -1.0}}}, "footstep.transition.spread", "got -1.0"),
+    ({"footstep": {"segments": {"commit": 1e-300}}}, "footstep.segments.commit", "from 0.1"),
+    ({"footstep": {"polish_rounds": 10**12}}, "footstep.polish_rounds", "from 0 to 1000"),
+    ({"footstep": {"heuristic_weight": "inf"}}, "footstep.heuristic_weight", "got inf"),
+    ({"footstep": {"min_success": 1.0}}, "footstep.min_success", "below 1"),
+    ({"footstep": {"anytime": {"weights": [5.0, 0.0]}}}, "footstep.anytime.weights", "above 0"),
+    ({"footstep": {"search": "greedy"}}, "footstep.search", "one of hybrid, complete, sampled"),
+    ({"scp": {"robustness_weight": "inf"}}, "scp.robustness_weight", "got inf"),
+    ({"scp": {"solver": "foo"}}, "scp.solver", "one of clarabel, osqp, got 'foo'"),
+    ({"dt": 1e-300}, "dt", "from 0.01 to 60 s"),
+])
+def test_values_outside_their_range_refused_at_reading(data, field: str, words: str) -> None:
+    for prefix in ("", "provenance.config"):  # a --config file, a plan's provenance
+        with pytest.raises(ConfigError) as info:
+            config_from_dict(PipelineConfig, data, "planner.yaml", prefix=prefix)
+        where = f"{prefix}.{field}" if prefix else field
+        assert info.value.field == where and words in info.value.reason, str(info.value)
+    assert config_from_dict(PipelineConfig, {"scp": {"radius_velocity": "inf"}},
+                            "p.yaml").scp.radius_velocity == float("inf")  # documented: none

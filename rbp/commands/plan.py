@@ -41,6 +41,21 @@ def rbp_version() -> str:
         return "unknown"
 
 
+def check_plan_output(args: argparse.Namespace) -> None:
+    """The plan's `-o` after `check_output`: a .json name (`-o cave.yaml` wrote the plan over
+    the scenario), and none of the command's input files."""
+    from rbp.commands.common import UserError
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".json":
+        raise UserError(f"{out}: -o: a plan file is JSON: give a name ending in .json, got "
+                        f"{out.suffix or 'no suffix'}")
+    for flag, given in (("the scenario", args.scenario), ("--from-plan", args.from_plan),
+                        ("--config", args.config)):
+        if given and out.exists() and Path(given).exists() and out.samefile(given):
+            raise UserError(f"{out}: -o: is {flag}'s file; the plan would overwrite it")
+
+
 def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
     from planning.complete_config import AnytimeConfig

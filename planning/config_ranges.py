@@ -1,0 +1,213 @@
+"""The allowed range of every field of the planner's configuration dataclasses.
+
+`planning.config_io` reads a configuration (an `rbp plan --config` file, or a plan's
+`provenance.config`) by its fields' types; this table adds what a type cannot say: the numbers
+each field may take (finite unless infinity is documented to mean "none"; counts whole numbers
+from 1 or 0 to a maximum that keeps the work and the memory bounded; steps and lengths positive
+with a least value, so that nothing divides by zero or allocates by a tiny step) and the words
+a string field may be. A value outside its range is refused when the file is read, naming the
+file and the field, instead of crashing or hanging the planner later. docs/formats.md lists
+these ranges (`range_lines`; tests/test_plan_config.py keeps the two equal, and checks that
+every field of every configuration dataclass has its entry here).
+
+The table is keyed by class name so that reading a configuration does not import the planner.
+Checks that join two fields (segments' commit <= lookahead, the lattice's angle step dividing
+180 deg) stay in the dataclasses' `__post_init__`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+INF = math.inf
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """Numbers from `lo` to `hi` (inclusive unless `open_lo`), `unit` for the message; whole
+    numbers if `integer`. A tuple field's items each in range, and at most `items` of them
+    (at least 1). Infinity passes only where `hi` is infinite."""
+
+    lo: float
+    hi: float
+    unit: str = ""
+    integer: bool = False
+    open_lo: bool = False
+    open_hi: bool = False
+    items: int = 0  # a tuple field: its most items (0: not a tuple)
+
+    def problem(self, value: Any) -> str:
+        """Why `value` (already of the field's type) is out of range, or ""."""
+        if self.items:
+            if not 1 <= len(value) <= self.items:
+                return f"must list 1 to {self.items} numbers, got {len(value)}"
+            for v in value:
+                if self.problem_of(v):
+                    return f"{self.problem_of(v)} (in {list(value)})"
+            return ""
+        return self.problem_of(value)
+
+    def problem_of(self, value: Any) -> str:
+        above = value > self.lo if self.open_lo else value >= self.lo
+        below = value < self.hi if self.open_hi else value <= self.hi
+        if above and below and (math.isfinite(value) or self.hi == INF):
+            return ""
+        return f"must be {self.text()}, got {value!r}"
+
+    def text(self) -> str:
+        kind = "a whole number" if self.integer else "a number"
+        lo, hi = _number(self.lo), _number(self.hi)
+        unit = f" {self.unit}" if self.unit else ""
+        if self.hi == INF:
+            return f"{kind} {'above' if self.open_lo else 'of at least'} {lo}{unit} (or .inf)"
+        if self.open_lo or self.open_hi:
+            return (f"{kind} {'above' if self.open_lo else 'of at least'} {lo} and "
+                    f"{'below' if self.open_hi else 'at most'} {hi}{unit}")
+        return f"{kind} from {lo} to {hi}{unit}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Choice:
+    """One of `words`."""
+
+    words: tuple[str, ...]
+
+    def problem(self, value: Any) -> str:
+        return "" if value in self.words else f"must be {self.text()}, got {value!r}"
+
+    def text(self) -> str:
+        return f"one of {', '.join(self.words)}"
+
+
+def _number(x: float) -> str:
+    if math.isfinite(x) and x == int(x) and abs(x) >= 1e4:
+        return f"{int(x):,}"
+    return f"{x:g}"
+
+
+def count(lo: int, hi: int) -> Range:
+    return Range(lo, hi, integer=True)
+
+
+def positive(lo: float, hi: float, unit: str = "") -> Range:
+    return Range(lo, hi, unit)
+
+
+PI = round(math.pi, 4)
+FIELDS: dict[str, dict[str, Range | Choice]] = {
+    "PipelineConfig": {
+        "dt": Range(0.01, 60.0, "s"),  # the simulator's plant step .. a minute
+        "motion_retries": count(0, 100),
+    },
+    "FootstepConfig": {
+        "search": Choice(("hybrid", "complete", "sampled")),
+        "sampled_expansions": count(1, 10_000_000),
+        "heuristic_weight": Range(0.0, 10_000.0),
+        "ordering": Choice(("distance", "travel", "distance+travel")),
+        "min_success": Range(0.0, 1.0, open_lo=True, open_hi=True),
+        "candidates_per_boom": count(1, 1000),
+        "max_expansions": count(1, 1_000_000_000),
+        "search_memory_mb": Range(1.0, 10_000_000.0, "MiB"),
+        "expansions_per_metre": Range(0.0, 1_000_000.0),
+        "time_limit": Range(0.0, 1_000_000.0, "s", open_lo=True),
+        "goal_samples": count(1, 100_000),
+        "polish_rounds": count(0, 1000),
+        "seed": count(0, 2**63 - 1),
+    },
+    "LatticeConfig": {  # as planning.lattice's POSITION_STEP_RANGE and ANGLE_STEP_RANGE
+        "position_step": positive(0.005, 0.5, "m"),
+        "angle_step_deg": positive(0.5, 45.0, "deg"),
+    },
+    "AnytimeConfig": {
+        "weights": Range(0.0, 10_000.0, open_lo=True, items=32),
+        "target_bound": Range(1.0, 10_000.0),
+        "improve_factor": Range(0.0, 10_000.0),
+        "improve_min": count(0, 1_000_000_000),
+        "corridor": Range(0.0, 10_000.0, "m"),
+    },
+    "RepairConfig": {
+        "window": count(1, 1000),
+        "stride": count(1, 1000),
+        "window_expansions": count(1, 100_000_000),
+        "passes": count(1, 1000),
+    },
+    "SegmentConfig": {  # a segment commits at least 10 cm: a climb's segments stay few
+        "min_climb": positive(0.1, 10_000.0, "m"),
+        "lookahead": positive(0.1, 1000.0, "m"),
+        "commit": positive(0.1, 1000.0, "m"),
+        "tolerance": positive(0.01, 100.0, "m"),
+    },
+    "TransitionConfig": {
+        "release_candidates": count(1, 1_000_000),
+        "release_samples": count(1, 100_000),
+        "release_rounds": count(0, 1000),
+        "samples": count(1, 100_000),
+        "search_rounds": count(0, 1000),
+        "refine_rounds": count(0, 1000),
+        "refine_samples": count(1, 100_000),
+        "elite": count(1, 100_000),
+        "spread": positive(0.001, 100.0, "m"),
+        "phi_range": Range(0.0, PI, "rad"),
+        "max_reach_violation": Range(0.0, 1000.0, "m"),
+        "hopeless_violation": Range(0.0, 1000.0, "m"),
+        "patience": count(1, 1000),
+    },
+    "SeedConfig": {  # steps of 1 mm at least: a 100 m phase is then 100,000 poses at most
+        "step": positive(0.001, 1.0, "m"),
+        "turn_step": positive(0.001, 1.0, "rad"),
+        "local_rounds": count(0, 16),  # the spread doubles each round
+        "local_samples": count(1, 10_000),
+        "local_spread": positive(0.001, 10.0, "m"),
+        "local_modes": count(1, 100),
+        "ompl_checks": count(1, 1_000_000),  # seed_common.MAX_OMPL_CHECKS
+        "ompl_time": Range(0.0, 86_400.0, "s", open_lo=True),
+        "ompl_range": positive(0.001, 100.0),
+        "ompl_margin": Range(0.0, 100.0, "m"),
+        "arc_heights": Range(0.0, 10.0, items=32),
+        "arc_min_height": Range(0.0, 10.0, "m"),
+    },
+    "ScpConfig": {
+        "solver": Choice(("clarabel", "osqp")),
+        "max_iterations": count(1, 10_000),
+        "robustness_weight": Range(0.0, 1e6),
+        "dynamics_weight": Range(0.0, 1e6),
+        "smoothness_weight": Range(0.0, 1e6),
+        "radius_pose": positive(1e-4, 100.0, "m"),
+        "radius_angle": positive(1e-4, 10.0, "rad"),
+        "radius_velocity": positive(1e-4, INF),  # .inf, the default: no trust region
+        "radius_tension": positive(1e-3, 1e6, "N"),
+        "radius_min": Range(0.0, 1.0, open_lo=True),
+        "radius_max": Range(1.0, 1e6),
+        "grow": Range(1.0, 100.0),
+        "shrink": Range(0.0, 1.0, open_lo=True),
+        "accept_ratio": Range(0.0, 1.0),
+        "grow_ratio": Range(0.0, 1.0),
+        "shrink_ratio": Range(0.0, 1.0),
+        "curvature_floor": Range(0.0, 1e6),
+        "curvature_scale_min": Range(0.0, 1.0, open_lo=True),
+        "tolerance": positive(1e-12, 1e3),
+    },
+}
+
+
+def field_problem(cls: type, name: str, value: Any) -> str:
+    """Why `value` is out of range for field `name` of configuration class `cls`, or ""
+    (also for None, and for fields and classes this table does not hold)."""
+    spec = FIELDS.get(cls.__name__, {}).get(name)
+    return "" if spec is None or value is None else spec.problem(value)
+
+
+# Where each class's fields are in a configuration file
+SECTIONS = {"PipelineConfig": "", "FootstepConfig": "footstep.",
+            "LatticeConfig": "footstep.lattice.",
+            "AnytimeConfig": "footstep.anytime.", "RepairConfig": "footstep.repair.",
+            "SegmentConfig": "footstep.segments.", "TransitionConfig": "footstep.transition.",
+            "SeedConfig": "seed.", "ScpConfig": "scp."}
+
+
+def range_lines() -> list[str]:
+    """docs/formats.md's table rows: | `key` | range |, in this table's order."""
+    return [f"| `{SECTIONS[cls]}{name}` | {spec.text()} |"
+            for cls, fields in FIELDS.items() for name, spec in fields.items()]

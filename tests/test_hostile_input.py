@@ -411,6 +411,50 @@ def test_control_characters_cannot_forge_error_lines(tmp_path):
     assert "cave\\nerror: forged.yaml" in result.stderr, result.stderr
 
 
+def _big_plan(steps: int) -> dict:
+    """The golden demo-shaft plan with its first phase's first step repeated `steps` times."""
+    import json
+
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "demo-shaft.json").read_text())
+    first = plan["phases"][0]
+    first["steps"] = [first["steps"][0]] * steps
+    first.pop("motion", None)
+    return plan
+
+
+def test_large_plan_with_a_wrong_format_refused_before_parsing(tmp_path):
+    """A 30 MB plan of another format took 11 s (the whole schema checked first)."""
+    import json
+
+    plan = _big_plan(100_000)
+    plan["format"] = "reachbot-plan/9"
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(plan))
+    start = time.perf_counter()
+    result = run_rbp("check", "-q", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "format: 'reachbot-plan/9' is not one of")
+    assert time.perf_counter() - start < 30, "the wrong format took too long to refuse"
+    # a format that is not the first key, and a document that is not an object
+    for name, text, words in (("late.json", '{"planner": "x", "format": 2}', "format: 2 is not"),
+                              ("list.json", "[1, 2]", "must be a JSON object, got an array")):
+        (tmp_path / name).write_text(text)
+        _refused_in_one_line(run_rbp("check", str(tmp_path / name), cwd=tmp_path),
+                             tmp_path / name, words)
+
+
+def test_large_plan_with_an_error_at_its_end_named_by_the_compiled_validator(tmp_path):
+    """jsonschema walked the whole plan to name the error (19 s for 30 MB); over a megabyte
+    the compiled validator's first error is named instead."""
+    import json
+
+    plan = _big_plan(20_000)
+    plan["phases"][0]["steps"][-1] = dict(plan["phases"][0]["steps"][0], pose=[1.0, 2.0])
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(plan))
+    result = run_rbp("check", "-q", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "phases/0/steps/19999/pose: must contain at least 3")
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")

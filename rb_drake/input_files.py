@@ -115,6 +115,16 @@ def max_input_values() -> int:
     return limit if limit > 0 else DEFAULT_MAX_NODES
 
 
+def count_values(data: Any) -> int:
+    """The values (YAML nodes: keys, values and collections) `data` would be written as, as
+    `load_yaml` counts them, for a writer to refuse a file rbp could not read back."""
+    if isinstance(data, dict):
+        return 1 + sum(1 + count_values(v) for v in data.values())
+    if isinstance(data, list | tuple):
+        return 1 + sum(count_values(v) for v in data)
+    return 1
+
+
 def _too_many(limit: int) -> str:
     return f"{limit:,} values (RBP_MAX_INPUT_VALUES raises the limit)"
 

@@ -7,7 +7,7 @@ goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (doc
   device (`/dev/zero` never ends) is refused before it is opened for reading;
 - at most `max_input_bytes()` bytes (32 MiB unless `RBP_MAX_INPUT_MB` says otherwise), checked
   on the file's size and again while reading, so a file that grows cannot get past it;
-- YAML of at most `max_input_values()` values (100,000 unless `RBP_MAX_INPUT_VALUES` says
+- YAML of at most `max_input_values()` values (50,000 unless `RBP_MAX_INPUT_VALUES` says
   otherwise), counted on the parser's event stream before any tree is
   built (PyYAML's composed nodes take about 500 bytes each: a 60 MB file of `0,0,0,...` would
   need 9 GB), and whose aliases expand to at most that many values too (a few kB of nested
@@ -37,12 +37,13 @@ from rb_drake.errors import RbpInputError
 
 DEFAULT_MAX_INPUT_MB = 32.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
-# Values of a YAML document, aliases expanded, unless RBP_MAX_INPUT_VALUES says otherwise: a
-# document of 100,000 is refused (bad format) or read in under a second and 200 MB; PyYAML's
-# tree and the checks cost about 6 us and 500 bytes a value. Bundled caves: < 10,000;
-# `rbp scenario generate`: about 23 a anchor, 5,000 for 30 m at 3 anchors a metre (it refuses
-# a cave over the limit up front); an imported cave of 50,000 outline vertices about 150,000.
-DEFAULT_MAX_NODES = 100_000
+# Values of a YAML document, aliases expanded, unless RBP_MAX_INPUT_VALUES says otherwise.
+# PyYAML's tree and the checks cost about 6 us and 500 bytes a value, and `rbp plan` takes
+# 0.6 s and 170 MB before it reads its scenario and configuration: with 50,000 values it
+# refuses a bad one in 0.8-1.0 s and 195 MB (100,000: 1.2 s and 218 MB). Bundled caves:
+# < 10,000; `rbp scenario generate`: about 23 an anchor, 5,000 for 30 m at 3 anchors a metre
+# (it refuses a cave over the limit up front); `rbp scenario import`: 3 an outline vertex.
+DEFAULT_MAX_NODES = 50_000
 MAX_ALIASES = 10_000    # alias uses in a YAML document
 MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
 MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit

@@ -32,6 +32,27 @@ def length_problem(lo: float, hi: float) -> str | None:
     return None
 
 
+def estimated_values(hi: float, anchor_density: float) -> int:
+    """About how many values (YAML nodes) the file of a cave up to `hi` m long holds: measured
+    2.0-2.1 anchors per metre of length and anchor a metre of rock (two walls and the ends),
+    23-24 values an anchor and about 150 for the rest; rounded up so as not to undercount."""
+    return math.ceil(24 * anchor_density * (2.2 * hi + 8) + 200)
+
+
+def values_problem(hi: float, anchor_density: float) -> str | None:
+    """Why a cave up to `hi` m long at `anchor_density` would make a file rbp cannot read back
+    (over rb_drake.input_files' limit on a YAML document's values), or None."""
+    from rb_drake.input_files import max_input_values
+
+    values, limit = estimated_values(hi, anchor_density), max_input_values()
+    if values <= limit:
+        return None
+    return (f"--length/--anchor-density: the file of a cave up to {hi:g} m long at "
+            f"{anchor_density:g} anchors a metre would hold about {values:,} values, over the "
+            f"limit of {limit:,} for reading it back (a shorter --length or a lower "
+            "--anchor-density; RBP_MAX_INPUT_VALUES raises the limit)")
+
+
 @dataclasses.dataclass(frozen=True)
 class CaveConfig:
     """Knobs of the generator; the defaults reproduce the benchmark caves."""

@@ -7,9 +7,10 @@ goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (doc
   device (`/dev/zero` never ends) is refused before it is opened for reading;
 - at most `max_input_bytes()` bytes (32 MiB unless `RBP_MAX_INPUT_MB` says otherwise), checked
   on the file's size and again while reading, so a file that grows cannot get past it;
-- YAML of at most MAX_NODES values, counted on the parser's event stream before any tree is
+- YAML of at most `max_input_values()` values (50,000 unless `RBP_MAX_INPUT_VALUES` says
+  otherwise), counted on the parser's event stream before any tree is
   built (PyYAML's composed nodes take about 500 bytes each: a 60 MB file of `0,0,0,...` would
-  need 9 GB), and whose aliases expand to at most MAX_NODES values too (a few kB of nested
+  need 9 GB), and whose aliases expand to at most that many values too (a few kB of nested
   aliases can expand to gigabytes once walked: the "billion laughs"; yaml.safe_dump writes
   aliases for shared objects, so they are not refused as such), nested at most MAX_DEPTH
   levels, with no scalar over MAX_SCALAR_CHARS characters nor a number over MAX_NUMBER_CHARS
@@ -36,15 +37,19 @@ from rb_drake.errors import RbpInputError
 
 DEFAULT_MAX_INPUT_MB = 32.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
-MAX_NODES = 1_000_000   # values of a YAML document, aliases expanded (bundled caves: < 10,000;
-#                         `rbp scenario generate`'s largest, 1000 m at 20 anchors a metre, about
-#                         900,000; an imported cave of 50,000 outline vertices about 150,000)
+# Values of a YAML document, aliases expanded, unless RBP_MAX_INPUT_VALUES says otherwise.
+# PyYAML's tree and the checks cost about 6 us and 500 bytes a value, and `rbp plan` takes
+# 0.6 s and 170 MB before it reads its scenario and configuration: with 50,000 values it
+# refuses a bad one in 0.8-1.0 s and 195 MB (100,000: 1.2 s and 218 MB). Bundled caves:
+# < 10,000; `rbp scenario generate`: about 23 an anchor, 5,000 for 30 m at 3 anchors a metre
+# (it refuses a cave over the limit up front); `rbp scenario import`: 3 an outline vertex.
+DEFAULT_MAX_NODES = 50_000
 MAX_ALIASES = 10_000    # alias uses in a YAML document
 MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
 MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit
 MAX_JSON_VALUES = 2_000_000  # values of a JSON document (a 300-phase plan: about 230,000)
 # A YAML document's nodes are counted on its events (which need no tree) only when a cheap
-# bound on them, from its structural characters, could exceed MAX_NODES, or it is long.
+# bound on them, from its structural characters, could exceed the limit, or it is long.
 EVENT_COUNT_ABOVE_CHARS = 1_000_000
 
 # libyaml's loader when PyYAML was built with it: 3 ms for a bundled cave instead of 22 ms.
@@ -98,6 +103,31 @@ def max_input_bytes() -> int:
     if not megabytes > 0:
         megabytes = DEFAULT_MAX_INPUT_MB
     return int(min(megabytes, 1e6) * 2**20)
+
+
+def max_input_values() -> int:
+    """The limit on a YAML document's values: RBP_MAX_INPUT_VALUES if set (a positive whole
+    number), else DEFAULT_MAX_NODES."""
+    value = os.environ.get("RBP_MAX_INPUT_VALUES", "").strip()
+    try:
+        limit = int(float(value)) if value else DEFAULT_MAX_NODES
+    except (ValueError, OverflowError):
+        limit = DEFAULT_MAX_NODES
+    return limit if limit > 0 else DEFAULT_MAX_NODES
+
+
+def count_values(data: Any) -> int:
+    """The values (YAML nodes: keys, values and collections) `data` would be written as, as
+    `load_yaml` counts them, for a writer to refuse a file rbp could not read back."""
+    if isinstance(data, dict):
+        return 1 + sum(1 + count_values(v) for v in data.values())
+    if isinstance(data, list | tuple):
+        return 1 + sum(count_values(v) for v in data)
+    return 1
+
+
+def _too_many(limit: int) -> str:
+    return f"{limit:,} values (RBP_MAX_INPUT_VALUES raises the limit)"
 
 
 def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
@@ -161,14 +191,16 @@ def _size(n: int) -> str:
 
 def load_yaml(text: str) -> Any:
     """The one YAML document of `text`, refused (InputFileError naming the line and column) if
-    it is not valid YAML, holds or expands (aliases included) to more than MAX_NODES values,
+    it is not valid YAML, holds or expands (aliases included) to more than `max_input_values()`
+    values,
     nests deeper than MAX_DEPTH, repeats a key in a mapping, or holds a value longer than
     MAX_SCALAR_CHARS or a number longer than MAX_NUMBER_CHARS, a value its constructor cannot
     build or an integer beyond a float's range (`_Loader`), or a merge key. A long document's
     values are counted on its events first (`_count_events`), before any tree is built."""
+    limit = max_input_values()
     try:
-        if len(text) > EVENT_COUNT_ABOVE_CHARS or _node_bound(text) > MAX_NODES:
-            _count_events(text)
+        if len(text) > EVENT_COUNT_ABOVE_CHARS or _node_bound(text) > limit:
+            _count_events(text, limit)
     except yaml.YAMLError as e:
         raise _yaml_error(e) from None
     loader = _Loader(text)
@@ -176,7 +208,7 @@ def load_yaml(text: str) -> Any:
         node = loader.get_single_node()
         if node is None:
             return None
-        _check_tree(node)
+        _check_tree(node, limit)
         return loader.construct_document(node)
     except yaml.YAMLError as e:
         raise _yaml_error(e) from None
@@ -201,17 +233,17 @@ def _node_bound(text: str) -> int:
     return 2 * sum(text.count(c) for c in ",:-?[{") + 1
 
 
-def _count_events(text: str) -> None:
-    """Refuse a YAML document with more than MAX_NODES nodes (aliases counted once), nested
+def _count_events(text: str, limit: int) -> None:
+    """Refuse a YAML document with more than `limit` nodes (aliases counted once), nested
     deeper than MAX_DEPTH, or holding a scalar over MAX_SCALAR_CHARS characters, from the
     parser's events: constant memory, however large the document."""
     nodes = depth = 0
     for event in yaml.parse(text, Loader=SAFE_LOADER):
         if isinstance(event, yaml.ScalarEvent | yaml.AliasEvent | yaml.CollectionStartEvent):
             nodes += 1
-            if nodes > MAX_NODES:
-                raise InputFileError(_where(event.start_mark), f"holds more than "
-                                     f"{MAX_NODES:,} values")
+            if nodes > limit:
+                raise InputFileError(_where(event.start_mark), "holds more than "
+                                     + _too_many(limit))
             if isinstance(event, yaml.CollectionStartEvent):
                 depth += 1
                 if depth > MAX_DEPTH:
@@ -229,12 +261,13 @@ def _where(mark: Any) -> str:
     return f"line {mark.line + 1}, column {mark.column + 1}"
 
 
-def _check_tree(root: yaml.Node) -> None:
+def _check_tree(root: yaml.Node, limit: int) -> None:
     """Measure the composed document without expanding it: the composer shares one node for an
     anchor and its aliases, so each node's expanded size and height are computed once and
     reused, and the walk is linear in the file's size however large the expansion."""
     measured: dict[int, tuple[int, int]] = {}  # id(node) -> (values when expanded, height)
     open_nodes: set[int] = set()
+    scalars: set[int] = set()  # id(node) of the scalars inside collections, checked once each
     reuses = 0
 
     def measure(node: yaml.Node, depth: int) -> tuple[int, int]:
@@ -258,13 +291,22 @@ def _check_tree(root: yaml.Node) -> None:
             elif isinstance(node, yaml.SequenceNode):
                 children = list(node.value)
             for child in children:
-                child_size, child_height = measure(child, depth + 1)
+                if type(child) is yaml.ScalarNode:  # most values: size and height 1, no call
+                    if id(child) in scalars:  # an alias of an anchored scalar
+                        reuses += 1
+                    else:
+                        scalars.add(id(child))
+                        if len(child.value) > MAX_NUMBER_CHARS:  # < MAX_SCALAR_CHARS
+                            _check_scalar(child)
+                    child_size, child_height = 1, 1
+                else:
+                    child_size, child_height = measure(child, depth + 1)
                 size += child_size
                 height = max(height, child_height + 1)
-                if size > MAX_NODES:
+                if size > limit:
                     raise InputFileError(_where(node.start_mark), f"expands to more than "
-                                         f"{MAX_NODES:,} values (through YAML aliases, if it "
-                                         "has any)")
+                                         f"{limit:,} values through YAML aliases, if it has "
+                                         "any (RBP_MAX_INPUT_VALUES raises the limit)")
             open_nodes.discard(key)
             measured[key] = (size, height)
         if depth + height - 1 > MAX_DEPTH:

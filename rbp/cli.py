@@ -56,7 +56,7 @@ MAX_ANCHOR_DENSITY = 20.0  # anchors per metre: one every 5 cm; denser caves tak
 
 def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_write_text
-    from rb_drake.generate import CaveConfig, generate_cave, length_problem
+    from rb_drake.generate import CaveConfig, generate_cave, length_problem, values_problem
     from rb_drake.scenario import scenario_to_yaml
 
     lo, hi = args.length
@@ -65,6 +65,8 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     if not 0 < args.anchor_density <= MAX_ANCHOR_DENSITY:
         raise UserError(f"--anchor-density: must be above 0 and at most {MAX_ANCHOR_DENSITY:g} "
                         f"anchors per metre, got {args.anchor_density:g}")
+    if (problem := values_problem(hi, args.anchor_density)) is not None:
+        raise UserError(problem)  # up front: a 1000 m cave takes minutes to draw
     check_seed(args.seed)
     cfg = CaveConfig(anchor_density=args.anchor_density, length=(lo, hi))
     check_output(args.output)

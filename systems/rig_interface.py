@@ -56,6 +56,7 @@ from systems.rig_messages import (
     StatusFilter,
     command_problem,
     decode_status,
+    fixed_message,
     scan_log,
 )
 from systems.rig_safety import RigCommandSource, SafetyReport
@@ -320,12 +321,12 @@ def replay_log(path: str | Path,
     path = Path(path)
     setup, commands, raw_statuses = None, [], []
     try:
-        damage = scan_log(path)
+        damage = scan_log(path, {config.command_channel: fixed_message(rig_command_t)})
         events = lcm.EventLog(str(path), "r")
     except (OSError, ValueError) as e:
         raise RigInputError("(file)", f"not an LCM log: {e}") from None
     if damage is not None:
-        raise RigInputError("(file)", damage)
+        raise RigInputError(*damage)
     for number, event in enumerate(events):
         if event.channel == config.setup_channel and setup is None:
             setup = _decoded(rig_setup_t, event.data, config.setup_channel, number)

@@ -10,8 +10,9 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import struct
+from collections.abc import Mapping
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import lcm
 import numpy as np
@@ -52,32 +53,63 @@ class RigLcmConfig:
     max_tension_rate: float = 25.0  # N/s per boom
 
 
-def scan_log(path: Path) -> str | None:
-    """None if every event header of the LCM log at `path` is sound, else the reason for the
-    first that is not ("event N: ..."). lcm's C reader trusts the header's lengths (a data
-    length of 2**31 - 1 crashes it) and prints its own complaints on stderr, so the headers
-    are checked here, before lcm reads the log, with one seek per event."""
+class FixedMessage(NamedTuple):
+    """A message type whose encoding has one size, so a header scan can tell whether an event
+    of its channel decodes: exactly `size` bytes beginning with its `fingerprint`."""
+
+    name: str
+    fingerprint: bytes
+    size: int
+
+
+def fixed_message(message_type: Any) -> FixedMessage:
+    """The FixedMessage of an lcm-gen type without variable-length fields."""
+    return FixedMessage(message_type.__name__, message_type._get_packed_fingerprint(),
+                        len(message_type().encode()))
+
+
+def scan_log(path: Path, fixed: Mapping[str, FixedMessage] | None = None
+             ) -> tuple[str, str] | None:
+    """None if every event header of the LCM log at `path` is sound, else (field, reason) for
+    the first that is not: ("(file)", "event N: ..."), or (channel, "event N does not decode
+    ...") for an event of a channel in `fixed` that is not its type's size and fingerprint
+    (checked here, in one read per event, so that a damaged last command is refused before
+    lcm reads and rbp decodes the 200,000 events before it: 1.8 s and 280 MB). lcm's C reader
+    trusts the header's lengths (a data length of 2**31 - 1 crashes it) and prints its own
+    complaints on stderr, so the headers are checked here, before lcm reads the log."""
+    by_name = {name.encode(): message for name, message in (fixed or {}).items()}
+    peek = _EVENT_HEADER.size + MAX_CHANNEL_LENGTH + 8  # header, channel, a fingerprint
     with open(path, "rb") as f:
         size = f.seek(0, 2)
         pos, number = 0, 0
         while pos < size:
             if number >= MAX_LOG_EVENTS:
-                return (f"more than {MAX_LOG_EVENTS:,} events: longer than any rig run rbp "
-                        "writes")
+                return ("(file)", f"more than {MAX_LOG_EVENTS:,} events: longer than any rig "
+                        "run rbp writes")
             f.seek(pos)
-            head = f.read(_EVENT_HEADER.size)
+            chunk = f.read(peek)
+            head = chunk[:_EVENT_HEADER.size]
             bad = f"event {number} is damaged or not an LCM event:"
             if len(head) < _EVENT_HEADER.size:
-                return f"{bad} a header of {len(head)} bytes, not {_EVENT_HEADER.size}"
+                return ("(file)", f"{bad} a header of {len(head)} bytes, not "
+                        f"{_EVENT_HEADER.size}")
             sync, _, _, channel, data = _EVENT_HEADER.unpack(head)
             if sync != _LOG_SYNC:
-                return f"{bad} no LCM sync word (0x{sync:08x})"
+                return "(file)", f"{bad} no LCM sync word (0x{sync:08x})"
             if not 0 < channel <= MAX_CHANNEL_LENGTH:
-                return f"{bad} channel length {channel} is not 1 to {MAX_CHANNEL_LENGTH} bytes"
+                return ("(file)", f"{bad} channel length {channel} is not 1 to "
+                        f"{MAX_CHANNEL_LENGTH} bytes")
             left = size - pos - _EVENT_HEADER.size - channel
             if not 0 <= data <= left:
-                return (f"{bad} data length {data} is not 0 to the {max(left, 0)} bytes left "
-                        "in the file")
+                return ("(file)", f"{bad} data length {data} is not 0 to the {max(left, 0)} "
+                        "bytes left in the file")
+            name = chunk[_EVENT_HEADER.size:_EVENT_HEADER.size + channel]
+            message = by_name.get(name)
+            start = _EVENT_HEADER.size + channel
+            if message is not None and (data != message.size or chunk[start:start + 8]
+                                        != message.fingerprint):
+                return (name.decode(), f"event {number} does not decode as {message.name}: "
+                        "the log is damaged or not rbp's")
             pos += _EVENT_HEADER.size + channel + data
             number += 1
     return None

@@ -271,9 +271,41 @@ def test_long_flat_yaml_refused_before_its_tree_is_built():
     """A file of many plain values (no alias) is counted on the parser's events: PyYAML's
     tree of a 60 MB `[0,0,...]` took 9 GB before this bound."""
     text = "walls: [" + ",".join(["0"] * 1_100_000) + "]\n"
-    grown_mb = _refusal_growth_mb(load_yaml, text, "holds more than 1,000,000 values")
+    grown_mb = _refusal_growth_mb(load_yaml, text, "holds more than 50,000 values")
     # building the tree of 1,100,000 values takes about 600 MB; counting events, a few
     assert grown_mb < 60, f"refusing 1.1 million values grew the peak memory by {grown_mb:.0f} MB"
+
+
+def test_yaml_value_limit_set_by_environment_and_near_limit_refusal_fast(tmp_path, monkeypatch):
+    """50,000 values by default (RBP_MAX_INPUT_VALUES sets another); a scenario just under it
+    with a wrong format is refused in one line, by `rbp plan` in about 0.8 s and 190 MB (5 s
+    and 560 MB for the million values the limit was)."""
+    text = "anchors: [" + ",".join(["0"] * 50_001) + "]\n"
+    with pytest.raises(InputFileError, match=r"more than 50,000 values \(RBP_MAX_INPUT_VALUES"):
+        load_yaml(text)
+    monkeypatch.setenv("RBP_MAX_INPUT_VALUES", "100000")
+    assert len(load_yaml(text)["anchors"]) == 50_001
+    monkeypatch.setenv("RBP_MAX_INPUT_VALUES", "10")
+    with pytest.raises(InputFileError, match="more than 10 values"):
+        load_yaml("[" + ",".join(["0"] * 11) + "]")
+    monkeypatch.delenv("RBP_MAX_INPUT_VALUES")
+    near = tmp_path / "near.yaml"
+    near.write_text("format: wrong\nanchors: [" + ",".join(["0"] * 49_990) + "]\n")
+    start = time.perf_counter()
+    result = run_rbp("plan", str(near), "-o", str(tmp_path / "p.json"), cwd=tmp_path)
+    _refused_in_one_line(result, near, "format: expected")
+    assert time.perf_counter() - start < 30, "the near-limit scenario took too long"
+
+
+def test_generate_refuses_a_cave_too_large_to_read_back(tmp_path):
+    """Up front, before minutes of drawing: the file would be refused on reading."""
+    out = tmp_path / "cave.yaml"
+    result = run_rbp("scenario", "generate", "--length", "1000", "1000", "--anchor-density",
+                     "20", "-o", str(out), cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert "--length/--anchor-density" in lines[0] and "RBP_MAX_INPUT_VALUES" in lines[0]
+    assert not out.exists()
 
 
 def test_long_value_and_huge_integer_refused_with_their_line():
@@ -380,6 +412,50 @@ def test_control_characters_cannot_forge_error_lines(tmp_path):
     assert "cave\\nerror: forged.yaml" in result.stderr, result.stderr
 
 
+def _big_plan(steps: int) -> dict:
+    """The golden demo-shaft plan with its first phase's first step repeated `steps` times."""
+    import json
+
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "demo-shaft.json").read_text())
+    first = plan["phases"][0]
+    first["steps"] = [first["steps"][0]] * steps
+    first.pop("motion", None)
+    return plan
+
+
+def test_large_plan_with_a_wrong_format_refused_before_parsing(tmp_path):
+    """A 30 MB plan of another format took 11 s (the whole schema checked first)."""
+    import json
+
+    plan = _big_plan(100_000)
+    plan["format"] = "reachbot-plan/9"
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(plan))
+    start = time.perf_counter()
+    result = run_rbp("check", "-q", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "format: 'reachbot-plan/9' is not one of")
+    assert time.perf_counter() - start < 30, "the wrong format took too long to refuse"
+    # a format that is not the first key, and a document that is not an object
+    for name, text, words in (("late.json", '{"planner": "x", "format": 2}', "format: 2 is not"),
+                              ("list.json", "[1, 2]", "must be a JSON object, got an array")):
+        (tmp_path / name).write_text(text)
+        _refused_in_one_line(run_rbp("check", str(tmp_path / name), cwd=tmp_path),
+                             tmp_path / name, words)
+
+
+def test_large_plan_with_an_error_at_its_end_named_by_the_compiled_validator(tmp_path):
+    """jsonschema walked the whole plan to name the error (19 s for 30 MB); over a megabyte
+    the compiled validator's first error is named instead."""
+    import json
+
+    plan = _big_plan(20_000)
+    plan["phases"][0]["steps"][-1] = dict(plan["phases"][0]["steps"][0], pose=[1.0, 2.0])
+    path = tmp_path / "big.json"
+    path.write_text(json.dumps(plan))
+    result = run_rbp("check", "-q", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "phases/0/steps/19999/pose: must contain at least 3")
+
+
 def test_json_with_millions_of_values_refused_before_parsing():
     text = "[" + ",".join(["0.5"] * 2_100_000) + "]"
     grown_mb = _refusal_growth_mb(load_json, text, "over the limit of 2,000,000")
@@ -395,7 +471,7 @@ def test_cli_refuses_large_and_numeric_monsters_in_one_line(tmp_path):
     digits.write_text(_with_top("gravity", "[0.0, -3" + "1" * 6000 + "]"))
     plan = tmp_path / "digits.json"
     plan.write_text('{"format": 1' + "2" * 6000 + "}")
-    for path, command, words in ((flat, "scenario", "holds more than 1,000,000 values"),
+    for path, command, words in ((flat, "scenario", "holds more than 50,000 values"),
                                  (digits, "scenario", "a number of 6,002 characters"),
                                  (plan, "check", "an integer beyond a float's range")):
         start = time.perf_counter()
@@ -440,6 +516,32 @@ def test_damaged_rig_logs_refused_in_one_line(tmp_path):
         _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path, words)
 
 
+def test_rig_log_with_a_damaged_last_command_refused_by_the_header_scan(tmp_path):
+    """A command that cannot decode is found by the scan of event headers (its size and
+    fingerprint), before lcm reads and rbp decodes the events before it: 200,000 commands
+    then garbage took 1.8 s and 280 MB to refuse."""
+    import lcm
+
+    from systems.reachbot_lcm import rig_command_t
+    from systems.rig_interface import RigLcmConfig
+    from systems.rig_messages import fixed_message, scan_log
+
+    channels = RigLcmConfig()
+    path = tmp_path / "run.lcmlog"
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    command = rig_command_t().encode()
+    for _ in range(20_000):
+        log.write_event(0, channels.command_channel, command)
+    log.write_event(0, channels.command_channel, b"garbage")
+    log.close()
+    fixed = {channels.command_channel: fixed_message(rig_command_t)}
+    assert scan_log(path, fixed) == (channels.command_channel, "event 20000 does not decode as "
+                                     "rig_command_t: the log is damaged or not rbp's")
+    assert scan_log(path) is None  # the headers themselves are sound
+    result = run_rbp("rig-replay", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "RIG_COMMAND: event 20000 does not decode")
+
+
 def test_hostile_terrain_files_refused_quickly_in_one_line(tmp_path):
     """`rbp scenario import`: a mesh of loose facets (trimesh's assembly of its section is
     quadratic in the pieces: 81 s for 100,000 facets), coordinates of 1e308 (numpy's overflow
@@ -465,6 +567,23 @@ def test_hostile_terrain_files_refused_quickly_in_one_line(tmp_path):
         # each takes well under a second of its own; the bound allows for a loaded machine
         assert time.perf_counter() - start < 30, f"importing {path} took too long"
     assert not (tmp_path / "cave.yaml").exists(), "a refused import wrote its output"
+
+
+def test_ply_over_the_vertex_limit_refused_from_its_header(tmp_path):
+    """The header's vertex count is read before the scan is loaded (2.6 million points took
+    5 s and 500 MB to load before their refusal as too dense)."""
+    from rb_drake.terrain.mesh_section import MAX_SCAN_VERTICES
+
+    n = MAX_SCAN_VERTICES + 1
+    path = tmp_path / "cloud.ply"
+    path.write_bytes(f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float "
+                     "x\nproperty float y\nproperty float z\nend_header\n".encode()
+                     + np.zeros((n, 3), "<f4").tobytes())
+    start = time.perf_counter()
+    result = run_rbp("scenario", "import", str(path), "-o", str(tmp_path / "cave.yaml"),
+                     cwd=tmp_path)
+    _refused_in_one_line(result, path, f"mesh: its header states {n:,} vertices")
+    assert time.perf_counter() - start < 30, "the large cloud took too long to refuse"
 
 
 def _write_stl(path: Path, triangles: np.ndarray) -> None:

@@ -431,3 +431,15 @@ def test_imported_anchors_pass_the_scenario_reader(tmp_path):
     inward = [a.id for a in anchors
               if rock.contains(np.array(a.position) + 0.05 * np.array(a.normal))]
     assert len(anchors) > 100 and not inward, inward
+
+
+def test_cave_too_large_to_read_back_refused(tmp_path, monkeypatch):
+    """An import whose scenario file would exceed the reader's limit on values (50,000 outline
+    vertices make 150,000) is refused in one line naming the options and the variable."""
+    out = tmp_path / "cave.yaml"
+    monkeypatch.setenv("RBP_MAX_INPUT_VALUES", "500")  # the subprocess inherits it
+    result = run_rbp("scenario", "import", str(EXAMPLE), "-o", str(out), cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert "--simplify/--anchor-density" in lines[0] and "RBP_MAX_INPUT_VALUES" in lines[0]
+    assert not out.exists()

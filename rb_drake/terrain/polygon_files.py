@@ -35,7 +35,8 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply")  # sectioned by rb_drake.terrain.mesh_s
 MAX_COORDINATE = 1e4  # m, as rb_drake.scenario.MAX_COORDINATE: farther is a wrong unit or scale
 CURVE_TOLERANCE = 0.005  # m: arcs and Bézier curves become polylines this close to them
 MAX_VERTICES = 50_000  # outline vertices in one file: a cave section needs a few thousand
-#                       (and the scenario written, 3 YAML values a vertex, stays readable)
+#                       (the scenario written, 3 YAML values a vertex, is checked against
+#                       the reader's limit on values: import_cave._check_readable)
 MAX_NUMBERS = 8 * MAX_VERTICES  # digit runs in a drawing: a vertex's two numbers need 2-4,
 #                                 a DXF's header a few thousand
 INSTALL_HINT = "pip install 'rbp[import]'"

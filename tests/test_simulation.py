@@ -819,7 +819,7 @@ def test_cli_writes_json(good_plan: dict[str, Any], tmp_path: Path,
 
 @pytest.mark.parametrize("content, field", [
     (None, "(file)"),
-    ("{ not json", "(file)"),
+    ("{ not json", "line 1, column 3"),  # a syntax error names its place
     ('{"format": "reachbot-plan/1"}', "(top level)"),
     ("FAILED", "success"),
 ])

@@ -368,7 +368,9 @@ def test_damaged_drawings_refused_or_read(tmp_path, cut, junk, suffix):
 def test_drawings_that_would_expand_past_the_limit_refused_quickly(tmp_path):
     """Arcs and <use> copies are bounded before ezdxf or svgelements expand them: a bulge of
     1e10 made billions of chords (gigabytes, minutes), six levels of ten <use> a million
-    elements, 2,000 tall Bézier curves 2 million points; a bulge of 1e300 made ezdxf warn."""
+    elements, 2,000 tall Bézier curves 2 million points; a bulge of 1e300 made ezdxf warn.
+    svgelements follows any href, dropping its first character: `href="xa"` copies `#a`, which
+    the count once skipped (21 s and 1.3 GB for the bomb, a RecursionError for the loop)."""
     import time
 
     def bulge_dxf(name: str, bulge: float) -> Path:
@@ -386,11 +388,17 @@ def test_drawings_that_would_expand_past_the_limit_refused_quickly(tmp_path):
         (bulge_dxf("bnan.dxf", math.nan), "entity 1 .*: a bulge that is not a finite number"),
         (tmp_path / "bomb.svg", r"6,802,462 elements once <use> copies are expanded"),
         (tmp_path / "loop.svg", r"<use> nested more than 8 deep \(or in a loop\)"),
+        (tmp_path / "bomb_nohash.svg", r"6,802,462 elements once <use> copies are expanded"),
+        (tmp_path / "loop_nohash.svg", r"<use> nested more than 8 deep \(or in a loop\)"),
         (tmp_path / "curves.svg", "more than 50000 outline vertices"),
     ]
     (tmp_path / "bomb.svg").write_text(svg.format(
         '<defs><g id="g0"><rect width="1" height="1"/></g>' + use + '</defs><use href="#g6"/>'))
     (tmp_path / "loop.svg").write_text(svg.format('<g id="a"><use href="#a"/></g>'))
+    (tmp_path / "bomb_nohash.svg").write_text(
+        (tmp_path / "bomb.svg").read_text().replace('href="#', 'href="x'))
+    (tmp_path / "loop_nohash.svg").write_text(svg.format(
+        '<g id="a"><rect width="1" height="1"/><use href="_a"/></g>'))
     (tmp_path / "curves.svg").write_text(svg.format(
         '<path d="M0 0 ' + " ".join(f"Q {20 * k + 10} 5000 {20 * k + 20} 0" for k in range(2000))
         + ' Z"/>'))

@@ -50,7 +50,7 @@ def use_copies(text: str, limit: int) -> str | None:
         root = ElementTree.fromstring(text)
     except (ElementTree.ParseError, ValueError):
         return None  # svgelements says what is wrong with it
-    ids = {e.get("id"): e for e in root.iter() if e.get("id")}
+    ids = {e.get("id"): e for e in root.iter() if e.get("id") is not None}
     sizes: dict[int, int] = {}  # elements under an element, its copies expanded
 
     def size(element: Any, depth: int) -> int:
@@ -59,8 +59,10 @@ def use_copies(text: str, limit: int) -> str | None:
                 raise ValueError(f"<use> nested more than {MAX_USE_DEPTH} deep (or in a loop)")
             n = 1 + sum(size(child, depth) for child in element)
             if element.tag.rsplit("}", 1)[-1] == "use":
-                href = element.get("href") or element.get(f"{{{XLINK}}}href") or ""
-                target = ids.get(href[1:]) if href.startswith("#") else None
+                # as svgelements resolves it: `href` over `xlink:href`, and any first
+                # character dropped, so that `href="xa"` copies `#a` too
+                href = element.get("href", element.get(f"{{{XLINK}}}href"))
+                target = ids.get(href[1:]) if href is not None else None
                 n += size(target, depth + 1) if target is not None else 0
             sizes[id(element)] = n
         return sizes[id(element)]

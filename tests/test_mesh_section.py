@@ -323,5 +323,11 @@ def test_too_few_points_for_a_density_are_refused(tmp_path: Path) -> None:
     path = tmp_path / "five.ply"
     points = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 1], [0, 2, 3]], dtype=float)
     path.write_bytes(trimesh.PointCloud(points).export(file_type="ply"))
-    with pytest.raises(RbpInputError, match=r"five\.ply: resolution: 5 point\(s\) are too few"):
+    with pytest.raises(RbpInputError,
+                       match=r"five\.ply: resolution: 5 point\(s\), 5 distinct, are too few"):
         section_polygons(path, None, None, None, TOLERANCE)
+    copies = tmp_path / "copies.obj"  # "4000000 point(s) are too few" said a cloud of one point
+    copies.write_text("v 0 0 0\n" * 1000 + "v 1 1 1\n")
+    with pytest.raises(RbpInputError,
+                       match=r"copies\.obj: resolution: 1,001 point\(s\), 2 distinct, are too"):
+        section_polygons(copies, None, None, None, TOLERANCE)

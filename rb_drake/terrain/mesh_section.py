@@ -79,7 +79,11 @@ MAX_SECTION_PIECES = 2_000
 # load a 31 MB cloud of 2.6 million points that was then refused as too dense; a million
 # points load and are thinned in about 2.5 s (the example cloud holds 12,000).
 MAX_SCAN_VERTICES = 1_000_000
-_PLY_VERTICES = re.compile(rb"^element\s+vertex\s+(\d{1,30})\s*$", re.MULTILINE)
+# Triangles likewise, counted in the file before trimesh builds its arrays (about 200 bytes a
+# face: an OBJ of 3.9 million faces on one vertex took 2.7 s and 809 MB). An STL's vertices are
+# 3 a triangle until trimesh merges them, so an STL holds at most a third of a million.
+MAX_SCAN_FACES = 1_000_000
+_PLY_ELEMENT = re.compile(rb"^[ \t]*element[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
 
 
 def _error(path: Path, field: str, reason: str) -> RbpInputError:
@@ -122,8 +126,7 @@ def load_scan(path: Path) -> tuple[str, Any]:
         raise _error(path, "mesh", f"unknown format {suffix or '(no suffix)'!r}: expected one of "
                      f"{', '.join(MESH_SUFFIXES)} (a mesh, or a PLY point cloud)")
     data = _read_bytes(path)
-    if suffix == ".ply":
-        _check_ply_header(path, data)
+    _check_scan_counts(path, data, suffix)
     try:
         import trimesh
     except ImportError:
@@ -150,15 +153,46 @@ def load_scan(path: Path) -> tuple[str, Any]:
     return "cloud", vertices
 
 
-def _check_ply_header(path: Path, data: bytes) -> None:
-    """Refuse a PLY whose header states more than MAX_SCAN_VERTICES vertices, before loading
-    it (a malformed header is left to trimesh's reader to refuse)."""
+def _check_scan_counts(path: Path, data: bytes, suffix: str) -> None:
+    """Refuse a scan of more than MAX_SCAN_VERTICES vertices or MAX_SCAN_FACES faces, counted
+    in the file before trimesh loads it (what cannot be counted is left to trimesh to refuse)."""
+    vertices, faces = _scan_counts(data, suffix)
+    what = "its header states" if suffix == ".ply" else "it holds"
+    if vertices > MAX_SCAN_VERTICES:
+        merged = " (3 a triangle, before merging)" if suffix == ".stl" else ""
+        raise _error(path, "mesh", f"{what} {vertices:,} vertices{merged}, over the limit of "
+                     f"{MAX_SCAN_VERTICES:,}: thin or crop the scan to the cave's section first")
+    if faces > MAX_SCAN_FACES:
+        raise _error(path, "mesh", f"{what} {faces:,} faces, over the limit of "
+                     f"{MAX_SCAN_FACES:,}: simplify or crop the scan to the cave's section first")
+
+
+def _scan_counts(data: bytes, suffix: str) -> tuple[int, int]:
+    """(vertices, faces) as trimesh's reader for `suffix` will find them in `data`."""
+    if suffix == ".stl":
+        stated = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
+        # binary if the sizes agree (trimesh's test), else ASCII: every `vertex`, any case
+        binary = len(data) - 84 == 50 * stated
+        triangles = stated if binary else data.lower().count(b"vertex") // 3
+        return 3 * triangles, triangles
+    if suffix == ".obj":  # trimesh's vertices follow "\nv ", its faces start lines with "f"
+        return (data.startswith(b"v ") + data.count(b"\nv ") + data.count(b"\rv "),
+                data.startswith(b"f") + data.count(b"\nf") + data.count(b"\rf"))
+    # PLY: every element line of the header (its count may carry a sign: int() takes "+2")
     end = data.find(b"end_header", 0, 65536)
-    found = _PLY_VERTICES.search(data, 0, end) if data.startswith(b"ply") and end > 0 else None
-    if found is not None and int(found.group(1)) > MAX_SCAN_VERTICES:
-        raise _error(path, "mesh", f"its header states {int(found.group(1)):,} vertices, over "
-                     f"the limit of {MAX_SCAN_VERTICES:,}: thin or crop the scan to the cave's "
-                     "section first")
+    if not data.startswith(b"ply") or end < 0:
+        return 0, 0  # not a PLY header: trimesh says what is wrong with it
+    vertices = faces = 0
+    for name, count in _PLY_ELEMENT.findall(data, 0, end):
+        try:
+            n = int(count)
+        except ValueError:
+            continue  # trimesh refuses the header
+        if name == b"vertex":
+            vertices = max(vertices, n)
+        else:  # faces, or an element trimesh reads alongside them (edges, strips)
+            faces = max(faces, n)
+    return vertices, faces
 
 
 class _UnreadableError(Exception):
@@ -258,8 +292,10 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
         if resolution is None:
             resolution = cloud_resolution(vertices)
             if not math.isfinite(resolution):
-                raise _error(path, "resolution", f"{len(vertices)} point(s) are too few to "
-                             "tell the cloud's density: give a resolution")
+                distinct = len(np.unique(vertices, axis=0))  # 4 million copies of one point
+                raise _error(path, "resolution", f"{len(vertices):,} point(s), {distinct:,} "
+                             "distinct, are too few to tell the cloud's density: give a "
+                             "resolution")
         near = np.abs(side) <= resolution
         if not near.any():
             raise _error(path, "plane", f"{where}: no point within {resolution:g} m of it")

@@ -46,6 +46,7 @@ from rb_drake.files import atomic_write
 from rb_drake.input_files import InputFileError, load_json
 from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
 from rb_drake.stance import Stance
+from systems.lcm_url import open_problem, quietly
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
 from systems.rig_messages import (
@@ -232,7 +233,12 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
     if sim_rig is not None and not config.url.startswith(MEMQ):
         raise RigInputError("--lcm-url", f"the simulated rig runs in-process on {MEMQ}, "
                             f"not on {config.url}")
-    bus = DrakeLcm(config.url)
+    problem = open_problem(config.url)  # in one line, before any command is sent
+    if problem:
+        raise RigInputError("--lcm-url", f"{config.url!r}: {problem}")
+    bus, said = quietly(lambda: DrakeLcm(config.url))  # tcpq:// says "connecting..."
+    if bus is None:
+        raise RigInputError("--lcm-url", f"{config.url!r}: LCM cannot open it: {said}")
     if sim_rig is not None:
         start = phase.pose.value(phase.start_time).ravel()
         rig = RigSimulator(phase.scenario.robot, phase.stance.positions, start, sim_rig)

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from rb_drake import geometry
+from rb_drake.errors import RbpInputError
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
 from rbp.commands.common import UserError
@@ -33,6 +34,7 @@ from systems.rig_interface import (
     RigRun,
     body_phase,
     replay_log,
+    run_rig,
 )
 
 SIM = RigSimConfig(seed=7)
@@ -429,6 +431,43 @@ def test_rig_run_checks_its_url_and_log_before_the_run(plan_file: Path, tmp_path
             cmd_rig_run(parse("rig-run", str(plan_file), "--lcm-url", url, "--log", log))
     with pytest.raises(UserError, match=f"^{re.escape(str(tmp_path))}: --log: is a directory"):
         cmd_rig_run(parse("rig-run", str(plan_file), "--sim-rig", "--log", str(tmp_path)))
+
+
+@pytest.mark.parametrize(("url", "words"), [
+    ("udpm://999.1.1.1:99999", "'999.1.1.1' is not an IPv4 address"),
+    ("udpm://10.0.0.1:7667", "'10.0.0.1' is not a multicast address"),
+    ("udpm://239.255.76.67:0", "the port must be a whole number from 1 to 65535, got '0'"),
+    ("udpm://239.255.76.67:7667?ttl=abc", "ttl must be a whole number from 0 to 255"),
+    ("udpm://239.255.76.67:7667?foo=1", "unknown option 'foo=1'"),
+    ("memq://x", "memq:// takes no address or options"),
+    ("tcpq://:5", "expected tcpq://HOST:PORT"),
+    ("file:///dev/zero?mode=r", "a log file is not a bus"),
+    ("tcpq://127.0.0.1:1", "LCM cannot open it: LCM tcpq: connecting"),
+])
+def test_rig_run_checks_the_whole_url(url: str, words: str, plan_file: Path, tmp_path: Path,
+                                      monkeypatch: pytest.MonkeyPatch,
+                                      capfd: pytest.CaptureFixture[str]) -> None:
+    """A URL of a known provider LCM cannot use is refused in one line before the plan is
+    read: udpm://999.1.1.1:99999 printed LCM's "Error: Bad multicast IP address" and then sent
+    81 commands; tcpq:// printed "LCM tcpq: connecting..." and more, file:// read a log."""
+    import rbp.commands.common
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("the plan was read before the URL was checked")
+
+    monkeypatch.setattr(rbp.commands.common, "read_plan", never)
+    with pytest.raises(UserError, match=rf"^--lcm-url: '{re.escape(url)}': {re.escape(words)}"):
+        cmd_rig_run(parse("rig-run", str(plan_file), "--lcm-url", url, "--log",
+                          str(tmp_path / "x.lcm")))
+    assert capfd.readouterr().err == "", "LCM's own messages reached stderr"
+
+
+def test_rig_run_refuses_a_bus_lcm_cannot_open_before_sending(plan: dict[str, Any],
+                                                              tmp_path: Path) -> None:
+    """run_rig opens the bus first: a URL LCM refuses sends no command and writes no log."""
+    with pytest.raises(RbpInputError, match=r"--lcm-url: 'tcpq://127\.0\.0\.1:1': LCM cannot"):
+        run_rig(plan, 0, RigLcmConfig(url="tcpq://127.0.0.1:1"), tmp_path / "x.lcm")
+    assert not (tmp_path / "x.lcm").exists()
 
 
 @pytest.mark.parametrize("command", ["rig-replay", "rig-report"])

@@ -13,20 +13,20 @@ from pathlib import Path
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 MIN_PERIOD, MAX_PERIOD = 0.01, 1.0  # s between rig commands: 100 a second to one a second
-LCM_PROVIDERS = ("memq", "udpm", "mpudpm", "tcpq", "file")  # what LCM's C library provides
 
 
 def check_lcm_url(url: str) -> None:
-    """`--lcm-url` of a provider LCM has, checked before the plan is verified (garbage://
-    failed after 9 s, with LCM's own "Error: ..." line)."""
+    """`--lcm-url` checked whole and opened once, before the plan is verified (garbage://
+    failed after 9 s with LCM's own "Error: ..." line; udpm://999.1.1.1:99999 printed one and
+    ran on without a bus)."""
     from rbp.commands.common import UserError
+    from systems.lcm_url import lcm_url_problem, open_problem
 
-    if not url:
-        return  # LCM's default: $LCM_DEFAULT_URL
-    provider, sep, _ = url.partition("://")
-    if not sep or provider not in LCM_PROVIDERS:
-        raise UserError(f"--lcm-url: {url!r} is not an LCM URL: expected PROVIDER://... with "
-                        f"a provider of {', '.join(LCM_PROVIDERS)}")
+    # an empty URL is LCM's default, $LCM_DEFAULT_URL: only opening it tells
+    problem = (lcm_url_problem(url) if url else None) or open_problem(url)
+    if problem:
+        raise UserError(f"--lcm-url: {url!r} {problem}" if problem.startswith("is not")
+                        else f"--lcm-url: {url!r}: {problem}")
 
 
 def add_rig_commands(subparsers) -> None:

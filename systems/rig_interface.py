@@ -334,7 +334,11 @@ def replay_log(path: str | Path,
     if damage is not None:
         raise RigInputError(*damage)
     for number, event in enumerate(events):
-        if event.channel == config.setup_channel and setup is None:
+        if event.channel == config.setup_channel:
+            if number > 0:  # run_rig writes it once, first: a later one could swap the scenario
+                raise RigInputError(config.setup_channel, f"event {number}: " + (
+                    "a second setup message; a log holds one, its first event" if setup
+                    else "the setup message must be the log's first event, not a later one"))
             setup = _decoded(rig_setup_t, event.data, config.setup_channel, number)
         elif event.channel == config.command_channel:
             commands.append((number, _decoded(rig_command_t, event.data,

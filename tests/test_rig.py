@@ -297,6 +297,32 @@ def test_replay_and_report_commands(sim_run: tuple[RigRun, Path],
     assert len(data) > 10_000 and data.startswith(b"\x89PNG\r\n\x1a\n"), "not a PNG figure"
 
 
+def test_a_setup_not_first_or_twice_is_refused(sim_run: tuple[RigRun, Path],
+                                               tmp_path: Path) -> None:
+    """The setup comes once, first: a second one could swap the scenario mid-log, and one that
+    comes last was read as if first; both are refused naming the event."""
+    _, log = sim_run
+    events = list(lcm.EventLog(str(log), "r"))
+    setup = events[0]
+
+    def write(name: str, order: list) -> Path:
+        path = tmp_path / name
+        out = lcm.EventLog(str(path), "w", overwrite=True)
+        for e in order:
+            out.write_event(e.timestamp, e.channel, e.data)
+        out.close()
+        return path
+
+    twice = write("twice.lcm", [*events[:3], setup, *events[3:]])
+    last = write("last.lcm", [*events[1:], setup])
+    with pytest.raises(RbpInputError, match=r"RIG_SETUP: event 3: a second setup message"):
+        replay_log(twice)
+    with pytest.raises(RbpInputError, match=rf"RIG_SETUP: event {len(events) - 1}: the setup "
+                                            "message must be the log's first event"):
+        replay_log(last)
+    assert cmd_rig_replay(parse("rig-replay", str(write("same.lcm", events)))) == 0
+
+
 def test_run_without_a_rig_receives_nothing(scn: Scenario, tmp_path: Path,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     """Nobody answers on this memq bus: the run ends on time (real time, 1 s) and says so."""

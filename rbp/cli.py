@@ -90,7 +90,7 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     from rbp.api import import_scenario
 
     check_seed(args.seed)
-    check_output(args.output)
+    check_output(args.output, inputs={"the imported file": args.file})
     scn = import_scenario(args.file, unit=args.unit, scale=args.scale, simplify=args.simplify,
                           anchor_density=args.anchor_density, seed=args.seed,
                           start=_pair(args.start), goal=_pair(args.goal), name=args.name,
@@ -150,7 +150,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rbp.api import draw
 
     check_dpi(args.dpi)
-    check_output(args.output, picture=True)
+    check_output(args.output, picture=True, inputs={"the scenario's file": args.scenario})
     draw(load_scenario_spec(args.scenario, check_start=False), args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
     return EXIT_OK
@@ -209,7 +209,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
         write_pictures,
     )
 
-    check_output(args.output)
     check_plan_output(args)
     if args.animate:
         from rbp.commands.plan import check_animation
@@ -313,7 +312,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
                         "into it)")
     for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
-        check_output(out / name, "--out", picture=name.endswith(".png"))
+        check_output(out / name, "--out", picture=name.endswith(".png"),
+                     inputs={"the scenario's file": args.scenario})
     scn = load_scenario_spec(args.scenario)
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))

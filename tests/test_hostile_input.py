@@ -737,5 +737,5 @@ def test_plan_output_is_json_and_not_an_input(tmp_path):
     config.write_text("{}")
     result = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(config),
                      "--footsteps-only", cwd=tmp_path)
-    _refused_in_one_line(result, config, "-o: is --config's file; the plan would overwrite it")
+    _refused_in_one_line(result, config, "-o: is --config's file; the output would overwrite it")
     assert config.read_text() == "{}"

@@ -86,8 +86,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from rbp.commands.common import UserError, check_output, check_seed, plural
 
     check_seed(args.seed)
+    plan_input = {"the plan's file": args.plan}
     if args.json:
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", inputs=plan_input)
+    if args.html:  # a folder here failed after the simulation, naming the temporary file
+        check_output(args.html, "--html", picture=None,
+                     inputs=plan_input | {"--json's file": args.json})
     if not 0 <= args.trials <= MAX_TRIALS:
         raise UserError(f"--trials: must be 0 to {MAX_TRIALS:,}, got {args.trials}")
     if args.replan and args.trials == 0:

@@ -729,8 +729,10 @@ def test_plan_output_is_json_and_not_an_input(tmp_path):
     cave = tmp_path / "cave.yaml"
     cave.write_text(_demo_text())
     result = run_rbp("plan", str(cave), "-o", str(cave), "--footsteps-only", cwd=tmp_path)
-    _refused_in_one_line(result, cave, "-o: a plan file is JSON")
+    _refused_in_one_line(result, cave, "-o: is the scenario's file")
     assert cave.read_text() == _demo_text(), "the scenario was overwritten"
+    result = run_rbp("plan", str(cave), "-o", "other.yaml", "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, Path("other.yaml"), "-o: a plan file is JSON")
     result = run_rbp("plan", "demo-shaft", "-o", "plan", "--footsteps-only", cwd=tmp_path)
     _refused_in_one_line(result, Path("plan"), "got no suffix")
     config = tmp_path / "planner.json"

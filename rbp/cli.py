@@ -575,9 +575,12 @@ def _main(argv: list[str] | None) -> int:
 
     try:
         from rb_drake.environment import threads_adapt_setting, threads_setting
+        from rb_drake.input_files import max_input_bytes, max_input_values
 
         threads_setting()  # a malformed RBP_THREADS is refused before any work
         threads_adapt_setting()
+        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
+        max_input_values()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

@@ -297,6 +297,25 @@ def test_yaml_value_limit_set_by_environment_and_near_limit_refusal_fast(tmp_pat
     assert time.perf_counter() - start < 30, "the near-limit scenario took too long"
 
 
+@pytest.mark.parametrize("variable", ["RBP_MAX_INPUT_MB", "RBP_MAX_INPUT_VALUES"])
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "nan", "1e999", "10000001"])
+def test_reading_limit_variables_malformed_refused(tmp_path, monkeypatch, variable, value):
+    """A malformed limit silently fell back to the default; refused as RBP_THREADS is."""
+    monkeypatch.setenv(variable, value)
+    result = run_rbp("scenario", "check", "demo-shaft", cwd=tmp_path)
+    _refused_in_one_line(result, Path(variable), f"{variable} (environment): must be")
+
+
+def test_largest_byte_limit_reads_files(tmp_path, monkeypatch):
+    """RBP_MAX_INPUT_MB=100000 (and its maximum) made every read allocate the whole limit: a
+    MemoryError; at most the file's size is read now."""
+    for value in ("100000", "1000000"):
+        monkeypatch.setenv("RBP_MAX_INPUT_MB", value)
+        assert read_text(DEMO) == _demo_text()
+        result = run_rbp("scenario", "check", str(DEMO), cwd=tmp_path)
+        assert result.returncode == 0 and not result.stderr, result.stderr[-2000:]
+
+
 def test_generate_refuses_a_cave_too_large_to_read_back(tmp_path):
     """Up front, before minutes of drawing: the file would be refused on reading."""
     out = tmp_path / "cave.yaml"

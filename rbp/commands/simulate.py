@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import time
 from pathlib import Path
@@ -184,6 +185,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.meshcat or args.html:
         from systems.meshcat_view import save_html, show_climb, start_meshcat
 
+        # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL is
+        # printed below when it is wanted (--meshcat), so an accepted --html run prints nothing
+        logging.getLogger("drake").setLevel(logging.WARNING)
         meshcat = start_meshcat()
         show_climb(meshcat, record)
         if args.html:

@@ -703,6 +703,15 @@ def test_plan_provenance_outside_its_range_refused(tmp_path):
                          "--footsteps-only", "--no-pictures", cwd=tmp_path)
         _refused_in_one_line(result, path, f"provenance.config.{part}.{key}: must be")
         assert not (tmp_path / "b.json").exists()
+    for seed, words in ((-1, "less than the minimum of 0"), (2**64, "greater than the maximum")):
+        forged = json.loads(json.dumps(plan))  # --seed -1 is refused; the plan's was read
+        forged["provenance"]["seed"] = seed
+        path = tmp_path / "seed.json"
+        path.write_text(json.dumps(forged))
+        result = run_rbp("plan", "--from-plan", str(path), "-o", str(tmp_path / "b.json"),
+                         "--footsteps-only", "--no-pictures", cwd=tmp_path)
+        _refused_in_one_line(result, path, f"provenance/seed: {seed} is {words}")
+        assert not (tmp_path / "b.json").exists()
 
 
 @pytest.mark.parametrize(("text", "field"), [

@@ -213,7 +213,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.animate:
         from rbp.commands.plan import check_animation
 
-        check_animation(args.animate)
+        check_animation(args.animate, {"the scenario's file": args.scenario,
+                                       "--from-plan's file": args.from_plan})
     if args.phase_figure is not None:  # what can be refused before planning
         if args.phase_figure < 0:
             raise UserError(f"--phase-figure: must be 0 or more, got {args.phase_figure}")

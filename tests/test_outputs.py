@@ -185,6 +185,7 @@ def test_trial_record_that_is_not_a_file_refused_before_the_trial(tmp_path, fifo
     (("rig-run", "--sim-rig", "--log", "P.json", "P.json"), "--log: is the plan's file"),
     (("scenario", "import", "P.json", "-o", "P.json"), "-o: is the imported file"),
     (("scenario", "show", "P.json", "-o", "link.png"), "-o: is the scenario's file"),
+    (("plan", "P.json", "-o", "o.json", "--animate", "link.png"), "--animate: is the scenario"),
 ])
 def test_output_that_is_an_input_refused(tmp_path, args, words):
     """`--json P.json P.json` replaced the plan with the results, `rig-run --log` with a binary

@@ -273,12 +273,12 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
 ANIMATION_SUFFIXES = (".gif", ".mp4")
 
 
-def check_animation(path: str) -> None:
+def check_animation(path: str, inputs: dict[str, str | None] | None = None) -> None:
     """`rbp plan --animate PATH` checked before planning: a writable .gif, or an .mp4 with
     ffmpeg installed (the writer is chosen by the suffix)."""
     from rbp.commands.common import UserError, check_output
 
-    check_output(path, "--animate", picture=True, animation=True)
+    check_output(path, "--animate", picture=True, animation=True, inputs=inputs)
     suffix = Path(path).suffix.lower()
     if suffix not in ANIMATION_SUFFIXES:
         raise UserError(f"{path}: --animate: must end in .gif or .mp4, got "

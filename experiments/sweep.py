@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import IO, Any, NamedTuple
 
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
-from rb_drake.files import atomic_write_text
+from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
 
 RECORD_FORMAT = "rbp-trial/1"
@@ -122,6 +122,10 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     Raises SweepError when the folder holds a record of that name for other parameters: the
     folder belongs to another sweep, and mixing the two would be silently wrong."""
     path = trial_path(out, trial.name)
+    # before any trial runs: a folder there (or --out a file) failed after the trial's work,
+    # and a symlink to a device was replaced by the record
+    if (problem := output_problem(path)) is not None:
+        raise SweepError(f"{path}: --out: {problem}")
     if not path.exists():
         return None
     try:  # within the input bounds: a sweep folder may hold anything (rb_drake.input_files)
@@ -252,6 +256,10 @@ def run_sweep(trials: Iterable[Trial], out: str | Path, workers: int | None = No
     _check_names(trials)
     if workers is not None and workers < 1:
         raise SweepError(f"--workers: must be 1 or more, got {workers}")
+    for folder in (Path(out), Path(out) / "trials"):  # the records go there: a folder or none
+        if folder.exists() and not folder.is_dir():
+            raise SweepError(f"{folder}: --out: is not a folder; give a folder (the trials' "
+                             "records are written into OUT/trials/)")
     records: dict[str, dict[str, Any]] = {}
     for t in trials:
         record = finished_record(out, t)

@@ -37,7 +37,7 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
         draw.draw_cave(ax, scn, highlight=tuple(scn.start_stance))
         draw.frame_axes(ax, scn)
         title = f"{draw.title_name(scn.name)} — {plan['planner']}: no plan ({plan['reason']})"
-        ax.set_title("\n".join(textwrap.wrap(title, 70)), fontsize=8)
+        ax.set_title("\n".join(textwrap.wrap(title, 70)), fontsize=8, parse_math=False)
         handles[1].set_label("anchor of the start stance (its normal in red)")
         fig.legend(handles=handles, loc="outside lower center", fontsize=7, frameon=False)
         return fig
@@ -90,7 +90,8 @@ def snapshots_figure(scn: Scenario, plan: dict[str, Any], max_panels: int = 12):
                      f"P {first} → {draw.format_prob(step['p_success'])}", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.locator_params(nbins=5)  # fewer ticks: their labels are most of the drawing time
-    fig.suptitle("\n".join(heading), fontsize=10, y=1.0 - 0.15 / height, va="top")
+    fig.suptitle("\n".join(heading), fontsize=10, y=1.0 - 0.15 / height, va="top",
+                 parse_math=False)
     bar = draw.add_probability_colourbar(
         fig, axes, cax=fig.add_axes((1.0 - 1.3 / width, bottom / height, 0.15 / width,
                                      1.0 - (top + bottom) / height)))
@@ -154,7 +155,7 @@ def phase_figure(plan: dict[str, Any], k: int):
         f"boom {phase['free_boom']} {phase['from_anchor']} -> {phase['to_anchor']}")
     title = (f"phase {k} ({what}): seed {motion['seed_method']}; SCP "
              f"{motion['scp_status']}")
-    top.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8)
+    top.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8, parse_math=False)
     return fig
 
 
@@ -185,7 +186,7 @@ def animation_figure(scn: Scenario, plan: dict[str, Any], max_frames: int = 400)
         draw.frame_axes(ax, scn)
         name = draw.title_name(scn.name)
         ax.set_title(f"{name}: t = {step['t']:.1f} s, P (all grasps hold) = "
-                     f"{draw.format_prob(step['p_success'])}", fontsize=9)
+                     f"{draw.format_prob(step['p_success'])}", fontsize=9, parse_math=False)
         return []
 
     draw_frame(0)
@@ -305,5 +306,6 @@ def search_figure(scn: Scenario, fp):
     name = draw.title_name(scn.name)
     title = (f"{name}: footstep search failed after {fp.expansions} expansions, "
              f"{fp.transitions_tested} transitions tested")
-    ax.set_title("\n".join(textwrap.wrap(title, max(40, wrap - 10))), fontsize=9)
+    ax.set_title("\n".join(textwrap.wrap(title, max(40, wrap - 10))), fontsize=9,
+                 parse_math=False)
     return fig

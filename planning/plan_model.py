@@ -293,7 +293,8 @@ class Provenance(Part):
     command: str = spec()
     planner: Planner = spec()
     motion: bool = spec()
-    seed: int = spec()
+    # the range of --seed (rbp.commands.common.MAX_SEED): -1 was read, though --seed -1 is not
+    seed: int = spec(minimum=0, maximum=2**63 - 1)
     scenario_source: str = spec()
     config: dict[str, Any] = spec(required=["footstep", "seed", "scp"],
                                   description="the PipelineConfig (planning.config_io)")

@@ -9,6 +9,8 @@ of holding, on a 'nines' scale (0.9, 0.99, 0.999, ...): green holds, red is at r
 from __future__ import annotations
 
 import math
+import unicodedata
+import warnings
 
 import matplotlib
 import numpy as np
@@ -30,9 +32,23 @@ ROCK = "#8c6d4f"
 TITLE_NAME = 80  # characters of a scenario's name in a picture's title
 
 
+# A name in a script the font lacks (洞窟, an emoji) is drawn as boxes; matplotlib's warning
+# about each missing glyph was printed on stderr of an accepted run.
+warnings.filterwarnings("ignore", message=r"Glyph \d+ .*missing from font", category=UserWarning)
+
+
 def title_name(name: str) -> str:
-    """`name` for a title: its first TITLE_NAME characters, with an ellipsis if cut."""
+    """`name` for a title: its first TITLE_NAME characters, with an ellipsis if cut, control
+    characters (tab, CR, newline) as spaces. Titles holding user text are drawn with
+    `parse_math=False`: `$x^{$` in a name ended every picture in mathtext's traceback."""
+    name = "".join(" " if unicodedata.category(c)[0] == "C" else c for c in name)
     return name if len(name) <= TITLE_NAME else name[:TITLE_NAME - 1] + "…"
+
+
+def plain_label(text: str) -> str:
+    """User text (an anchor id) for a legend label, which cannot turn mathtext off: `$` escaped,
+    control characters as spaces."""
+    return title_name(text).replace("$", r"\$")
 
 GLYPH_SCALE = 0.006  # m of glyph per N of mean limit
 NINES = Normalize(vmin=1.0, vmax=5.0)  # colour scale in -log10(1 - P)
@@ -217,7 +233,8 @@ def scenario_figure(scn: Scenario):
     else:
         status = "start pose infeasible: " + "; ".join(diagnose_pose(scn, stance, pose))
     ax.set_title(f"{title_name(scn.name)}: {len(scn.anchors)} anchors, gravity "
-                 f"{np.linalg.norm(scn.gravity_vector):.2f} m/s²\n{status}", fontsize=10)
+                 f"{np.linalg.norm(scn.gravity_vector):.2f} m/s²\n{status}", fontsize=10,
+                 parse_math=False)
     handles = cave_legend_handles(scn)
     handles.append(Line2D(
         [], [], color=prob_colour(0.9999), lw=2.6,

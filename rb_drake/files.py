@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -33,10 +34,8 @@ def output_problem(path: str | Path) -> str | None:
     missing folder is fine if it can be created."""
     try:
         target = output_target(path)
-        if target.is_dir():
-            return "is a directory; give a file name"
-        if target.exists() and not target.is_file():
-            return "is not a regular file (a device or a pipe?)"
+        if (problem := _not_regular(target)) is not None:
+            return problem
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
             folder = folder.parent  # the nearest existing folder must let us create the rest
@@ -54,8 +53,13 @@ def output_problem(path: str | Path) -> str | None:
 
 def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
     """Call `write(f)` on a temporary binary file, then rename it to `path` (to a symlink's
-    target: the link stays)."""
+    target: the link stays). A target that exists and is not a regular file is refused
+    (OSError naming `path`): renaming over it replaced a device such as /dev/zero, run as root,
+    with a regular file, and a folder gave an error naming the temporary file."""
+    given = path
     path = output_target(path)
+    if (problem := _not_regular(path)) is not None:
+        raise OSError(errno.EEXIST, problem, str(given))
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -70,6 +74,19 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _not_regular(target: Path) -> str | None:
+    """Why `target` (a symlink already followed) cannot be replaced by an output, or None."""
+    try:
+        mode = target.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):  # not there yet (its folder is checked)
+        return None
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a directory; give a file name"
+    return "is not a regular file (a device or a pipe?); give a file name"
 
 
 def _umask() -> int:

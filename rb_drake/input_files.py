@@ -25,6 +25,7 @@ so the user sees one line naming the file, the field (or "(file)") and the reaso
 from __future__ import annotations
 
 import json
+import math
 import os
 import stat
 import sys
@@ -93,27 +94,42 @@ class InputFileError(RbpInputError):
         self.field: str = field
 
 
+MAX_INPUT_MB = 1_000_000  # RBP_MAX_INPUT_MB's largest: about a terabyte
+MAX_NODES = 10_000_000  # RBP_MAX_INPUT_VALUES's largest: PyYAML's tree of them takes ~5 GB
+
+
 def max_input_bytes() -> int:
-    """The size limit of an input file: RBP_MAX_INPUT_MB (megabytes) if set, else 32 MiB."""
+    """The size limit of an input file: RBP_MAX_INPUT_MB (megabytes above 0, at most
+    MAX_INPUT_MB) if set, else 32 MiB. A malformed value is refused (RbpInputError naming the
+    variable) rather than silently replaced by the default."""
     value = os.environ.get("RBP_MAX_INPUT_MB", "").strip()
+    if not value:
+        return int(DEFAULT_MAX_INPUT_MB * 2**20)
     try:
-        megabytes = float(value) if value else DEFAULT_MAX_INPUT_MB
+        megabytes = float(value)
     except ValueError:
-        megabytes = DEFAULT_MAX_INPUT_MB
-    if not megabytes > 0:
-        megabytes = DEFAULT_MAX_INPUT_MB
-    return int(min(megabytes, 1e6) * 2**20)
+        megabytes = math.nan
+    if not 0 < megabytes <= MAX_INPUT_MB:  # nan and inf too
+        raise RbpInputError(f"must be a number of megabytes above 0 and at most "
+                            f"{MAX_INPUT_MB:,}, got {value!r}",
+                            field="RBP_MAX_INPUT_MB (environment)")
+    return max(1, int(megabytes * 2**20))
 
 
 def max_input_values() -> int:
-    """The limit on a YAML document's values: RBP_MAX_INPUT_VALUES if set (a positive whole
-    number), else DEFAULT_MAX_NODES."""
+    """The limit on a YAML document's values: RBP_MAX_INPUT_VALUES if set (a whole number from
+    1 to MAX_NODES; a malformed one is refused naming the variable), else DEFAULT_MAX_NODES."""
     value = os.environ.get("RBP_MAX_INPUT_VALUES", "").strip()
+    if not value:
+        return DEFAULT_MAX_NODES
     try:
-        limit = int(float(value)) if value else DEFAULT_MAX_NODES
-    except (ValueError, OverflowError):
-        limit = DEFAULT_MAX_NODES
-    return limit if limit > 0 else DEFAULT_MAX_NODES
+        number = float(value)  # "1e6" is taken; "1.5" is not a whole number
+    except ValueError:
+        number = math.nan
+    if not (1 <= number <= MAX_NODES and number == int(number)):
+        raise RbpInputError(f"must be a whole number of values from 1 to {MAX_NODES:,}, got "
+                            f"{value!r}", field="RBP_MAX_INPUT_VALUES (environment)")
+    return int(number)
 
 
 def count_values(data: Any) -> int:
@@ -177,7 +193,16 @@ def read_bytes(path: str | Path, max_bytes: int | None = None) -> bytes:
         with os.fdopen(fd, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise InputFileError("(file)", "is not a regular file")
-            data = f.read(limit + 1)
+            # at most the file's size + 1 bytes: read(limit + 1) allocated the whole limit
+            # (RBP_MAX_INPUT_MB=100000: a MemoryError on every file)
+            size = os.fstat(f.fileno()).st_size
+            data = f.read(min(limit, size) + 1)
+            if size < len(data) <= limit:  # it grew, or its size is not known (/proc): read on
+                parts, total = [data], len(data)
+                while total <= limit and (chunk := f.read(min(2**20, limit + 1 - total))):
+                    parts.append(chunk)
+                    total += len(chunk)
+                data = b"".join(parts)
     except OSError as e:
         raise InputFileError("(file)", f"cannot read: {e.strerror or e}") from None
     if len(data) > limit:

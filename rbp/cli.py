@@ -90,7 +90,7 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     from rbp.api import import_scenario
 
     check_seed(args.seed)
-    check_output(args.output)
+    check_output(args.output, inputs={"the imported file": args.file})
     scn = import_scenario(args.file, unit=args.unit, scale=args.scale, simplify=args.simplify,
                           anchor_density=args.anchor_density, seed=args.seed,
                           start=_pair(args.start), goal=_pair(args.goal), name=args.name,
@@ -150,7 +150,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     from rbp.api import draw
 
     check_dpi(args.dpi)
-    check_output(args.output, picture=True)
+    check_output(args.output, picture=True, inputs={"the scenario's file": args.scenario})
     draw(load_scenario_spec(args.scenario, check_start=False), args.output, dpi=args.dpi)
     print(f"wrote {args.output}")
     return EXIT_OK
@@ -209,12 +209,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
         write_pictures,
     )
 
-    check_output(args.output)
     check_plan_output(args)
     if args.animate:
         from rbp.commands.plan import check_animation
 
-        check_animation(args.animate)
+        check_animation(args.animate, {"the scenario's file": args.scenario,
+                                       "--from-plan's file": args.from_plan})
     if args.phase_figure is not None:  # what can be refused before planning
         if args.phase_figure < 0:
             raise UserError(f"--phase-figure: must be 0 or more, got {args.phase_figure}")
@@ -313,7 +313,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
                         "into it)")
     for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
-        check_output(out / name, "--out", picture=name.endswith(".png"))
+        check_output(out / name, "--out", picture=name.endswith(".png"),
+                     inputs={"the scenario's file": args.scenario})
     scn = load_scenario_spec(args.scenario)
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
@@ -575,9 +576,12 @@ def _main(argv: list[str] | None) -> int:
 
     try:
         from rb_drake.environment import threads_adapt_setting, threads_setting
+        from rb_drake.input_files import max_input_bytes, max_input_values
 
         threads_setting()  # a malformed RBP_THREADS is refused before any work
         threads_adapt_setting()
+        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
+        max_input_values()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

@@ -400,18 +400,19 @@ def report_figure(log: RigLog):
     time, and each boom's measured load-cell force against its commanded tension."""
     import matplotlib.pyplot as plt
 
-    from rb_drake.draw import title_name
+    from rb_drake.draw import plain_label, title_name
 
     fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7.0, 6.0))
     rec = log.replay
     for i, anchor in enumerate(log.stance_ids):
         color = f"C{i}"
-        top.plot(rec.time, rec.p_grasp[:, i], color=color, label=f"boom {i}: {anchor}")
+        top.plot(rec.time, rec.p_grasp[:, i], color=color, label=f"boom {i}: {plain_label(anchor)}")
         bottom.plot(rec.time, rec.force[:, i], color=color, label=f"boom {i} measured")
         bottom.plot(log.command_time, log.tension_setpoint[:, i], color=color, linestyle="--",
                     label=f"boom {i} commanded")
     top.set_ylabel("probability of grasp maintenance")
-    top.set_title(f"{title_name(log.scenario.name)}: {log.plan_source or 'rig run'}")
+    top.set_title(f"{title_name(log.scenario.name)}: {title_name(log.plan_source or 'rig run')}",
+                  parse_math=False)
     top.legend(loc="lower left", fontsize="small")
     top.grid(alpha=0.3)
     bottom.set_ylabel("tension (N)")

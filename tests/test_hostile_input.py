@@ -297,6 +297,25 @@ def test_yaml_value_limit_set_by_environment_and_near_limit_refusal_fast(tmp_pat
     assert time.perf_counter() - start < 30, "the near-limit scenario took too long"
 
 
+@pytest.mark.parametrize("variable", ["RBP_MAX_INPUT_MB", "RBP_MAX_INPUT_VALUES"])
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "nan", "1e999", "10000001"])
+def test_reading_limit_variables_malformed_refused(tmp_path, monkeypatch, variable, value):
+    """A malformed limit silently fell back to the default; refused as RBP_THREADS is."""
+    monkeypatch.setenv(variable, value)
+    result = run_rbp("scenario", "check", "demo-shaft", cwd=tmp_path)
+    _refused_in_one_line(result, Path(variable), f"{variable} (environment): must be")
+
+
+def test_largest_byte_limit_reads_files(tmp_path, monkeypatch):
+    """RBP_MAX_INPUT_MB=100000 (and its maximum) made every read allocate the whole limit: a
+    MemoryError; at most the file's size is read now."""
+    for value in ("100000", "1000000"):
+        monkeypatch.setenv("RBP_MAX_INPUT_MB", value)
+        assert read_text(DEMO) == _demo_text()
+        result = run_rbp("scenario", "check", str(DEMO), cwd=tmp_path)
+        assert result.returncode == 0 and not result.stderr, result.stderr[-2000:]
+
+
 def test_generate_refuses_a_cave_too_large_to_read_back(tmp_path):
     """Up front, before minutes of drawing: the file would be refused on reading."""
     out = tmp_path / "cave.yaml"
@@ -720,6 +739,15 @@ def test_plan_provenance_outside_its_range_refused(tmp_path):
                          "--footsteps-only", "--no-pictures", cwd=tmp_path)
         _refused_in_one_line(result, path, f"provenance.config.{part}.{key}: must be")
         assert not (tmp_path / "b.json").exists()
+    for seed, words in ((-1, "less than the minimum of 0"), (2**64, "greater than the maximum")):
+        forged = json.loads(json.dumps(plan))  # --seed -1 is refused; the plan's was read
+        forged["provenance"]["seed"] = seed
+        path = tmp_path / "seed.json"
+        path.write_text(json.dumps(forged))
+        result = run_rbp("plan", "--from-plan", str(path), "-o", str(tmp_path / "b.json"),
+                         "--footsteps-only", "--no-pictures", cwd=tmp_path)
+        _refused_in_one_line(result, path, f"provenance/seed: {seed} is {words}")
+        assert not (tmp_path / "b.json").exists()
 
 
 @pytest.mark.parametrize(("text", "field"), [
@@ -765,13 +793,15 @@ def test_plan_output_is_json_and_not_an_input(tmp_path):
     cave = tmp_path / "cave.yaml"
     cave.write_text(_demo_text())
     result = run_rbp("plan", str(cave), "-o", str(cave), "--footsteps-only", cwd=tmp_path)
-    _refused_in_one_line(result, cave, "-o: a plan file is JSON")
+    _refused_in_one_line(result, cave, "-o: is the scenario's file")
     assert cave.read_text() == _demo_text(), "the scenario was overwritten"
+    result = run_rbp("plan", str(cave), "-o", "other.yaml", "--footsteps-only", cwd=tmp_path)
+    _refused_in_one_line(result, Path("other.yaml"), "-o: a plan file is JSON")
     result = run_rbp("plan", "demo-shaft", "-o", "plan", "--footsteps-only", cwd=tmp_path)
     _refused_in_one_line(result, Path("plan"), "got no suffix")
     config = tmp_path / "planner.json"
     config.write_text("{}")
     result = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", str(config),
                      "--footsteps-only", cwd=tmp_path)
-    _refused_in_one_line(result, config, "-o: is --config's file; the plan would overwrite it")
+    _refused_in_one_line(result, config, "-o: is --config's file; the output would overwrite it")
     assert config.read_text() == "{}"

@@ -10,10 +10,12 @@ symlink, written through.
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
 
+from rb_drake.files import atomic_write_text, output_problem
 from tests.cli_helpers import run_rbp
 
 
@@ -106,3 +108,91 @@ def test_demo_out_that_is_a_file_is_refused_in_one_line(tmp_path: Path) -> None:
     assert result.stderr.strip() == ("error: afile: --out: is a file; give a folder (its "
                                      "outputs are written into it)"), result.stderr
     assert (tmp_path / "afile").read_text() == "keep me\n"
+
+
+def _refused(result, words: str, *more: str) -> str:
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, (result.returncode, result.stderr[-2000:])
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr[-2000:]
+    for w in (words, *more):
+        assert w in lines[0], (w, lines[0])
+    assert ".tmp" not in lines[0], lines[0]  # the user's path, never the temporary file
+    return lines[0]
+
+
+@pytest.fixture
+def fifo_link(tmp_path: Path) -> Path:
+    """out.json, a symlink to a FIFO: stands for a link to a device such as /dev/zero, which
+    the atomic writer replaced with a regular file when run as root."""
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    link = tmp_path / "out.json"
+    link.symlink_to(fifo)
+    return link
+
+
+def test_atomic_write_never_replaces_a_non_regular_target(fifo_link, tmp_path):
+    with pytest.raises(OSError, match="not a regular file") as e:
+        atomic_write_text(fifo_link, "{}")
+    assert e.value.filename == str(fifo_link)
+    assert (tmp_path / "fifo").is_fifo() and fifo_link.is_symlink()
+    assert output_problem(fifo_link) is not None
+    (tmp_path / "d").mkdir()
+    with pytest.raises(OSError, match="is a directory"):
+        atomic_write_text(tmp_path / "d", "{}")
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_symlinked_output_to_a_pipe_refused_before_work(fifo_link, tmp_path):
+    result = run_rbp("scenario", "generate", "-o", str(fifo_link), cwd=tmp_path)
+    _refused(result, str(fifo_link), "-o: is not a regular file")
+    assert (tmp_path / "fifo").is_fifo()
+
+
+def test_outputs_checked_before_the_work_naming_the_option(tmp_path):
+    (tmp_path / "DIR").mkdir()
+    (tmp_path / "plan.json").write_text("{}")  # refused before the plan is read
+    result = run_rbp("simulate", "--trials", "1", "--html", "DIR", "plan.json", cwd=tmp_path)
+    _refused(result, "DIR: --html: is a directory")
+    (tmp_path / "pdir" / "p.png").mkdir(parents=True)
+    result = run_rbp("plan", "demo-shaft", "-o", "pdir/p.json", "--footsteps-only",
+                     cwd=tmp_path)
+    _refused(result, "pdir/p.png: -o's picture: is a directory")
+    assert not (tmp_path / "pdir" / "p.json").exists(), "the plan was made before refusing"
+    (tmp_path / "afile").write_text("x")
+    result = run_rbp("experiment", "timing_table", "--trials", "1", "--workers", "1", "--out",
+                     "afile", cwd=tmp_path)
+    _refused(result, "afile: --out: is not a folder")
+
+
+def test_trial_record_that_is_not_a_file_refused_before_the_trial(tmp_path, fifo_link):
+    trials = tmp_path / "ex" / "trials"
+    trials.mkdir(parents=True)
+    (trials / "000-shaft-s1.json").mkdir()
+    result = run_rbp("experiment", "timing_table", "--trials", "1", "--workers", "1", "--out",
+                     "ex", cwd=tmp_path)
+    _refused(result, "000-shaft-s1.json: --out: is a directory")
+    shutil.rmtree(trials / "000-shaft-s1.json")
+    (trials / "000-shaft-s1.json").symlink_to(tmp_path / "fifo")
+    result = run_rbp("experiment", "timing_table", "--trials", "1", "--workers", "1", "--out",
+                     "ex", cwd=tmp_path)
+    _refused(result, "000-shaft-s1.json: --out: is not a regular file")
+    assert (tmp_path / "fifo").is_fifo()
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (("simulate", "--trials", "1", "--json", "P.json", "P.json"), "--json: is the plan's file"),
+    (("rig-run", "--sim-rig", "--log", "P.json", "P.json"), "--log: is the plan's file"),
+    (("scenario", "import", "P.json", "-o", "P.json"), "-o: is the imported file"),
+    (("scenario", "show", "P.json", "-o", "link.png"), "-o: is the scenario's file"),
+    (("plan", "P.json", "-o", "o.json", "--animate", "link.png"), "--animate: is the scenario"),
+])
+def test_output_that_is_an_input_refused(tmp_path, args, words):
+    """`--json P.json P.json` replaced the plan with the results, `rig-run --log` with a binary
+    log; through a symlink (or a hard link) it is the same file."""
+    plan = tmp_path / "P.json"
+    plan.write_text('{"not": "touched"}')
+    (tmp_path / "link.png").symlink_to(plan)
+    _refused(run_rbp(*args, cwd=tmp_path), "P.json" if "link.png" not in args else "link.png",
+             words, "the output would overwrite it")
+    assert plan.read_text() == '{"not": "touched"}'

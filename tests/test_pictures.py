@@ -280,3 +280,40 @@ def test_picture_suffix_name_and_sigterm(tmp_path: Path, capsys) -> None:
         atomic_write(tmp_path / "pic.png", killed)
     assert not list(tmp_path.glob("*.png*")) and not list(tmp_path.glob(".pic.png.*"))
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL, "the handler is put back"
+
+
+HOSTILE_NAME = "$x^{$ 洞窟\t😀\r$\\frac{"  # mathtext, glyphs the font lacks, control characters
+
+
+def test_hostile_names_draw_quietly(tmp_path: Path) -> None:
+    """A scenario's name with `$...$` ended every picture in mathtext's traceback (scenario
+    show, plan, demo, rig-report), and one the font lacks glyphs for printed a UserWarning per
+    glyph: each picture is drawn now with nothing on stderr, as is `simulate --html`'s replay."""
+    import json
+
+    import yaml
+
+    from rb_drake.scenario import bundled_caves
+    from tests.cli_helpers import run_rbp
+
+    def quiet(*args: str, status: int = 0) -> None:
+        result = run_rbp(*args, cwd=tmp_path)
+        assert result.returncode == status and not result.stderr, (args, result.stderr[-2000:])
+
+    cave = yaml.safe_load(bundled_caves()["demo-shaft"].read_text())
+    cave["name"] = HOSTILE_NAME
+    (tmp_path / "cave.yaml").write_text(yaml.safe_dump(cave, allow_unicode=True))
+    quiet("scenario", "show", "cave.yaml", "-o", "cave.png")
+    quiet("demo", "--scenario", "cave.yaml", "--no-plan", "--out", "demo")
+    quiet("plan", "cave.yaml", "--footsteps-only", "-q", "--max-expansions", "3", "-o", "p.json",
+          status=1)  # the snapshots and the search picture
+    quiet("plan", "rig", "-q", "--no-pictures", "-o", "r.json")
+    # Drake's "INFO:drake:Meshcat listening for connections at ..." was printed on stderr
+    quiet("simulate", "--trials", "0", "--html", "r.html", "r.json")
+    plan = json.loads((tmp_path / "r.json").read_text())
+    plan["scenario"]["name"] = HOSTILE_NAME
+    (tmp_path / "r.json").write_text(json.dumps(plan))
+    quiet("rig-run", "r.json", "--phase", "0", "--sim-rig", "--log", "rig.lcm")
+    quiet("rig-report", "rig.lcm", "-o", "report.png")
+    assert all((tmp_path / p).stat().st_size > 1000
+               for p in ("cave.png", "demo/cave.png", "p.png", "p-search.png", "report.png"))

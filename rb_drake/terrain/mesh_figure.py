@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from rb_drake.draw import ROCK, new_figure
+from rb_drake.draw import ROCK, new_figure, title_name
 from rb_drake.files import atomic_save_figure
 from rb_drake.terrain.mesh_section import (
     DEFAULT_NORMAL,
@@ -108,8 +108,9 @@ def draw_scan(ax3: Any, path: Path, rock: list[Any],
     ax3.set_xlabel("x (m)")
     ax3.set_ylabel("y (m)")
     ax3.set_zlabel("z (m)")
-    ax3.set_title(f"{Path(path).name}: {'mesh' if kind == 'mesh' else 'point cloud'} and the plane",
-                  fontsize=9)
+    ax3.set_title(f"{title_name(Path(path).name)}: "
+                  f"{'mesh' if kind == 'mesh' else 'point cloud'} and the plane", fontsize=9,
+                  parse_math=False)
 
 
 def _bounds(polygons: list[Any]) -> tuple[float, float, float, float]:

@@ -12,7 +12,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from rb_drake.errors import RbpInputError, one_line
@@ -73,24 +73,41 @@ def check_dpi(dpi: int) -> None:
         raise UserError(f"--dpi: must be {MIN_DPI} to {MAX_DPI} dots per inch, got {dpi}")
 
 
-def check_output(path: str | Path, flag: str = "-o", picture: bool = False,
-                 animation: bool = False) -> Path:
-    """`path` as an output of option `flag`, refused (UserError naming the user's path) before
-    any work if it cannot be written; an image suffix is refused for a data file (`picture`
-    False), so that a plan and its picture never share a path, and a picture's suffix must be
-    a format matplotlib writes (an animation's writer is chosen by `check_animation`)."""
+def check_output(path: str | Path, flag: str = "-o", picture: bool | None = False,
+                 animation: bool = False,
+                 inputs: Mapping[str, str | Path | None] | None = None) -> Path:
+    """`path` as an output of option `flag`, refused (UserError naming the user's path and
+    `flag`, never a temporary file) before any work if it cannot be written: a folder, a device,
+    a pipe (a symlink is followed), an unwritable place, or one of the command's `inputs`
+    ({what: path}, e.g. {"the plan": args.plan}: `--json P.json P.json` replaced the plan). An
+    image suffix is refused for a data file (`picture` False), so that a plan and its picture
+    never share a path; a picture's suffix must be a format matplotlib writes (an animation's
+    writer is chosen by `check_animation`); `picture` None takes any suffix (an HTML page)."""
     from rb_drake.files import IMAGE_SUFFIXES, output_problem, picture_format_problem
 
     path = Path(path)
     problem = output_problem(path)
-    if problem is None and not picture and path.suffix.lower() in IMAGE_SUFFIXES:
+    if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
     if problem is None and picture and not animation:
         problem = picture_format_problem(path)
+    if problem is None:
+        for what, given in (inputs or {}).items():
+            if given is not None and _same_file(path, given):
+                problem = f"is {what}; the output would overwrite it"
+                break
     if problem is not None:
         raise UserError(f"{path}: {flag}: {problem}")
     return path
+
+
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether paths `a` and `b` name one existing file (through symlinks and hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either missing (b may be a bundled cave's name)
+        return False
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):

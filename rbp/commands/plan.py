@@ -42,18 +42,24 @@ def rbp_version() -> str:
 
 
 def check_plan_output(args: argparse.Namespace) -> None:
-    """The plan's `-o` after `check_output`: a .json name (`-o cave.yaml` wrote the plan over
-    the scenario), and none of the command's input files."""
-    from rbp.commands.common import UserError
+    """The plan's `-o` and the pictures written beside it, before planning: writable files
+    that are none of the command's inputs, and a .json name (`-o cave.yaml` wrote the plan
+    over the scenario)."""
+    from rbp.commands.common import UserError, check_output
 
-    out = Path(args.output)
+    inputs = {"the scenario's file": args.scenario, "--from-plan's file": args.from_plan,
+              "--config's file": args.config}
+    out = check_output(args.output, inputs=inputs)
     if out.suffix.lower() != ".json":
         raise UserError(f"{out}: -o: a plan file is JSON: give a name ending in .json, got "
                         f"{out.suffix or 'no suffix'}")
-    for flag, given in (("the scenario", args.scenario), ("--from-plan", args.from_plan),
-                        ("--config", args.config)):
-        if given and out.exists() and Path(given).exists() and out.samefile(given):
-            raise UserError(f"{out}: -o: is {flag}'s file; the plan would overwrite it")
+    if args.no_pictures:
+        return
+    pictures = [out.with_suffix(".png"), out.with_name(f"{out.stem}-search.png")]
+    if args.phase_figure is not None:
+        pictures.append(out.with_name(f"{out.stem}-phase{args.phase_figure}.png"))
+    for picture in pictures:  # a folder there failed after the plan was made
+        check_output(picture, "-o's picture", picture=True, inputs=inputs)
 
 
 def plan_setup(args: argparse.Namespace):
@@ -267,12 +273,12 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
 ANIMATION_SUFFIXES = (".gif", ".mp4")
 
 
-def check_animation(path: str) -> None:
+def check_animation(path: str, inputs: dict[str, str | None] | None = None) -> None:
     """`rbp plan --animate PATH` checked before planning: a writable .gif, or an .mp4 with
     ffmpeg installed (the writer is chosen by the suffix)."""
     from rbp.commands.common import UserError, check_output
 
-    check_output(path, "--animate", picture=True, animation=True)
+    check_output(path, "--animate", picture=True, animation=True, inputs=inputs)
     suffix = Path(path).suffix.lower()
     if suffix not in ANIMATION_SUFFIXES:
         raise UserError(f"{path}: --animate: must end in .gif or .mp4, got "

@@ -90,7 +90,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
                         f"commands, got {args.period:g}")
     check_seed(args.seed)
     check_lcm_url(args.lcm_url)
-    check_output(args.log, "--log")  # a folder or an unwritable place, before the run
+    # a folder, an unwritable place or the plan itself, before the run
+    check_output(args.log, "--log", inputs={"the plan's file": args.plan})
     path = Path(args.plan)
     plan = read_plan(path)
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
@@ -150,7 +151,7 @@ def cmd_rig_report(args: argparse.Namespace) -> int:
     from systems.rig_interface import RigLcmConfig, report_figure
 
     check_dpi(args.dpi)
-    check_output(args.output, picture=True)
+    check_output(args.output, picture=True, inputs={"the log's file": args.log})
     log = _replay(args.log)
     if not len(log.replay.time):
         channel = RigLcmConfig().status_channel

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import time
 from pathlib import Path
@@ -86,8 +87,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from rbp.commands.common import UserError, check_output, check_seed, plural
 
     check_seed(args.seed)
+    plan_input = {"the plan's file": args.plan}
     if args.json:
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", inputs=plan_input)
+    if args.html:  # a folder here failed after the simulation, naming the temporary file
+        check_output(args.html, "--html", picture=None,
+                     inputs=plan_input | {"--json's file": args.json})
     if not 0 <= args.trials <= MAX_TRIALS:
         raise UserError(f"--trials: must be 0 to {MAX_TRIALS:,}, got {args.trials}")
     if args.replan and args.trials == 0:
@@ -180,6 +185,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.meshcat or args.html:
         from systems.meshcat_view import save_html, show_climb, start_meshcat
 
+        # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL is
+        # printed below when it is wanted (--meshcat), so an accepted --html run prints nothing
+        logging.getLogger("drake").setLevel(logging.WARNING)
         meshcat = start_meshcat()
         show_climb(meshcat, record)
         if args.html:

@@ -455,7 +455,7 @@ def test_local_sampling_at_the_configuration_maxima_checks_in_bounded_batches(
 
     sizes: list[int] = []
 
-    def counted(scn: Scenario, stance, configs: np.ndarray):  # type: ignore[no-untyped-def]
+    def counted(scn: Scenario, stance: object, configs: np.ndarray) -> SimpleNamespace:
         sizes.append(len(configs))  # all infeasible: every round runs
         n = len(configs)
         return SimpleNamespace(feasible=np.zeros(n, bool),

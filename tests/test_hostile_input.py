@@ -651,7 +651,7 @@ def test_unwritable_outputs_named_with_their_reason(tmp_path):
 
 @pytest.mark.parametrize(("text", "words"), [
     ("footstep: {expansions_per_metre: .inf}\n", "footstep.expansions_per_metre: must be"),
-    ("seed: {step: 0.0}\n", "seed.step: must be a number from 0.001 to 1 m, got 0.0"),
+    ("seed: {step: 0.0}\n", "seed.step: must be a number from 0.005 to 1 m, got 0.0"),
     ("footstep: {search: sampled, goal_samples: 1000000000000}\n", "footstep.goal_samples:"),
     ("footstep: {segments: {min_climb: 1.0e-300, lookahead: 1.0e-300, commit: 1.0e-300, "
      "tolerance: 1.0e-300}}\n", "footstep.segments.min_climb: must be"),

@@ -18,6 +18,7 @@ import json
 import sys
 from pathlib import Path
 
+from experiments.arguments import number
 from experiments.common import make_cave
 from rb_drake.errors import EXIT_OK
 
@@ -77,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--caves", default="shaft:7,rockfall:8,crevasse:18",
                         help="kind:seed, comma-separated")
-    parser.add_argument("--time-limit", type=float, default=120.0, help="s per cave")
+    parser.add_argument("--time-limit", type=number(0.001, 86_400), default=120.0,
+                        help="s per cave")
     parser.add_argument("--out", default="out/anytime-curve.png")
     args = parser.parse_args(argv)
     from rb_drake.files import atomic_save_figure, atomic_write_text

@@ -25,6 +25,7 @@ import argparse
 from datetime import UTC, datetime
 from typing import Any
 
+from experiments.arguments import number
 from experiments.common import (
     ORACLE_SECONDS,
     OTHER_PLANNERS,
@@ -203,7 +204,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser.add_argument("--motion", action="store_true",
                         help="plan the whole climb (seeds and SCP too) for rbp and rbp-sampled, "
                              "so that 'verified' means the whole plan passes rbp check")
-    parser.add_argument("--oracle-time", type=float, default=ORACLE_SECONDS,
+    parser.add_argument("--oracle-time", type=number(0.001, 86_400), default=ORACLE_SECONDS,
                         help="seconds the oracle may search a cave before it says undecided "
                              f"(default {ORACLE_SECONDS:g})")
     add_ompl_log_argument(parser)

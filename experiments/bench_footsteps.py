@@ -16,6 +16,7 @@ import statistics
 import time
 from pathlib import Path
 
+from experiments.arguments import MAX_EXPANSIONS, MAX_TRIALS, number, seed_number, whole
 from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
@@ -29,10 +30,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", default="shaft",
                         help="cave kinds, comma-separated: shaft, crevasse, rockfall")
-    parser.add_argument("--trials", type=int, default=5)
-    parser.add_argument("--first-seed", type=int, default=1)
-    parser.add_argument("--max-expansions", type=int, default=1000)
-    parser.add_argument("--length", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
+    parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=5)
+    parser.add_argument("--first-seed", type=seed_number, default=1)
+    parser.add_argument("--max-expansions", type=whole(1, MAX_EXPANSIONS), default=1000)
+    parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=None, metavar=("MIN",
+                        "MAX"),
                         help="cave length range in m (default: the generator's, 7 to 9)")
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)

@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, number, seed_number, whole
 from experiments.common import ROUTE_VARIANTS, cave_kind
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
@@ -113,12 +114,14 @@ def summarise(caves: list[dict[str, Any]], modes: tuple[str, ...]) -> dict[str, 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.busy_core",
                                      description=__doc__.split("\n\n")[0])
-    parser.add_argument("--trials", type=int, default=100, help="caves (default 100)")
-    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=100,
+                        help="caves (default 100)")
+    parser.add_argument("--first-seed", type=seed_number, default=1)
     parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
-    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
+    parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=(4.5, 5.0))
     parser.add_argument("--variant", default="default", choices=ROUTE_VARIANTS)
-    parser.add_argument("--busy", type=int, default=1, help="cores kept spinning (default 1)")
+    parser.add_argument("--busy", type=whole(0, MAX_WORKERS), default=1,
+                        help="cores kept spinning (default 1)")
     parser.add_argument("--modes", default="default,one",
                         help="comma-separated, the first 'default': default (today's threads), "
                              "one (RBP_THREADS=1); every thread always, waiting as: before "

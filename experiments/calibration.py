@@ -25,6 +25,7 @@ import argparse
 import time
 from typing import Any
 
+from experiments.arguments import MAX_EXPANSIONS, MAX_RUNS, seed_number, whole
 from experiments.sweep import (
     Trial,
     add_sweep_arguments,
@@ -235,11 +236,11 @@ def calibration_figure(rows: list[dict[str, Any]]):
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=len(CAVES), out="out/calibration")
-    parser.add_argument("--runs", type=int, default=2000,
-                        help="stochastic climbs per plan (default 2000)")
-    parser.add_argument("--mc-seed", type=int, default=0,
+    parser.add_argument("--runs", type=whole(1, MAX_RUNS), default=2000,
+                        help="stochastic climbs per plan 1 to 100,000 (default 2000)")
+    parser.add_argument("--mc-seed", type=seed_number, default=0,
                         help="seed of the climbs' draws (default 0)")
-    parser.add_argument("--max-expansions", type=int, default=1000,
+    parser.add_argument("--max-expansions", type=whole(1, MAX_EXPANSIONS), default=1000,
                         help="the footstep search's budget (default 1000)")
     parser.add_argument("--caves", type=lambda s: s.split(","), default=None,
                         help="a comma-separated subset of the set (default: all of "

@@ -15,6 +15,7 @@ import math
 import time
 from typing import Any
 
+from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
 from experiments.sweep import (
     RESULT_CHECKS,
     Trial,
@@ -220,12 +221,13 @@ def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 10
     parser.add_argument("--kind", default="mixed",
                         choices=("mixed", "shaft", "crevasse", "rockfall"),
                         help="cave kind (default mixed: shaft, crevasse, shaft, rockfall, ...)")
-    parser.add_argument("--first-seed", type=int, default=1,
+    parser.add_argument("--first-seed", type=seed_number, default=1,
                         help="seed of the first cave; trial i uses seed first + i (default 1)")
-    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0),
+    parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=(4.5, 5.0),
                         metavar=("MIN", "MAX"),
                         help="shaft height or passage length range in m (default 4.5 5.0)")
-    parser.add_argument("--max-expansions", type=int, default=max_expansions,
+    parser.add_argument("--max-expansions", type=whole(1, MAX_EXPANSIONS),
+                        default=max_expansions,
                         help="RBP gives up after expanding this many stances "
                              f"(default {max_expansions})")
 

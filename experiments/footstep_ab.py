@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import number, seed_number
 from experiments.common import cave_kind
 from experiments.sweep import quantiles
 from rb_drake.errors import EXIT_OK
@@ -90,17 +91,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--old", type=Path, required=True, help="the old source tree")
     parser.add_argument("--new", type=Path, default=Path(__file__).resolve().parents[1],
                         help="the new source tree (default: this one)")
-    parser.add_argument("--seeds", type=int, nargs="*", default=None,
+    parser.add_argument("--seeds", type=seed_number, nargs="*", default=None,
                         help="benchmark seeds (1..100) to run")
     parser.add_argument("--caves", choices=("route", "noroute"), default=None,
                         help="the caves of this oracle label in --labels")
     parser.add_argument("--labels", type=Path, default=None,
                         help="a baseline_comparison results.json with oracle labels")
-    parser.add_argument("--max-old-seconds", type=float, default=None,
+    parser.add_argument("--max-old-seconds", type=number(0.001, 86_400), default=None,
                         help="with --labels: leave out caves whose oracle took longer there")
     parser.add_argument("--thorough", action="store_true",
                         help="the oracle (no expansion budget), else the default search")
-    parser.add_argument("--time-limit", type=float, default=900.0)
+    parser.add_argument("--time-limit", type=number(0.001, 86_400), default=900.0)
     parser.add_argument("--all-cores", action="store_true",
                         help="one tree after the other, each with every core (the oracle's "
                              "setting; the order alternates from cave to cave), not both at "

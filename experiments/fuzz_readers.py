@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from experiments.arguments import seed_number, whole
+
 # Values a field may be replaced by: extreme and awkward numbers, wrong types, big structures.
 HOSTILE_VALUES: tuple[Any, ...] = (
     0, -0.0, 1, -1, 0.5, 1e-308, 5e-324, -5e-324, 1e308, -1e308, math.inf, -math.inf, math.nan,
@@ -142,8 +144,8 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(prog="python -m experiments.fuzz_readers",
                                      description=__doc__.split("\n\n")[0])
-    parser.add_argument("--documents", type=int, default=10_000, help="per reader")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--documents", type=whole(1, 10_000_000), default=10_000, help="per reader")
+    parser.add_argument("--seed", type=seed_number, default=0)
     parser.add_argument("--readers", default=",".join(READERS))
     args = parser.parse_args(argv)
     report = {}

@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import MAX_WORKERS, number, whole
 from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
@@ -112,12 +113,13 @@ def draw(rows: list[dict[str, Any]], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.long_climbs",
                                      description=__doc__.split("\n\n")[0])
-    parser.add_argument("--lengths", type=float, nargs="+", default=[5.0, 10.0, 15.0, 20.0])
+    parser.add_argument("--lengths", type=number(0, 1e4), nargs="+", default=[5.0, 10.0, 15.0,
+                        20.0])
     parser.add_argument("--kinds", default=",".join(KINDS))
     parser.add_argument("--seeds", default="5001,5002,5003")
     parser.add_argument("--variants", default="default,before",
                         help=f"comma-separated, of {', '.join(VARIANTS)}")
-    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
     parser.add_argument("--out", default="out/long-climbs.json")
     args = parser.parse_args(argv)
     variants = args.variants.split(",")

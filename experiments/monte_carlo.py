@@ -17,6 +17,7 @@ import argparse
 import itertools
 from typing import Any
 
+from experiments.arguments import MAX_RUNS, seed_number, whole
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -139,9 +140,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=50, out="out/monte_carlo")
     add_cave_arguments(parser)
-    parser.add_argument("--runs", type=int, default=1000,
-                        help="stochastic executions per plan (default 1000)")
-    parser.add_argument("--mc-seed", type=int, default=0,
+    parser.add_argument("--runs", type=whole(1, MAX_RUNS), default=1000,
+                        help="stochastic executions per plan 1 to 100,000 (default 1000)")
+    parser.add_argument("--mc-seed", type=seed_number, default=0,
                         help="seed of the executions' draws (default 0)")
     args = parser.parse_args(argv)
     check_cave_arguments(parser, args)

@@ -21,6 +21,7 @@ from collections import Counter
 
 import numpy as np
 
+from experiments.arguments import seed_number, whole
 from planning.pipeline import plan_climb
 from planning.plan_faults import FAULTS, judge, random_fault
 from planning.plan_model import plan_dict
@@ -33,8 +34,9 @@ CAVES = ("demo-shaft", "demo-crevasse", "rockfall-3")
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--faults", type=int, default=1000, help="faults to try (default 1000)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the faults' draws")
+    parser.add_argument("--faults", type=whole(1, 1_000_000), default=1000,
+                        help="faults to try (default 1000)")
+    parser.add_argument("--seed", type=seed_number, default=0, help="seed of the faults' draws")
     parser.add_argument("--caves", default=",".join(CAVES),
                         help=f"bundled caves, comma-separated (default {','.join(CAVES)})")
     parser.add_argument("--classes", help="only these fault classes, comma-separated (default: "

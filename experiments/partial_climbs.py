@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import MAX_TRIALS, seed_number, whole
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 from rb_drake.files import atomic_write_text
@@ -95,9 +96,9 @@ def _median(values: list[float]) -> float | None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", required=True, help="results (.json), rewritten after each cave")
-    ap.add_argument("--seeds", type=int, nargs="*",
+    ap.add_argument("--seeds", type=seed_number, nargs="*",
                     help="only these seeds of the no-route caves (default: all of them)")
-    ap.add_argument("--limit", type=int, help="at most this many caves")
+    ap.add_argument("--limit", type=whole(1, MAX_TRIALS), help="at most this many caves")
     args = ap.parse_args(argv)
     caves = no_route_caves()
     if args.seeds:

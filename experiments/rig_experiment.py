@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from experiments.arguments import number, seed_number
 from experiments.sweep import machine_info, write_results
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
@@ -52,8 +53,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
                         help="LCM bus of the rig (default memq://, in-process)")
     parser.add_argument("--hardware", action="store_true",
                         help="talk to a real rig on --lcm-url instead of the simulated one")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulated rig's noise")
-    parser.add_argument("--period", type=float, default=0.1,
+    parser.add_argument("--seed", type=seed_number, default=0,
+                        help="seed of the simulated rig's noise")
+    parser.add_argument("--period", type=number(0.001, 60), default=0.1,
                         help="seconds between commands (default 0.1)")
     args = parser.parse_args(argv)
     if not args.period > 0:

@@ -27,6 +27,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, number, seed_number, whole
 from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import add_ompl_log_argument, cave_kind, check_ompl_log
 from experiments.common import finite_median as median
@@ -144,17 +145,18 @@ def write_ompl_log(args: argparse.Namespace, caves: list[dict[str, Any]], varian
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.route_quality",
                                      description=__doc__.split("\n\n")[0])
-    parser.add_argument("--trials", type=int, default=100, help="caves (default 100)")
-    parser.add_argument("--first-seed", type=int, default=1)
+    parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=100,
+                        help="caves (default 100)")
+    parser.add_argument("--first-seed", type=seed_number, default=1)
     parser.add_argument("--seeds", default=None,
                         help="comma-separated seeds of the benchmark to run, instead of --trials")
     parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
-    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0))
+    parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=(4.5, 5.0))
     parser.add_argument("--variants", default="default",
                         help=f"comma-separated, of {', '.join(VARIANTS)}")
-    parser.add_argument("--time-limit", type=float, default=None,
+    parser.add_argument("--time-limit", type=number(0.001, 86_400), default=None,
                         help="s per search of the oracle variants (default 600)")
-    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
     parser.add_argument("--out", default="out/route_quality.json")
     parser.add_argument("--compare", default=None, help="another run's json")
     parser.add_argument("--against-oracle", nargs="+", metavar="RUN.json", default=None,

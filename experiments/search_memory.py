@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import number, whole
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 
@@ -119,8 +120,9 @@ def main(argv: list[str] | None = None) -> int:
                         default=[("rockfall", 5001, 5.0), ("shaft", 5001, 15.0),
                                  ("crevasse", 5003, 20.0)],
                         help="KIND:SEED:LENGTH of generated caves")
-    parser.add_argument("--time-limit", type=float, default=300.0, help="s per search")
-    parser.add_argument("--every", type=int, default=500,
+    parser.add_argument("--time-limit", type=number(0.001, 86_400), default=300.0,
+                        help="s per search")
+    parser.add_argument("--every", type=whole(1, 1_000_000_000), default=500,
                         help="expansions between memory samples")
     parser.add_argument("--memory-mb", default="default",
                         help="the new tree's cap in MiB, 'none' or 'default'")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 
+from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
 from experiments.common import make_cave, plan_cave, plan_record
 from experiments.sweep import machine_info, write_results
 from rb_drake.errors import EXIT_OK
@@ -21,17 +22,18 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out/snapshots", help="output folder")
     parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
-    parser.add_argument("--seed", type=int, default=1, help="cave seed (default 1)")
-    parser.add_argument("--tries", type=int, default=3,
+    parser.add_argument("--seed", type=seed_number, default=1, help="cave seed (default 1)")
+    parser.add_argument("--tries", type=whole(1, 1000), default=3,
                         help="seeds to try, from --seed on, until one gives a plan (default 3)")
-    parser.add_argument("--length", type=float, nargs=2, default=(4.5, 5.0),
+    parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=(4.5, 5.0),
                         metavar=("MIN", "MAX"), help="cave length range in m (default 4.5 5.0)")
-    parser.add_argument("--max-expansions", type=int, default=150,
+    parser.add_argument("--max-expansions", type=whole(1, MAX_EXPANSIONS), default=150,
                         help="RBP gives up after expanding this many stances (default 150)")
     parser.add_argument("--planner", choices=("rbp", "naive"), default="rbp")
     parser.add_argument("--footsteps-only", action="store_true",
                         help="draw the footstep plan (no seed and SCP trajectories)")
-    parser.add_argument("--panels", type=int, default=8, help="at most this many snapshots")
+    parser.add_argument("--panels", type=whole(1, 1000), default=8,
+                        help="at most this many snapshots")
     args = parser.parse_args(argv)
     if args.tries < 1 or args.panels < 1 or args.max_expansions < 1:
         parser.error("--tries, --panels and --max-expansions must be 1 or more")

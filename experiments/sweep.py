@@ -32,6 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, tcp_address, whole
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
@@ -292,12 +293,12 @@ def ok_records(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 def add_sweep_arguments(parser: argparse.ArgumentParser, trials: int, out: str) -> None:
     """The flags every sweep shares: --out, --trials, --workers, --cluster."""
     parser.add_argument("--out", default=out, help=f"output folder (default {out})")
-    parser.add_argument("--trials", type=int, default=trials,
-                        help=f"number of trials (default {trials})")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="local worker processes (default: one per core; 1: in this "
-                             "process)")
-    parser.add_argument("--cluster", metavar="tcp://HOST:PORT",
+    parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=trials,
+                        help=f"number of trials, 1 to {MAX_TRIALS:,} (default {trials})")
+    parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=None,
+                        help=f"local worker processes, 1 to {MAX_WORKERS} (default: one per "
+                             "core; 1: in this process)")
+    parser.add_argument("--cluster", metavar="tcp://HOST:PORT", type=tcp_address,
                         help="run the trials on this Dask distributed scheduler instead")
 
 

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from experiments.arguments import seed_number
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS_FIGURE = ROOT / "docs" / "figures" / "terrain-import.png"
 MESH = ROOT / "rb_drake" / "data" / "terrain" / "lava_tube.ply"
@@ -92,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scan", type=Path, default=MESH,
                         help="a mesh or point cloud (.stl, .obj, .ply; default the lava tube)")
-    parser.add_argument("--seed", type=int, default=0, help="the anchors' seed (default 0)")
+    parser.add_argument("--seed", type=seed_number, default=0, help="the anchors' seed (default 0)")
     parser.add_argument("--out", type=Path, default=DOCS_FIGURE, help="the picture to write")
     args = parser.parse_args(argv)
 

@@ -25,11 +25,15 @@ from planning.seed_common import (
     describe_infeasible,
     failed_seed,
     found_seed,
+    pieces,
     subdivide,
 )
 from rb_drake.feasibility import check_poses
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
+
+MAX_DETOUR_POSES = 20_000  # a 100 m detour at the least step, 5 mm
+CHECK_BATCH = 50_000  # poses checked in one vectorised call (tens of MB)
 
 
 def _local(scn: Scenario, stance: Stance, line: np.ndarray, cfg: SeedConfig,
@@ -48,16 +52,33 @@ def _local(scn: Scenario, stance: Stance, line: np.ndarray, cfg: SeedConfig,
         spread = cfg.local_spread * 2.0**r
         c = rng.normal(0.0, 1.0, (cfg.local_samples, len(modes), 3)) * (
             spread / modes[None, :, None]) * scale
-        paths = [subdivide(line + shapes.T @ c[k], cfg.step, cfg.turn_step)
-                 for k in range(cfg.local_samples)]
-        counts = [len(p) for p in paths]
-        check = check_configurations(scn, stance, np.vstack(paths))
-        cuts = np.cumsum(counts)[:-1]
-        ok = [bool(f.all()) for f in np.split(check.feasible, cuts)]
-        if any(ok):
-            best = min((counts[k], k) for k in range(len(ok)) if ok[k])[1]
-            return paths[best], np.split(check.allocation.robustness, cuts)[best]
+        detours = [line + shapes.T @ c[k] for k in range(cfg.local_samples)]
+        # a detour of more poses than MAX_DETOUR_POSES is not tried: wide spreads over many
+        # rounds and modes at a fine step would otherwise ask gigabytes
+        sizes = [int(pieces(w, cfg.step, cfg.turn_step).sum()) + 1 for w in detours]
+        found: list[tuple[int, np.ndarray, np.ndarray]] = []
+        batch: list[np.ndarray] = []
+        for k, w in enumerate(detours):
+            if sizes[k] <= MAX_DETOUR_POSES:
+                batch.append(subdivide(w, cfg.step, cfg.turn_step))
+            if batch and (k == len(detours) - 1 or sum(map(len, batch)) >= CHECK_BATCH):
+                found += _feasible_paths(scn, stance, batch)
+                batch = []
+        if found:
+            _, path, robustness = min(found, key=lambda f: f[0])
+            return path, robustness
     return None
+
+
+def _feasible_paths(scn: Scenario, stance: Stance,
+                    paths: list[np.ndarray]) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The paths all of whose poses are feasible, each with its length and robustness."""
+    counts = [len(p) for p in paths]
+    check = check_configurations(scn, stance, np.vstack(paths))
+    cuts = np.cumsum(counts)[:-1]
+    robust = np.split(check.allocation.robustness, cuts)
+    return [(counts[k], paths[k], robust[k])
+            for k, f in enumerate(np.split(check.feasible, cuts)) if f.all()]
 
 
 def body_seed(scn: Scenario, stance_ids: tuple[str, ...], start_pose: np.ndarray,

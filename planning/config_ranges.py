@@ -154,11 +154,15 @@ FIELDS: dict[str, dict[str, Range | Choice]] = {
         "hopeless_violation": Range(0.0, 1000.0, "m"),
         "patience": count(1, 1000),
     },
-    "SeedConfig": {  # steps of 1 mm at least: a 100 m phase is then 100,000 poses at most
-        "step": positive(0.001, 1.0, "m"),
-        "turn_step": positive(0.001, 1.0, "rad"),
+    # Steps of 5 mm / 5 mrad at least: a 100 m phase is then 20,000 poses at most. A reach's
+    # local sampling builds an offset-to-offset table of (rounds x samples)^2: at these maxima
+    # 1601^2 (about 100 MB); a body detour of more than 20,000 poses is not tried
+    # (body_seeds.MAX_DETOUR_POSES). All maxima together plan demo-shaft in under 1 GB.
+    "SeedConfig": {
+        "step": positive(0.005, 1.0, "m"),
+        "turn_step": positive(0.005, 1.0, "rad"),
         "local_rounds": count(0, 16),  # the spread doubles each round
-        "local_samples": count(1, 10_000),
+        "local_samples": count(1, 100),
         "local_spread": positive(0.001, 10.0, "m"),
         "local_modes": count(1, 100),
         "ompl_checks": count(1, 1_000_000),  # seed_common.MAX_OMPL_CHECKS

@@ -32,6 +32,7 @@ from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
 ARC_OFFSET = 1e-3  # m; the arc's ends are tested for collision this far off the rock they grip
+CHECK_BATCH = 50_000  # configurations checked in one vectorised call (tens of MB)
 SWAY_REPAIRS = 5   # searches for a sway, each after striking out a failed piece
 
 
@@ -187,8 +188,13 @@ def _sway(scn: Scenario, three: Stance, pose: np.ndarray, tips: np.ndarray, cfg:
     draws = rng.normal(0.0, 1.0, (cfg.local_rounds, cfg.local_samples, 3))
     offsets = np.vstack([np.zeros((1, 3)), (draws * spreads[:, None, None] * scale).reshape(-1, 3)])
     N, C = len(tips), len(offsets)
-    grid = np.column_stack([np.tile(pose + offsets, (N, 1)), np.repeat(tips, C, axis=0)])
-    feasible = check_configurations(scn, three, grid).feasible.reshape(N, C)
+    feasible = np.zeros((N, C), dtype=bool)
+    per = max(1, CHECK_BATCH // C)  # tips per vectorised check: its memory stays bounded
+    for k in range(0, N, per):
+        part = tips[k:k + per]
+        grid = np.column_stack([np.tile(pose + offsets, (len(part), 1)),
+                                np.repeat(part, C, axis=0)])
+        feasible[k:k + per] = check_configurations(scn, three, grid).feasible.reshape(-1, C)
     d = offsets[:, None, :] - offsets[None, :, :]
     cost = np.maximum(np.linalg.norm(d[..., :2], axis=-1) / cfg.step,
                       np.abs(d[..., 2]) / cfg.turn_step)  # steps from offset i to offset j

@@ -42,12 +42,18 @@ from rb_drake.stance import Stance
 
 DWELL_MOTION = 0.8  # of a trajectory phase's final dwell spent finishing its last motion
 RESAMPLE = 0.05     # s: the grid of a two-step phase's minimum-jerk line (`rest_to_rest`)
+# Grid points per interval at most: the minimum-jerk curve's shape does not depend on its
+# duration, and 400 points resolve it (progress error under 1e-5); past 20 s (400 x RESAMPLE)
+# the spacing grows instead, so that a plan's grids scale with its steps, not its duration
+# (a plan of 1e7 s would otherwise ask 2e8 points per interval).
+MAX_GRID = 400
 
 
 def rest_to_rest(t0: float, t1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A grid on [t0, t1] (spacing <= step) with the minimum-jerk progress s (0 -> 1) and its
-    rate ds/dt: 10 tau^3 - 15 tau^4 + 6 tau^5, which starts and ends at rest."""
-    n = max(1, math.ceil((t1 - t0) / step))
+    rate ds/dt: 10 tau^3 - 15 tau^4 + 6 tau^5, which starts and ends at rest. At most
+    MAX_GRID + 1 points: a long interval's spacing is (t1 - t0) / MAX_GRID."""
+    n = min(max(1, math.ceil((t1 - t0) / step)), MAX_GRID)
     t = np.linspace(t0, t1, n + 1)
     tau = (t - t0) / (t1 - t0)
     s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)

@@ -706,7 +706,7 @@ def test_unwritable_outputs_named_with_their_reason(tmp_path):
 
 @pytest.mark.parametrize(("text", "words"), [
     ("footstep: {expansions_per_metre: .inf}\n", "footstep.expansions_per_metre: must be"),
-    ("seed: {step: 0.0}\n", "seed.step: must be a number from 0.001 to 1 m, got 0.0"),
+    ("seed: {step: 0.0}\n", "seed.step: must be a number from 0.005 to 1 m, got 0.0"),
     ("footstep: {search: sampled, goal_samples: 1000000000000}\n", "footstep.goal_samples:"),
     ("footstep: {segments: {min_climb: 1.0e-300, lookahead: 1.0e-300, commit: 1.0e-300, "
      "tolerance: 1.0e-300}}\n", "footstep.segments.min_climb: must be"),
@@ -805,3 +805,49 @@ def test_plan_output_is_json_and_not_an_input(tmp_path):
                      "--footsteps-only", cwd=tmp_path)
     _refused_in_one_line(result, config, "-o: is --config's file; the output would overwrite it")
     assert config.read_text() == "{}"
+
+
+# rbp bench and rbp experiment options that allocated without bound or failed late (probe 2 of
+# session 28): each refused before any work, in argparse's one error line naming the option
+@pytest.mark.parametrize("args, words", [
+    (["bench", "--samples", "99999999999999"], "--samples: must be a whole number from 1 to"),
+    (["bench", "--seed", "-1"], "--seed: must be a whole number from 0"),
+    (["bench", "--moves", "0"], "--moves: must be a whole number from 1 to 100"),
+    (["experiment", "timing_table", "--trials", "1000000000", "--workers", "1"],
+     "--trials: must be a whole number from 1 to 100,000"),
+    (["experiment", "timing_table", "--first-seed", "-1"], "--first-seed: must be a whole"),
+    (["experiment", "monte_carlo", "--runs", "99999999999999999999"],
+     "--runs: must be a whole number from 1 to 100,000"),
+    (["experiment", "monte_carlo", "--mc-seed", "-5"], "--mc-seed: must be a whole number"),
+    (["experiment", "monte_carlo", "--cluster", "tcp://256.1.1.1:99999"],
+     "--cluster: port must be from 1 to 65535"),
+    (["experiment", "seed_vs_scp", "--cluster", "tcp://256.1.1.1:80"],
+     "--cluster: '256.1.1.1' is not an IP address"),
+    (["experiment", "calibration", "--cluster", "localhost"], "--cluster: must be tcp://"),
+    (["experiment", "rig_experiment", "--period", "nan"], "--period: must be a number from"),
+    (["experiment", "snapshots", "--panels", "0"], "--panels: must be a whole number from 1"),
+])
+def test_bench_and_experiment_options_range_checked_up_front(tmp_path, args, words):
+    start = time.perf_counter()
+    result = run_rbp(*args, "--out", str(tmp_path / "out"), cwd=tmp_path)
+    errors = [line for line in result.stderr.splitlines() if "error:" in line]
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert len(errors) == 1 and words in errors[0], result.stderr[-2000:]
+    assert "Traceback" not in result.stderr and time.perf_counter() - start < 30
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("content, words", [
+    (None, "is a device, not a regular file"),  # /dev/zero: read 23.8 GB before
+    ("[1, 2]", "(file): must be a JSON object"),  # an AttributeError before
+    ('{"sections": {"scp": [1]}}', "sections.scp: must be an object with a summary"),
+    ('{"sections": ', "Expecting value"),
+])
+def test_bench_compare_read_by_the_bounded_reader_and_checked(tmp_path, content, words):
+    old = Path("/dev/zero") if content is None else tmp_path / "old.json"
+    if content is not None:
+        old.write_text(content)
+    result = run_rbp("bench", "--compare", str(old), "--out", str(tmp_path / "out"),
+                     cwd=tmp_path)
+    _refused_in_one_line(result, old, words)
+    assert not (tmp_path / "out").exists()

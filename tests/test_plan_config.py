@@ -260,9 +260,11 @@ def test_docs_list_every_range() -> None:
 @pytest.mark.parametrize("data, field, words", [
     ({"footstep": {"expansions_per_metre": "inf"}}, "footstep.expansions_per_metre",
      "from 0 to 1,000,000"),
-    ({"seed": {"step": 0.0}}, "seed.step", "from 0.001 to 1 m, got 0.0"),
-    ({"seed": {"step": 1.0e-300}}, "seed.step", "from 0.001"),
-    ({"seed": {"step": -0.02}}, "seed.step", "from 0.001"),
+    ({"seed": {"step": 0.0}}, "seed.step", "from 0.005 to 1 m, got 0.0"),
+    ({"seed": {"step": 1.0e-300}}, "seed.step", "from 0.005"),
+    ({"seed": {"step": 0.001}}, "seed.step", "from 0.005"),  # 2.4 GB and minutes before
+    ({"seed": {"local_samples": 10_000}}, "seed.local_samples", "from 1 to 100"),  # 36 GiB
+    ({"seed": {"step": -0.02}}, "seed.step", "from 0.005"),
     ({"seed": {"turn_step": "inf"}}, "seed.turn_step", "got inf"),
     ({"seed": {"local_samples": 0}}, "seed.local_samples", "whole number from 1"),
     ({"seed": {"arc_heights": ["inf"]}}, "seed.arc_heights", "got inf"),

@@ -14,6 +14,7 @@ held for the whole arc.
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -442,3 +443,28 @@ def test_a_gripper_path_may_touch_its_own_rock_only_in_its_last_2_cm() -> None:
         assert _arc_is_clear(world, tips, up, up) is clear, (
             f"a path dipping into rock {before * 100:.0f} cm before its anchor: clear should "
             f"be {clear}")
+
+
+def test_local_sampling_at_the_configuration_maxima_checks_in_bounded_batches(
+        shaft: Scenario, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The largest local sampling a configuration may ask (16 rounds of 100 samples, 100
+    modes, the spread doubling each round to 1.6 km, 5 mm steps) once built detours of millions of
+    poses and checked them in one call (gigabytes): detours over MAX_DETOUR_POSES are not
+    tried, and no check sees more than a batch."""
+    from planning import body_seeds
+
+    sizes: list[int] = []
+
+    def counted(scn: Scenario, stance: object, configs: np.ndarray) -> SimpleNamespace:
+        sizes.append(len(configs))  # all infeasible: every round runs
+        n = len(configs)
+        return SimpleNamespace(feasible=np.zeros(n, bool),
+                               allocation=SimpleNamespace(robustness=np.zeros(n)))
+
+    monkeypatch.setattr(body_seeds, "check_configurations", counted)
+    cfg = SeedConfig(local_rounds=16, local_samples=100, local_modes=100, local_spread=0.05,
+                     step=0.005, turn_step=0.005)
+    stance = shaft.stance(shaft.start_stance)
+    line = subdivide(np.vstack(BLOCKED_PAIR), cfg.step, cfg.turn_step)
+    assert body_seeds._local(shaft, stance, line, cfg, np.random.default_rng(0)) is None
+    assert sizes and max(sizes) <= body_seeds.CHECK_BATCH + body_seeds.MAX_DETOUR_POSES

@@ -947,3 +947,14 @@ def test_a_plan_without_its_release_ramp_stops_there(good_plan: dict[str, Any],
     assert record.implied_p_path() == 0.0
     mc = monte_carlo(record, 200, 3)
     assert mc.successes == 0 and mc.to_json()["failures"]["handover"] > 0, mc.to_json()["failures"]
+
+
+def test_rest_to_rest_grid_scales_with_steps_not_duration() -> None:
+    """A plan's times may reach 1e7 s: a grid every 0.05 s of such an interval asked 8.9 million
+    points per phase (`rbp simulate` failed to allocate; `rbp check` took 9 GB)."""
+    from planning.smooth_motion import MAX_GRID
+
+    t, s, _ = rest_to_rest(0.0, 1e7, 0.05)
+    assert len(t) == MAX_GRID + 1 and t[-1] == 1e7 and s[-1] == pytest.approx(1.0, abs=1e-15)
+    assert np.all(np.diff(s) > 0)
+    assert len(rest_to_rest(2.0, 7.0, 0.05)[0]) == 101  # a short interval keeps its 0.05 s grid

@@ -48,12 +48,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import seed_number, whole
 from experiments.bench.allocation import run_allocation
 from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
 from experiments.bench.scp import run_scp
-from rb_drake.errors import EXIT_OK, EXIT_USAGE
+from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
 from rb_drake.files import atomic_write_text
+from rb_drake.input_files import InputFileError, load_json, read_text
 
 SECTIONS = ("allocation", "scp", "footstep")
 FORMAT = "rbp-bench/1"
@@ -62,18 +64,19 @@ FORMAT = "rbp-bench/1"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--only", default=",".join(SECTIONS),
                         help=f"comma-separated sections (default: {','.join(SECTIONS)})")
-    parser.add_argument("--samples", type=int, default=300,
-                        help="allocation cases (default 300)")
-    parser.add_argument("--moves", type=int, default=4,
+    parser.add_argument("--samples", type=whole(1, 10_000), default=300,
+                        help="allocation cases, 1 to 10,000 (default 300)")
+    parser.add_argument("--moves", type=whole(1, 100), default=4,
                         help="scp: regrasps along climbs of the bundled caves; each gives a "
-                             "body and a reach phase (default 4)")
-    parser.add_argument("--ipopt-iterations", type=int, default=1000,
-                        help="scp: IPOPT's iteration cap per phase (default 1000)")
-    parser.add_argument("--caves", type=int, default=3,
-                        help="footstep: generated caves (default 3)")
-    parser.add_argument("--max-expansions", type=int, default=60,
-                        help="footstep: the planners' cap (default 60)")
-    parser.add_argument("--seed", type=int, default=0)
+                             "body and a reach phase, 1 to 100 (default 4)")
+    parser.add_argument("--ipopt-iterations", type=whole(1, 100_000), default=1000,
+                        help="scp: IPOPT's iteration cap per phase, 1 to 100,000 "
+                             "(default 1000)")
+    parser.add_argument("--caves", type=whole(1, 1000), default=3,
+                        help="footstep: generated caves, 1 to 1000 (default 3)")
+    parser.add_argument("--max-expansions", type=whole(1, 1_000_000), default=60,
+                        help="footstep: the planners' cap, 1 to 1,000,000 (default 60)")
+    parser.add_argument("--seed", type=seed_number, default=0)
     parser.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
     parser.add_argument("--json", metavar="FILE", help="results file (default OUT/bench.json)")
     parser.add_argument("--compare", metavar="OLD", help="an earlier results file: print the "
@@ -89,10 +92,15 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     old = None
     if args.compare:  # read first: a bad file should fail before minutes of benchmarking
-        try:
-            old = json.loads(Path(args.compare).read_text())
-        except (OSError, ValueError) as e:
-            print(f"error: --compare {args.compare}: {e}", file=sys.stderr)
+        try:  # the bounded reader: /dev/zero or a huge file is refused, not read
+            old = load_json(read_text(args.compare))
+            comparable(old)
+        except InputFileError as e:
+            print(f"error: {one_line(args.compare)}: {e}", file=sys.stderr)
+            return EXIT_USAGE
+        except (ValueError, RecursionError) as e:
+            print(f"error: {one_line(args.compare)}: (file): {one_line(str(e))}",
+                  file=sys.stderr)
             return EXIT_USAGE
     result: dict[str, Any] = {
         "format": FORMAT, "created": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(),
@@ -114,6 +122,20 @@ def run(args: argparse.Namespace) -> int:
     if old is not None:
         print_comparison(old, result, args.compare)
     return EXIT_OK
+
+
+def comparable(old: Any) -> None:
+    """Refuse (InputFileError naming the field) a --compare file that is not an rbp bench
+    results file's shape: an object whose "sections" hold objects whose "summary" is one."""
+    if not isinstance(old, dict):
+        raise InputFileError("(file)", "must be a JSON object (an rbp bench results file), got "
+                             f"{type(old).__name__}")
+    sections = old.get("sections", {})
+    if not isinstance(sections, dict):
+        raise InputFileError("sections", "must be an object")
+    for name, section in sections.items():
+        if not isinstance(section, dict) or not isinstance(section.get("summary", {}), dict):
+            raise InputFileError(f"sections.{name}", "must be an object with a summary object")
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

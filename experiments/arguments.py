@@ -1,0 +1,75 @@
+"""argparse `type=` helpers that range-check a command-line option as it is read, so that
+`rbp bench` and `rbp experiment` refuse a value that would allocate without bound or fail
+late (a billion trials, a negative seed, a port beyond 65535) before any work, in argparse's
+one `error:` line naming the option (docs/formats.md, "Command-line options")."""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import math
+import re
+from collections.abc import Callable
+
+MAX_SEED = 2**63 - 1  # numpy's generators take seeds up to 2^64; int64 is the safe common range
+
+
+def whole(lo: int, hi: int) -> Callable[[str], int]:
+    """A whole number from `lo` to `hi`."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(
+                f"must be a whole number from {lo:,} to {hi:,}, got {value:,}"[:200])
+        return value
+    parse.__name__ = "whole number"  # argparse's "invalid whole number value"
+    return parse
+
+
+def number(lo: float, hi: float) -> Callable[[str], float]:
+    """A finite number from `lo` to `hi`."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"must be a number from {lo:g} to {hi:g}, "
+                                             f"got {text!r}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+seed_number = whole(0, MAX_SEED)
+
+_HOST = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?"
+                   r"(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*$")
+
+
+def tcp_address(text: str) -> str:
+    """tcp://HOST:PORT with a host name or IP address and a port from 1 to 65535."""
+    m = re.fullmatch(r"tcp://(\[[^\]]*\]|[^:/\[\]]*):(\d{1,5})", text.strip())
+    if not m:
+        raise argparse.ArgumentTypeError(f"must be tcp://HOST:PORT, got {text!r}")
+    host, port = m.group(1), int(m.group(2))
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be from 1 to 65535, got {port}")
+    bare = host.strip("[]")
+    if host.startswith("[") or re.fullmatch(r"[\d.]+", bare):
+        try:
+            ipaddress.ip_address(bare)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{bare!r} is not an IP address") from None
+    elif not _HOST.match(bare):
+        raise argparse.ArgumentTypeError(f"{bare!r} is not a host name")
+    return text.strip()
+
+
+MAX_TRIALS = 100_000  # a sweep's trials: each is a record in memory and a file on disk
+MAX_WORKERS = 1024
+MAX_RUNS = 100_000  # stochastic executions per plan (monte_carlo, calibration)
+MAX_EXPANSIONS = 10_000_000  # the footstep search's cap (FootstepConfig allows 1e9; minutes)

@@ -36,7 +36,7 @@ from experiments.sweep import quantiles
 from rb_drake.errors import EXIT_OK
 
 _CHILD = r"""
-import json, sys, time
+import json, resource, sys, time
 try:
     from experiments.common import make_cave
 except ImportError:  # an old tree, from before experiments/common.py
@@ -52,7 +52,8 @@ cpu, wall = time.process_time(), time.perf_counter()
 fp = plan_footsteps(scn, config)
 print(json.dumps({"success": bool(fp.success), "stop": fp.stop, "expansions": fp.expansions,
                   "regrasps": max(0, len(fp.stances) - 1) if fp.success else None,
-                  "wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu}))
+                  "wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
 
@@ -142,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
         return quantiles(values)["median"]
 
     summary: dict[str, Any] = {side: {"median_wall": median([r[side]["wall"] for r in rows]),
-                      "median_cpu": median([r[side]["cpu"] for r in rows])}
+                      "median_cpu": median([r[side]["cpu"] for r in rows]),
+                      "most_peak_mb": max((r[side].get("peak_mb", 0.0) for r in rows), default=None)}
                for side in ("old", "new")}
     summary["ratio_median"] = median([r["ratio"] for r in rows])
     summary["cpu_ratio_median"] = median([r["cpu_ratio"] for r in rows])

@@ -51,6 +51,18 @@ def output_problem(path: str | Path) -> str | None:
     return None
 
 
+# The temporary files being written now: a process ended by force (`rbp`'s second SIGTERM,
+# or its first when the interrupt was swallowed) removes them first
+LIVE_TEMPORARY: set[str] = set()
+
+
+def remove_live_temporary() -> None:
+    """Remove every temporary file an `atomic_write` is still writing."""
+    for tmp in list(LIVE_TEMPORARY):
+        Path(tmp).unlink(missing_ok=True)
+        LIVE_TEMPORARY.discard(tmp)
+
+
 def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
     """Call `write(f)` on a temporary binary file, then rename it to `path` (to a symlink's
     target: the link stays). A target that exists and is not a regular file is refused
@@ -65,6 +77,7 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as e:  # name the output, not the temporary file (a folder such as /proc)
         raise OSError(e.errno, f"cannot write a file there ({e.strerror})", str(path)) from None
+    LIVE_TEMPORARY.add(tmp)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
@@ -73,6 +86,8 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    finally:
+        LIVE_TEMPORARY.discard(tmp)
     return path
 
 

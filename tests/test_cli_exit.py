@@ -194,3 +194,43 @@ def test_check_does_not_load_the_footstep_planner(tmp_path: Path) -> None:
     assert proc.stdout.strip().splitlines()[-1] == "0 False False False", (
         "rbp check loaded the footstep planner or jsonschema (status, numba, networkx, "
         f"jsonschema):\n{proc.stdout}{proc.stderr}")
+
+
+_SWALLOWED = r"""
+import os, signal, sys, tempfile, time
+import rbp.commands.common as common
+from rb_drake.files import LIVE_TEMPORARY
+common.SWALLOWED_INTERRUPT_S = 1
+fd, tmp = tempfile.mkstemp(dir=sys.argv[1], suffix=".tmp")
+LIVE_TEMPORARY.add(tmp)
+with common.sigterm_interrupts():
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    except KeyboardInterrupt:
+        pass  # swallowed, as a callback's exception is
+    if sys.argv[2] == "long":
+        time.sleep(30)
+print("finished")
+"""
+
+
+@pytest.mark.parametrize("work", ["long", "short"])
+def test_a_swallowed_sigterm_still_ends_the_command(tmp_path: Path, work: str) -> None:
+    """SIGTERM raised inside code that swallows it (matplotlib's callbacks did, while an
+    animation was written): the command still ends, exit 3, its temporary files removed; if
+    it ends by itself first, it still reports the interrupt."""
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", _SWALLOWED, str(tmp_path), work],
+                          capture_output=True, text=True, timeout=60)
+    seconds = time.perf_counter() - started
+    assert "finished" not in done.stdout, f"the command went on to its end: {done.stdout!r}"
+    assert list(tmp_path.iterdir()) == [] or work == "short", \
+        f"a temporary file was left: {list(tmp_path.iterdir())}"
+    if work == "long":
+        assert done.returncode == 3, (done.returncode, done.stderr)
+        assert done.stderr.strip() == "interrupted", done.stderr
+        assert seconds < 20, f"ended only after {seconds:.1f} s (the fallback is 1 s here)"
+    else:
+        assert done.returncode != 0 and "Terminated" in done.stderr, \
+            "a swallowed interrupt must still end the command as interrupted at its end"

@@ -15,7 +15,8 @@ import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-from rb_drake.errors import RbpInputError, one_line
+from rb_drake.errors import EXIT_INTERRUPTED, RbpInputError, one_line
+from rb_drake.files import remove_live_temporary
 
 
 def plural(n: int, word: str) -> str:
@@ -31,6 +32,9 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised as an interrupt (`sigterm_interrupts`)."""
 
 
+SWALLOWED_INTERRUPT_S = 5  # s after SIGTERM: if the command has not unwound, it ends by force
+
+
 @contextlib.contextmanager
 def sigterm_interrupts() -> Iterator[None]:
     """Within: SIGTERM raises `Terminated` in the main thread, so that it unwinds as Ctrl-C
@@ -40,19 +44,37 @@ def sigterm_interrupts() -> Iterator[None]:
         yield
         return
     pid = os.getpid()
+    received: list[int] = []
+
+    def end_now(*_: object) -> None:
+        """The interrupt was swallowed (raised inside a callback that Python only reports, as
+        matplotlib's were while an animation was written), or SIGTERM came twice: end here,
+        without the temporary files an output was being written to."""
+        remove_live_temporary()
+        print("interrupted", file=sys.stderr, flush=True)
+        os._exit(EXIT_INTERRUPTED)
 
     def handler(signum: int, _frame: object) -> None:
         if os.getpid() != pid:
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
+        if received:
+            end_now()
+        received.append(signum)
+        # if the interrupt does not unwind the command within a few seconds, end it anyway
+        signal.signal(signal.SIGALRM, end_now)
+        signal.alarm(SWALLOWED_INTERRUPT_S)
         raise Terminated
 
     previous = signal.signal(signal.SIGTERM, handler)
     try:
         yield
     finally:
+        signal.alarm(0)
         signal.signal(signal.SIGTERM, previous)
+        if received and sys.exc_info()[0] is None:
+            raise Terminated  # swallowed, and the command ended in time: still an interrupt
 
 
 MAX_SEED = 2**63 - 1  # numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers

@@ -567,6 +567,24 @@ def _caused_by_interrupt(error: BaseException | None) -> bool:
 
 def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    from rb_drake.environment import (
+        library_settings,
+        quiet_matplotlib,
+        threads_adapt_setting,
+        threads_setting,
+    )
+    from rb_drake.input_files import max_input_bytes, max_input_values
+
+    try:  # the environment, before numba, matplotlib or Drake is imported
+        threads_setting()  # a malformed RBP_THREADS is refused before any work
+        threads_adapt_setting()
+        library_settings()  # and numba's and OpenMP's variables
+        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
+        max_input_values()
+    except RbpInputError as e:
+        print(f"error: {one_line(str(e))}", file=sys.stderr)
+        return EXIT_USAGE
+    quiet_matplotlib()
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
     args = build_parser().parse_args(argv)
@@ -575,13 +593,6 @@ def _main(argv: list[str] | None) -> int:
     from rb_drake.scenario import ScenarioError
 
     try:
-        from rb_drake.environment import threads_adapt_setting, threads_setting
-        from rb_drake.input_files import max_input_bytes, max_input_values
-
-        threads_setting()  # a malformed RBP_THREADS is refused before any work
-        threads_adapt_setting()
-        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
-        max_input_values()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

@@ -30,6 +30,7 @@ from rbp.commands.common import (
     check_dpi,
     check_output,
     check_seed,
+    forget_outputs,
     load_scenario_spec,
     plural,
     read_plan,
@@ -593,6 +594,7 @@ def _main(argv: list[str] | None) -> int:
     from rb_drake.scenario import ScenarioError
 
     try:
+        forget_outputs()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

@@ -921,3 +921,20 @@ def test_an_ompl_log_inside_the_experiment_out_is_refused(tmp_path, inside):
     error = result.stderr.strip().splitlines()[-1]
     assert f"--ompl-log: bc/{inside}: is in the experiment's --out" in error
     assert not (tmp_path / "bc").exists()
+
+
+@pytest.mark.parametrize("flag, value, words", [
+    ("--max-expansions", "99999999999999999999", "must be a whole number from 1 to 1,000,000,000"),
+    ("--max-expansions", "0", "must be a whole number from 1 to 1,000,000,000"),
+    ("--time-limit", "1e300", "must be a number above 0 and at most 1,000,000 s"),
+    ("--time-limit", "nan", "must be a number above 0 and at most 1,000,000 s"),
+])
+def test_plan_flags_are_held_to_the_configuration_ranges(tmp_path, capsys, flag, value, words):
+    """A flag outside its field's range was written into provenance.config, and the plan's
+    own --from-plan then refused it."""
+    from rbp.cli import main
+
+    out = tmp_path / "p.json"
+    assert main(["plan", "demo-shaft", "--no-pictures", "-o", str(out), flag, value]) == 2
+    assert _one_error(capsys).startswith(f"error: {flag}: {words}")
+    assert not out.exists()

@@ -73,8 +73,14 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     check_output(args.output)
     try:
         scn = generate_cave(args.kind, args.seed, cfg)
-    except RuntimeError as e:  # no feasible start stance in any draw
-        raise UserError(str(e)) from None
+    except RuntimeError:  # no feasible start stance in any draw: name what to change
+        found = (f"no {args.kind} cave with a feasible start stance after {cfg.max_redraws} "
+                 f"draws from seed {args.seed}")
+        if args.anchor_density < 1:  # below 0.5 a metre caves often have no start stance
+            raise UserError(f"--anchor-density: {found} at {args.anchor_density:g} anchors "
+                            f"per metre; give 1 to {MAX_ANCHOR_DENSITY:g} (default 3)") from None
+        raise UserError(f"--seed: {found}; give another --seed or --length, or a denser "
+                        "--anchor-density") from None
     command = (f"rbp scenario generate --kind {args.kind} --seed {args.seed} "
                f"--length {lo:g} {hi:g} --anchor-density {args.anchor_density:g}")
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")

@@ -938,3 +938,14 @@ def test_plan_flags_are_held_to_the_configuration_ranges(tmp_path, capsys, flag,
     assert main(["plan", "demo-shaft", "--no-pictures", "-o", str(out), flag, value]) == 2
     assert _one_error(capsys).startswith(f"error: {flag}: {words}")
     assert not out.exists()
+
+
+def test_generate_without_a_start_stance_names_the_option_to_change(tmp_path, capsys):
+    """Was `error: no cave of kind 'shaft' ...; loosen the CaveConfig`: no field, no way out."""
+    from rbp.cli import main
+
+    out = tmp_path / "x.yaml"
+    assert main(["scenario", "generate", "--anchor-density", "0.01", "-o", str(out)]) == 2
+    error = _one_error(capsys)
+    assert error.startswith("error: --anchor-density: no shaft cave with a feasible start")
+    assert "give 1 to 20" in error and not out.exists()

@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
                      f"{args.planners!r}")
     if not args.oracle_time > 0:
         parser.error(f"--oracle-time: must be positive, got {args.oracle_time}")
-    check_ompl_log(parser, args.ompl_log)
+    check_ompl_log(parser, args.ompl_log, args.out)
 
     from rb_drake.files import atomic_save_figure
 

@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import time
+from pathlib import Path
 from typing import Any
 
 from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
@@ -239,12 +241,18 @@ def add_ompl_log_argument(parser: argparse.ArgumentParser) -> None:
                              "and Planner Arena")
 
 
-def check_ompl_log(parser: argparse.ArgumentParser, path: str | None) -> None:
-    """Refuse an --ompl-log path that cannot be written, before any work."""
+def check_ompl_log(parser: argparse.ArgumentParser, path: str | None, out: str) -> None:
+    """Refuse an --ompl-log path that cannot be written, or that lies in the experiment's
+    --out folder (it replaced results.json or a trial record there), before any work."""
     from rb_drake.files import output_problem
 
-    if path is not None and (problem := output_problem(path)) is not None:
+    if path is None:
+        return
+    if (problem := output_problem(path)) is not None:
         parser.error(f"--ompl-log: {path}: {problem}")
+    if Path(os.path.realpath(path)).is_relative_to(os.path.realpath(out)):
+        parser.error(f"--ompl-log: {path}: is in the experiment's --out ({out}), where it "
+                     "writes its own files; give a path outside it")
 
 
 def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

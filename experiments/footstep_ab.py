@@ -144,7 +144,8 @@ def main(argv: list[str] | None = None) -> int:
 
     summary: dict[str, Any] = {side: {"median_wall": median([r[side]["wall"] for r in rows]),
                       "median_cpu": median([r[side]["cpu"] for r in rows]),
-                      "most_peak_mb": max((r[side].get("peak_mb", 0.0) for r in rows), default=None)}
+                      "most_peak_mb": max((r[side].get("peak_mb", 0.0) for r in rows),
+                                          default=None)}
                for side in ("old", "new")}
     summary["ratio_median"] = median([r["ratio"] for r in rows])
     summary["cpu_ratio_median"] = median([r["cpu_ratio"] for r in rows])

@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
                              "variant of a cave is taken from the first file that has it)")
     add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
-    check_ompl_log(parser, args.ompl_log)
+    check_ompl_log(parser, args.ompl_log, args.out)
     if args.against_oracle:
         runs = [json.loads(Path(f).read_text()) for f in args.against_oracle]
         print(json.dumps(against_oracle(runs), indent=1))

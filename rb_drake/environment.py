@@ -35,3 +35,64 @@ def threads_adapt_setting() -> bool:
         raise RbpInputError(f"must be 0 or 1, got {value!r}", field="RBP_THREADS_ADAPT "
                             "(environment)")
     return value != "0"
+
+
+# numba's threading layers (NUMBA_THREADING_LAYER): another name ended in numba's traceback
+NUMBA_LAYERS = ("default", "safe", "forksafe", "threadsafe", "tbb", "omp", "workqueue")
+
+
+def library_settings() -> None:
+    """Refuse (RbpInputError naming the variable) the libraries' variables that they would
+    meet with a traceback (NUMBA_NUM_THREADS=0, NUMBA_THREADING_LAYER=nosuch) or a warning
+    (NUMBA_NUM_THREADS=abc, OMP_NUM_THREADS=abc, printed twice by libgomp). The command line
+    calls it before numba is imported; `import rbp` leaves the environment to the caller."""
+    numba_threads = os.environ.get("NUMBA_NUM_THREADS")
+    if numba_threads is not None and not _whole_threads(numba_threads):
+        raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS}, "
+                            f"got {numba_threads!r}", field="NUMBA_NUM_THREADS (environment)")
+    omp = os.environ.get("OMP_NUM_THREADS")
+    if omp is not None and not all(_whole_threads(part) for part in omp.split(",")):
+        raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS} (or a "
+                            f"comma-separated list of them), got {omp!r}",
+                            field="OMP_NUM_THREADS (environment)")
+    layer = os.environ.get("NUMBA_THREADING_LAYER")
+    if layer is not None and layer not in NUMBA_LAYERS:
+        raise RbpInputError(f"must be one of {', '.join(NUMBA_LAYERS)}, got {layer!r}",
+                            field="NUMBA_THREADING_LAYER (environment)")
+
+
+def _whole_threads(value: str) -> bool:
+    value = value.strip()
+    return value.isdigit() and 1 <= int(value) <= MAX_THREADS
+
+
+def quiet_matplotlib() -> None:
+    """rbp draws only to files: the Agg backend whatever MPLBACKEND says (MPLBACKEND=nosuch
+    ended in a traceback at import), and, when matplotlib's config or cache folder cannot be
+    made (HOME a regular file), a fresh temporary MPLCONFIGDIR, silently: matplotlib printed
+    two warning lines on every picture and before any error line."""
+    import tempfile
+
+    os.environ["MPLBACKEND"] = "Agg"
+    home = os.path.expanduser("~")
+    if os.environ.get("MPLCONFIGDIR"):
+        folders = [os.environ["MPLCONFIGDIR"]]
+    else:
+        folders = [os.path.join(os.environ.get("XDG_CONFIG_HOME")
+                                or os.path.join(home, ".config"), "matplotlib"),
+                   os.path.join(os.environ.get("XDG_CACHE_HOME")
+                                or os.path.join(home, ".cache"), "matplotlib")]
+    for folder in folders:
+        try:
+            os.makedirs(folder, exist_ok=True)  # as matplotlib does
+            usable = os.path.isdir(folder) and os.access(folder, os.W_OK | os.X_OK)
+        except (OSError, ValueError):
+            usable = False
+        if not usable:
+            fresh = tempfile.mkdtemp(prefix="rbp-matplotlib-")
+            import atexit
+            import shutil
+
+            atexit.register(shutil.rmtree, fresh, ignore_errors=True)
+            os.environ["MPLCONFIGDIR"] = fresh
+            return

@@ -9,7 +9,7 @@ import errno
 import os
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO
 
@@ -28,10 +28,16 @@ def output_target(path: str | Path) -> Path:
         raise OSError(f"{path}: a symlink loop") from e
 
 
-def output_problem(path: str | Path) -> str | None:
+TEMPORARY_EXTRA = 14  # atomic_write's temporary file is .NAME.XXXXXXXX.tmp: 14 bytes more
+
+
+def output_problem(path: str | Path,
+                   inputs: Mapping[str, str | Path | None] | None = None) -> str | None:
     """Why `path` cannot be written as an output file, or None: checked before any work, so
     that a plan of minutes is not computed for nothing. A symlink is followed to its target; a
-    missing folder is fine if it can be created."""
+    missing folder is fine if it can be created. A name whose temporary file would exceed the
+    folder's longest name is refused (it failed only after the work), and so is a path that is
+    one of the command's `inputs` ({what: path}: the output would overwrite it)."""
     try:
         target = output_target(path)
         if (problem := _not_regular(target)) is not None:
@@ -48,6 +54,13 @@ def output_problem(path: str | Path) -> str | None:
         return f"{folder} is not a folder"
     if not os.access(folder, os.W_OK | os.X_OK):
         return f"the folder {folder} is not writable"
+    longest = _name_max(folder) - TEMPORARY_EXTRA
+    if len(os.fsencode(target.name)) > longest:
+        return (f"the file name is too long: {len(os.fsencode(target.name))} bytes, at most "
+                f"{longest} here (its temporary file adds {TEMPORARY_EXTRA})")
+    for what, given in (inputs or {}).items():
+        if given is not None and _same_file(path, given):
+            return f"is {what}; the output would overwrite it"
     return None
 
 
@@ -61,6 +74,21 @@ def remove_live_temporary() -> None:
     for tmp in list(LIVE_TEMPORARY):
         Path(tmp).unlink(missing_ok=True)
         LIVE_TEMPORARY.discard(tmp)
+
+
+def _name_max(folder: Path) -> int:
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether paths `a` and `b` name one existing file (through symlinks and hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either missing (b may be a bundled cave's name)
+        return False
 
 
 def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:

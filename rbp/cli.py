@@ -30,6 +30,7 @@ from rbp.commands.common import (
     check_dpi,
     check_output,
     check_seed,
+    forget_outputs,
     load_scenario_spec,
     plural,
     read_plan,
@@ -72,8 +73,14 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     check_output(args.output)
     try:
         scn = generate_cave(args.kind, args.seed, cfg)
-    except RuntimeError as e:  # no feasible start stance in any draw
-        raise UserError(str(e)) from None
+    except RuntimeError:  # no feasible start stance in any draw: name what to change
+        found = (f"no {args.kind} cave with a feasible start stance after {cfg.max_redraws} "
+                 f"draws from seed {args.seed}")
+        if args.anchor_density < 1:  # below 0.5 a metre caves often have no start stance
+            raise UserError(f"--anchor-density: {found} at {args.anchor_density:g} anchors "
+                            f"per metre; give 1 to {MAX_ANCHOR_DENSITY:g} (default 3)") from None
+        raise UserError(f"--seed: {found}; give another --seed or --length, or a denser "
+                        "--anchor-density") from None
     command = (f"rbp scenario generate --kind {args.kind} --seed {args.seed} "
                f"--length {lo:g} {hi:g} --anchor-density {args.anchor_density:g}")
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
@@ -567,6 +574,24 @@ def _caused_by_interrupt(error: BaseException | None) -> bool:
 
 def _main(argv: list[str] | None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
+    from rb_drake.environment import (
+        library_settings,
+        quiet_matplotlib,
+        threads_adapt_setting,
+        threads_setting,
+    )
+    from rb_drake.input_files import max_input_bytes, max_input_values
+
+    try:  # the environment, before numba, matplotlib or Drake is imported
+        threads_setting()  # a malformed RBP_THREADS is refused before any work
+        threads_adapt_setting()
+        library_settings()  # and numba's and OpenMP's variables
+        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
+        max_input_values()
+    except RbpInputError as e:
+        print(f"error: {one_line(str(e))}", file=sys.stderr)
+        return EXIT_USAGE
+    quiet_matplotlib()
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
     args = build_parser().parse_args(argv)
@@ -575,13 +600,7 @@ def _main(argv: list[str] | None) -> int:
     from rb_drake.scenario import ScenarioError
 
     try:
-        from rb_drake.environment import threads_adapt_setting, threads_setting
-        from rb_drake.input_files import max_input_bytes, max_input_values
-
-        threads_setting()  # a malformed RBP_THREADS is refused before any work
-        threads_adapt_setting()
-        max_input_bytes()  # and so are the reading limits' (they fell back to the default)
-        max_input_values()
+        forget_outputs()
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

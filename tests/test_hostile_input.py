@@ -851,3 +851,101 @@ def test_bench_compare_read_by_the_bounded_reader_and_checked(tmp_path, content,
                      cwd=tmp_path)
     _refused_in_one_line(result, old, words)
     assert not (tmp_path / "out").exists()
+
+
+def _one_error(capsys: pytest.CaptureFixture[str]) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), lines
+    return lines[0]
+
+
+@pytest.mark.parametrize("how", ["same", "symlink", "default"])
+def test_bench_never_overwrites_its_compare_file(tmp_path, capsys, how):
+    """`--json F --compare F` (also through a symlink, or `--out D --compare D/bench.json`)
+    overwrote the results it compares with."""
+    from rbp.cli import main
+
+    old = tmp_path / "d" / "bench.json"
+    old.parent.mkdir()
+    old.write_text('{"sections": {}}')
+    given = {"same": ["--json", str(old)], "default": []}.get(how)
+    if given is None:
+        (tmp_path / "link.json").symlink_to(old)
+        given = ["--json", str(tmp_path / "link.json")]
+    argv = ["bench", "--only", "allocation", "--samples", "1", "--out", str(old.parent),
+            *given, "--compare", str(old)]
+    assert main(argv) == 2
+    assert "is --compare's file; the output would overwrite it" in _one_error(capsys)
+    assert old.read_text() == '{"sections": {}}'
+
+
+def test_bench_unknown_section_names_only(tmp_path, capsys):
+    from rbp.cli import main
+
+    assert main(["bench", "--only", "nope", "--out", str(tmp_path / "b")]) == 2
+    assert _one_error(capsys).startswith("error: --only: unknown section(s) ['nope']")
+
+
+def test_two_outputs_of_one_command_may_not_share_a_path(tmp_path, capsys):
+    """`simulate --json X --html X` lost the JSON (the page was written over it)."""
+    from rbp.cli import main
+
+    same = tmp_path / "same.out"
+    assert main(["simulate", str(tmp_path / "p.json"), "--trials", "1", "--json", str(same),
+                 "--html", str(same)]) == 2
+    assert f"{same}: --html: is also --json's output" in _one_error(capsys)
+
+
+@pytest.mark.parametrize("argv", [
+    ["plan", "demo-crevasse", "--no-pictures", "-o", "y" * 250 + ".json"],
+    ["plan", "demo-crevasse", "-o", "y" * 237 + ".json"],  # its NAME-search.png: 248 bytes
+    ["scenario", "generate", "-o", "y" * 240 + ".yaml"],
+])
+def test_an_output_name_too_long_for_its_temporary_file_is_refused_first(
+        tmp_path, capsys, monkeypatch, argv):
+    """.NAME.XXXXXXXX.tmp is 14 bytes longer than NAME: a 250-byte name failed after the work."""
+    from rbp.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    assert "the file name is too long" in _one_error(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("inside", ["results.json", "trials/000-shaft-s1.json"])
+def test_an_ompl_log_inside_the_experiment_out_is_refused(tmp_path, inside):
+    """--ompl-log OUT/results.json replaced the experiment's results (or a trial record)."""
+    result = run_rbp("experiment", "baseline_comparison", "--out", "bc", "--trials", "1",
+                     "--ompl-log", f"bc/{inside}", cwd=tmp_path)
+    assert result.returncode == 2, result.stderr[-1500:]
+    error = result.stderr.strip().splitlines()[-1]
+    assert f"--ompl-log: bc/{inside}: is in the experiment's --out" in error
+    assert not (tmp_path / "bc").exists()
+
+
+@pytest.mark.parametrize("flag, value, words", [
+    ("--max-expansions", "99999999999999999999", "must be a whole number from 1 to 1,000,000,000"),
+    ("--max-expansions", "0", "must be a whole number from 1 to 1,000,000,000"),
+    ("--time-limit", "1e300", "must be a number above 0 and at most 1,000,000 s"),
+    ("--time-limit", "nan", "must be a number above 0 and at most 1,000,000 s"),
+])
+def test_plan_flags_are_held_to_the_configuration_ranges(tmp_path, capsys, flag, value, words):
+    """A flag outside its field's range was written into provenance.config, and the plan's
+    own --from-plan then refused it."""
+    from rbp.cli import main
+
+    out = tmp_path / "p.json"
+    assert main(["plan", "demo-shaft", "--no-pictures", "-o", str(out), flag, value]) == 2
+    assert _one_error(capsys).startswith(f"error: {flag}: {words}")
+    assert not out.exists()
+
+
+def test_generate_without_a_start_stance_names_the_option_to_change(tmp_path, capsys):
+    """Was `error: no cave of kind 'shaft' ...; loosen the CaveConfig`: no field, no way out."""
+    from rbp.cli import main
+
+    out = tmp_path / "x.yaml"
+    assert main(["scenario", "generate", "--anchor-density", "0.01", "-o", str(out)]) == 2
+    error = _one_error(capsys)
+    assert error.startswith("error: --anchor-density: no shaft cave with a feasible start")
+    assert "give 1 to 20" in error and not out.exists()

@@ -54,7 +54,7 @@ from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
 from experiments.bench.scp import run_scp
 from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
-from rb_drake.files import atomic_write_text
+from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
 
 SECTIONS = ("allocation", "scp", "footstep")
@@ -87,7 +87,13 @@ def run(args: argparse.Namespace) -> int:
     sections = [s.strip() for s in args.only.split(",") if s.strip()]
     unknown = sorted(set(sections) - set(SECTIONS))
     if unknown:
-        print(f"error: unknown section(s) {unknown}; choose from {list(SECTIONS)}",
+        print(one_line(f"error: --only: unknown section(s) {unknown}; choose from "
+                       f"{list(SECTIONS)}"), file=sys.stderr)
+        return EXIT_USAGE
+    out = Path(args.json) if args.json else Path(args.out) / "bench.json"
+    # before any work, and never over the --compare file it reads (it was overwritten)
+    if (problem := output_problem(out, {"--compare's file": args.compare})) is not None:
+        print(one_line(f"error: {out}: {'--json' if args.json else '--out'}: {problem}"),
               file=sys.stderr)
         return EXIT_USAGE
     old = None
@@ -116,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
         else:
             result["sections"][name] = run_footstep(args.caves, args.max_expansions, args.seed)
     result["seconds"] = time.perf_counter() - started
-    out = Path(args.json) if args.json else Path(args.out) / "bench.json"
     atomic_write_text(out, json.dumps(result, indent=1, default=jsonable))
     print(f"\nwrote {out} ({result['seconds']:.0f} s)")
     if old is not None:

@@ -100,36 +100,37 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
                  inputs: Mapping[str, str | Path | None] | None = None) -> Path:
     """`path` as an output of option `flag`, refused (UserError naming the user's path and
     `flag`, never a temporary file) before any work if it cannot be written: a folder, a device,
-    a pipe (a symlink is followed), an unwritable place, or one of the command's `inputs`
-    ({what: path}, e.g. {"the plan": args.plan}: `--json P.json P.json` replaced the plan). An
-    image suffix is refused for a data file (`picture` False), so that a plan and its picture
-    never share a path; a picture's suffix must be a format matplotlib writes (an animation's
-    writer is chosen by `check_animation`); `picture` None takes any suffix (an HTML page)."""
+    a pipe (a symlink is followed), an unwritable place, a name too long for its temporary
+    file, one of the command's `inputs` ({what: path}, e.g. {"the plan": args.plan}: `--json
+    P.json P.json` replaced the plan), or another of the command's outputs (`--json X --html X`
+    lost the JSON). An image suffix is refused for a data file (`picture` False), so that a
+    plan and its picture never share a path; a picture's suffix must be a format matplotlib
+    writes (an animation's writer is chosen by `check_animation`); `picture` None takes any
+    suffix (an HTML page)."""
     from rb_drake.files import IMAGE_SUFFIXES, output_problem, picture_format_problem
 
     path = Path(path)
-    problem = output_problem(path)
+    problem = output_problem(path, inputs)
     if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
     if problem is None and picture and not animation:
         problem = picture_format_problem(path)
-    if problem is None:
-        for what, given in (inputs or {}).items():
-            if given is not None and _same_file(path, given):
-                problem = f"is {what}; the output would overwrite it"
-                break
+    key = os.path.realpath(path)  # missing files too, through the symlinks that exist
+    if problem is None and _OUTPUTS.get(key, flag) != flag:
+        problem = f"is also {_OUTPUTS[key]}'s output; give each output its own path"
     if problem is not None:
         raise UserError(f"{path}: {flag}: {problem}")
+    _OUTPUTS[key] = flag
     return path
 
 
-def _same_file(a: str | Path, b: str | Path) -> bool:
-    """Whether paths `a` and `b` name one existing file (through symlinks and hard links)."""
-    try:
-        return os.path.samefile(a, b)
-    except (OSError, ValueError):  # either missing (b may be a bundled cave's name)
-        return False
+_OUTPUTS: dict[str, str] = {}  # this command's outputs checked so far: real path -> option
+
+
+def forget_outputs() -> None:
+    """Start a command: no output checked yet (`check_output`)."""
+    _OUTPUTS.clear()
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):

@@ -27,6 +27,12 @@ if TYPE_CHECKING:
 # and the plan's time stamps, rounded to 1 us, cannot keep the steps apart), and a 5 cm step
 # takes at most a minute
 MIN_DT, MAX_DT = 0.01, 60.0
+# Options that set a configuration field: held to the field's range (planning.config_ranges),
+# so that a plan's provenance.config is always one --from-plan reads back (a budget of 1e20
+# was accepted, written, then refused). --seed, --dt and --min-success have their own checks
+# of the same ranges.
+OPTION_FIELDS = {"--max-expansions": ("FootstepConfig", "max_expansions"),
+                 "--time-limit": ("FootstepConfig", "time_limit")}
 
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
@@ -66,9 +72,14 @@ def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
     from planning.complete_config import AnytimeConfig
     from planning.config_io import load_config
+    from planning.config_ranges import FIELDS
     from planning.pipeline import PipelineConfig
     from rbp.commands.common import MAX_SEED, UserError, check_seed, load_scenario_spec
 
+    for flag, (cls, name) in OPTION_FIELDS.items():  # before any work, as a file's would be
+        value = getattr(args, name, None)
+        if value is not None and (problem := FIELDS[cls][name].problem(value)):
+            raise UserError(f"{flag}: {problem}")
     cfg = PipelineConfig()
     planner, motion = args.planner or "rbp", not args.footsteps_only
     if args.from_plan:
@@ -130,12 +141,6 @@ def plan_setup(args: argparse.Namespace):
         source = "--seed" if args.seed is not None else (
             f"{args.config or args.from_plan or '(configuration)'}: footstep.seed")
         check_seed(cfg.footstep.seed, source)
-    budget = cfg.footstep.max_expansions
-    if budget is not None and not budget >= 1:
-        raise UserError(f"--max-expansions: must be 1 or more, got {budget}")
-    limit = cfg.footstep.time_limit
-    if limit is not None and not limit > 0:
-        raise UserError(f"--time-limit: must be positive, got {limit}")
     from planning.footsteps import SEARCHES
 
     if cfg.footstep.search not in SEARCHES:

@@ -411,6 +411,52 @@ def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, 
     assert caught.value.field == f"phases/0/steps/1/{field}", caught.value.field
 
 
+def test_plans_stretched_in_time_refused_at_reading(tmp_path):
+    """A plan with every time x50,000 passed `rbp check`, then `rbp simulate` ran out of memory
+    sampling it (5.4 GB); one with time_step x1000 made `rbp check` grow to 5.6 GB. A step more
+    than a minute after the one before, or a time_step outside --dt's range, is refused; a
+    footstep plan's long body move at the nominal speeds is not."""
+    from planning.plan_file import PlanFileError, read_plan_file
+
+    golden = Path(__file__).parent / "data" / "golden"
+    path = tmp_path / "plan.json"
+    plan = json.loads((golden / "demo-shaft.json").read_text())
+    for phase in plan["phases"]:
+        for step in phase["steps"]:
+            step["t"] *= 1000
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match="at most 60 s apart") as caught:
+        read_plan_file(path)
+    assert caught.value.field == "phases/0/steps/1/t", caught.value.field
+    for time_step in (500.0, 0.001):
+        path.write_text(json.dumps(plan | {"time_step": time_step}))
+        with pytest.raises(PlanFileError, match="than the m") as caught:
+            read_plan_file(path)
+        assert caught.value.field == "time_step", caught.value.field
+    plan = json.loads((golden / "demo-shaft.json").read_text())
+    plan["phases"][3]["steps"][0]["t"] += 61  # across phases too: a wait between them
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match="61 s after") as caught:
+        read_plan_file(path)
+    assert caught.value.field == "phases/3/steps/0/t", caught.value.field
+    # the rig's straight move: 10 m at 0.1 m/s, 100 s between its steps, is accepted
+    plan = json.loads((golden / "rig.json").read_text())
+    steps = plan["phases"][0]["steps"]
+    for n, step in enumerate(steps):
+        step["t"], step["pose"][0] = 100.0 * n, steps[0]["pose"][0] + 10.0 * n
+    path.write_text(json.dumps(plan))
+    assert read_plan_file(path)["phases"][0]["steps"][-1]["t"] == 100.0 * (len(steps) - 1)
+    # the CLI: one line, exit 2, for checking and simulating alike
+    steps[1]["pose"][0] = steps[0]["pose"][0]  # 100 s, and no move to take them
+    path.write_text(json.dumps(plan))
+    for command in (("check",), ("simulate", "--trials", "0")):
+        done = run_rbp(*command, str(path), cwd=tmp_path)
+        assert done.returncode == 2, done
+        assert done.stderr == (f"error: {path}: phases/0/steps/1/t: 100 s after the step before: "
+                               "steps are at most 60 s apart (longer only for a body move at "
+                               "0.1 m/s, 0.2 rad/s)\n"), done.stderr
+
+
 def test_control_characters_cannot_forge_error_lines(tmp_path):
     """A key, a value or a file name holding a newline or carriage return printed a second,
     forged `error:` line; they are written as escapes, in the message and by the CLI."""

@@ -457,6 +457,36 @@ def test_plans_stretched_in_time_refused_at_reading(tmp_path):
                                "0.1 m/s, 0.2 rad/s)\n"), done.stderr
 
 
+def test_rig_run_refuses_a_log_its_readers_would_refuse(tmp_path):
+    """`rbp rig-run --period 0.01` over a 17-minute phase logged 27.6 MB, more than 200,000
+    events, which rig-replay and rig-report then refused: the run is refused before any
+    command is sent, naming --period and the least that fits."""
+    from types import SimpleNamespace
+
+    from systems.rig_interface import RigInputError, check_log_size
+
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "rig.json").read_text())
+    steps = plan["phases"][0]["steps"]
+    for step in steps:
+        step["t"] = round(step["t"] * 200, 6)  # 56 s apart: readable
+    while steps[-1]["t"] < 1100:  # then wait at the goal, to 1110 s
+        steps.append(dict(steps[-1], t=steps[-1]["t"] + 55))
+    plan.pop("verified", None)
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps(plan))
+    done = run_rbp("rig-run", str(path), "--sim-rig", "--period", "0.01", "--log",
+                   str(tmp_path / "run.lcm"), cwd=tmp_path)
+    assert done.returncode == 2, done
+    assert done.stderr == ("error: --period: 0.01 s over the phase's 1110 s would log 222,003 "
+                           "events, more than the 200,000 rbp rig-replay and rig-report read: "
+                           "use at least 0.0112 s\n"), done.stderr
+    assert not (tmp_path / "run.lcm").exists()
+    phase = SimpleNamespace(start_time=3.0, end_time=1113.0)
+    check_log_size(phase, 0.0112)  # type: ignore[arg-type]
+    with pytest.raises(RigInputError, match=r"use at least 0\.0112 s"):
+        check_log_size(phase, 0.0111)  # type: ignore[arg-type]
+
+
 def test_control_characters_cannot_forge_error_lines(tmp_path):
     """A key, a value or a file name holding a newline or carriage return printed a second,
     forged `error:` line; they are written as escapes, in the message and by the CLI."""

@@ -383,7 +383,11 @@ def replay_log(path: str | Path,
     stance_ids = tuple(setup.stance)
     unknown = [a for a in stance_ids if a not in scn.anchor_index]
     if unknown:
-        raise RigInputError(f"{config.setup_channel}.stance", f"unknown anchor {unknown[0]!r}")
+        raise RigInputError(f"{config.setup_channel}.stance",
+                            f"event 0: unknown anchor {unknown[0]!r}")
+    if len(set(stance_ids)) != len(stance_ids):  # as a scenario's start stance is checked
+        raise RigInputError(f"{config.setup_channel}.stance", f"event 0: each boom needs its "
+                            f"own anchor, got {list(stance_ids)}")
     statuses = [s for s in (decode_status(d, scn.robot) for d in raw_statuses) if s is not None]
     monitor = GraspMonitor(scn.stance(stance_ids))
     context = monitor.CreateDefaultContext()

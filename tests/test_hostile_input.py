@@ -611,6 +611,38 @@ def test_damaged_rig_logs_refused_in_one_line(tmp_path):
         _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path, words)
 
 
+def test_rig_log_setup_printed_escaped_and_its_stance_checked(tmp_path):
+    """A setup's `plan_source` holding a newline was printed raw by `rbp rig-replay`, forging
+    an `error:` line on stdout; a stance holding one anchor on all four booms was accepted."""
+    import json
+
+    import lcm
+
+    from systems.reachbot_lcm import rig_setup_t
+    from systems.rig_interface import RigLcmConfig
+
+    channels = RigLcmConfig()
+    scenario_json = json.dumps(load_scenario(DEMO).to_dict())
+
+    def write(name: str, source: str, stance: list[str]) -> Path:
+        msg = rig_setup_t()
+        msg.scenario_json, msg.plan_source, msg.stance = scenario_json, source, stance
+        path = tmp_path / name
+        log = lcm.EventLog(str(path), "w", overwrite=True)
+        log.write_event(0, channels.setup_channel, msg.encode())
+        log.close()
+        return path
+
+    path = write("forged.lcmlog", "x\nerror: forged\r", ["a30", "a6", "a1", "a20"])
+    result = run_rbp("rig-replay", str(path), cwd=tmp_path)
+    assert result.returncode == 0 and not result.stderr, result
+    assert result.stdout == f"{path}: demo-shaft, x\\nerror: forged\\r: 0 commands, 0 statuses\n"
+    path = write("same.lcmlog", "", ["a30"] * 4)
+    _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path,
+                         "RIG_SETUP.stance: event 0: each boom needs its own anchor, got "
+                         "['a30', 'a30', 'a30', 'a30']")
+
+
 def test_rig_log_with_a_damaged_last_command_refused_by_the_header_scan(tmp_path):
     """A command that cannot decode is found by the scan of event headers (its size and
     fingerprint), before lcm reads and rbp decodes the events before it: 200,000 commands

@@ -22,8 +22,10 @@ import numpy as np
 
 from planning.easing import ease_motions
 from planning.plan_model import (
+    BODY_SPEED,
     FORMAT,
     STAGES,
+    TURN_SPEED,
     Limits,
     Motion,
     Phase,
@@ -47,8 +49,6 @@ if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write 
     from planning.footsteps import FootstepPlan
     from planning.pipeline import PhaseMotion
 
-BODY_SPEED = 0.1      # m/s, nominal, for the time stamps of body phases
-TURN_SPEED = 0.2      # rad/s
 REACH_DURATION = 5.0  # s for the free gripper to travel between anchors
 
 

@@ -17,7 +17,7 @@ import re
 from pathlib import Path
 from typing import Any
 
-from planning.plan_model import Plan
+from planning.plan_model import BODY_SPEED, MAX_STEP_GAP, TURN_SPEED, Plan
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, read_text
 
@@ -137,7 +137,35 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
     if error is not None:
         field = "/".join(str(p) for p in error.absolute_path) or "(top level)"
         raise PlanFileError(field, error.message)
+    check_times(plan)
     return plan
+
+
+# s: slack on the longest wait, for times rounded to 1 us and a duration rounded with them
+GAP_TOL = 1e-3
+
+
+def check_times(plan: dict[str, Any]) -> None:
+    """Refuse (PlanFileError on the step's `t`) a schema-valid plan whose step comes more than
+    MAX_STEP_GAP after the step before it, in its phase or (a phase's first) the phase before's
+    last: the planner writes steps at most --dt apart, and the simulator and the rig sample the
+    plan over its time. A footstep plan's body phase may take longer, at its nominal speeds
+    (planning.plan.build_plan). Times that do not increase are the verifier's (rule
+    time-order): they stretch nothing."""
+    before: dict[str, Any] | None = None
+    for k, phase in enumerate(plan["phases"]):
+        for n, step in enumerate(phase["steps"]):
+            if before is not None:
+                gap = step["t"] - before["t"]
+                a, b = before["pose"], step["pose"]
+                allowed = max(MAX_STEP_GAP, math.hypot(b[0] - a[0], b[1] - a[1]) / BODY_SPEED,
+                              abs(b[2] - a[2]) / TURN_SPEED)
+                if gap > allowed + GAP_TOL:
+                    raise PlanFileError(
+                        f"phases/{k}/steps/{n}/t", f"{gap:.6g} s after the step before: steps "
+                        f"are at most {MAX_STEP_GAP:g} s apart (longer only for a body move "
+                        f"at {BODY_SPEED:g} m/s, {TURN_SPEED:g} rad/s)")
+            before = step
 
 
 def _check_format(value: Any) -> None:

@@ -48,7 +48,18 @@ FORCE4 = {"$ref": "#/$defs/force4"}  # 4 tensions (N) or nulls, each within MAX_
 # simulator). The same as rb_drake's scenario and robot bounds (tests/test_plan.py checks).
 MAX_COORDINATE = 1e4  # m for positions and steps, rad for angles (rb_drake.scenario)
 MAX_FORCE = 1e6       # N for tensions, N m for torques (rb_drake.params)
-MAX_TIME = 1e7        # s: a plan's times and time step (115 days; a climb takes minutes)
+MAX_TIME = 1e7        # s: a plan's times (115 days; a climb takes minutes)
+# rbp plan --dt's range, and a plan's time_step: a step is at least one of the simulator's plant
+# steps and a 5 cm step takes at most a minute (rbp.commands.plan)
+MIN_TIME_STEP, MAX_TIME_STEP = 0.01, 60.0
+# The longest wait between successive steps (planning.plan_file.check_times): the simulator and
+# the rig sample a plan over its time, so a plan stretched in time (a step a day apart) must be
+# refused at reading, not run out of memory later.
+MAX_STEP_GAP = MAX_TIME_STEP
+# m/s and rad/s: the nominal speeds of a footstep plan's body phases (planning.plan.build_plan),
+# which may take longer than MAX_STEP_GAP for a long move
+BODY_SPEED = 0.1
+TURN_SPEED = 0.2
 COORDINATE = {"type": "number", "minimum": -MAX_COORDINATE, "maximum": MAX_COORDINATE}
 
 
@@ -350,7 +361,7 @@ class Plan(Part):
     scenario: dict[str, Any] = spec(ref="scenario")
     robot: dict[str, Any] = spec(ref="robot")
     phases: tuple[Phase, ...] = spec()
-    time_step: float | None = spec(None, exclusiveMinimum=0, maximum=MAX_TIME,
+    time_step: float | None = spec(None, minimum=MIN_TIME_STEP, maximum=MAX_TIME_STEP,
                                    description="s between trajectory steps (full plans)")
     limits: Limits | None = spec(None)
     start: Start | None = spec(None)

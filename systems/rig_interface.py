@@ -23,6 +23,7 @@ diagram once per run, and `replay_log` one monitor per log.
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import struct
 import tempfile
@@ -50,6 +51,7 @@ from systems.lcm_url import open_problem, quietly
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
 from systems.rig_messages import (
+    MAX_LOG_EVENTS,
     MEMQ,
     LogWriter,
     RawSerializer,
@@ -230,6 +232,7 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
     atomically when the run ends) starts with a `rig_setup_t` naming the scenario and stance.
     """
     phase = body_phase(plan, phase_index)
+    check_log_size(phase, config.period)
     if sim_rig is not None and not config.url.startswith(MEMQ):
         raise RigInputError("--lcm-url", f"the simulated rig runs in-process on {MEMQ}, "
                             f"not on {config.url}")
@@ -261,6 +264,20 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
             atomic_write(log, lambda f: shutil.copyfileobj(src, f))
     return RigRun(live, writer.counts[config.command_channel],
                   writer.counts[config.status_channel], bus.get_lcm_url(), Path(log), safety)
+
+
+def check_log_size(phase: BodyPhase, period: float) -> None:
+    """Refuse (RigInputError on --period), before any command is sent, a run whose log would
+    hold more events than rig-replay and rig-report read (MAX_LOG_EVENTS): the setup, and a
+    command and a status every period over the phase (as `_simulate` runs it)."""
+    duration = phase.end_time - phase.start_time
+    events = 1 + 2 * (math.floor(duration / period + 1e-9) + 1)
+    if events > MAX_LOG_EVENTS:
+        # the least period whose run fits, rounded up to 0.1 ms
+        least = math.ceil(duration / ((MAX_LOG_EVENTS - 3) // 2) * 1e4) / 1e4
+        raise RigInputError("--period", f"{period:g} s over the phase's {duration:.6g} s "
+                            f"would log {events:,} events, more than the {MAX_LOG_EVENTS:,} "
+                            f"rbp rig-replay and rig-report read: use at least {least:g} s")
 
 
 def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
@@ -366,7 +383,11 @@ def replay_log(path: str | Path,
     stance_ids = tuple(setup.stance)
     unknown = [a for a in stance_ids if a not in scn.anchor_index]
     if unknown:
-        raise RigInputError(f"{config.setup_channel}.stance", f"unknown anchor {unknown[0]!r}")
+        raise RigInputError(f"{config.setup_channel}.stance",
+                            f"event 0: unknown anchor {unknown[0]!r}")
+    if len(set(stance_ids)) != len(stance_ids):  # as a scenario's start stance is checked
+        raise RigInputError(f"{config.setup_channel}.stance", f"event 0: each boom needs its "
+                            f"own anchor, got {list(stance_ids)}")
     statuses = [s for s in (decode_status(d, scn.robot) for d in raw_statuses) if s is not None]
     monitor = GraspMonitor(scn.stance(stance_ids))
     context = monitor.CreateDefaultContext()

@@ -411,6 +411,82 @@ def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, 
     assert caught.value.field == f"phases/0/steps/1/{field}", caught.value.field
 
 
+def test_plans_stretched_in_time_refused_at_reading(tmp_path):
+    """A plan with every time x50,000 passed `rbp check`, then `rbp simulate` ran out of memory
+    sampling it (5.4 GB); one with time_step x1000 made `rbp check` grow to 5.6 GB. A step more
+    than a minute after the one before, or a time_step outside --dt's range, is refused; a
+    footstep plan's long body move at the nominal speeds is not."""
+    from planning.plan_file import PlanFileError, read_plan_file
+
+    golden = Path(__file__).parent / "data" / "golden"
+    path = tmp_path / "plan.json"
+    plan = json.loads((golden / "demo-shaft.json").read_text())
+    for phase in plan["phases"]:
+        for step in phase["steps"]:
+            step["t"] *= 1000
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match="at most 60 s apart") as caught:
+        read_plan_file(path)
+    assert caught.value.field == "phases/0/steps/1/t", caught.value.field
+    for time_step in (500.0, 0.001):
+        path.write_text(json.dumps(plan | {"time_step": time_step}))
+        with pytest.raises(PlanFileError, match="than the m") as caught:
+            read_plan_file(path)
+        assert caught.value.field == "time_step", caught.value.field
+    plan = json.loads((golden / "demo-shaft.json").read_text())
+    plan["phases"][3]["steps"][0]["t"] += 61  # across phases too: a wait between them
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match="61 s after") as caught:
+        read_plan_file(path)
+    assert caught.value.field == "phases/3/steps/0/t", caught.value.field
+    # the rig's straight move: 10 m at 0.1 m/s, 100 s between its steps, is accepted
+    plan = json.loads((golden / "rig.json").read_text())
+    steps = plan["phases"][0]["steps"]
+    for n, step in enumerate(steps):
+        step["t"], step["pose"][0] = 100.0 * n, steps[0]["pose"][0] + 10.0 * n
+    path.write_text(json.dumps(plan))
+    assert read_plan_file(path)["phases"][0]["steps"][-1]["t"] == 100.0 * (len(steps) - 1)
+    # the CLI: one line, exit 2, for checking and simulating alike
+    steps[1]["pose"][0] = steps[0]["pose"][0]  # 100 s, and no move to take them
+    path.write_text(json.dumps(plan))
+    for command in (("check",), ("simulate", "--trials", "0")):
+        done = run_rbp(*command, str(path), cwd=tmp_path)
+        assert done.returncode == 2, done
+        assert done.stderr == (f"error: {path}: phases/0/steps/1/t: 100 s after the step before: "
+                               "steps are at most 60 s apart (longer only for a body move at "
+                               "0.1 m/s, 0.2 rad/s)\n"), done.stderr
+
+
+def test_rig_run_refuses_a_log_its_readers_would_refuse(tmp_path):
+    """`rbp rig-run --period 0.01` over a 17-minute phase logged 27.6 MB, more than 200,000
+    events, which rig-replay and rig-report then refused: the run is refused before any
+    command is sent, naming --period and the least that fits."""
+    from types import SimpleNamespace
+
+    from systems.rig_interface import RigInputError, check_log_size
+
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "rig.json").read_text())
+    steps = plan["phases"][0]["steps"]
+    for step in steps:
+        step["t"] = round(step["t"] * 200, 6)  # 56 s apart: readable
+    while steps[-1]["t"] < 1100:  # then wait at the goal, to 1110 s
+        steps.append(dict(steps[-1], t=steps[-1]["t"] + 55))
+    plan.pop("verified", None)
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps(plan))
+    done = run_rbp("rig-run", str(path), "--sim-rig", "--period", "0.01", "--log",
+                   str(tmp_path / "run.lcm"), cwd=tmp_path)
+    assert done.returncode == 2, done
+    assert done.stderr == ("error: --period: 0.01 s over the phase's 1110 s would log 222,003 "
+                           "events, more than the 200,000 rbp rig-replay and rig-report read: "
+                           "use at least 0.0112 s\n"), done.stderr
+    assert not (tmp_path / "run.lcm").exists()
+    phase = SimpleNamespace(start_time=3.0, end_time=1113.0)
+    check_log_size(phase, 0.0112)  # type: ignore[arg-type]
+    with pytest.raises(RigInputError, match=r"use at least 0\.0112 s"):
+        check_log_size(phase, 0.0111)  # type: ignore[arg-type]
+
+
 def test_control_characters_cannot_forge_error_lines(tmp_path):
     """A key, a value or a file name holding a newline or carriage return printed a second,
     forged `error:` line; they are written as escapes, in the message and by the CLI."""
@@ -533,6 +609,38 @@ def test_damaged_rig_logs_refused_in_one_line(tmp_path):
             log.write_event(0, channel, data)
         log.close()
         _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path, words)
+
+
+def test_rig_log_setup_printed_escaped_and_its_stance_checked(tmp_path):
+    """A setup's `plan_source` holding a newline was printed raw by `rbp rig-replay`, forging
+    an `error:` line on stdout; a stance holding one anchor on all four booms was accepted."""
+    import json
+
+    import lcm
+
+    from systems.reachbot_lcm import rig_setup_t
+    from systems.rig_interface import RigLcmConfig
+
+    channels = RigLcmConfig()
+    scenario_json = json.dumps(load_scenario(DEMO).to_dict())
+
+    def write(name: str, source: str, stance: list[str]) -> Path:
+        msg = rig_setup_t()
+        msg.scenario_json, msg.plan_source, msg.stance = scenario_json, source, stance
+        path = tmp_path / name
+        log = lcm.EventLog(str(path), "w", overwrite=True)
+        log.write_event(0, channels.setup_channel, msg.encode())
+        log.close()
+        return path
+
+    path = write("forged.lcmlog", "x\nerror: forged\r", ["a30", "a6", "a1", "a20"])
+    result = run_rbp("rig-replay", str(path), cwd=tmp_path)
+    assert result.returncode == 0 and not result.stderr, result
+    assert result.stdout == f"{path}: demo-shaft, x\\nerror: forged\\r: 0 commands, 0 statuses\n"
+    path = write("same.lcmlog", "", ["a30"] * 4)
+    _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path,
+                         "RIG_SETUP.stance: event 0: each boom needs its own anchor, got "
+                         "['a30', 'a30', 'a30', 'a30']")
 
 
 def test_rig_log_with_a_damaged_last_command_refused_by_the_header_scan(tmp_path):

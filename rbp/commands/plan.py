@@ -16,17 +16,19 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from planning.plan_model import MAX_TIME_STEP, MIN_TIME_STEP
+
 if TYPE_CHECKING:
     from planning.footsteps import FootstepPlan
     from planning.pipeline import PipelineConfig
     from planning.plan_model import Plan, Provenance
     from rb_drake.scenario import Scenario
 
-# --dt's range: a step of the plan is at least one of the simulator's plant steps
-# (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as 1/dt^2 and its solver fails,
-# and the plan's time stamps, rounded to 1 us, cannot keep the steps apart), and a 5 cm step
-# takes at most a minute
-MIN_DT, MAX_DT = 0.01, 60.0
+# --dt's range, a plan's time_step's (planning.plan_model): a step of the plan is at least one of
+# the simulator's plant steps (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as
+# 1/dt^2 and its solver fails, and the plan's time stamps, rounded to 1 us, cannot keep the steps
+# apart), and a 5 cm step takes at most a minute
+MIN_DT, MAX_DT = MIN_TIME_STEP, MAX_TIME_STEP
 # Options that set a configuration field: held to the field's range (planning.config_ranges),
 # so that a plan's provenance.config is always one --from-plan reads back (a budget of 1e20
 # was accepted, written, then refused). --seed, --dt and --min-success have their own checks

@@ -10,7 +10,7 @@ import argparse
 import math
 from pathlib import Path
 
-from rb_drake.errors import EXIT_FAILED, EXIT_OK
+from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
 
 MIN_PERIOD, MAX_PERIOD = 0.01, 1.0  # s between rig commands: 100 a second to one a second
 
@@ -68,7 +68,7 @@ def _summary(record, stance_ids) -> list[str]:
     lines = []
     for i, anchor in enumerate(stance_ids):
         k = int(record.p_grasp[:, i].argmin())
-        lines.append(f"  boom {i} -> {anchor}: min P = {record.p_grasp[k, i]:.5f} at "
+        lines.append(f"  boom {i} -> {one_line(anchor)}: min P = {record.p_grasp[k, i]:.5f} at "
                      f"t = {record.time[k]:.2f} s (force {record.force[k, i]:.2f} N, pull "
                      f"angle {math.degrees(record.pull_angle[k, i]):+.1f} deg)")
     return lines
@@ -137,8 +137,9 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
 
     log = _replay(args.log)
     rec = log.replay
-    print(f"{args.log}: {log.scenario.name}, {log.plan_source or 'rig run'}: "
-          f"{len(log.command_time)} commands, {len(rec.time)} statuses")
+    # a log's texts are printed escaped: a newline in one could forge an `error:` line
+    print(one_line(f"{args.log}: {log.scenario.name}, {log.plan_source or 'rig run'}: "
+                   f"{len(log.command_time)} commands, {len(rec.time)} statuses"))
     if len(rec.time):
         print("\n".join(_summary(rec, log.stance_ids)))
         print(f"  min P(all grasps) = {float(np.prod(rec.p_grasp, axis=1).min()):.5f}")

@@ -11,7 +11,7 @@ import math
 import re
 from collections.abc import Callable
 
-MAX_SEED = 2**63 - 1  # numpy's generators take seeds up to 2^64; int64 is the safe common range
+from rb_drake.errors import MAX_SEED
 
 
 def whole(lo: int, hi: int) -> Callable[[str], int]:

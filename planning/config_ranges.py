@@ -21,6 +21,8 @@ import dataclasses
 import math
 from typing import Any
 
+from rb_drake.errors import MAX_SEED
+
 INF = math.inf
 
 
@@ -114,7 +116,7 @@ FIELDS: dict[str, dict[str, Range | Choice]] = {
         "time_limit": Range(0.0, 1_000_000.0, "s", open_lo=True),
         "goal_samples": count(1, 100_000),
         "polish_rounds": count(0, 1000),
-        "seed": count(0, 2**63 - 1),
+        "seed": count(0, MAX_SEED),
     },
     "LatticeConfig": {  # as planning.lattice's POSITION_STEP_RANGE and ANGLE_STEP_RANGE
         "position_step": positive(0.005, 0.5, "m"),

@@ -21,6 +21,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 from planning.search_outcome import Quality, Stop
+from rb_drake.errors import MAX_SEED
 
 if TYPE_CHECKING:
     from rb_drake.scenario import Scenario
@@ -304,8 +305,8 @@ class Provenance(Part):
     command: str = spec()
     planner: Planner = spec()
     motion: bool = spec()
-    # the range of --seed (rbp.commands.common.MAX_SEED): -1 was read, though --seed -1 is not
-    seed: int = spec(minimum=0, maximum=2**63 - 1)
+    # the range of --seed (rb_drake.errors.MAX_SEED): -1 was read, though --seed -1 is not
+    seed: int = spec(minimum=0, maximum=MAX_SEED)
     scenario_source: str = spec()
     config: dict[str, Any] = spec(required=["footstep", "seed", "scp"],
                                   description="the PipelineConfig (planning.config_io)")

@@ -50,3 +50,7 @@ EXIT_FAILED: Final = 1       # ran, but no route / planning failed / the plan do
 EXIT_USAGE: Final = 2        # bad input (one line naming the file, field and reason), or an
 #                              output that cannot be written
 EXIT_INTERRUPTED: Final = 3  # Ctrl-C (or a closed output pipe): no traceback, no half-written file
+
+# The largest seed any reader takes (--seed, a plan's provenance, a configuration, the
+# experiments): numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
+MAX_SEED: Final = 2**63 - 1

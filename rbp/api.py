@@ -256,7 +256,7 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
     import numpy as np
 
     from planning.plan_model import plan_of
-    from rb_drake.errors import RbpInputError
+    from rb_drake.errors import MAX_SEED, RbpInputError
     from systems.diagram import ClimbSimulator
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanTrajectory, plan_scenario
@@ -267,7 +267,7 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
                             field="success")
     if trials < 0:
         raise RbpInputError(f"must be 0 or more, got {trials}", field="trials")
-    if not 0 <= seed <= 2**63 - 1:
+    if not 0 <= seed <= MAX_SEED:
         raise RbpInputError(f"must be 0 or more (at most 2**63 - 1), got {seed}", field="seed")
     if replan not in (None, "retry", "footsteps"):
         raise RbpInputError(f"must be None, 'retry' or 'footsteps', got {replan!r}",

@@ -15,7 +15,7 @@ import threading
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-from rb_drake.errors import EXIT_INTERRUPTED, RbpInputError, one_line
+from rb_drake.errors import EXIT_INTERRUPTED, MAX_SEED, RbpInputError, one_line
 from rb_drake.files import remove_live_temporary
 
 
@@ -77,7 +77,6 @@ def sigterm_interrupts() -> Iterator[None]:
             raise Terminated  # swallowed, and the command ended in time: still an interrupt
 
 
-MAX_SEED = 2**63 - 1  # numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
 MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels
 
 

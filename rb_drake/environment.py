@@ -21,9 +21,16 @@ def threads_setting() -> int | None:
     except ValueError:
         threads = 0
     if not 1 <= threads <= MAX_THREADS:
-        raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS}, "
-                            f"got {value!r}", field="RBP_THREADS (environment)")
+        raise _bad_threads("RBP_THREADS", value)
     return threads
+
+
+def _bad_threads(variable: str, value: str, listed: bool = False) -> RbpInputError:
+    """The refusal of a thread count (`listed`: a comma-separated list of them) from 1 to
+    MAX_THREADS in environment variable `variable`."""
+    what = " (or a comma-separated list of them)" if listed else ""
+    return RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS}{what}, "
+                         f"got {value!r}", field=f"{variable} (environment)")
 
 
 def threads_adapt_setting() -> bool:
@@ -48,13 +55,10 @@ def library_settings() -> None:
     calls it before numba is imported; `import rbp` leaves the environment to the caller."""
     numba_threads = os.environ.get("NUMBA_NUM_THREADS")
     if numba_threads is not None and not _whole_threads(numba_threads):
-        raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS}, "
-                            f"got {numba_threads!r}", field="NUMBA_NUM_THREADS (environment)")
+        raise _bad_threads("NUMBA_NUM_THREADS", numba_threads)
     omp = os.environ.get("OMP_NUM_THREADS")
     if omp is not None and not all(_whole_threads(part) for part in omp.split(",")):
-        raise RbpInputError(f"must be a whole number of threads from 1 to {MAX_THREADS} (or a "
-                            f"comma-separated list of them), got {omp!r}",
-                            field="OMP_NUM_THREADS (environment)")
+        raise _bad_threads("OMP_NUM_THREADS", omp, listed=True)
     layer = os.environ.get("NUMBA_THREADING_LAYER")
     if layer is not None and layer not in NUMBA_LAYERS:
         raise RbpInputError(f"must be one of {', '.join(NUMBA_LAYERS)}, got {layer!r}",

@@ -31,13 +31,13 @@ def test_a_malformed_library_variable_is_refused_in_one_line(
     assert repr(value) in lines[0] and not out.exists()
 
 
-def test_good_library_variables_are_accepted(monkeypatch: pytest.MonkeyPatch) -> None:
-    from rb_drake.environment import library_settings
-
+def test_good_library_variables_are_accepted(monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
     for variable, value in (("NUMBA_NUM_THREADS", "2"), ("OMP_NUM_THREADS", "4,2"),
                             ("NUMBA_THREADING_LAYER", "workqueue")):
         monkeypatch.setenv(variable, value)
-    library_settings()
+    assert main(["scenario", "check", "demo-shaft"]) == 0, capsys.readouterr().err
+    assert capsys.readouterr().err == "", "well-formed variables must pass without a word"
 
 
 def test_matplotlib_backend_and_an_unusable_home_are_quiet(tmp_path: Path) -> None:

@@ -5,8 +5,9 @@ Every reader of a user's file (scenario, planner configuration, plan, rig log, r
 goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (docs/formats.md):
 - only regular files: a directory, a FIFO (which would block on open with no writer) or a
   device (`/dev/zero` never ends) is refused before it is opened for reading;
-- at most `max_input_bytes()` bytes (32 MiB unless `RBP_MAX_INPUT_MB` says otherwise), checked
-  on the file's size and again while reading, so a file that grows cannot get past it;
+- at most `max_input_bytes()` bytes (8 MiB unless `RBP_MAX_INPUT_MB` says otherwise; four
+  times that, `max_scan_bytes()`, for a drawing or scan to import), checked on the file's size
+  and again while reading, so a file that grows cannot get past it;
 - YAML of at most `max_input_values()` values (50,000 unless `RBP_MAX_INPUT_VALUES` says
   otherwise), counted on the parser's event stream before any tree is
   built (PyYAML's composed nodes take about 500 bytes each: a 60 MB file of `0,0,0,...` would
@@ -36,7 +37,10 @@ import yaml
 
 from rb_drake.errors import RbpInputError
 
-DEFAULT_MAX_INPUT_MB = 32.0  # a 300-phase plan is about 5 MB, the largest generated cave 0.3 MB
+# A 300-phase plan is about 5 MB, the largest generated cave 0.3 MB. A near-limit file whose
+# error is at its end is read whole: 32 MiB took 2 s and 200 MB, over the issue's 1 s.
+DEFAULT_MAX_INPUT_MB = 8.0
+SCAN_FACTOR = 4  # drawings and scans to import: real cave scans are larger, read once
 MAX_DEPTH = 64          # nesting levels: scenarios and plans use at most 8
 # Values of a YAML document, aliases expanded, unless RBP_MAX_INPUT_VALUES says otherwise.
 # PyYAML's tree and the checks cost about 6 us and 500 bytes a value, and `rbp plan` takes
@@ -100,7 +104,7 @@ MAX_NODES = 10_000_000  # RBP_MAX_INPUT_VALUES's largest: PyYAML's tree of them 
 
 def max_input_bytes() -> int:
     """The size limit of an input file: RBP_MAX_INPUT_MB (megabytes above 0, at most
-    MAX_INPUT_MB) if set, else 32 MiB. A malformed value is refused (RbpInputError naming the
+    MAX_INPUT_MB) if set, else 8 MiB. A malformed value is refused (RbpInputError naming the
     variable) rather than silently replaced by the default."""
     value = os.environ.get("RBP_MAX_INPUT_MB", "").strip()
     if not value:
@@ -114,6 +118,12 @@ def max_input_bytes() -> int:
                             f"{MAX_INPUT_MB:,}, got {value!r}",
                             field="RBP_MAX_INPUT_MB (environment)")
     return max(1, int(megabytes * 2**20))
+
+
+def max_scan_bytes() -> int:
+    """The size limit of a drawing or scan that `rbp scenario import` reads: SCAN_FACTOR times
+    `max_input_bytes()` (32 MiB by default)."""
+    return SCAN_FACTOR * max_input_bytes()
 
 
 def max_input_values() -> int:

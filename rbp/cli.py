@@ -205,6 +205,18 @@ def _route_quality(search: dict) -> str:
     return ""
 
 
+def _over_reading_limit(path: Path) -> str:
+    """A note when a written plan is larger than rbp's readers accept (a long climb at a fine
+    --dt), saying how to read it back; empty otherwise."""
+    from rb_drake.input_files import max_input_bytes
+
+    size, limit = path.stat().st_size, max_input_bytes()
+    if size <= limit:
+        return ""
+    return (f" ({size / 2**20:.1f} MiB, over the {limit / 2**20:.1f} MiB reading limit: set "
+            f"RBP_MAX_INPUT_MB={math.ceil(size / 2**20)} to check or simulate it)")
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
     from rbp.commands.plan import (
@@ -242,7 +254,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
                                               getattr(args, "argv", None)))
     out = Path(args.output)
     write_plan(plan, out)
-    print(f"wrote {out}")
+    print(f"wrote {out}{_over_reading_limit(out)}")
     if not args.no_pictures:
         write_pictures(scn, plan, out, args.phase_figure, args.animate, search=record.last)
     _print_motion(plan)

@@ -519,10 +519,11 @@ def _big_plan(steps: int) -> dict:
 
 
 def test_large_plan_with_a_wrong_format_refused_before_parsing(tmp_path):
-    """A 30 MB plan of another format took 11 s (the whole schema checked first)."""
+    """A 30 MB plan of another format took 11 s (the whole schema checked first); 7 MB, under
+    the default reading limit, now."""
     import json
 
-    plan = _big_plan(100_000)
+    plan = _big_plan(30_000)
     plan["format"] = "reachbot-plan/9"
     path = tmp_path / "big.json"
     path.write_text(json.dumps(plan))
@@ -1057,3 +1058,53 @@ def test_generate_without_a_start_stance_names_the_option_to_change(tmp_path, ca
     error = _one_error(capsys)
     assert error.startswith("error: --anchor-density: no shaft cave with a feasible start")
     assert "give 1 to 20" in error and not out.exists()
+
+
+def test_near_limit_plan_with_an_error_at_its_end_read_in_bounded_memory(tmp_path):
+    """The default reading limit is 8 MiB: a plan just under it whose only error is at its
+    end is parsed whole and refused naming the step, within a stated multiple of its size
+    (32 MiB took 2 s and 200 MB, over the issue's 1 s); a byte more than the limit is refused
+    before reading, and a scan to import may be four times larger."""
+    import json
+    import tracemalloc
+
+    from planning.plan_file import PlanFileError, read_plan_file
+    from rb_drake.input_files import check_input_file, max_input_bytes, max_scan_bytes
+
+    assert max_input_bytes() == 8 * 2**20 and max_scan_bytes() == 4 * max_input_bytes()
+    plan = _big_plan(1)
+    step = plan["phases"][0]["steps"][0]
+    plan["phases"][0]["steps"] = [dict(step) for _ in range(31_000)]
+    plan["phases"][0]["steps"][-1]["t"] = "late"
+    path = tmp_path / "near.json"
+    path.write_text(json.dumps(plan))
+    size_mb = path.stat().st_size / 2**20
+    assert 7.0 < size_mb < 8.0, f"the plan should sit just under the limit, is {size_mb:.1f} MiB"
+    tracemalloc.start()
+    try:
+        with pytest.raises(PlanFileError, match=r"phases/0/steps/30999/t"):
+            read_plan_file(path)
+        peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
+    finally:
+        tracemalloc.stop()
+    assert peak_mb < 8 * size_mb, f"reading {size_mb:.1f} MiB peaked at {peak_mb:.0f} MiB"
+    with path.open("ab") as f:
+        f.write(b" " * (max_input_bytes() - path.stat().st_size + 1))
+    with pytest.raises(InputFileError, match=r"over the 8\.0 MiB limit"):
+        check_input_file(path)
+    assert check_input_file(path, max_scan_bytes()) == max_scan_bytes()
+
+
+def test_plan_over_the_reading_limit_names_the_variable_that_reads_it_back(tmp_path, monkeypatch):
+    """`rbp plan` can write a plan larger than its readers accept (a long climb at a fine
+    --dt); it says so, and the variable it names reads the plan back."""
+    from rbp.cli import _over_reading_limit
+
+    path = tmp_path / "plan.json"
+    path.write_bytes(b" " * (3 * 2**20 + 5))
+    assert _over_reading_limit(path) == "", "a 3 MiB plan is within the default 8 MiB limit"
+    monkeypatch.setenv("RBP_MAX_INPUT_MB", "2")
+    note = _over_reading_limit(path)
+    assert "over the 2.0 MiB reading limit" in note and "RBP_MAX_INPUT_MB=4" in note, note
+    monkeypatch.setenv("RBP_MAX_INPUT_MB", "4")
+    assert read_text(path).strip() == "", "the named limit should read the plan back"

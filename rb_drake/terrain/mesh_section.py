@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rb_drake.errors import RbpInputError
-from rb_drake.input_files import InputFileError, check_input_file, read_bytes
+from rb_drake.input_files import InputFileError, check_input_file, max_scan_bytes, read_bytes
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -118,7 +118,8 @@ def load_scan(path: Path) -> tuple[str, Any]:
     RbpInputError naming the file ("mesh" field) and the reason."""
     path = Path(path)
     try:
-        check_input_file(path)  # a missing file or a directory, before its name's suffix
+        # a missing file or a directory, before its name's suffix
+        check_input_file(path, max_scan_bytes())
     except InputFileError as e:
         raise _error(path, e.field, e.reason) from None
     suffix = path.suffix.lower()
@@ -217,7 +218,7 @@ def _load_mesh(trimesh: Any, data: bytes, suffix: str) -> Any:
 def _read_bytes(path: Path) -> bytes:
     """The bytes of a regular file within the input size limit (rb_drake.input_files)."""
     try:
-        return read_bytes(path)
+        return read_bytes(path, max_scan_bytes())
     except InputFileError as e:
         raise _error(path, e.field, e.reason) from None
 

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
-from rb_drake.input_files import InputFileError, load_json, read_text
+from rb_drake.input_files import InputFileError, load_json, max_scan_bytes, read_text
 from rb_drake.terrain.drawing_bounds import arc_chords, use_copies
 
 if TYPE_CHECKING:
@@ -76,7 +76,7 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
     except ImportError:
         raise missing_extra("shapely") from None
     try:
-        text = read_text(path)
+        text = read_text(path, max_scan_bytes())
     except InputFileError as e:
         raise RbpInputError(e.reason, file=name, field=e.field) from None
     if not text.strip():

@@ -16,6 +16,13 @@ transitions, by `planning.packing`; a stance's components to about a fifth) keep
 it would drop packed instead, until packed entries fill a share of the cap (`MemoryPool`):
 unpacking takes about a tenth of the time of deciding an entry again.
 
+A pool may also watch the whole process (`MemoryPool.process_budget`): the search's own
+structures (its open list, parents, labels) grow beside the caches, and what else lives in the
+process (the libraries, a caller's data) is not the cache's to count; when resident memory
+passes the budget, the pool lowers its cap by the excess (to at least `GOVERNOR_FLOOR_MB`), and
+raises it again, up to its own cap, when memory allows. Only what is kept changes, never what
+is decided.
+
 To the code that uses it the cache is a dict that never forgets: `get` and `[]` rebuild a
 dropped key, `in` counts it, and the search's decisions do not change
 (tests/test_bounded_cache.py, and the benchmark of docs/benchmarks.md: the same routes capped
@@ -25,6 +32,8 @@ caller is still working on is not rebuilt beside it.
 
 from __future__ import annotations
 
+import math
+import os
 import resource
 import sys
 from collections import OrderedDict
@@ -44,6 +53,19 @@ def peak_memory_mb() -> float:
     """The process's peak resident memory so far, MiB."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / 2.0 ** 20 if sys.platform == "darwin" else peak / 1024.0  # bytes there, kB here
+
+
+def resident_memory_bytes() -> int | None:
+    """The process's resident memory now (bytes), or None where /proc does not say."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+GOVERNOR_FLOOR_MB = 64.0  # the least a watching pool's cap is lowered to
+GOVERNOR_EVERY = 256      # uses of its entries between two readings of resident memory
 
 
 def array_bytes(value: Any) -> int:
@@ -78,6 +100,12 @@ class MemoryPool:
         self.total_bytes = 0   # live entries
         self.packed_bytes = 0  # packed entries
         self.peak_bytes = 0
+        # resident bytes the whole process should keep within (None: not watched), and the
+        # cap lowered to keep it there (module doc)
+        self.process_budget: float | None = None
+        self.lowered_cap: float | None = None
+        self.lowest_cap: float | None = None
+        self._uses = 0
 
     def touched(self, cache: BoundedCache[Any, Any], key: Hashable, grew: int) -> None:
         """`cache` used (or stored) `key`, whose bytes grew by `grew`."""
@@ -85,9 +113,26 @@ class MemoryPool:
         self._order[slot] = cache
         self._order.move_to_end(slot)
         self.total_bytes += grew
-        if self.cap_bytes is not None and self.total_bytes + self.packed_bytes > self.cap_bytes:
-            self._shrink(self.cap_bytes)
+        self._uses += 1
+        if self.process_budget is not None and self._uses % GOVERNOR_EVERY == 0:
+            self._watch_process(self.process_budget)
+        cap = self.cap_bytes if self.lowered_cap is None else self.lowered_cap
+        if cap is not None and self.total_bytes + self.packed_bytes > cap:
+            self._shrink(cap)
         self.peak_bytes = max(self.peak_bytes, self.total_bytes + self.packed_bytes)
+
+    def _watch_process(self, budget: float) -> None:
+        """Lower the cap by the process's excess over `budget`, or raise it by its room."""
+        resident = resident_memory_bytes()
+        if resident is None:
+            return
+        held = self.total_bytes + self.packed_bytes
+        cap = held + budget - resident
+        if self.cap_bytes is not None and cap >= self.cap_bytes:
+            self.lowered_cap = None
+            return
+        self.lowered_cap = max(GOVERNOR_FLOOR_MB * 2.0 ** 20, cap)
+        self.lowest_cap = min(self.lowered_cap, self.lowest_cap or math.inf)
 
     def unpacked(self, cache: BoundedCache[Any, Any], key: Hashable, nbytes: int) -> None:
         """`cache`'s packed entry `key` (`nbytes`) is packed no more."""
@@ -113,7 +158,8 @@ class MemoryPool:
     def stats(self) -> dict[str, float]:
         return {"bytes": self.total_bytes + self.packed_bytes, "peak_bytes": self.peak_bytes,
                 "live": len(self._order), "packed": len(self._packed),
-                "packed_bytes": self.packed_bytes}
+                "packed_bytes": self.packed_bytes} | (
+                    {} if self.lowest_cap is None else {"lowest_cap": self.lowest_cap})
 
 
 class BoundedCache(Generic[K, V]):

@@ -54,6 +54,10 @@ def stance4(ids: Iterable[str]) -> Stance4:
 # The memo's cap, MiB: with what a search keeps per vertex outside it, a search of 100,000
 # vertices peaks under 2 GB (docs/benchmarks.md, session 21), one per core of a 24 GB machine
 DEFAULT_MEMORY_MB = 768.0
+# The process beyond the memo's cap: rbp and its libraries (about 250 MiB) and the search's own
+# structures (about 6 kB a vertex on the 20 m crevasse: 100,000 vertices in 1681 MiB in all).
+# Past cap + this, the memo gives way (1.75 GiB in all by default, under issue 31's 2 GB).
+PROCESS_HEADROOM_MB = 1024.0
 CACHES = ("components", "transitions", "moves")  # the memo's caches, sharing one cap
 
 
@@ -82,9 +86,13 @@ class LatticeMemo:
         self.set_memory(memory_mb)
 
     def set_memory(self, memory_mb: float | None) -> None:
-        """Cap what it holds at `memory_mb` MiB (None: no cap)."""
+        """Cap what it holds at `memory_mb` MiB (None: no cap), and hold the whole process
+        within that cap plus PROCESS_HEADROOM_MB by lowering it while the search's own
+        structures grow (`MemoryPool.process_budget`)."""
         self.memory_mb = memory_mb
         self.pool.cap_bytes = None if memory_mb is None else float(memory_mb) * 2.0 ** 20
+        self.pool.process_budget = (None if memory_mb is None
+                                    else (float(memory_mb) + PROCESS_HEADROOM_MB) * 2.0 ** 20)
 
     def move_table(self, vertex: Vertex) -> MoveTable:
         """Vertex (stance, component)'s moves: (boom, anchor index) -> its `move_rows`."""

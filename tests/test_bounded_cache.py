@@ -216,3 +216,53 @@ def test_a_capped_min_success_search_decides_as_an_uncapped_one() -> None:
         np.testing.assert_array_equal(a, b, err_msg="an edge's alternatives differ")
     for a, b in zip(capped.poses, free.poses, strict=True):
         np.testing.assert_array_equal(a, b, err_msg="a transition pose differs")
+
+
+def test_a_pool_watching_the_process_gives_way_and_recovers(monkeypatch) -> None:
+    """Past its process budget a pool lowers its cap by the excess (not under the floor) and
+    drops to it; with room again it returns to its own cap."""
+    from planning import bounded_cache
+    from planning.bounded_cache import GOVERNOR_EVERY, GOVERNOR_FLOOR_MB, MemoryPool
+
+    mib = 2.0 ** 20
+    pool = MemoryPool(cap_bytes=400 * mib)
+    pool.process_budget = 1000 * mib
+    pool.protected = 0
+    cache: BoundedCache[int, np.ndarray] = BoundedCache(
+        lambda a: a.nbytes, lambda k, _t: np.zeros(1), pool=pool, name="c")
+    resident = {"bytes": 500 * mib}
+    monkeypatch.setattr(bounded_cache, "resident_memory_bytes", lambda: resident["bytes"])
+    for key in range(GOVERNOR_EVERY):  # 256 entries of 1 MiB each: 256 MiB, under both
+        cache[key] = np.zeros(2**17)
+    assert pool.lowered_cap is None and pool.total_bytes == 256 * mib, pool.stats()
+    resident["bytes"] = 1100 * mib  # 100 MiB over the budget: the cap is held - 100 MiB
+    for key in range(GOVERNOR_EVERY):
+        cache.get(key)
+    assert pool.lowered_cap == pytest.approx(156 * mib, abs=1 * mib), pool.stats()
+    assert pool.total_bytes <= pool.lowered_cap, f"not dropped to the lowered cap: {pool.stats()}"
+    resident["bytes"] = 5000 * mib  # far over: never under the floor
+    for key in range(GOVERNOR_EVERY):
+        cache.get(key)
+    assert pool.lowered_cap == GOVERNOR_FLOOR_MB * mib, pool.stats()
+    assert pool.stats()["lowest_cap"] == GOVERNOR_FLOOR_MB * mib
+    resident["bytes"] = 300 * mib  # room again: its own cap
+    for key in range(GOVERNOR_EVERY):
+        cache.get(key)
+    assert pool.lowered_cap is None, pool.stats()
+
+
+def test_a_search_squeezed_by_the_process_decides_as_an_uncapped_one() -> None:
+    """A memo whose process budget is below what the process already holds keeps only its
+    floor, and the search decides exactly as with no cap."""
+    from planning.bounded_cache import GOVERNOR_FLOOR_MB
+
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    config = CompleteConfig(COARSE, anytime=AnytimeConfig())
+    free = complete_search(scn, config, memo=LatticeMemo(memory_mb=None))
+    memo = LatticeMemo(memory_mb=768.0)
+    memo.pool.process_budget = 1.0  # every reading is over it
+    squeezed = complete_search(scn, config, memo=memo)
+    assert memo.pool.lowest_cap == GOVERNOR_FLOOR_MB * 2**20, memo.pool.stats()
+    assert (squeezed.path, squeezed.expansions, squeezed.transitions_tested, squeezed.cost) == \
+        (free.path, free.expansions, free.transitions_tested, free.cost), \
+        "a search whose memo gave way to the process decided otherwise"

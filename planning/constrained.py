@@ -122,7 +122,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     while open_list:
         f, cost, _, index, move = heapq.heappop(open_list)
         if move is not None:  # a move: evaluate it, then (when popped again) enter the child
-            j, anchor, rows, child, evaluated = move
+            j, anchor, child, evaluated = move
             vertex = labels[index][0]
             stance, comp = vertex
             k, base = labels[index][1], labels[index][2]
@@ -131,6 +131,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                 lat = memo.components[stance].components[comp]
                 tr = memo.transitions.get(key)
                 if tr is None:
+                    rows = memo.move_table(vertex)[(j, scn.anchor_index[anchor])]
                     known = memo.components.get(child)
                     seen = None if known is None else known.known_component(lat.keys[rows])
                     tr = memo.transitions[key] = lattice_transition(
@@ -142,7 +143,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                     # least the worst sum): the child's components wait for that key.
                     least = base + bound.c_attach + max(0.0, -float(tr.worst.max()))
                     heapq.heappush(open_list, (f, least * (1.0 - 1e-12), next(tie), index,
-                                               (j, anchor, rows, child, True)))
+                                               (j, anchor, child, True)))
                 continue
             tr = memo.transitions[key]  # decided again, the same, if the memo dropped it
             known = memo.components.get(child)
@@ -187,13 +188,16 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                                       f"expansions) without a route of predicted success >= "
                                       f"{min_success:g}")
             break
-        for j, anchor, rows, child in vertex_moves(scn, lat, stance, excluded):
+        # a pending move keeps no lattice rows (they are in `memo.move_table`, within its cap):
+        # kept in the open list they took most of the search's own memory
+        for j, anchor, _, child in vertex_moves(scn, lat, stance, excluded,
+                                                memo.move_table(vertex)):
             hops = bound.regrasps(child)
             least = cost + bound.c_attach  # every edge costs at least the attach term
             if not math.isfinite(hops) or least + bound.c_attach * hops > slack:
                 continue
             heapq.heappush(open_list, (k + 1 + hops, least, next(tie), index,
-                                       (j, anchor, rows, child, False)))
+                                       (j, anchor, child, False)))
     if found is None:
         if stop == Stop.NOROUTE and excluded:
             stop = Stop.EXHAUSTED

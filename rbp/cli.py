@@ -25,16 +25,17 @@ from rb_drake.errors import (
     RbpInputError,
     one_line,
 )
+from rbp.commands.common import RECEIVED as INTERRUPTS_RECEIVED
 from rbp.commands.common import (
     UserError,
     check_dpi,
     check_output,
     check_seed,
+    clean_interrupts,
     forget_outputs,
     load_scenario_spec,
     plural,
     read_plan,
-    sigterm_interrupts,
 )
 
 if TYPE_CHECKING:
@@ -555,7 +556,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (EXIT_STATUSES)."""
     try:
-        with sigterm_interrupts():  # SIGTERM unwinds as Ctrl-C: no temporary file left
+        with clean_interrupts():  # Ctrl-C and SIGTERM unwind: no temporary file left
             return _main(argv)
     except KeyboardInterrupt:
         # Outputs are written to a temporary file and renamed, so nothing is left half-written.
@@ -567,9 +568,11 @@ def main(argv: list[str] | None = None) -> int:
         with contextlib.suppress(OSError, ValueError):
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_INTERRUPTED
-    except SystemError as e:
-        # Ctrl-C while compiled (numba) code calls back into Python arrives wrapped this way.
-        if not _caused_by_interrupt(e):
+    except Exception as e:
+        # Ctrl-C while compiled (numba) code calls back into Python arrives wrapped in a
+        # SystemError, and a library may turn it into another error: after an interrupt,
+        # whatever ends the command is the interrupt.
+        if not (INTERRUPTS_RECEIVED or _caused_by_interrupt(e)):
             raise
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -203,7 +203,7 @@ from rb_drake.files import LIVE_TEMPORARY
 common.SWALLOWED_INTERRUPT_S = 1
 fd, tmp = tempfile.mkstemp(dir=sys.argv[1], suffix=".tmp")
 LIVE_TEMPORARY.add(tmp)
-with common.sigterm_interrupts():
+with common.clean_interrupts():
     try:
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(5)
@@ -231,3 +231,41 @@ def test_a_swallowed_sigterm_still_ends_the_command(tmp_path: Path, work: str) -
     else:
         assert done.returncode != 0 and "Terminated" in done.stderr, \
             "a swallowed interrupt must still end the command as interrupted at its end"
+
+
+_DURING_IMPORT = r"""
+import os, signal, sys, time
+sys.path.insert(0, sys.argv[1])
+from rbp.commands.common import clean_interrupts
+try:
+    with clean_interrupts():
+        try:
+            import slow_library  # interrupts itself halfway through its import
+        except ImportError:
+            print("swallowed by an optional import")
+        time.sleep(3)
+        print("not interrupted")
+except KeyboardInterrupt:
+    print("interrupted once imported:", sys.modules["slow_library"].DONE)
+"""
+
+_SLOW_LIBRARY = """
+import os, signal, time
+os.kill(os.getpid(), signal.{signal})
+start = time.monotonic()
+while time.monotonic() - start < 0.3:  # work in Python, where the interrupt would land
+    pass
+DONE = True
+"""
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_an_interrupt_during_an_import_lands_after_it(tmp_path: Path, name: str) -> None:
+    """Ctrl-C inside an import left pydrake "initialization failed", numba's extension an
+    ImportError, once a segfault, and an optional import's `except ImportError` swallowed it:
+    the interrupt is held until the import is done, then raised."""
+    (tmp_path / "slow_library.py").write_text(_SLOW_LIBRARY.format(signal=name))
+    done = subprocess.run([sys.executable, "-c", _DURING_IMPORT, str(tmp_path)], cwd=ROOT,
+                          env=_env(), capture_output=True, text=True, timeout=120)
+    lines = done.stdout.strip().splitlines()
+    assert lines == ["interrupted once imported: True"], (lines, done.stderr[-2000:])

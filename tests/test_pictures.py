@@ -254,7 +254,7 @@ def test_picture_suffix_name_and_sigterm(tmp_path: Path, capsys) -> None:
 
     from rb_drake.draw import title_name
     from rb_drake.files import atomic_write
-    from rbp.commands.common import Terminated, sigterm_interrupts
+    from rbp.commands.common import Terminated, clean_interrupts
 
     for argv in (["scenario", "show", "demo-shaft"], ["rig-report", str(tmp_path / "no.lcm")]):
         capsys.readouterr()
@@ -276,7 +276,7 @@ def test_picture_suffix_name_and_sigterm(tmp_path: Path, capsys) -> None:
         f.write(b"half a picture")
         os.kill(os.getpid(), signal.SIGTERM)
 
-    with pytest.raises(Terminated), sigterm_interrupts():
+    with pytest.raises(Terminated), clean_interrupts():
         atomic_write(tmp_path / "pic.png", killed)
     assert not list(tmp_path.glob("*.png*")) and not list(tmp_path.glob(".pic.png.*"))
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL, "the handler is put back"

@@ -12,8 +12,10 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
+from typing import Any
 
 from rb_drake.errors import EXIT_INTERRUPTED, MAX_SEED, RbpInputError, one_line
 from rb_drake.files import remove_live_temporary
@@ -29,52 +31,95 @@ class UserError(RbpInputError):
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised as an interrupt (`sigterm_interrupts`)."""
+    """SIGTERM, raised as an interrupt (`clean_interrupts`)."""
 
 
-SWALLOWED_INTERRUPT_S = 5  # s after SIGTERM: if the command has not unwound, it ends by force
+SWALLOWED_INTERRUPT_S = 5  # s after an interrupt: if the command has not unwound, it ends by force
+IMPORT_POLL_S = 0.02  # s between looks at whether an interrupted import has finished
+RECEIVED: list[int] = []  # the interrupting signals of this command (`clean_interrupts`)
+
+
+def _importing(frame: Any) -> bool:
+    """Whether `frame` runs inside an import: an interrupt raised there can leave a compiled
+    library half-initialised (pydrake said "initialization failed", numba's extension raised
+    ImportError, a segfault followed once), or be swallowed by an optional import's
+    `except ImportError`."""
+    seen = 0
+    while frame is not None and seen < 500:
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            return True
+        frame, seen = frame.f_back, seen + 1
+    return False
 
 
 @contextlib.contextmanager
-def sigterm_interrupts() -> Iterator[None]:
-    """Within: SIGTERM raises `Terminated` in the main thread, so that it unwinds as Ctrl-C
-    does and an output's temporary file is removed (a killed picture write left a 0-byte
-    .NAME.XXXX.tmp). A forked worker that inherits the handler dies of SIGTERM as before."""
+def clean_interrupts() -> Iterator[None]:
+    """Within: Ctrl-C (SIGINT) raises KeyboardInterrupt and SIGTERM `Terminated` in the main
+    thread, so that the command unwinds and an output's temporary file is removed (a killed
+    picture write left a 0-byte .NAME.XXXX.tmp); an interrupt that arrives during an import is
+    raised once the import is done; one that is swallowed, or a second one, ends the command
+    within SWALLOWED_INTERRUPT_S with "interrupted" and status 3. A forked worker that inherits
+    the handlers behaves as before (SIGTERM kills it, SIGINT raises KeyboardInterrupt). A
+    SIGINT that the caller ignores (a background job) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pid = os.getpid()
-    received: list[int] = []
+    received = RECEIVED
+    received.clear()
+    state = {"pending": False, "deadline": 0.0}
 
     def end_now(*_: object) -> None:
         """The interrupt was swallowed (raised inside a callback that Python only reports, as
-        matplotlib's were while an animation was written), or SIGTERM came twice: end here,
-        without the temporary files an output was being written to."""
+        matplotlib's were while an animation was written), or came twice: end here, without
+        the temporary files an output was being written to."""
         remove_live_temporary()
         print("interrupted", file=sys.stderr, flush=True)
         os._exit(EXIT_INTERRUPTED)
 
-    def handler(signum: int, _frame: object) -> None:
+    def interrupt() -> KeyboardInterrupt:
+        return Terminated() if received[0] == signal.SIGTERM else KeyboardInterrupt()
+
+    def on_alarm(_signum: int, frame: Any) -> None:
+        if time.monotonic() >= state["deadline"] or not state["pending"]:
+            end_now()
+        if _importing(frame):
+            signal.setitimer(signal.ITIMER_REAL, IMPORT_POLL_S)
+            return
+        state["pending"] = False
+        signal.setitimer(signal.ITIMER_REAL, max(0.01, state["deadline"] - time.monotonic()))
+        raise interrupt()
+
+    def handler(signum: int, frame: Any) -> None:
         if os.getpid() != pid:
+            if signum == signal.SIGINT:
+                signal.default_int_handler(signum, frame)
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
             return
         if received:
             end_now()
         received.append(signum)
-        # if the interrupt does not unwind the command within a few seconds, end it anyway
-        signal.signal(signal.SIGALRM, end_now)
-        signal.alarm(SWALLOWED_INTERRUPT_S)
-        raise Terminated
+        state["deadline"] = time.monotonic() + SWALLOWED_INTERRUPT_S
+        signal.signal(signal.SIGALRM, on_alarm)
+        if _importing(frame):
+            state["pending"] = True
+            signal.setitimer(signal.ITIMER_REAL, IMPORT_POLL_S)
+            return
+        signal.setitimer(signal.ITIMER_REAL, SWALLOWED_INTERRUPT_S)
+        raise interrupt()
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, handler)}
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
     try:
         yield
     finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGTERM, previous)
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        for signum, before in previous.items():
+            signal.signal(signum, before)
         if received and sys.exc_info()[0] is None:
-            raise Terminated  # swallowed, and the command ended in time: still an interrupt
+            raise interrupt()  # swallowed, and the command ended in time: still an interrupt
 
 
 MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels

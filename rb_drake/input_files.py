@@ -394,18 +394,19 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return result
 
 
-def load_json(text: str, **options: Any) -> Any:
+def load_json(text: str, max_values: int = MAX_JSON_VALUES, **options: Any) -> Any:
     """The JSON value of `text` (json.loads with `options`; a leading UTF-8 byte-order mark is
     skipped); refused (InputFileError) if it may hold more than MAX_JSON_VALUES values (every
     value but the first follows a "[", "{" or ",", so their count bounds the values before any
     is built), repeats a key in an object or holds an integer beyond a float's range (10**400
     would raise OverflowError wherever it is used as a number; the field names its line); the
-    caller handles json.JSONDecodeError and RecursionError."""
+    caller handles json.JSONDecodeError and RecursionError. `max_values` lowers the limit
+    for a document of a smaller kind (a scenario inside a rig log)."""
     text = text.removeprefix("\ufeff")
     bound = sum(text.count(c) for c in ",[{") + 1
-    if bound > MAX_JSON_VALUES:
+    if bound > max_values:
         raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
-                             f"brackets), over the limit of {MAX_JSON_VALUES:,}")
+                             f"brackets), over the limit of {max_values:,}")
     try:
         return json.loads(text, object_pairs_hook=no_duplicate_keys, parse_int=_json_int,
                           **options)

@@ -254,7 +254,8 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
         setup.utime = round(phase.start_time * 1e6)
         setup.scenario_json = json.dumps(phase.scenario.to_dict(resolved=True))
         setup.stance = list(phase.stance_ids)
-        setup.plan_source = plan_source
+        # a file name that is not UTF-8 (its bytes as surrogates) cannot be encoded as is
+        setup.plan_source = plan_source.encode(errors="backslashreplace").decode()
         writer.events.write_event(setup.utime, config.setup_channel, setup.encode())
         writer.utime = setup.utime
 

@@ -405,7 +405,8 @@ def _setup_scenario(text: str, channel: str) -> Scenario:
         return scenario_from_dict(load_json(text, max_values=max_input_values()),
                                   "log scenario", check_start=False)
     except InputFileError as e:
-        raise RigInputError(field, e.reason) from None
+        where = "" if e.field == "(file)" else f"{e.field}: "
+        raise RigInputError(field, f"{where}{e.reason}") from None
     except (ScenarioError, json.JSONDecodeError) as e:
         raise RigInputError(field, str(e)) from None
     except RecursionError:

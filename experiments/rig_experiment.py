@@ -62,6 +62,16 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         parser.error(f"--period: must be positive, got {args.period}")
     if args.hardware and args.lcm_url.startswith("memq://"):
         parser.error("--hardware: give the rig's bus with --lcm-url udpm://...")
+    # the URL before the heavy imports (a wrong one was refused after 1 s and 267 MB)
+    from systems.lcm_url import lcm_url_problem
+
+    if not args.hardware and args.lcm_url != "memq://":
+        parser.error(f"--lcm-url: the simulated rig runs in-process on memq://, not on "
+                     f"{args.lcm_url} (--hardware talks to a real rig)")
+    problem = lcm_url_problem(args.lcm_url)
+    if problem:
+        parser.error(f"--lcm-url: {args.lcm_url!r} {problem}" if problem.startswith("is not")
+                     else f"--lcm-url: {args.lcm_url!r}: {problem}")
 
     import numpy as np
 

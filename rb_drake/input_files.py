@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import stat
 import sys
 from pathlib import Path
@@ -244,7 +245,7 @@ def load_yaml(text: str) -> Any:
         if node is None:
             return None
         _check_tree(node, limit)
-        return loader.construct_document(node)
+        return _no_lone_surrogates(text, loader.construct_document(node))
     except yaml.YAMLError as e:
         raise _yaml_error(e) from None
     except RecursionError:  # the pure-Python parser, without libyaml's nesting limit
@@ -394,21 +395,22 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return result
 
 
-def load_json(text: str, **options: Any) -> Any:
+def load_json(text: str, max_values: int = MAX_JSON_VALUES, **options: Any) -> Any:
     """The JSON value of `text` (json.loads with `options`; a leading UTF-8 byte-order mark is
     skipped); refused (InputFileError) if it may hold more than MAX_JSON_VALUES values (every
     value but the first follows a "[", "{" or ",", so their count bounds the values before any
     is built), repeats a key in an object or holds an integer beyond a float's range (10**400
     would raise OverflowError wherever it is used as a number; the field names its line); the
-    caller handles json.JSONDecodeError and RecursionError."""
+    caller handles json.JSONDecodeError and RecursionError. `max_values` lowers the limit
+    for a document of a smaller kind (a scenario inside a rig log)."""
     text = text.removeprefix("\ufeff")
     bound = sum(text.count(c) for c in ",[{") + 1
-    if bound > MAX_JSON_VALUES:
+    if bound > max_values:
         raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
-                             f"brackets), over the limit of {MAX_JSON_VALUES:,}")
+                             f"brackets), over the limit of {max_values:,}")
     try:
-        return json.loads(text, object_pairs_hook=no_duplicate_keys, parse_int=_json_int,
-                          **options)
+        return _no_lone_surrogates(text, json.loads(
+            text, object_pairs_hook=no_duplicate_keys, parse_int=_json_int, **options))
     except _HugeIntError as e:
         at = max(text.find(e.digits), 0)
         where = f"line {text.count(chr(10), 0, at) + 1}, column {at - text.rfind(chr(10), 0, at)}"
@@ -433,3 +435,38 @@ def _json_int(digits: str) -> int:
     if value is None or abs(value) > sys.float_info.max:
         raise _HugeIntError(digits)
     return value
+
+
+# An escape of half a UTF-16 pair ("\ud800" in JSON, also "\U0000d800" in YAML): decoded, it
+# is a lone surrogate, text no UTF-8 output can hold (a rig log's setup, a results file)
+_SURROGATE_ESCAPE = re.compile(r"\\(?:u|U0000)[dD][89a-fA-F]")
+
+
+def _no_lone_surrogates(text: str, data: Any) -> Any:
+    """`data`, refused (InputFileError naming the field) if a key or string in it holds a lone
+    surrogate; walked only when `text` has an escape that can make one."""
+    if not _SURROGATE_ESCAPE.search(text):
+        return data
+    stack: list[tuple[Any, str]] = [(data, "")]
+    while stack:
+        value, where = stack.pop()
+        children: list[tuple[Any, str]] = []
+        if isinstance(value, dict):
+            for key, item in value.items():
+                field = f"{where}.{key}" if where else str(key)
+                children += [(key, field), (item, field)]
+        elif isinstance(value, list):
+            children = [(item, f"{where}[{i}]") for i, item in enumerate(value)]
+        elif isinstance(value, str) and not _encodable(value):
+            raise InputFileError(where or "(file)", "a lone surrogate (a \\u escape of half "
+                                 "a UTF-16 pair): not text UTF-8 can hold")
+        stack.extend(reversed(children))  # the first in the document is named
+    return data
+
+
+def _encodable(text: str) -> bool:
+    try:
+        text.encode()
+    except UnicodeEncodeError:
+        return False
+    return True

@@ -78,6 +78,13 @@ MAX_RUNS = 100_000  # stochastic executions per plan (monte_carlo, calibration)
 MAX_EXPANSIONS = 10_000_000  # the footstep search's cap (FootstepConfig allows 1e9; minutes)
 
 
+def json_type(value: Any) -> str:
+    """The JSON name of `value`'s type, for a refusal."""
+    names = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
+             str: "a string", list: "a list", dict: "an object"}
+    return names.get(type(value), type(value).__name__)
+
+
 def read_json_file(path: str | Path, kind: type = dict) -> Any:
     """The JSON value (of type `kind`) of a file a user named, read within rbp's input bounds
     (rb_drake.input_files: a FIFO, a device, a directory, a huge file are refused unread);
@@ -93,11 +100,9 @@ def read_json_file(path: str | Path, kind: type = dict) -> Any:
     except RecursionError:
         raise InputFileError("(file)", "nested too deeply") from None
     if not isinstance(value, kind):
-        names: dict[type, str] = {dict: "an object", list: "a list", str: "a string",
-                                  int: "a number", float: "a number", bool: "a boolean",
-                                  type(None): "null"}
+        names: dict[type, str] = {dict: "an object", list: "a list"}
         raise InputFileError("(file)", f"must be {names.get(kind, kind.__name__)}, got "
-                             f"{names.get(type(value), type(value).__name__)}")
+                             f"{json_type(value)}")
     return value
 
 

@@ -9,7 +9,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from experiments.sweep import json_type
+from experiments.arguments import json_type
 
 Rule = tuple[Callable[[Any], bool], str]  # (test of a value, what the value must be)
 

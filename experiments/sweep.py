@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, tcp_address, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
@@ -158,13 +158,6 @@ class _NonFiniteError(Exception):
 
 def _no_constant(name: str) -> Any:
     raise _NonFiniteError(name)
-
-
-def json_type(value: Any) -> str:
-    """The JSON name of `value`'s type, for a refusal."""
-    names = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
-             str: "a string", list: "a list", dict: "an object"}
-    return names.get(type(value), type(value).__name__)
 
 
 def _record_problem(record: dict[str, Any], trial: Trial) -> str | None:

@@ -108,8 +108,11 @@ def calibration_trials(args: argparse.Namespace) -> list[Trial]:
 
 def simulated(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per simulated plan: trial name, p_path and the simulation's numbers."""
-    return [{"trial": r["name"], "p_path": r["result"]["plan"]["p_path"],
-             **r["result"]["simulated"]} for r in records if r["result"]["simulated"]]
+    # the simulation's own keys first: a "p_path" or "trial" in it (unchecked) cannot replace
+    # the plan's
+    return [{**r["result"]["simulated"], "trial": r["name"],
+             "p_path": r["result"]["plan"]["p_path"]}
+            for r in records if r["result"]["simulated"]]
 
 
 def pooled(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -9,9 +9,12 @@ import argparse
 import ipaddress
 import math
 import re
+import sys
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
-from rb_drake.errors import MAX_SEED
+from rb_drake.errors import EXIT_USAGE, MAX_SEED, one_line
 
 
 def whole(lo: int, hi: int) -> Callable[[str], int]:
@@ -73,3 +76,44 @@ MAX_TRIALS = 100_000  # a sweep's trials: each is a record in memory and a file 
 MAX_WORKERS = 1024
 MAX_RUNS = 100_000  # stochastic executions per plan (monte_carlo, calibration)
 MAX_EXPANSIONS = 10_000_000  # the footstep search's cap (FootstepConfig allows 1e9; minutes)
+
+
+def json_type(value: Any) -> str:
+    """The JSON name of `value`'s type, for a refusal."""
+    names = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
+             str: "a string", list: "a list", dict: "an object"}
+    return names.get(type(value), type(value).__name__)
+
+
+def read_json_file(path: str | Path, kind: type = dict) -> Any:
+    """The JSON value (of type `kind`) of a file a user named, read within rbp's input bounds
+    (rb_drake.input_files: a FIFO, a device, a directory, a huge file are refused unread);
+    raises InputFileError(field, reason) for a file that is not such JSON."""
+    import json
+
+    from rb_drake.input_files import InputFileError, load_json, read_text
+
+    try:
+        value = load_json(read_text(path))
+    except json.JSONDecodeError as e:
+        raise InputFileError(f"line {e.lineno}, column {e.colno}", f"not JSON: {e.msg}") from None
+    except RecursionError:
+        raise InputFileError("(file)", "nested too deeply") from None
+    if not isinstance(value, kind):
+        names: dict[type, str] = {dict: "an object", list: "a list"}
+        raise InputFileError("(file)", f"must be {names.get(kind, kind.__name__)}, got "
+                             f"{json_type(value)}")
+    return value
+
+
+def json_argument(path: str | Path, kind: type = dict) -> Any:
+    """`read_json_file` for a file named on a script's command line: a file that is not such
+    JSON ends the script with one line, `error: FILE: FIELD: REASON` (escaped), exit status
+    EXIT_USAGE."""
+    from rb_drake.input_files import InputFileError
+
+    try:
+        return read_json_file(path, kind)
+    except InputFileError as e:
+        print(one_line(f"error: {path}: {e}"), file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None

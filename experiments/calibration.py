@@ -26,7 +26,19 @@ import time
 from typing import Any
 
 from experiments.arguments import MAX_EXPANSIONS, MAX_RUNS, seed_number, whole
+from experiments.records import (
+    BOOLEAN,
+    COUNT,
+    INTERVAL,
+    NUMBER,
+    PROBABILITY,
+    SECONDS,
+    STRING,
+    maybe,
+    simulation_problem,
+)
 from experiments.sweep import (
+    RESULT_CHECKS,
     Trial,
     add_sweep_arguments,
     machine_info,
@@ -136,9 +148,21 @@ def _planned_minimum(plan: dict[str, Any], traj) -> Any:
     return out
 
 
+CALIBRATION_TRIAL = "experiments.calibration:calibration_trial"
+# What the table, the figure and results.json read of a trial's record
+_PLAN = {"success": BOOLEAN, "reason": STRING, "p_path": maybe(PROBABILITY),
+         "regrasps": (lambda v: COUNT[0](v) and v <= 10**6, "a whole number from 0 to 1,000,000"),
+         "problems": (lambda v: isinstance(v, list), "a list")}
+_SIMULATED = {"runs": COUNT, "successes": COUNT, "rate": PROBABILITY, "ci95": INTERVAL,
+              "p_sim": PROBABILITY, "max_position_error": NUMBER, "max_heading_error": NUMBER,
+              "climb_seconds": SECONDS}
+RESULT_CHECKS[CALIBRATION_TRIAL] = lambda params, record: simulation_problem(
+    record, _PLAN, _SIMULATED)
+
+
 def calibration_trials(args: argparse.Namespace) -> list[Trial]:
     names = list(CAVES) if args.caves is None else args.caves
-    return [Trial(name, "experiments.calibration:calibration_trial",
+    return [Trial(name, CALIBRATION_TRIAL,
                   {"cave": CAVES[name], "runs": args.runs, "mc_seed": args.mc_seed,
                    "max_expansions": args.max_expansions}) for name in names]
 

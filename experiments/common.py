@@ -18,11 +18,23 @@ from pathlib import Path
 from typing import Any
 
 from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
+from experiments.records import (
+    BOOLEAN,
+    COUNT,
+    MEGABYTES,
+    NUMBER,
+    PROBABILITY,
+    SECONDS,
+    STRING,
+    Rule,
+    fields_problem,
+    maybe,
+    stage_seconds_problem,
+)
 from experiments.sweep import (
     RESULT_CHECKS,
     Trial,
     check_sweep_arguments,
-    json_type,
     quantiles,
 )
 
@@ -178,36 +190,50 @@ def climb_trial(kind: str, seed: int, length: list[float], max_expansions: int,
     return out
 
 
-def _probability(value: Any) -> bool:
-    return (isinstance(value, (int, float)) and not isinstance(value, bool)
-            and 0.0 <= value <= 1.0)  # NaN fails both comparisons
-
-
-# The fields of a planner's plan_record the summaries read: (check, what it must be).
-_RECORD_FIELDS: dict[str, tuple[Any, str]] = {
-    "success": (lambda v: isinstance(v, bool), "true or false"),
-    "reason": (lambda v: isinstance(v, str), "a string"),
-    "p_path": (lambda v: v is None or _probability(v), "null or a number from 0 to 1"),
-    "p_grasps": (lambda v: v is None or _probability(v), "null or a number from 0 to 1"),
-    "regrasps": (lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 10**6,
-                 "a whole number from 0 to 1,000,000"),
+# The fields of a planner's plan_record the summaries and the OMPL log read: (check, what it
+# must be); those after "phases" are missing from a cave the generator could not make.
+_RECORD_FIELDS: dict[str, Rule] = {
+    "success": BOOLEAN, "reason": STRING, "p_path": maybe(PROBABILITY),
+    "p_grasps": maybe(PROBABILITY), "regrasps": (lambda v: COUNT[0](v) and v <= 10**6,
+                                                 "a whole number from 0 to 1,000,000"),
+    "phases": (lambda v: fields_problem(v, "", {"body": COUNT, "reach": COUNT}) is None,
+               "an object of body and reach counts"),
+    "stop": maybe(STRING), "expansions": maybe(COUNT), "cost": maybe(NUMBER),
+    "bound": maybe(NUMBER), "verified": BOOLEAN,
 }
+_OPTIONAL = ("stop", "expansions", "cost", "bound", "verified")
+_HISTORY_POINT = {"seconds": SECONDS, "cost": NUMBER, "lower_bound": NUMBER,
+                  "expansions": COUNT}
 
 
-def climb_result_problem(params: dict[str, Any], result: dict[str, Any]) -> str | None:
-    """What is wrong with a finished climb trial's result ("FIELD: REASON"), or None: each
-    planner's record holds the fields the summaries read, within their ranges."""
+def _search_problem(value: Any, where: str) -> str | None:
+    """timing.PLANNER.search: the search's memory and an anytime search's history."""
+    rules = {"peak_memory_mb": maybe(MEGABYTES), "kept_memory_mb": maybe(MEGABYTES),
+             "history": (lambda v: v is None or isinstance(v, list), "null or a list")}
+    if (problem := fields_problem(value, where, rules, optional=tuple(rules))) is not None:
+        return problem
+    for i, point in enumerate(value.get("history") or ()):
+        if (problem := fields_problem(point, f"{where}.history.{i}", _HISTORY_POINT)):
+            return problem
+    return None
+
+
+def climb_result_problem(params: dict[str, Any], record: dict[str, Any]) -> str | None:
+    """What is wrong with a finished climb trial's record ("FIELD: REASON"), or None: each
+    planner's record holds the fields the summaries read, within their ranges, and its timing
+    (when it planned a cave) seconds per stage."""
     for planner in params.get("planners", ()):
-        row = result.get(planner)
-        if not isinstance(row, dict):
-            return f"{planner}: expected the planner's record, got {json_type(row)}"
-        for key, (ok, what) in _RECORD_FIELDS.items():
-            if key not in row:
-                return f"{planner}.{key}: missing"
-            if not ok(row[key]):
-                return f"{planner}.{key}: must be {what}, got {str(row[key])[:40]!r}"
+        where = f"result.{planner}"
+        if (problem := fields_problem(record["result"].get(planner), where, _RECORD_FIELDS,
+                                      _OPTIONAL)) is not None:
+            return problem if planner in record["result"] else f"{where}: missing"
+        row = record["result"][planner]
         if row["success"] and row["p_path"] is None:
-            return f"{planner}.p_path: a successful plan's must be a number from 0 to 1"
+            return f"{where}.p_path: a successful plan's must be a number from 0 to 1"
+        if planner in record["timing"] and (problem := stage_seconds_problem(
+                record["timing"][planner], f"timing.{planner}", ("footstep",),
+                {"search": _search_problem})) is not None:
+            return problem
     return None
 
 

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import number, seed_number
+from experiments.arguments import json_argument, number, seed_number
 from experiments.common import cave_kind
 from experiments.sweep import quantiles
 from rb_drake.errors import EXIT_OK
@@ -116,8 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.caves is not None:
         if args.labels is None:
             parser.error("--caves needs --labels")
+        results = json_argument(args.labels)  # bounded: a FIFO or deep nesting is one line
         try:
-            results = json.loads(args.labels.read_text())
             for trial in results["trials"]:  # baseline_comparison's per-cave table
                 took = trial["oracle"]["footstep_seconds"]
                 if trial["label"] == args.caves and (args.max_old_seconds is None

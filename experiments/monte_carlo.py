@@ -26,7 +26,19 @@ from experiments.common import (
     plan_record,
     trial_cave,
 )
+from experiments.records import (
+    BOOLEAN,
+    COUNT,
+    INTERVAL,
+    NUMBER,
+    PROBABILITY,
+    STRING,
+    fields_problem,
+    maybe,
+    simulation_problem,
+)
 from experiments.sweep import (
+    RESULT_CHECKS,
     Trial,
     add_sweep_arguments,
     machine_info,
@@ -72,20 +84,35 @@ def simulate_trial(runs: int, mc_seed: int, **params: Any) -> dict[str, Any]:
         "failures": mc.to_json()["failures"]}}
 
 
+SIMULATE_TRIAL = "experiments.monte_carlo:simulate_trial"
+# What the summaries read of a simulated plan (its runs, the rate's interval); `simulated_problem`
+# (experiments.records.simulation_problem also checks that the counts agree)
+_SIMULATED = {"runs": COUNT, "successes": COUNT, "rate": PROBABILITY, "ci95": INTERVAL,
+              "p_sim": PROBABILITY, "max_position_error": NUMBER,
+              "failures": (lambda v: fields_problem(v, "", {}) is None, "an object")}
+
+
+RESULT_CHECKS[SIMULATE_TRIAL] = lambda params, record: simulation_problem(
+    record, {"success": BOOLEAN, "reason": STRING, "p_path": maybe(PROBABILITY)}, _SIMULATED)
+
+
 def calibration_trials(args: argparse.Namespace) -> list[Trial]:
     """The climb trials' caves, each with the Monte Carlo settings."""
     trials = []
     for t in climb_trials(args, ["rbp"], motion=True):
         params = {k: v for k, v in t.params.items() if k not in ("planners", "motion")}
-        trials.append(Trial(t.name, "experiments.monte_carlo:simulate_trial",
+        trials.append(Trial(t.name, SIMULATE_TRIAL,
                             params | {"runs": args.runs, "mc_seed": args.mc_seed}))
     return trials
 
 
 def simulated(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per simulated plan: trial name, p_path and the simulation's numbers."""
-    return [{"trial": r["name"], "p_path": r["result"]["plan"]["p_path"],
-             **r["result"]["simulated"]} for r in records if r["result"]["simulated"]]
+    # the simulation's own keys first: a "p_path" or "trial" in it (unchecked) cannot replace
+    # the plan's
+    return [{**r["result"]["simulated"], "trial": r["name"],
+             "p_path": r["result"]["plan"]["p_path"]}
+            for r in records if r["result"]["simulated"]]
 
 
 def pooled(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

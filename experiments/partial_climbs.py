@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_TRIALS, seed_number, whole
+from experiments.arguments import MAX_TRIALS, json_argument, seed_number, whole
 from experiments.sweep import machine_info
-from rb_drake.errors import EXIT_OK
+from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
 from rb_drake.files import atomic_write_text
 
 LABELS = Path(__file__).resolve().parents[1] / "docs" / "figures" / "route-oracle-all.json"
@@ -107,8 +107,14 @@ def main(argv: list[str] | None = None) -> int:
         caves = caves[:args.limit]
     out = Path(args.out)
     rows: list[dict[str, Any]] = []
-    if out.exists():
-        rows = json.loads(out.read_text()).get("caves", [])
+    if out.exists():  # resuming: its own earlier output, read within the input bounds
+        rows = json_argument(out).get("caves", [])
+        if not (isinstance(rows, list) and all(
+                isinstance(r, dict) and isinstance(r.get("kind"), str)
+                and isinstance(r.get("seed"), int) for r in rows)):
+            print(one_line(f"error: {out}: caves: must be a list of objects with kind and "
+                           "seed (this script's own results)"), file=sys.stderr)
+            return EXIT_USAGE
     done = {(r["kind"], r["seed"]) for r in rows}
     for kind, seed in caves:
         if (kind, seed) in done:

@@ -27,13 +27,20 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, number, seed_number, whole
+from experiments.arguments import (
+    MAX_TRIALS,
+    MAX_WORKERS,
+    json_argument,
+    number,
+    seed_number,
+    whole,
+)
 from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import add_ompl_log_argument, cave_kind, check_ompl_log
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
-from rb_drake.errors import EXIT_OK
+from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
@@ -86,6 +93,30 @@ def compare(new: dict[str, Any], old: dict[str, Any]) -> None:
                 ratios.append(a["seconds"] / b["seconds"])
         print(f"{v}: {same_route} caves the same, {diff} different; median time new/old "
               f"{median(ratios):.3f}")
+
+
+def run_file(path: str) -> dict[str, Any]:
+    """A run's results file (--compare, --against-oracle), read within the input bounds and
+    checked for the shape the comparisons walk: else one line and exit status 2."""
+    run = json_argument(path)
+    variants, caves = run.get("variants"), run.get("caves")
+    problem = None
+    if not (isinstance(variants, list) and all(isinstance(v, str) for v in variants)):
+        problem = "variants: must be a list of variant names"
+    elif not isinstance(caves, list):
+        problem = "caves: must be a list"
+    else:
+        for i, cave in enumerate(caves):
+            if not (isinstance(cave, dict) and isinstance(cave.get("kind"), str)
+                    and isinstance(cave.get("seed"), int)
+                    and all(isinstance(cave.get(v), dict) for v in variants)):
+                problem = (f"caves.{i}: must be an object with kind, seed and an object per "
+                           "variant")
+                break
+    if problem is not None:
+        print(one_line(f"error: {path}: {problem}"), file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
+    return run
 
 
 def against_oracle(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -166,8 +197,9 @@ def main(argv: list[str] | None = None) -> int:
     add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
     check_ompl_log(parser, args.ompl_log, args.out)
+    old = run_file(args.compare) if args.compare else None  # before the run: it fails fast
     if args.against_oracle:
-        runs = [json.loads(Path(f).read_text()) for f in args.against_oracle]
+        runs = [run_file(f) for f in args.against_oracle]
         print(json.dumps(against_oracle(runs), indent=1))
         return EXIT_OK
     variants = args.variants.split(",")
@@ -201,8 +233,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {out}")
     if args.ompl_log:
         print(f"wrote {write_ompl_log(args, caves, variants, result, started)}")
-    if args.compare:
-        compare(result, json.loads(Path(args.compare).read_text()))
+    if old is not None:
+        compare(result, old)
     return EXIT_OK
 
 

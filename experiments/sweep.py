@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, tcp_address, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
@@ -52,10 +52,10 @@ class SweepError(RbpError):
     """A sweep that cannot run as asked (bad trial names, a folder holding another sweep)."""
 
 
-# A trial function's check of a finished record's result (function path -> check(params,
-# result) -> "FIELD: REASON" or None), registered by the module that makes its trials: a
-# record edited or damaged since (p_path "x", 1e308, missing) is refused on resuming, before
-# the summaries read it.
+# A trial function's check of a finished record (function path -> check(params, record) ->
+# "FIELD: REASON" or None, FIELD dotted from the record: "result.rbp.p_path"), registered by
+# the module that makes its trials (rules in experiments.records): a record edited or damaged
+# since (p_path "x", 1e308, missing) is refused on resuming, before the summaries read it.
 RESULT_CHECKS: dict[str, Callable[[dict[str, Any], dict[str, Any]], str | None]] = {}
 
 
@@ -130,9 +130,13 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:  # within the input bounds: a sweep folder may hold anything (rb_drake.input_files)
-        record = load_json(read_text(path))
+        record = load_json(read_text(path), parse_constant=_no_constant)
     except (InputFileError, json.JSONDecodeError, RecursionError):
         return None  # not ours or damaged: run the trial again, the new record replaces it
+    except _NonFiniteError as e:  # records are written without them: a summary would write it on
+        raise SweepError(f"{path}: (file): holds {e}, which no record does (they are written "
+                         "without NaN or Infinity); delete the file to run the trial again"
+                         ) from None
     if not isinstance(record, dict):
         return None
     # Compare through JSON, as stored: tuples become lists.
@@ -148,23 +152,28 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     return record
 
 
-def json_type(value: Any) -> str:
-    """The JSON name of `value`'s type, for a refusal."""
-    names = {type(None): "null", bool: "a boolean", int: "a number", float: "a number",
-             str: "a string", list: "a list", dict: "an object"}
-    return names.get(type(value), type(value).__name__)
+class _NonFiniteError(Exception):
+    pass
+
+
+def _no_constant(name: str) -> Any:
+    raise _NonFiniteError(name)
 
 
 def _record_problem(record: dict[str, Any], trial: Trial) -> str | None:
     """What is wrong with a finished record's fields ("FIELD: REASON"), or None."""
     if record.get("format") != RECORD_FORMAT:
         return f"format: expected {RECORD_FORMAT!r}, got {str(record.get('format'))[:40]!r}"
-    for field in ("result", "timing"):
+    for field in ("result", "timing", "worker"):
         if not isinstance(record.get(field), dict):
             return f"{field}: expected an object, got {json_type(record.get(field))}"
+    trial_seconds = record["timing"].get("trial", 0.0)
+    if not (isinstance(trial_seconds, int | float) and not isinstance(trial_seconds, bool)
+            and 0 <= trial_seconds <= 1e9):  # the progress line and the OMPL log add it up
+        return f"timing.trial: must be a number of seconds from 0 to 1e9, got " \
+               f"{str(trial_seconds)[:40]!r}"
     check = RESULT_CHECKS.get(trial.function)
-    problem = check(trial.params, record["result"]) if check is not None else None
-    return None if problem is None else f"result.{problem}"
+    return check(trial.params, record) if check is not None else None
 
 
 class ProgressDisplay:

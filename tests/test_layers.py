@@ -24,7 +24,8 @@ LAYERS = ("rb_drake", "planning", "systems", "experiments", "rbp")  # lowest fir
 # experiment script (run one with `rbp experiment NAME`, or move what it shares into these). An
 # experiment that is a package (experiments/bench/) may import its own modules.
 EXPERIMENT_LIBRARIES = frozenset({"experiments", "experiments.common", "experiments.sweep",
-                                  "experiments.ompl_log", "experiments.arguments"})
+                                  "experiments.ompl_log", "experiments.arguments",
+                                  "experiments.records"})
 
 
 def experiment_of(module: str) -> str:

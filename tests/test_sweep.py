@@ -213,24 +213,26 @@ def test_an_edited_finished_record_is_refused_naming_its_field(tmp_path: Path) -
     from experiments.common import CLIMB_TRIAL
 
     trial = tiny_climb("c0", "shaft", 1)
-    row = {"success": True, "reason": "", "p_path": 0.92, "p_grasps": 0.99, "regrasps": 7}
+    row = {"success": True, "reason": "", "p_path": 0.92, "p_grasps": 0.99, "regrasps": 7,
+           "phases": {"body": 7, "reach": 7}}
 
     def stored(result: object) -> None:
         trial_path(tmp_path, trial.name).parent.mkdir(parents=True, exist_ok=True)
         trial_path(tmp_path, trial.name).write_text(json.dumps(
             {"format": "rbp-trial/1", "name": trial.name, "function": CLIMB_TRIAL,
-             "params": trial.params, "result": result, "error": None, "timing": {}}))
+             "params": trial.params, "result": result, "error": None, "timing": {},
+             "worker": {}}))
 
     stored({"cave": None, "naive": row})
     assert run_sweep([trial], tmp_path, workers=1, stream=io.StringIO())[0]["result"]["naive"]
     cases = [(None, r"result: expected an object, got null"),
              ({"naive": {**row, "p_path": "x"}}, r"result\.naive\.p_path: must be null or a"),
              ({"naive": {**row, "p_path": 1e308}}, r"result\.naive\.p_path: must be"),
-             ({"naive": {**row, "p_path": math.nan}}, r"result\.naive\.p_path: must be"),
+             ({"naive": {**row, "p_path": math.nan}}, r"\(file\): holds NaN"),
              ({"naive": {k: v for k, v in row.items() if k != "p_path"}},
               r"result\.naive\.p_path: missing"),
              ({"naive": {**row, "regrasps": True}}, r"result\.naive\.regrasps: must be"),
-             ({"naive": [1]}, r"result\.naive: expected the planner's record, got a list")]
+             ({"naive": [1]}, r"result\.naive: expected an object, got a list")]
     for result, words in cases:
         stored(result)
         with pytest.raises(SweepError, match=rf"c0\.json: {words}.*delete the file"):

@@ -48,14 +48,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import seed_number, whole
+from experiments.arguments import json_type, read_json_file, seed_number, whole
 from experiments.bench.allocation import run_allocation
 from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
 from experiments.bench.scp import run_scp
 from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
 from rb_drake.files import atomic_write_text, output_problem
-from rb_drake.input_files import InputFileError, load_json, read_text
+from rb_drake.input_files import InputFileError
 
 SECTIONS = ("allocation", "scp", "footstep")
 FORMAT = "rbp-bench/1"
@@ -86,6 +86,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     sections = [s.strip() for s in args.only.split(",") if s.strip()]
     unknown = sorted(set(sections) - set(SECTIONS))
+    if not sections:  # --only '' or ',,': no work, and an empty results file said it ran
+        print(one_line(f"error: --only: no section given ({args.only!r}); choose from "
+                       f"{list(SECTIONS)}"), file=sys.stderr)
+        return EXIT_USAGE
     if unknown:
         print(one_line(f"error: --only: unknown section(s) {unknown}; choose from "
                        f"{list(SECTIONS)}"), file=sys.stderr)
@@ -99,14 +103,10 @@ def run(args: argparse.Namespace) -> int:
     old = None
     if args.compare:  # read first: a bad file should fail before minutes of benchmarking
         try:  # the bounded reader: /dev/zero or a huge file is refused, not read
-            old = load_json(read_text(args.compare))
+            old = read_json_file(args.compare, object)
             comparable(old)
         except InputFileError as e:
             print(f"error: {one_line(args.compare)}: {e}", file=sys.stderr)
-            return EXIT_USAGE
-        except (ValueError, RecursionError) as e:
-            print(f"error: {one_line(args.compare)}: (file): {one_line(str(e))}",
-                  file=sys.stderr)
             return EXIT_USAGE
     result: dict[str, Any] = {
         "format": FORMAT, "created": time.strftime("%Y-%m-%d %H:%M:%S"), "machine": machine(),
@@ -141,6 +141,9 @@ def comparable(old: Any) -> None:
     for name, section in sections.items():
         if not isinstance(section, dict) or not isinstance(section.get("summary", {}), dict):
             raise InputFileError(f"sections.{name}", "must be an object with a summary object")
+    if not isinstance(old.get("created", ""), str):  # printed as the comparison's heading
+        raise InputFileError("created", "must be a string (when it was measured), got "
+                             f"{json_type(old['created'])}")
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from experiments.bench.stats import fmt, ratio
+from rb_drake.errors import one_line
 
 
 def flat_metrics(result: dict[str, Any]) -> dict[str, float]:
@@ -39,7 +40,10 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> list[tuple[str, float, 
 
 def print_comparison(old: dict[str, Any], new: dict[str, Any], label: str) -> None:
     rows = compare(old, new)
-    print(f"\ncompared with {label} ({old.get('created', '?')}): new/old per metric")
+    # the file's name and its `created` escaped: a control character or a lone surrogate
+    # (UnicodeEncodeError on a UTF-8 stdout) there was printed raw or crashed after the run
+    created = one_line(str(old.get("created", "?")))
+    print(f"\ncompared with {one_line(label)} ({created}): new/old per metric")
     width = max((len(k) for k, *_ in rows), default=10)
     for key, a, b, new_over_old in rows:
         # Four significant digits: a fixed number of decimals loses a ratio far below 1.

@@ -5,7 +5,8 @@ Two Drake systems talk to the rig through `DrakeLcm`: `RigCommandSource` streams
 `LcmPublisherSystem`, and `GraspMonitor` turns each status an `LcmSubscriberSystem` receives
 into each anchor's probability of grasp maintenance (the paper's Fig. 7) from the measured
 load-cell force and hinge angle. `run_rig` executes one phase and logs every message to an LCM
-log; `replay_log` feeds a log back through the same monitor; `report_figure` draws it.
+log; `replay_log` computes the same monitor's outputs for a log, and `report_figure` draws
+it (both in `systems.rig_log`, which reads a log without importing Drake).
 
 Because this drives hardware: commands are clamped to the robot's boom-length and tension
 limits, their change from one command to the next is bounded (`max_length_rate`,
@@ -16,7 +17,7 @@ of range is logged as received but ignored (`StatusFilter`, in `systems.rig_mess
 rest of the LCM side, keeps the last good one).
 
 Python LeafSystems are never freed in pydrake 1.51 (STACK.md section 5): `run_rig` builds its
-diagram once per run, and `replay_log` one monitor per log.
+diagram once per run.
 """
 
 
@@ -25,7 +26,6 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import struct
 import tempfile
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -41,36 +41,24 @@ from pydrake.trajectories import PiecewisePolynomial
 from planning.plan_model import Plan, plan_of, plan_scenario
 from planning.verify_between import step_motion
 from rb_drake import geometry, grasp
-from rb_drake.errors import RbpInputError, one_line
 from rb_drake.files import atomic_write
-from rb_drake.input_files import InputFileError, load_json, max_input_values
-from rb_drake.scenario import Scenario, ScenarioError, scenario_from_dict
+from rb_drake.scenario import Scenario, ScenarioError
 from rb_drake.stance import Stance
 from systems.lcm_url import open_problem, quietly
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
-from systems.rig_messages import (
-    COMMAND_ROW,
+from systems.rig_log import (  # noqa: F401 (reading a log back, without Drake: here too)
     MAX_LOG_EVENTS,
     MEMQ,
-    LogWriter,
-    RawSerializer,
+    GraspRecord,
+    RigInputError,
     RigLcmConfig,
-    StatusFilter,
-    first_bad_command,
-    fixed_message,
-    good_statuses,
-    read_log,
+    RigLog,
+    replay_log,
+    report_figure,
 )
+from systems.rig_messages import LogWriter, RawSerializer, StatusFilter
 from systems.rig_safety import RigCommandSource, SafetyReport
-
-
-class RigInputError(RbpInputError):
-    """A plan or log the rig cannot use: `field` (path in the file) and `reason`."""
-
-    def __init__(self, field: str, reason: str):
-        super().__init__(reason, field=field)
-
 
 # ---------------------------------------------------------------------------------------------
 # The phase to execute
@@ -205,15 +193,6 @@ def build_rig_diagram(phase: BodyPhase, bus: DrakeLcm, config: RigLcmConfig) -> 
 # Running, logging, replaying
 
 
-class GraspRecord(NamedTuple):
-    """The monitor's output per status message (N rows, in arrival order)."""
-
-    time: np.ndarray        # (N,) s, the status's utime
-    p_grasp: np.ndarray     # (N, 4)
-    pull_angle: np.ndarray  # (N, 4) rad
-    force: np.ndarray       # (N, 4) N, measured
-
-
 class RigRun(NamedTuple):
     live: GraspRecord
     commands: int           # published
@@ -320,140 +299,3 @@ def _record(rows: list[tuple]) -> GraspRecord:
         return GraspRecord(np.zeros(0), np.zeros((0, 4)), np.zeros((0, 4)), np.zeros((0, 4)))
     t, p, psi, f = zip(*rows, strict=True)
     return GraspRecord(np.array(t), np.array(p), np.array(psi), np.array(f))
-
-
-class RigLog(NamedTuple):
-    """A run's log, decoded, with the monitor's output per status (`replay_log`)."""
-
-    scenario: Scenario
-    stance_ids: tuple[str, ...]
-    plan_source: str
-    command_time: np.ndarray      # (M,) s
-    boom_length: np.ndarray       # (M, 4) m, commanded
-    tension_setpoint: np.ndarray  # (M, 4) N
-    replay: GraspRecord           # per status, in log order
-    winch_length: np.ndarray      # (N, 4) m, measured
-
-
-def replay_log(path: str | Path,
-               config: RigLcmConfig = RigLcmConfig()) -> RigLog:  # noqa: B008 (frozen)
-    """Read a log written by `run_rig` and pass each good status through a `GraspMonitor`
-    (statuses that do not decode or are out of range are skipped, as the live run did). A
-    setup or command message that does not decode, or a log past MAX_LOG_EVENTS events, is
-    refused (RigInputError naming the channel and the event): such a log was not written by
-    `run_rig`, or was damaged since."""
-    path = Path(path)
-    setup, commands, raw_statuses = None, [], []
-    channels = (config.setup_channel, config.command_channel, config.status_channel)
-    try:
-        events, damage = read_log(path, channels,
-                                  {config.command_channel: fixed_message(rig_command_t)})
-    except OSError as e:
-        raise RigInputError("(file)", f"not an LCM log: {e.strerror or e}") from None
-    if damage is not None:
-        raise RigInputError(*damage)
-    for number, channel, data in events:
-        if channel == config.setup_channel:
-            if number > 0:  # run_rig writes it once, first: a later one could swap the scenario
-                raise RigInputError(config.setup_channel, f"event {number}: " + (
-                    "a second setup message; a log holds one, its first event" if setup
-                    else "the setup message must be the log's first event, not a later one"))
-            setup = _decoded(rig_setup_t, data, config.setup_channel, number)
-        elif channel == config.command_channel:  # each its type's size and fingerprint
-            commands.append((number, data))
-        else:
-            raw_statuses.append(data)
-    if setup is None:
-        raise RigInputError(config.setup_channel, "no setup message: not a log written by "
-                            "rbp rig-run (or not an LCM log at all)")
-    scn = _setup_scenario(setup.scenario_json, config.setup_channel)
-    command_rows = np.frombuffer(b"".join(d for _, d in commands), dtype=COMMAND_ROW)
-    bad = first_bad_command(command_rows, scn.robot)  # out of range would overflow the plots
-    if bad is not None:
-        raise RigInputError(config.command_channel, f"event {commands[bad[0]][0]}: {bad[1]}: "
-                            "not a command rbp sends")
-    stance_ids = tuple(setup.stance)
-    unknown = [a for a in stance_ids if a not in scn.anchor_index]
-    if unknown:
-        raise RigInputError(f"{config.setup_channel}.stance",
-                            f"event 0: unknown anchor {_shown(unknown[0])}")
-    if len(set(stance_ids)) != len(stance_ids):  # as a scenario's start stance is checked
-        raise RigInputError(f"{config.setup_channel}.stance", f"event 0: each boom needs its "
-                            f"own anchor, got {list(stance_ids)}")
-    statuses = good_statuses(raw_statuses, scn.robot)
-    # GraspMonitor's outputs, for every status at once (through the system, one FixValue per
-    # status, 30,000 took 5 s)
-    stance = scn.stance(stance_ids)
-    force = statuses["load_cell_force"].astype(float)
-    pull = geometry.wrap_angle(statuses["hinge_angle"].astype(float) - np.arctan2(
-        stance.normals[:, 1], stance.normals[:, 0]))
-    p_grasp = grasp.prob(force, pull, stance.f_normal, stance.f_lateral, stance.sigma_normal,
-                         stance.sigma_lateral).reshape(-1, 4)
-    return RigLog(scn, stance_ids, setup.plan_source, command_rows["utime"] * 1e-6,
-                  command_rows["boom_length"].astype(float).reshape(-1, 4),
-                  command_rows["tension_setpoint"].astype(float).reshape(-1, 4),
-                  GraspRecord(statuses["utime"] * 1e-6, p_grasp, pull.reshape(-1, 4),
-                              force.reshape(-1, 4)),
-                  statuses["winch_length"].astype(float).reshape(-1, 4))
-
-
-def _setup_scenario(text: str, channel: str) -> Scenario:
-    """The scenario of a log's setup message (RigInputError on `channel`.scenario_json), of
-    at most as many values as a scenario file (a 7 MB one of 900,000 objects took 370 MB)."""
-    field = f"{channel}.scenario_json"
-    try:
-        return scenario_from_dict(load_json(text, max_values=max_input_values()),
-                                  "log scenario", check_start=False)
-    except InputFileError as e:
-        where = "" if e.field == "(file)" else f"{e.field}: "
-        raise RigInputError(field, f"{where}{e.reason}") from None
-    except (ScenarioError, json.JSONDecodeError) as e:
-        raise RigInputError(field, str(e)) from None
-    except RecursionError:
-        raise RigInputError(field, "nested too deeply to be a scenario") from None
-
-
-def _decoded(message_type: Any, data: bytes, channel: str, number: int) -> Any:
-    """`data` decoded as `message_type`, or RigInputError naming the channel and the event."""
-    try:
-        return message_type.decode(data)
-    except (ValueError, struct.error, IndexError, OverflowError):
-        # lcm-gen's decoders raise ValueError on a wrong fingerprint, struct.error on a
-        # truncated message and UnicodeDecodeError (a ValueError) on a damaged string
-        raise RigInputError(channel, f"event {number} does not decode as "
-                            f"{message_type.__name__}: the log is damaged or not rbp's"
-                            ) from None
-
-
-def report_figure(log: RigLog):
-    """The paper's Fig. 7 for a log: each anchor's probability of grasp maintenance over
-    time, and each boom's measured load-cell force against its commanded tension."""
-    import matplotlib.pyplot as plt
-
-    from rb_drake.draw import plain_label, title_name
-
-    fig, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(7.0, 6.0))
-    rec = log.replay
-    for i, anchor in enumerate(log.stance_ids):
-        color = f"C{i}"
-        top.plot(rec.time, rec.p_grasp[:, i], color=color, label=f"boom {i}: {plain_label(anchor)}")
-        bottom.plot(rec.time, rec.force[:, i], color=color, label=f"boom {i} measured")
-        bottom.plot(log.command_time, log.tension_setpoint[:, i], color=color, linestyle="--",
-                    label=f"boom {i} commanded")
-    top.set_ylabel("probability of grasp maintenance")
-    top.set_title(f"{title_name(log.scenario.name)}: {title_name(log.plan_source or 'rig run')}",
-                  parse_math=False)
-    top.legend(loc="lower left", fontsize="small")
-    top.grid(alpha=0.3)
-    bottom.set_ylabel("tension (N)")
-    bottom.set_xlabel("time (s)")
-    bottom.legend(ncol=2, fontsize="x-small")
-    bottom.grid(alpha=0.3)
-    fig.tight_layout()
-    return fig
-
-
-def _shown(text: str) -> str:
-    """`text` quoted for an error line: control characters escaped, and U+FFFD too (lcm's
-    decoder puts one for each byte of a log's string that is not UTF-8)."""
-    return one_line(repr(text)).replace("\ufffd", "\\ufffd")

@@ -151,3 +151,52 @@ def test_rig_experiment_checks_the_url_before_heavy_imports(capsys):
     with pytest.raises(SystemExit):
         main(["--hardware", "--lcm-url", "udpm://999.1.1.1:99999", "--out", "/nonexistent/x"])
     assert "'999.1.1.1' is not an IPv4 address" in capsys.readouterr().err
+
+
+_HEAVY = ("pydrake", "matplotlib", "lcm")  # Drake alone took rig-replay's refusal to 190 MB
+
+
+def _bad_last_command_log(path: Path) -> Path:
+    from systems.reachbot_lcm import rig_command_t
+
+    good, bad = rig_command_t(), rig_command_t()
+    good.boom_length, good.tension_setpoint = [1.0] * 4, [5.0] * 4
+    bad.boom_length, bad.tension_setpoint = [float("nan")] * 4, [5.0] * 4
+    return _write(path, [(b"RIG_SETUP", _setup()), *[(b"RIG_COMMAND", good.encode())] * 50,
+                         (b"RIG_COMMAND", bad.encode()), (b"RIG_STATUS", _status(0, 2.0))])
+
+
+def test_rig_log_read_and_refused_without_drake(tmp_path):
+    """A damaged log is read, checked and refused through `systems.rig_log`, and `rbp
+    rig-replay` replays a good one, without importing Drake, matplotlib or lcm (a refusal
+    took 211 MB with them, over the 200 MB of the reading limits); the refusal is one line."""
+    import subprocess
+    import sys
+
+    from tests.cli_helpers import ROOT, run_rbp
+
+    bad = _bad_last_command_log(tmp_path / "bad.lcm")
+    good = _write(tmp_path / "good.lcm", [(b"RIG_SETUP", _setup()),
+                                          (b"RIG_STATUS", _status(0, 2.0))])
+    code = f"""if True:
+        import sys
+        from systems.rig_log import RigInputError, replay_log
+        try:
+            replay_log({str(bad)!r})
+        except RigInputError as e:
+            print(e)
+        from rbp.cli import main
+        assert main(["rig-replay", {str(good)!r}]) == 0
+        print(sorted({{m.split(".")[0] for m in sys.modules}} & set({_HEAVY!r})))
+    """
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "LCM_DEFAULT_URL": "memq://"}
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("RIG_COMMAND: event 51: boom_length [nan"), lines
+    assert "1 statuses" in lines[1] and lines[-1] == "[]", lines
+
+    refused = run_rbp("rig-replay", str(bad), cwd=tmp_path)
+    assert refused.returncode == 2, refused.stderr
+    assert refused.stderr.splitlines() == [f"error: {bad}: {lines[0]}"]

@@ -119,7 +119,7 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
 def _replay(log_path: str):
     from rb_drake.input_files import InputFileError, check_input_file
     from rbp.commands.common import UserError
-    from systems.rig_interface import RigInputError, replay_log
+    from systems.rig_log import RigInputError, replay_log  # no Drake: a bad log is refused light
 
     path = Path(log_path)
     try:
@@ -149,7 +149,7 @@ def cmd_rig_replay(args: argparse.Namespace) -> int:
 def cmd_rig_report(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_save_figure
     from rbp.commands.common import UserError, check_dpi, check_output
-    from systems.rig_interface import RigLcmConfig, report_figure
+    from systems.rig_log import RigLcmConfig, report_figure  # matplotlib once the log is read
 
     check_dpi(args.dpi)
     check_output(args.output, picture=True, inputs={"the log's file": args.log})

@@ -14,14 +14,24 @@ stays accurate far into both tails where `log(ndtr(z))` underflows.
 
 from __future__ import annotations
 
+import functools
 import math
+from types import ModuleType
 
 import numpy as np
-from scipy.special import erfcx, log_ndtr
 
 HALF_PI = 0.5 * math.pi
 SQRT_2_OVER_PI = math.sqrt(2.0 / math.pi)
 INV_SQRT2 = 1.0 / math.sqrt(2.0)
+
+
+@functools.cache
+def _special() -> ModuleType:
+    """scipy.special, imported on first use: it takes 0.3 s, and every command reads a
+    scenario through this module, also to refuse one in a line."""
+    import scipy.special
+
+    return scipy.special
 
 
 def mean_limit(psi: np.ndarray, f_normal: np.ndarray | float,
@@ -66,7 +76,7 @@ def log_prob(force: np.ndarray, psi: np.ndarray, f_normal: np.ndarray, f_lateral
     psi = np.asarray(psi, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore"):
         z = margin(force, psi, f_normal, f_lateral, sigma_normal, sigma_lateral)
-        out = log_ndtr(z)
+        out = _special().log_ndtr(z)
     return np.where(np.abs(psi) < HALF_PI, out, -np.inf)
 
 
@@ -79,11 +89,11 @@ def prob(force: np.ndarray, psi: np.ndarray, f_normal: np.ndarray, f_lateral: np
 def mills_ratio(z: np.ndarray) -> np.ndarray:
     """lambda(z) = phi(z) / Phi(z) = d log Phi / dz, computed in log space (no underflow)."""
     # phi/Phi = sqrt(2/pi) / erfcx(-z/sqrt 2): stable in both tails and cheaper than log_ndtr.
-    return SQRT_2_OVER_PI / erfcx(-np.asarray(z, dtype=float) * INV_SQRT2)
+    return SQRT_2_OVER_PI / _special().erfcx(-np.asarray(z, dtype=float) * INV_SQRT2)
 
 
 def log_ndtr_derivatives(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """log Phi(z) and its first and second derivatives; the second is -lambda (z + lambda) < 0."""
     z = np.asarray(z, dtype=float)
     lam = mills_ratio(z)
-    return log_ndtr(z), lam, -lam * (z + lam)
+    return _special().log_ndtr(z), lam, -lam * (z + lam)

@@ -18,7 +18,9 @@ if TYPE_CHECKING:
 
 ANCHOR_CLEARANCE = 0.02  # m; a boom's last 2 cm, at its gripper, may touch the rock it grasps.
 INDEX_EDGES = 2048  # rock of more edges finds a segment's edges in a quadtree (edge_index), not
-#                     by testing all in the batch's box: drawn caves have up to 50,000 edges
+#                     by testing all in the batch's box: drawn caves have up to 50,000 edges ...
+DENSE_PAIRS = 1 << 16  # ... unless a batch's segments x edges in its box are this few (a body's
+#                        four sides: one pass over the edges costs less than the quadtree's)
 
 
 class Rock:
@@ -72,15 +74,15 @@ class Rock:
         shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
         a2 = np.broadcast_to(a, (*shape, 2)).reshape(-1, 2)
         b2 = np.broadcast_to(b, (*shape, 2)).reshape(-1, 2)
+        # Only edges whose bounding box meets the batch's can be hit: the robot spans a few
+        # metres of a cave that may be tens of metres long.
+        lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
+        hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
+        near = np.all((self.edge_hi >= lo) & (self.edge_lo <= hi), axis=1)
         hit: np.ndarray  # (I,): numpy types ndarray.any(axis=) as maybe a scalar
-        if len(self.edge_start) > INDEX_EDGES:
+        if len(near) > INDEX_EDGES and len(a2) * np.count_nonzero(near) > DENSE_PAIRS:
             hit = self._indexed_hits(a2, b2)
         else:
-            # Only edges whose bounding box meets the batch's can be hit: the robot spans a few
-            # metres of a cave that may be tens of metres long.
-            lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
-            hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
-            near = np.all((self.edge_hi >= lo) & (self.edge_lo <= hi), axis=1)
             hit = np.any(_segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]),
                          axis=1)
         if inside:

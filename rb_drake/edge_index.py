@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-MAX_LEVELS = 24   # the finest cell is at least the rock's extent / 2**24
+MAX_LEVELS = 12   # the finest cell is at least the rock's extent / FANOUT**12
+FANOUT = 4        # a cell's children a side: few levels, as each costs a query a few numpy calls
+
+_CHILD_X, _CHILD_Y = (c.ravel() for c in np.meshgrid(np.arange(FANOUT), np.arange(FANOUT)))
 
 
 class EdgeIndex:
@@ -25,8 +28,8 @@ class EdgeIndex:
         # cells about an edge long (the median), but never so fine that the edges' pieces
         # outnumber 4 per edge, nor beyond MAX_LEVELS halvings of the extent
         cell = max(float(np.median(length)), float(length.sum()) / (4 * len(length)),
-                   extent / 2 ** MAX_LEVELS)
-        self.levels = max(1, int(np.ceil(np.log2(extent / cell))) + 1)
+                   extent / FANOUT ** MAX_LEVELS)
+        self.levels = max(1, int(np.ceil(np.log(extent / cell) / np.log(FANOUT))) + 1)
         self.cell = cell
         self.eps = 1e-9 * max(1.0, extent)  # cells are closed and widened by this much
         self.origin = lo - cell
@@ -38,11 +41,10 @@ class EdgeIndex:
         keep[1:] = (key[1:] != key[:-1]) | (owner[1:] != owner[:-1])
         self.key, self.edge = key[keep], owner[keep]
         self.edges = len(start)
-        # the occupied cells of each coarser level (level l: cells 2**l fine cells wide)
+        # the occupied cells of each coarser level (level l: cells FANOUT**l fine cells wide)
         self.occupied = [np.unique(self.key)]
-        ix, iy = cells[:, 0], cells[:, 1]
         for level in range(1, self.levels + 1):
-            self.occupied.append(np.unique(self._key(np.stack([ix >> level, iy >> level], 1))))
+            self.occupied.append(np.unique(self._key(cells // FANOUT ** level)))
 
     @staticmethod
     def _key(cells: np.ndarray) -> np.ndarray:
@@ -51,7 +53,7 @@ class EdgeIndex:
     def candidates(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pairs (segment i, edge j), i into a/b (I, 2), of every edge a segment may meet."""
         top = self.levels
-        size = self.cell * 2 ** top
+        size = self.cell * FANOUT ** top
         # the whole rock is in top cells 0..1 (clipped as floats: a far point overflows no int)
         lo = np.clip(np.floor((np.minimum(a, b) - self.eps - self.origin) / size), 0, 2)
         hi = np.clip(np.floor((np.maximum(a, b) + self.eps - self.origin) / size), -1, 1)
@@ -66,10 +68,10 @@ class EdgeIndex:
         s, x, y = np.concatenate(seg), np.concatenate(cx), np.concatenate(cy)
         for level in range(top, -1, -1):
             s, x, y = self._passed(a, b, s, x, y, level)
-            if level:  # each kept cell's four children
-                s = np.repeat(s, 4)
-                x = 2 * np.repeat(x, 4) + np.tile([0, 1, 0, 1], len(x))
-                y = 2 * np.repeat(y, 4) + np.tile([0, 0, 1, 1], len(y))
+            if level:  # each kept cell's FANOUT x FANOUT children
+                s = np.repeat(s, FANOUT ** 2)
+                x = FANOUT * np.repeat(x, FANOUT ** 2) + np.tile(_CHILD_X, len(x))
+                y = FANOUT * np.repeat(y, FANOUT ** 2) + np.tile(_CHILD_Y, len(y))
         key = self._key(np.stack([x, y], 1))
         first = np.searchsorted(self.key, key, side="left")
         count = np.searchsorted(self.key, key, side="right") - first
@@ -90,7 +92,7 @@ class EdgeIndex:
         at = np.minimum(np.searchsorted(occ, key), len(occ) - 1)
         keep = occ[at] == key
         s, x, y = s[keep], x[keep], y[keep]
-        size = self.cell * 2 ** level
+        size = self.cell * FANOUT ** level
         x0 = self.origin[0] + x * size - self.eps
         y0 = self.origin[1] + y * size - self.eps
         x1, y1 = x0 + size + 2 * self.eps, y0 + size + 2 * self.eps

@@ -126,7 +126,7 @@ def _cells_passed(index: EdgeIndex, start: np.ndarray,
     lo = np.floor((np.minimum(p0, p1) - index.eps - index.origin) / index.cell).astype(np.int64)
     hi = np.floor((np.maximum(p0, p1) + index.eps - index.origin) / index.cell).astype(np.int64)
     cells, owners = [], []
-    span = int((hi - lo).max()) if len(lo) else 0  # 2, 3 with the widening
+    span = int((hi - lo).max()) if len(lo) else 0  # 1, or 2 with the widening
     for dx in range(span + 1):
         for dy in range(span + 1):
             ok = (lo[:, 0] + dx <= hi[:, 0]) & (lo[:, 1] + dy <= hi[:, 1])

@@ -9,10 +9,18 @@ are checked from the shoulder to a point `ANCHOR_CLEARANCE` short of the anchor.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from rb_drake.edge_index import EdgeIndex
+
 ANCHOR_CLEARANCE = 0.02  # m; a boom's last 2 cm, at its gripper, may touch the rock it grasps.
+INDEX_EDGES = 2048  # rock of more edges finds a segment's edges in a quadtree (edge_index), not
+#                     by testing all in the batch's box: drawn caves have up to 50,000 edges ...
+DENSE_PAIRS = 1 << 16  # ... unless a batch's segments x edges in its box are this few (a body's
+#                        four sides: one pass over the edges costs less than the quadtree's)
 
 
 class Rock:
@@ -29,6 +37,7 @@ class Rock:
             self.edge_owner = np.eye(len(self.polygons))[owner]
             self.edge_lo = np.minimum(self.edge_start, self.edge_end)
             self.edge_hi = np.maximum(self.edge_start, self.edge_end)
+            self._index: EdgeIndex | None = None  # built at the first segment test
         else:
             self.edge_start = self.edge_end = np.zeros((0, 2))
             self.vertex = np.zeros((0, 2))
@@ -65,16 +74,33 @@ class Rock:
         shape = np.broadcast_shapes(a.shape, b.shape)[:-1]
         a2 = np.broadcast_to(a, (*shape, 2)).reshape(-1, 2)
         b2 = np.broadcast_to(b, (*shape, 2)).reshape(-1, 2)
-        # Only edges whose bounding box meets the batch's can be hit: the robot spans a few metres
-        # of a cave that may be tens of metres long.
+        # Only edges whose bounding box meets the batch's can be hit: the robot spans a few
+        # metres of a cave that may be tens of metres long.
         lo = np.minimum(a2.min(axis=0), b2.min(axis=0)) if len(a2) else np.zeros(2)
         hi = np.maximum(a2.max(axis=0), b2.max(axis=0)) if len(a2) else np.zeros(2)
         near = np.all((self.edge_hi >= lo) & (self.edge_lo <= hi), axis=1)
-        hit: np.ndarray = np.any(  # (I,): numpy types ndarray.any(axis=) as maybe a scalar
-            _segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]), axis=1)
+        hit: np.ndarray  # (I,): numpy types ndarray.any(axis=) as maybe a scalar
+        if len(near) > INDEX_EDGES and len(a2) * np.count_nonzero(near) > DENSE_PAIRS:
+            hit = self._indexed_hits(a2, b2)
+        else:
+            hit = np.any(_segments_cross(a2, b2, self.edge_start[near], self.edge_end[near]),
+                         axis=1)
         if inside:
             hit |= self.contains(a2)
         return hit.reshape(shape)
+
+    def _indexed_hits(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """segments_hit's crossing test, on the pairs the edge quadtree finds (the same test
+        on fewer pairs: every pair that can meet is among them)."""
+        from rb_drake.edge_index import EdgeIndex
+
+        if self._index is None:
+            self._index = EdgeIndex(self.edge_start, self.edge_end)
+        seg, edge = self._index.candidates(a, b)
+        meet = _pairs_cross(a[seg], b[seg], self.edge_start[edge], self.edge_end[edge])
+        hit = np.zeros(len(a), dtype=bool)
+        hit[seg[meet]] = True
+        return hit
 
     def distance(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point to the nearest rock edge, shape points.shape[:-1]."""
@@ -101,6 +127,15 @@ def _segments_cross(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) 
     o2 = _orient(ax, ay, bx, by, dx, dy)
     o3 = _orient(cx, cy, dx, dy, ax, ay)
     o4 = _orient(cx, cy, dx, dy, bx, by)
+    return (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0))
+
+
+def _pairs_cross(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """_segments_cross for the pairs a_k b_k, c_k d_k, shape (K,)."""
+    o1 = _orient(*a.T, *b.T, *c.T)
+    o2 = _orient(*a.T, *b.T, *d.T)
+    o3 = _orient(*c.T, *d.T, *a.T)
+    o4 = _orient(*c.T, *d.T, *b.T)
     return (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0))
 
 

@@ -53,7 +53,7 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
                        start: tuple[float, float] | None = None,
                        goal: tuple[float, float] | None = None,
                        name: str = "imported", source: str = "<imported>",
-                       framed: bool = False) -> Scenario:
+                       framed: bool = False, max_values: int | None = None) -> Scenario:
     """A cave of the rock `rock` (shapely Polygons in metres, up = +y). Anchors are placed as
     the generator places them (config's density, normal noise and limit-surface ranges) from
     `seed`: the same rock and seed, the same cave. `start` (x, y) is the body's position to
@@ -85,6 +85,9 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
                             f"anchors per metre is more than {MAX_ANCHORS} anchors; lower "
                             "--anchor-density or import a smaller section", file=source)
     walls = _walls(solid, source)
+    wall_values = sum(1 + 3 * len(w) for w in walls)  # each vertex a list of two numbers
+    if max_values is not None and wall_values > max_values:
+        raise too_many_values(source, f"at least {wall_values:,}", max_values)
     rng = np.random.default_rng(seed)
     anchors = place_anchors(rng, cfg, surfaces, Rock(walls))
     if len(anchors) < NUM_BOOMS:
@@ -115,6 +118,15 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     # the file's own checks (simple counter-clockwise walls, anchors on them, goal in free
     # space, the start stance holding the robot) on what will be written
     return scenario_from_dict(scn.to_dict(), source)
+
+
+def too_many_values(source: str, values: str, limit: int) -> RbpInputError:
+    """The refusal of a cave whose file would hold `values` values, over `limit`."""
+    return RbpInputError(f"the cave's file would hold {values} values, over the limit of "
+                         f"{limit:,} for reading it back: a larger --simplify (fewer outline "
+                         "vertices) or a lower --anchor-density; RBP_MAX_INPUT_VALUES raises "
+                         "the limit", file=source, field="--simplify/--anchor-density")
+
 
 
 def _polygons(geometry: object) -> list[Polygon]:
@@ -238,13 +250,12 @@ def _anchors_in_reach(scn: Scenario, poses: np.ndarray) -> tuple[np.ndarray, np.
     from scipy.spatial import cKDTree
 
     from rb_drake import geometry
-    from rb_drake.collision import ANCHOR_CLEARANCE
+    from rb_drake.collision import ANCHOR_CLEARANCE, INDEX_EDGES
 
     robot = scn.robot
     upper = np.sin(robot.shoulder_directions) > 0
-    hold = np.zeros(len(poses), dtype=bool)
-    room = np.zeros(len(poses), dtype=bool)
     tree = cKDTree(scn.anchor_positions)
+    starts, ends, which, high = [], [], [], []  # each boom line to test: pose * 4 + boom
     for k, near in enumerate(tree.query_ball_point(poses[:, :2], robot.max_reach)):
         if len(near) < NUM_BOOMS:
             continue
@@ -252,15 +263,29 @@ def _anchors_in_reach(scn: Scenario, poses: np.ndarray) -> tuple[np.ndarray, np.
         targets = scn.anchor_positions[idx]
         above = targets[:, 1] >= poses[k, 1] + GOAL_HEADROOM
         shoulders = geometry.shoulder_positions(robot, poses[k])[0]  # (4, 2)
-        hold[k] = room[k] = True
         for i in range(NUM_BOOMS):
             ok = geometry.reach(robot, poses[k], targets, np.full(len(idx), i)).violation[0] == 0
-            if ok.any():  # of those in range, the booms that would pass through no rock
-                d = targets[ok] - shoulders[i]
-                end = targets[ok] - ANCHOR_CLEARANCE * d / np.linalg.norm(d, axis=1)[:, None]
-                ok[ok] = ~scn.rock.segments_hit(shoulders[i], end, inside=False)
-            hold[k] &= bool(ok.any())
-            room[k] &= bool(ok.any()) and (not upper[i] or bool((ok & above).any()))
+            d = targets[ok] - shoulders[i]  # of those in range, those whose booms pass no rock
+            ends.append(targets[ok] - ANCHOR_CLEARANCE * d / np.linalg.norm(d, axis=1)[:, None])
+            starts.append(np.broadcast_to(shoulders[i], d.shape))
+            which.append(np.full(len(d), 4 * k + i))
+            high.append(above[ok])
+    clear = np.zeros((len(poses), NUM_BOOMS), dtype=bool)  # some anchor held clear of rock
+    clear_high = np.zeros((len(poses), NUM_BOOMS), dtype=bool)  # ... and one GOAL_HEADROOM up
+    if ends:
+        a, b = np.concatenate(starts), np.concatenate(ends)
+        line, up = np.concatenate(which), np.concatenate(high)
+        # all poses' lines in few batches, not four a pose (each a pass over the rock's edges
+        # or its quadtree); batches bounded, as the test of a batch is lines x nearby edges
+        edges = len(scn.rock.edge_start)
+        batch = 1 << 12 if edges > INDEX_EDGES else max(64, (1 << 18) // max(1, edges))
+        free = np.concatenate([~scn.rock.segments_hit(a[j:j + batch], b[j:j + batch],
+                                                      inside=False)
+                               for j in range(0, len(a), batch)])
+        clear.reshape(-1)[line[free]] = True
+        clear_high.reshape(-1)[line[free & up]] = True
+    hold = np.asarray(clear.all(axis=1))
+    room = hold & np.asarray((clear_high | ~upper).all(axis=1))
     return hold, room
 
 

@@ -59,10 +59,13 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
             raise RbpInputError("only for a mesh or point cloud (.stl, .obj, .ply)",
                                 file=str(path), field="--plane-origin/--plane-normal")
         rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
+    from rb_drake.input_files import max_input_values
+
     cfg = CaveConfig(anchor_density=opts.anchor_density)
     scn = scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
                              goal=opts.goal, name=opts.name or path.stem, source=str(path),
-                             framed=scan)  # a scan's rock is a frame minus the free space
+                             framed=scan,  # a scan's rock is a frame minus the free space
+                             max_values=max_input_values())
     _check_readable(path, scn)
     return scn
 
@@ -71,13 +74,11 @@ def _check_readable(path: Path, scn: Scenario) -> None:
     """Refuse a cave whose file rbp could not read back: over the limit on a YAML document's
     values (3 a vertex of 50,000 outline vertices, 23 an anchor, may exceed it)."""
     from rb_drake.input_files import count_values, max_input_values
+    from rb_drake.terrain.cave_from_rock import too_many_values
 
     values, limit = count_values(scn.to_dict()), max_input_values()
     if values > limit:
-        raise RbpInputError(f"the cave's file would hold {values:,} values, over the limit of "
-                            f"{limit:,} for reading it back: a larger --simplify (fewer outline "
-                            "vertices) or a lower --anchor-density; RBP_MAX_INPUT_VALUES raises "
-                            "the limit", file=str(path), field="--simplify/--anchor-density")
+        raise too_many_values(str(path), f"{values:,}", limit)
 
 
 def _check(opts: ImportOptions) -> None:

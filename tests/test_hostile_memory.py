@@ -1,0 +1,52 @@
+"""Hostile inputs bounded in memory and refused in one line: JSON of many small objects, and
+command-line paths and numbers (docs/formats.md "Reading limits")."""
+
+from __future__ import annotations
+
+import json
+import tracemalloc
+from pathlib import Path
+
+import pytest
+
+from rb_drake.input_files import MAX_JSON_UNITS, InputFileError, json_units, load_json
+
+GOLDEN = Path(__file__).parent / "data" / "golden"
+
+
+def test_json_of_many_small_objects_refused_before_parsing():
+    """990,000 `{"a":0}` in 8 MB were under the value bound and parsed to 192 MB."""
+    text = "[" + ",".join(['{"a":0}'] * 990_000) + "]"
+    tracemalloc.start()
+    try:
+        with pytest.raises(InputFileError, match="over the limit of 2,000,000"):
+            load_json(text)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 2**20, f"refusing it allocated {peak / 2**20:.1f} MB"
+
+
+def test_json_of_many_keys_refused():
+    text = "{" + ",".join(f'"{i:x}":0' for i in range(400_000)) + "}"
+    with pytest.raises(InputFileError, match="units"):
+        load_json(text)
+
+
+@pytest.mark.parametrize("path", [p for p in sorted(GOLDEN.glob("*.json"))
+                                  if p.stat().st_size > 100_000], ids=lambda p: p.name)
+def test_plans_of_8_mib_stay_readable(path):
+    """Plans at their density scaled to 8 MiB stay within the units (about 1 M per 8 MiB)."""
+    text = path.read_text()
+    assert json_units(text) * 8 * 2**20 / len(text) < 0.6 * MAX_JSON_UNITS
+    assert load_json(text) == json.loads(text)
+
+
+def test_a_long_plan_of_steps_reads():
+    """28,000 steps in one phase (a 7.4 MB plan) reads; it counts about 1.4 M units."""
+    plan = json.loads((GOLDEN / "rig.json").read_text())
+    step = plan["phases"][0]["steps"][0]
+    plan["phases"][0]["steps"] = [dict(step, t=float(i)) for i in range(28_000)]
+    text = json.dumps(plan)
+    assert len(text) > 5_000_000
+    assert len(load_json(text)["phases"][0]["steps"]) == 28_000

@@ -50,3 +50,29 @@ def test_a_long_plan_of_steps_reads():
     text = json.dumps(plan)
     assert len(text) > 5_000_000
     assert len(load_json(text)["phases"][0]["steps"]) == 28_000
+
+
+def _one_line(result, *words: str) -> str:
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, (result.returncode, result.stderr[-2000:])
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr[-2000:]
+    assert all(w in lines[0] for w in words), (words, lines[0])
+    return lines[0]
+
+
+def test_no_verify_refusal_is_one_line_naming_the_step(tmp_path):
+    """simulate --no-verify printed its warning, then every step time as np.float64(...)."""
+    from tests.cli_helpers import run_rbp
+
+    plan = json.loads((GOLDEN / "demo-shaft.json").read_text())
+    steps = plan["phases"][0]["steps"]
+    steps[1]["t"], steps[2]["t"] = steps[2]["t"], steps[1]["t"]
+    path = tmp_path / "ooo.json"
+    path.write_text(json.dumps(plan))
+    line = _one_line(run_rbp("simulate", "--trials", "0", "--no-verify", str(path),
+                             cwd=tmp_path), "phases[0].steps[2].t: times must increase")
+    assert "np.float64" not in line and len(line) < 300, line
+    empty = tmp_path / "empty.json"
+    empty.write_text(json.dumps(dict(plan, phases=[])))
+    _one_line(run_rbp("rig-run", "--sim-rig", "--no-verify", "--log",
+                      str(tmp_path / "a.lcm"), str(empty), cwd=tmp_path), str(empty))

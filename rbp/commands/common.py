@@ -152,15 +152,21 @@ def read_plan(path: Path) -> dict:
         raise UserError(f"{path}: {e}") from None
 
 
+def warn_unverified(path: Path) -> None:
+    """--no-verify's warning, printed once the plan is read and accepted: a refusal stays one
+    line (the warning came before the `error:` line)."""
+    print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
+          "is executed as it is", file=sys.stderr)
+
+
 def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
-    since is not verified again; `verify=False` (--no-verify) skips the check, loudly."""
+    since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
+    `warn_unverified`, once the plan is accepted)."""
     from planning.plan_file import has_valid_stamp
 
     if not verify:
-        print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
-              "is executed as it is", file=sys.stderr)
         return False
     if has_valid_stamp(plan):
         return False

@@ -34,6 +34,7 @@ from rbp.commands.common import (
     load_scenario_spec,
     plural,
     read_plan,
+    refuse_empty_paths,
     sigterm_interrupts,
 )
 
@@ -606,13 +607,15 @@ def _main(argv: list[str] | None) -> int:
     quiet_matplotlib()
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     args.argv = argv  # the command line, for the plan's provenance
     from planning.config_io import ConfigError
     from rb_drake.scenario import ScenarioError
 
     try:
         forget_outputs()
+        refuse_empty_paths(parser, args)
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

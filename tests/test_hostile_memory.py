@@ -76,3 +76,23 @@ def test_no_verify_refusal_is_one_line_naming_the_step(tmp_path):
     empty.write_text(json.dumps(dict(plan, phases=[])))
     _one_line(run_rbp("rig-run", "--sim-rig", "--no-verify", "--log",
                       str(tmp_path / "a.lcm"), str(empty), cwd=tmp_path), str(empty))
+
+
+@pytest.mark.parametrize("argv, name", [
+    (("check", ""), "plan: (argument)"),
+    (("plan", "", "-o", "a.json"), "scenario: (argument)"),
+    (("plan", "demo-shaft", "-o", ""), "-o"),
+    (("plan", "demo-shaft", "-o", "a.json", "--config", ""), "--config"),
+    (("demo", "--scenario", ""), "--scenario"),
+    (("scenario", "check", ""), "scenario: (argument)"),
+    (("simulate", "p.json", "--json", ""), "--json"),
+])
+def test_empty_path_refused_naming_the_option(tmp_path, capsys, monkeypatch, argv, name):
+    """'' was read as `.` (a directory), and `--config ''` silently planned with defaults."""
+    from rbp.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(list(argv)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {name}: an empty path (''): give a file name"], err
+    assert not (tmp_path / "a.json").exists()

@@ -7,6 +7,7 @@ every module of `rbp.commands` import from here (never from `rbp.cli`, which imp
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import signal
@@ -130,6 +131,26 @@ _OUTPUTS: dict[str, str] = {}  # this command's outputs checked so far: real pat
 def forget_outputs() -> None:
     """Start a command: no output checked yet (`check_output`)."""
     _OUTPUTS.clear()
+
+
+NOT_PATHS = {"name", "lcm_url"}  # the string arguments that do not name a file
+
+
+def refuse_empty_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse an empty path argument ('') of the command `args.func` (UserError naming the
+    option): '' was read as `.` ("is a directory") and `--config ''` was silently ignored."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                if sub.get_default("func") is getattr(args, "func", None) or any(
+                        isinstance(a, argparse._SubParsersAction) for a in sub._actions):
+                    refuse_empty_paths(sub, args)
+        elif (parser.get_default("func") is getattr(args, "func", None)
+              and action.dest not in NOT_PATHS and action.choices is None
+              and getattr(args, action.dest, None) == ""):
+            name = (action.option_strings[0] if action.option_strings
+                    else f"{action.dest}: (argument)")
+            raise UserError(f"{name}: an empty path (''): give a file name")
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):

@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import stat
 import sys
 from pathlib import Path
@@ -87,6 +88,15 @@ class _Loader(SAFE_LOADER):  # type: ignore[valid-type,misc]
             raise InputFileError(_where(node.start_mark), "an integer beyond a float's range "
                                  f"(over {sys.float_info.max:.1e} in magnitude)")
         return value
+
+
+# YAML 1.2 reads `1e308`, `1e-300`, `1.0e3` as floats, PyYAML's YAML 1.1 as strings (its floats
+# need a dot and a signed exponent): `time_limit: 1e3` was "expected a number, got str".
+# Integers (no exponent) stay integers; the readers range-check the float as any number.
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?([0-9][0-9_]*(\.[0-9_]*)?|\.[0-9]+)"
+                                         r"[eE][-+]?[0-9]+$"),
+                              list("-+.0123456789"))
 
 
 def _short(node: yaml.Node) -> str:

@@ -96,3 +96,25 @@ def test_empty_path_refused_naming_the_option(tmp_path, capsys, monkeypatch, arg
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"error: {name}: an empty path (''): give a file name"], err
     assert not (tmp_path / "a.json").exists()
+
+
+def test_yaml_exponent_forms_without_a_dot_are_numbers():
+    """YAML 1.1 (PyYAML) read `1e308` as a string: "expected a number, got str '1e308'"."""
+    from rb_drake.input_files import load_yaml
+
+    data = load_yaml("a: 1e308\nb: 1e-300\nc: 1E3\nd: 10\ne: -2e+5\nf: 1.0e3\ng: '1e3'\nh: 1_000\n")
+    assert data == {"a": 1e308, "b": 1e-300, "c": 1000.0, "d": 10, "e": -2e5, "f": 1000.0,
+                    "g": "1e3", "h": 1000}
+    assert type(data["d"]) is int and type(data["h"]) is int and type(data["c"]) is float
+
+
+def test_config_exponent_without_a_dot_is_range_checked(tmp_path):
+    from planning.config_io import ConfigError, load_config
+    from planning.pipeline import PipelineConfig
+
+    path = tmp_path / "c.yaml"
+    path.write_text("footstep: {heuristic_weight: 1e308}\n")
+    with pytest.raises(ConfigError, match="heuristic_weight: must be a number from"):
+        load_config(str(path), PipelineConfig)
+    path.write_text("footstep: {heuristic_weight: 2e0}\n")
+    assert load_config(str(path), PipelineConfig).footstep.heuristic_weight == 2.0

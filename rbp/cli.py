@@ -219,12 +219,12 @@ def _over_reading_limit(path: Path) -> str:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from planning.plan import write_plan
     from rbp.commands.plan import (
         SearchRecord,
         check_plan_output,
         plan_setup,
         provenance,
+        read_plan_inputs,
         run_planner,
         write_pictures,
     )
@@ -242,7 +242,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
             flag = "--footsteps-only" if args.footsteps_only else "--no-pictures"
             raise UserError(f"--phase-figure: draws a phase's trajectory, which {flag} "
                             "leaves out")
+    read_plan_inputs(args)  # before the planner's imports (170 MB): a refusal costs little
     scn, planner, cfg, motion = plan_setup(args)
+    from planning.plan import write_plan
+
     partial = getattr(args, "partial", False)
     if partial and (planner != "rbp" or not motion):
         flag = "--planner naive" if planner != "rbp" else "--footsteps-only"
@@ -322,12 +325,6 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job on the bundled demo cave: check it, picture it, report the start stance."""
-    import numpy as np
-
-    from rb_drake.draw import scenario_figure
-    from rb_drake.feasibility import check_poses
-    from rb_drake.files import atomic_save_figure, atomic_write_text
-
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
@@ -335,7 +332,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
         check_output(out / name, "--out", picture=name.endswith(".png"),
                      inputs={"the scenario's file": args.scenario})
-    scn = load_scenario_spec(args.scenario)
+    scn = load_scenario_spec(args.scenario)  # before the heavy imports: a refusal costs little
+    import numpy as np
+
+    from rb_drake.draw import scenario_figure
+    from rb_drake.feasibility import check_poses
+    from rb_drake.files import atomic_save_figure, atomic_write_text
+
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
     alloc = check.allocation

@@ -118,3 +118,26 @@ def test_config_exponent_without_a_dot_is_range_checked(tmp_path):
         load_config(str(path), PipelineConfig)
     path.write_text("footstep: {heuristic_weight: 2e0}\n")
     assert load_config(str(path), PipelineConfig).footstep.heuristic_weight == 2.0
+
+
+def test_plan_refuses_a_bad_scenario_before_the_planners_imports(tmp_path):
+    """`rbp plan` read its scenario after importing the planner (0.6 s, 170 MB): a near-limit
+    scenario with an error at its end took 1.1 s and 232 MB to refuse (scenario check: 100 MB).
+    Now nothing of the planner is imported before the refusal."""
+    import os
+    import subprocess
+    import sys
+
+    from rb_drake.scenario import bundled_caves
+    from tests.cli_helpers import ROOT
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(bundled_caves()["demo-shaft"].read_text() + "zzz: 1\n")
+    code = ("import sys; from rbp.cli import main; rc = main(sys.argv[1:]); "
+            "print(rc, 'planning.pipeline' in sys.modules, 'planning.plan' in sys.modules)")
+    result = subprocess.run([sys.executable, "-c", code, "plan", str(bad), "-o",
+                             str(tmp_path / "p.json"), "--footsteps-only", "-q"],
+                            cwd=ROOT, capture_output=True, text=True, timeout=300,
+                            env={**os.environ, "LCM_DEFAULT_URL": "memq://"})
+    assert result.stdout.split() == ["2", "False", "False"], (result.stdout, result.stderr)
+    assert result.stderr.strip().splitlines()[0].startswith(f"error: {bad}: "), result.stderr

@@ -120,7 +120,8 @@ def test_config_exponent_without_a_dot_is_range_checked(tmp_path):
     assert load_config(str(path), PipelineConfig).footstep.heuristic_weight == 2.0
 
 
-def test_plan_refuses_a_bad_scenario_before_the_planners_imports(tmp_path):
+@pytest.mark.parametrize("given", ["scenario", "--from-plan"])
+def test_plan_refuses_a_bad_scenario_before_the_planners_imports(tmp_path, given):
     """`rbp plan` read its scenario after importing the planner (0.6 s, 170 MB): a near-limit
     scenario with an error at its end took 1.1 s and 232 MB to refuse (scenario check: 100 MB).
     Now nothing of the planner is imported before the refusal."""
@@ -133,9 +134,16 @@ def test_plan_refuses_a_bad_scenario_before_the_planners_imports(tmp_path):
 
     bad = tmp_path / "bad.yaml"
     bad.write_text(bundled_caves()["demo-shaft"].read_text() + "zzz: 1\n")
+    inputs = [str(bad)]
+    if given == "--from-plan":  # a plan whose last step is wrong (--from-plan: 238 MB)
+        plan = json.loads((GOLDEN / "demo-shaft.json").read_text())
+        plan["phases"][-1]["steps"][-1]["pose"] = [0.0]
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(plan))
+        inputs = ["--from-plan", str(bad)]
     code = ("import sys; from rbp.cli import main; rc = main(sys.argv[1:]); "
             "print(rc, 'planning.pipeline' in sys.modules, 'planning.plan' in sys.modules)")
-    result = subprocess.run([sys.executable, "-c", code, "plan", str(bad), "-o",
+    result = subprocess.run([sys.executable, "-c", code, "plan", *inputs, "-o",
                              str(tmp_path / "p.json"), "--footsteps-only", "-q"],
                             cwd=ROOT, capture_output=True, text=True, timeout=300,
                             env={**os.environ, "LCM_DEFAULT_URL": "memq://"})

@@ -17,8 +17,9 @@ goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (doc
   levels, with no scalar over MAX_SCALAR_CHARS characters nor a number over MAX_NUMBER_CHARS
   (Python refuses to convert an integer of more than 4,300 digits), without duplicate keys in
   a mapping (the last one would silently win);
-- JSON of at most MAX_JSON_VALUES values, bounded by counting its separators before parsing
-  (a parsed number takes about 60 bytes).
+- JSON of at most MAX_JSON_UNITS units, counted on its separators before parsing: a value
+  (after a `,`, `[` or `{`) one, a list one more, an object or key (`{`, `:`) five more, as a
+  parsed object or key takes five times a number's memory (`json_units`).
 A refusal raises InputFileError(field, reason); each reader turns it into its own error class,
 so the user sees one line naming the file, the field (or "(file)") and the reason.
 """
@@ -53,7 +54,11 @@ DEFAULT_MAX_NODES = 50_000
 MAX_ALIASES = 10_000    # alias uses in a YAML document
 MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
 MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit
-MAX_JSON_VALUES = 2_000_000  # values of a JSON document (a 300-phase plan: about 230,000)
+# Units of a JSON document (`json_units`), about 32 bytes parsed each: 2,000,000 keep a hostile
+# file's parse to about 64 MB (990,000 `{"a":0}` took 192 MB: a parsed dict costs six
+# numbers). A 7.4 MB plan of 28,000 steps counts 1.4 M (21 MB parsed; 300 phases, 5 MB: 1 M).
+MAX_JSON_UNITS = 2_000_000
+JSON_OBJECT_UNITS = 5  # more for each `{` and `:`: a dict's 180 bytes, a key's pair and slot
 # A YAML document's nodes are counted on its events (which need no tree) only when a cheap
 # bound on them, from its structural characters, could exceed the limit, or it is long.
 EVENT_COUNT_ABOVE_CHARS = 1_000_000
@@ -83,6 +88,15 @@ class _Loader(SAFE_LOADER):  # type: ignore[valid-type,misc]
             raise InputFileError(_where(node.start_mark), "an integer beyond a float's range "
                                  f"(over {sys.float_info.max:.1e} in magnitude)")
         return value
+
+
+# YAML 1.2 reads `1e308`, `1e-300`, `1.0e3` as floats, PyYAML's YAML 1.1 as strings (its floats
+# need a dot and a signed exponent): `time_limit: 1e3` was "expected a number, got str".
+# Integers (no exponent) stay integers; the readers range-check the float as any number.
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?([0-9][0-9_]*(\.[0-9_]*)?|\.[0-9]+)"
+                                         r"[eE][-+]?[0-9]+$"),
+                              list("-+.0123456789"))
 
 
 def _short(node: yaml.Node) -> str:
@@ -395,17 +409,31 @@ def no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return result
 
 
-def load_json(text: str, max_values: int = MAX_JSON_VALUES, **options: Any) -> Any:
+def json_units(text: str) -> int:
+    """An upper bound on the memory JSON `text` takes parsed, in units of about 32 bytes (a
+    number): every value but the first follows a `,`, `[` or `{` (one unit each), a list takes
+    one unit more, an object or a key (each `{` and `:`) JSON_OBJECT_UNITS more. Characters
+    inside strings only add, so the bound holds whatever the strings hold."""
+    values = text.count(",") + text.count("[") + text.count("{") + 1
+    return (values + text.count("[")
+            + JSON_OBJECT_UNITS * (text.count("{") + text.count(":")))
+
+
+def load_json(text: str, max_values: int | None = None, **options: Any) -> Any:
     """The JSON value of `text` (json.loads with `options`; a leading UTF-8 byte-order mark is
-    skipped); refused (InputFileError) if it may hold more than MAX_JSON_VALUES values (every
-    value but the first follows a "[", "{" or ",", so their count bounds the values before any
-    is built), repeats a key in an object or holds an integer beyond a float's range (10**400
-    would raise OverflowError wherever it is used as a number; the field names its line); the
-    caller handles json.JSONDecodeError and RecursionError. `max_values` lowers the limit
-    for a document of a smaller kind (a scenario inside a rig log)."""
+    skipped); refused (InputFileError) if its parse may take more than MAX_JSON_UNITS units
+    (`json_units`, before any value is built), repeats a key in an object or holds an integer
+    beyond a float's range (10**400 would raise OverflowError wherever it is used as a number;
+    the field names its line); the caller handles json.JSONDecodeError and RecursionError.
+    `max_values` also bounds its values, for a document of a smaller kind (a scenario inside a
+    rig log holds at most what a scenario file may)."""
     text = text.removeprefix("\ufeff")
-    bound = sum(text.count(c) for c in ",[{") + 1
-    if bound > max_values:
+    units = json_units(text)
+    if units > MAX_JSON_UNITS:
+        raise InputFileError("(file)", f"too many values and objects to read: {units:,} units "
+                             f"(a value 1, a list 2, an object or key {JSON_OBJECT_UNITS + 1}), "
+                             f"over the limit of {MAX_JSON_UNITS:,}")
+    if max_values is not None and (bound := sum(text.count(c) for c in ",[{") + 1) > max_values:
         raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
                              f"brackets), over the limit of {max_values:,}")
     try:

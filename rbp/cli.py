@@ -36,6 +36,7 @@ from rbp.commands.common import (
     load_scenario_spec,
     plural,
     read_plan,
+    refuse_empty_paths,
 )
 
 if TYPE_CHECKING:
@@ -219,12 +220,12 @@ def _over_reading_limit(path: Path) -> str:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from planning.plan import write_plan
     from rbp.commands.plan import (
         SearchRecord,
         check_plan_output,
         plan_setup,
         provenance,
+        read_plan_inputs,
         run_planner,
         write_pictures,
     )
@@ -242,7 +243,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
             flag = "--footsteps-only" if args.footsteps_only else "--no-pictures"
             raise UserError(f"--phase-figure: draws a phase's trajectory, which {flag} "
                             "leaves out")
+    read_plan_inputs(args)  # before the planner's imports (170 MB): a refusal costs little
     scn, planner, cfg, motion = plan_setup(args)
+    from planning.plan import write_plan
+
     partial = getattr(args, "partial", False)
     if partial and (planner != "rbp" or not motion):
         flag = "--planner naive" if planner != "rbp" else "--footsteps-only"
@@ -322,12 +326,6 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job on the bundled demo cave: check it, picture it, report the start stance."""
-    import numpy as np
-
-    from rb_drake.draw import scenario_figure
-    from rb_drake.feasibility import check_poses
-    from rb_drake.files import atomic_save_figure, atomic_write_text
-
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"{out}: --out: is a file; give a folder (its outputs are written "
@@ -335,7 +333,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for name in ("cave.png", "start.json", "plan.json"):  # checked before any work
         check_output(out / name, "--out", picture=name.endswith(".png"),
                      inputs={"the scenario's file": args.scenario})
-    scn = load_scenario_spec(args.scenario)
+    scn = load_scenario_spec(args.scenario)  # before the heavy imports: a refusal costs little
+    import numpy as np
+
+    from rb_drake.draw import scenario_figure
+    from rb_drake.feasibility import check_poses
+    from rb_drake.files import atomic_save_figure, atomic_write_text
+
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
     alloc = check.allocation
@@ -609,13 +613,15 @@ def _main(argv: list[str] | None) -> int:
     quiet_matplotlib()
     if argv[:1] == ["bench"]:  # all its options belong to experiments.bench (--help included)
         return cmd_bench(argparse.Namespace(args=argv[1:]))
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     args.argv = argv  # the command line, for the plan's provenance
     from planning.config_io import ConfigError
     from rb_drake.scenario import ScenarioError
 
     try:
         forget_outputs()
+        refuse_empty_paths(parser, args)
         return int(args.func(args) or 0)
     except (ScenarioError, ConfigError, RbpInputError) as e:  # UserError among them
         print(f"error: {one_line(str(e))}", file=sys.stderr)

@@ -27,6 +27,7 @@ import json
 import math
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -203,12 +204,14 @@ class RigRun(NamedTuple):
 
 
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
-            sim_rig: RigSimConfig | None = None, plan_source: str = "") -> RigRun:
+            sim_rig: RigSimConfig | None = None, plan_source: str = "",
+            accepted: Callable[[], None] | None = None) -> RigRun:
     """Execute body phase `phase_index` of `plan` against the rig on `config.url`.
 
     With `sim_rig`, the rig simulator answers on the same in-process bus and the run goes as
     fast as it can; otherwise the run keeps to real time for the hardware. The log (written
     atomically when the run ends) starts with a `rig_setup_t` naming the scenario and stance.
+    `accepted` is called once the plan and options are accepted, before any command is sent.
     """
     phase = body_phase(plan, phase_index)
     check_log_size(phase, config.period)
@@ -221,6 +224,8 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
     bus, said = quietly(lambda: DrakeLcm(config.url))  # tcpq:// says "connecting..."
     if bus is None:
         raise RigInputError("--lcm-url", f"{config.url!r}: LCM cannot open it: {said}")
+    if accepted is not None:
+        accepted()
     if sim_rig is not None:
         start = phase.pose.value(phase.start_time).ravel()
         rig = RigSimulator(phase.scenario.robot, phase.stance.positions, start, sim_rig)

@@ -217,8 +217,10 @@ class PlanTrajectory:
         stance = scn.stance(ids)
         steps = phase.steps
         times = np.array([s.t for s in steps], dtype=float)
-        if np.any(np.diff(times) <= 0):
-            raise PlanError(f"{where}.steps", f"step times must increase, got {list(times)}")
+        if np.any(np.diff(times) <= 0):  # name the first step out of order, never all times
+            n = int(np.flatnonzero(np.diff(times) <= 0)[0]) + 1
+            raise PlanError(f"{where}.steps[{n}].t", f"times must increase from step to step "
+                            f"(got {float(times[n]):g} after {float(times[n - 1]):g})")
         if previous_end is not None and abs(times[0] - previous_end) > 1e-6:
             raise PlanError(f"{where}.steps[0].t",
                             f"starts at {times[0]} but the phase before ends at {previous_end}")

@@ -7,6 +7,7 @@ every module of `rbp.commands` import from here (never from `rbp.cli`, which imp
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import signal
@@ -177,6 +178,26 @@ def forget_outputs() -> None:
     _OUTPUTS.clear()
 
 
+NOT_PATHS = {"name", "lcm_url"}  # the string arguments that do not name a file
+
+
+def refuse_empty_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse an empty path argument ('') of the command `args.func` (UserError naming the
+    option): '' was read as `.` ("is a directory") and `--config ''` was silently ignored."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                if sub.get_default("func") is getattr(args, "func", None) or any(
+                        isinstance(a, argparse._SubParsersAction) for a in sub._actions):
+                    refuse_empty_paths(sub, args)
+        elif (parser.get_default("func") is getattr(args, "func", None)
+              and action.dest not in NOT_PATHS and action.choices is None
+              and getattr(args, action.dest, None) == ""):
+            name = (action.option_strings[0] if action.option_strings
+                    else f"{action.dest}: (argument)")
+            raise UserError(f"{name}: an empty path (''): give a file name")
+
+
 def load_scenario_spec(spec: str, check_start: bool = True):
     """A scenario from a file path, or a bundled cave by name (see `rbp scenario list`):
     `rbp.api.load_scenario`."""
@@ -197,15 +218,21 @@ def read_plan(path: Path) -> dict:
         raise UserError(f"{path}: {e}") from None
 
 
+def warn_unverified(path: Path) -> None:
+    """--no-verify's warning, printed once the plan is read and accepted: a refusal stays one
+    line (the warning came before the `error:` line)."""
+    print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
+          "is executed as it is", file=sys.stderr)
+
+
 def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
     """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
-    since is not verified again; `verify=False` (--no-verify) skips the check, loudly."""
+    since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
+    `warn_unverified`, once the plan is accepted)."""
     from planning.plan_file import has_valid_stamp
 
     if not verify:
-        print(f"WARNING: {path}: --no-verify: using the plan WITHOUT verifying it; a wrong plan "
-              "is executed as it is", file=sys.stderr)
         return False
     if has_valid_stamp(plan):
         return False

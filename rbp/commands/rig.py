@@ -81,9 +81,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         check_seed,
         read_plan,
         refuse_wrong_plan,
+        warn_unverified,
     )
-    from systems.rig import RigSimConfig
-    from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
 
     if not MIN_PERIOD <= args.period <= MAX_PERIOD:  # 1e-9 sent commands without end
         raise UserError(f"--period: must be {MIN_PERIOD:g} to {MAX_PERIOD:g} s between "
@@ -96,11 +95,17 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     plan = read_plan(path)
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
         return EXIT_FAILED  # before any LCM traffic
+    # imported once the plan is read: they take 80 MB, a refused plan's reading its own
+    from systems.rig import RigSimConfig
+    from systems.rig_interface import RigInputError, RigLcmConfig, run_rig
+
     config = RigLcmConfig(url=args.lcm_url, period=args.period)
     sim = RigSimConfig(seed=args.seed) if args.sim_rig else None
     try:
         run = run_rig(plan, args.phase, config, args.log, sim_rig=sim,
-                      plan_source=f"{path.name} phase {args.phase}")
+                      plan_source=f"{path.name} phase {args.phase}",
+                      accepted=None if getattr(args, "verify", True)
+                      else lambda: warn_unverified(path))
     except RigInputError as e:
         where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None

@@ -84,7 +84,13 @@ def _simulation_failed(path: Path, error: Exception, where: str) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Run `rbp simulate` (see the module docstring); 0 on success."""
-    from rbp.commands.common import UserError, check_output, check_seed, plural
+    from rbp.commands.common import (
+        UserError,
+        check_output,
+        check_seed,
+        plural,
+        warn_unverified,
+    )
 
     check_seed(args.seed)
     plan_input = {"the plan's file": args.plan}
@@ -102,9 +108,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if plan is None:
         return EXIT_FAILED
 
-    from rb_drake.files import atomic_write_text
-    from systems.diagram import ClimbSimulator, SimulationError
-    from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanError, PlanTrajectory, plan_scenario
 
     scn = plan_scenario(plan, str(path))
@@ -112,6 +115,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         traj = PlanTrajectory(plan, scn)
     except PlanError as e:
         raise UserError(f"{path}: {e}") from None
+    if not getattr(args, "verify", True):
+        warn_unverified(path)
+    # imported once the plan is accepted: a refused plan costs its reading only
+    from rb_drake.files import atomic_write_text
+    from systems.diagram import ClimbSimulator, SimulationError
+    from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
+
     simulator = ClimbSimulator(scn)
     show, done = _progress("simulating")
     start = time.perf_counter()

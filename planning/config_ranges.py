@@ -217,3 +217,35 @@ def range_lines() -> list[str]:
     """docs/formats.md's table rows: | `key` | range |, in this table's order."""
     return [f"| `{SECTIONS[cls]}{name}` | {spec.text()} |"
             for cls, fields in FIELDS.items() for name, spec in fields.items()]
+
+
+# The fields that take true or false, so need no range (section_keys lists them with FIELDS')
+SWITCHES = {"PipelineConfig": ("optimise",), "AnytimeConfig": ("restart",),
+            "TransitionConfig": ("ignore_grasps",), "ScpConfig": ("keep_seed_floor",)}
+
+
+def section_keys(section: str) -> list[str]:
+    """The keys a configuration file may give in `section` (a SECTIONS value: "" for the top
+    level, "footstep." and so on): its class's fields (this table's and its switches) and its
+    sub-sections (tests/test_plan_config.py holds them to the dataclasses)."""
+    cls = next(name for name, prefix in SECTIONS.items() if prefix == section)
+    subsections = {prefix[len(section):-1] for prefix in SECTIONS.values()
+                   if prefix.startswith(section) and prefix.count(".") == section.count(".") + 1}
+    return sorted(set(FIELDS.get(cls, {})) | set(SWITCHES.get(cls, ())) | subsections)
+
+
+def unknown_key(data: Any, section: str = "") -> tuple[str, str] | None:
+    """(field, reason) of the first key of configuration `data` that no class has, as
+    `planning.config_io` words it, or None: `rbp plan` checks this before it imports the
+    planner (0.6 s and 170 MB), so that a misspelt key costs a line, not the imports."""
+    if not isinstance(data, dict):
+        return None  # the reader names what it expected
+    keys = section_keys(section)
+    for key, value in data.items():
+        field = f"{section}{key}"
+        if key not in keys:
+            return field, f"unknown key; expected one of {keys}"
+        if f"{field}." in SECTIONS.values() and (found := unknown_key(value, f"{field}.")):
+            return found
+    return None
+

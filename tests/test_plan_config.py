@@ -295,3 +295,40 @@ def test_values_outside_their_range_refused_at_reading(data, field: str, words: 
         assert info.value.field == where and words in info.value.reason, str(info.value)
     assert config_from_dict(PipelineConfig, {"scp": {"radius_velocity": "inf"}},
                             "p.yaml").scp.radius_velocity == float("inf")  # documented: none
+
+
+def test_unknown_keys_found_without_the_planner_as_its_classes_find_them(tmp_path) -> None:
+    """`rbp plan` refuses a misspelt configuration key before importing the planner, from
+    planning.config_ranges alone: each section's keys are its class's fields, and a misspelt
+    key at every depth gets the classes' own message."""
+    import dataclasses
+
+    from planning.complete_config import AnytimeConfig
+    from planning.config_ranges import SECTIONS, section_keys, unknown_key
+    from planning.lattice import LatticeConfig
+    from planning.route_repair import RepairConfig
+    from planning.seed_common import SeedConfig
+    from planning.segmented import SegmentConfig
+    from planning.transition import TransitionConfig
+
+    classes = {c.__name__: c for c in (PipelineConfig, FootstepConfig, LatticeConfig,
+                                       AnytimeConfig, RepairConfig, SegmentConfig,
+                                       TransitionConfig, SeedConfig, ScpConfig)}
+    assert set(classes) == set(SECTIONS), "a configuration class without its section here"
+    for name, section in SECTIONS.items():
+        fields = sorted(f.name for f in dataclasses.fields(classes[name]) if f.init)
+        assert section_keys(section) == fields, f"{name}: keys known without the planner"
+        data: dict = {"speling": 1}
+        for part in reversed(section.split(".")[:-1]):
+            data = {part: data}
+        with pytest.raises(ConfigError) as refused:
+            config_from_dict(PipelineConfig, data, "c.yaml")
+        assert unknown_key(data) == (refused.value.field, refused.value.reason), section
+    assert unknown_key({"footstep": {"lattice": {"position_step": 0.02}}, "seed": {}}) is None
+    config = tmp_path / "c.yaml"
+    config.write_text("footstep:\n  anytime:\n    improve_factr: 2\n")
+    result = run_rbp("plan", "demo-shaft", "--config", str(config), "-o", "p.json",
+                     cwd=tmp_path)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert "footstep.anytime.improve_factr: unknown key" in lines[0], lines[0]

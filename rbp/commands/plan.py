@@ -77,6 +77,7 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     issue 28's 1 s and 200 MB; `rbp scenario check` refused the same in 0.55 s and 100 MB.
     The configurations' keys are checked in `plan_setup`, against the planner's classes."""
     from planning.config_io import ConfigError
+    from planning.config_ranges import unknown_key
     from rb_drake.scenario import read_yaml_file
     from rbp.commands.common import load_scenario_spec
 
@@ -87,6 +88,8 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     if args.config:
         data = read_yaml_file(args.config, ConfigError)
         args.config_data = {} if data is None else data
+        if found := unknown_key(args.config_data):  # as plan_setup's classes would refuse it
+            raise ConfigError(args.config, *found)
 
 
 def plan_setup(args: argparse.Namespace):

@@ -878,7 +878,7 @@ def test_cli_rejects_negative_trials(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("change, field", [
-    (lambda p: p["phases"][0]["steps"][1].update(t=-1.0), "phases[0].steps"),
+    (lambda p: p["phases"][0]["steps"][1].update(t=-1.0), "phases[0].steps[1].t"),
     (lambda p: p["phases"][1]["stance"].__setitem__(2, "nowhere"), "phases[1].stance"),
     (lambda p: p["phases"][2]["steps"][0].update(t=p["phases"][2]["steps"][0]["t"] + 0.25),
      "phases[2].steps[0].t"),

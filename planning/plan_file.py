@@ -162,13 +162,20 @@ GAP_TOL = 1e-3
 def check_times(plan: dict[str, Any]) -> None:
     """Refuse (PlanFileError on the step's `t`) a schema-valid plan whose step comes more than
     MAX_STEP_GAP after the step before it, in its phase or (a phase's first) the phase before's
-    last: the planner writes steps at most --dt apart, and the simulator and the rig sample the
-    plan over its time. A footstep plan's body phase may take longer, at its nominal speeds
+    last, or whose first step is more than MAX_STEP_GAP from 0 s: the planner writes steps at
+    most --dt apart from 0 s, and the simulator and the rig sample the plan over its time. A
+    footstep plan's body phase may take longer, at its nominal speeds
     (planning.plan.build_plan). Times that do not increase are the verifier's (rule
     time-order): they stretch nothing."""
     before: dict[str, Any] | None = None
     for k, phase in enumerate(plan["phases"]):
         for n, step in enumerate(phase["steps"]):
+            if before is None and abs(step["t"]) > MAX_STEP_GAP + GAP_TOL:
+                # the simulator and the rig start at 0 s: a plan shifted by 1e7 s simulated
+                # its first 1e7 s of nothing (rbp simulate --no-verify ran for hours)
+                raise PlanFileError(
+                    f"phases/{k}/steps/{n}/t", f"the plan's first step is at {step['t']:.6g} "
+                    f"s: a plan starts within {MAX_STEP_GAP:g} s of 0 s (the planner's at 0)")
             if before is not None:
                 gap = step["t"] - before["t"]
                 a, b = before["pose"], step["pose"]

@@ -1108,3 +1108,23 @@ def test_plan_over_the_reading_limit_names_the_variable_that_reads_it_back(tmp_p
     assert "over the 2.0 MiB reading limit" in note and "RBP_MAX_INPUT_MB=4" in note, note
     monkeypatch.setenv("RBP_MAX_INPUT_MB", "4")
     assert read_text(path).strip() == "", "the named limit should read the plan back"
+
+
+def test_plan_shifted_far_in_time_refused_at_reading(tmp_path):
+    """A plan whose every step is 9.99e6 s late (within the schema's 1e7 s) made
+    `rbp simulate --no-verify` integrate 1e7 s of nothing: a plan starts within the longest
+    step gap of 0 s, as the planner's do (at 0)."""
+    import json
+
+    from planning.plan_file import PlanFileError, read_plan_file
+
+    plan = json.loads((Path(__file__).parent / "data" / "golden" / "demo-shaft.json").read_text())
+    for phase in plan["phases"]:
+        for step in phase["steps"]:
+            step["t"] += 9.99e6
+    path = tmp_path / "late.json"
+    path.write_text(json.dumps(plan))
+    with pytest.raises(PlanFileError, match=r"phases/0/steps/0/t: .*first step is at 9\.99e\+06"):
+        read_plan_file(path)
+    result = run_rbp("simulate", "--trials", "0", "--no-verify", str(path), cwd=tmp_path)
+    _refused_in_one_line(result, path, "a plan starts within")

@@ -115,6 +115,9 @@ MAX_SIZE = 100.0      # m: body sides, shoulder offsets
 MAX_BOOM = 20.0       # m: boom length (ReachBot's are a few metres; the lattice grows with it)
 MAX_FORCE = 1e6       # N: boom tension; N m: shoulder torque
 MAX_MASS = 1e6        # kg: body and gripper; kg/m: boom density
+# kg: the simulator's four shoulder links (0.01 kg each) ride on the body, whose own mass is
+# the rest; a body of 0.03 kg was simulated with negative inertia (Drake warned, 8 lines)
+MIN_BODY_MASS = 0.1
 MAX_DEGREES = 1e4     # shoulder directions
 
 
@@ -202,7 +205,7 @@ def robot_from_dict(overrides: Mapping[str, Any] | None) -> RobotParams:
         elif key == "boom_tension":
             changes[key] = _interval(key, value, 0.0, MAX_FORCE)
         elif key in ("body_mass",):
-            changes[key] = _number(key, value, 0.0, MAX_MASS, lo_open=True)
+            changes[key] = _number(key, value, MIN_BODY_MASS, MAX_MASS)
         elif key == "shoulder_torque_max":
             changes[key] = _number(key, value, 0.0, MAX_FORCE)
         elif key in ("gripper_mass", "boom_linear_density"):

@@ -302,3 +302,16 @@ def test_plant_options_limits_and_live_outputs(robot):
         axial = np.array([reactions[b.index()].translational()[0] for b in rb.booms])
         want = -5.0 if live else 0.0
         np.testing.assert_allclose(axial, want, atol=0.05, err_msg=f"live={live}")
+
+
+def test_lightest_body_keeps_a_positive_inertia_in_the_simulator(tmp_path) -> None:
+    """The simulator's body carries the four shoulder links (ARM_MASS each) out of the
+    robot's body_mass: the least body_mass a scenario may give leaves it most of its mass
+    (a body of 0.03 kg was simulated with negative inertia, Drake warning in 8 lines), and a
+    lighter one is refused at reading."""
+    from rb_drake.params import MIN_BODY_MASS, NUM_BOOMS, ParamError
+
+    assert MIN_BODY_MASS - NUM_BOOMS * ARM_MASS >= 0.5 * MIN_BODY_MASS, \
+        "the simulator's body would keep under half the lightest body's mass"
+    with pytest.raises(ParamError, match=r"body_mass.*must be >= 0\.1, got 0\.03"):
+        robot_from_dict({"body_mass": 0.03})

@@ -287,7 +287,7 @@ def read_plan(path: str | Path) -> Plan:
     try:
         return read(path)
     except PlanFileError as e:  # named as load_scenario names its file
-        raise PlanFileError(e.field, e.reason, file=str(path)) from None
+        raise PlanFileError(str(e.field), e.reason, file=str(path)) from None
 
 
 def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:

@@ -57,6 +57,7 @@ def test_plan_dicts_are_read_as_plan_files(plan_dict: dict[str, Any], path: list
 
 
 def test_plan_of_a_wrong_type_or_missing_keys(plan_dict: dict[str, Any]) -> None:
+    wrong: object
     for wrong in ("x", [], None, 5):
         with pytest.raises(RbpInputError, match=r"^plan: expected a Plan"):
             rbp.check(wrong)  # type: ignore[arg-type]

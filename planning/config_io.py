@@ -146,6 +146,12 @@ def _describe(value: Any) -> str:
     return f"{type(value).__name__} {text}"
 
 
+def checked_config(config: T, source: str = "config") -> T:
+    """`config` (a configuration dataclass built in Python) held to the ranges a file's values
+    are (`config_from_dict`): rbp.plan(PipelineConfig(dt=0.0)) failed only after the search."""
+    return config_from_dict(type(config), config_to_dict(config), source)
+
+
 def load_config(path: str | Path, cls: type[T], base: T | None = None) -> T:
     """Read a YAML configuration file on top of `base`; raises ConfigError."""
     data = read_yaml_file(path, ConfigError)

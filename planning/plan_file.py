@@ -14,6 +14,7 @@ import hashlib
 import json
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +30,9 @@ VERIFIER = "rbp-verify/4"
 class PlanFileError(RbpInputError):
     """A plan file that cannot be used: `field` (path in the file) and `reason`."""
 
-    def __init__(self, field: str, reason: str):
-        super().__init__(f"{field}: {reason}")
+    def __init__(self, field: str, reason: str, file: str | None = None):
+        super().__init__(reason, file=file, field=field)
         self.field = field
-        self.reason = reason
 
 
 _SCENARIO_FORMAT = re.compile(r"^format:\s*['\"]?reachbot-scenario/", re.MULTILINE)
@@ -96,14 +96,22 @@ def _all_finite(data: Any) -> bool:
     return True
 
 
-def _find_bad(value: Any, path: str) -> tuple[str, _Bad] | None:
-    if isinstance(value, _Bad):
+def _huge(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and abs(value) > _MAX_FLOAT
+
+
+_MAX_FLOAT = 1.7976931348623157e308
+
+
+def _find_bad(value: Any, path: str,
+              bad: Callable[[Any], bool] = lambda v: isinstance(v, _Bad)) -> tuple[str, Any] | None:
+    if bad(value):
         return path, value
     items = (value.items() if isinstance(value, dict)
              else enumerate(value) if isinstance(value, list) else ())
     for key, item in items:
         sub = f"{path}[{key}]" if isinstance(key, int) else (f"{path}.{key}" if path else key)
-        found = _find_bad(item, sub)
+        found = _find_bad(item, sub, bad)
         if found is not None:
             return found
     return None
@@ -201,6 +209,32 @@ def _check_format(value: Any) -> None:
 def _kind(value: Any) -> str:
     return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(
         type(value), "a number")
+
+
+def plan_from(plan: Any, what: str = "plan") -> Plan:
+    """`plan` (argument `what` of the Python API) as a Plan: a Plan as it is (the planner's, or
+    read from a file: already valid); a plan-file object (a dict) checked as a plan file is,
+    through its JSON text (the reading limits, non-finite numbers, the schema, the times), so
+    that a NaN, a bool or 10**400 is refused (PlanFileError naming the field) before numpy or
+    Drake meet it (a NaN pose aborted the interpreter in Drake)."""
+    if isinstance(plan, Plan):
+        return plan
+    if not isinstance(plan, dict):
+        raise RbpInputError("expected a Plan (rbp.plan, rbp.read_plan) or a plan-file object "
+                            f"(a dict), got {type(plan).__name__}", field=what)
+    try:
+        text = json.dumps(plan)  # NaN written as NaN: parse_plan_text names its field
+    except (TypeError, ValueError, RecursionError) as e:  # a set, an object, 10**5000, a loop
+        raise PlanFileError("(top level)", f"not a plan-file object: {e}") from None
+    try:
+        data = parse_plan_text(text)
+    except PlanFileError as e:
+        # "line 1, column N" of a text the caller never saw: name an integer past the floats
+        found = _find_bad(plan, "", _huge) if (e.field or "").startswith("line ") else None
+        if found is None:
+            raise
+        raise PlanFileError(found[0], e.reason) from None
+    return Plan.from_dict(validated(data, quick=len(text) > QUICK_SCHEMA_ABOVE_CHARS))
 
 
 def read_plan(path: str | Path) -> Plan:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import IO
 
 IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".gif", ".webp")
+MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels
 
 
 def output_target(path: str | Path) -> Path:

@@ -23,6 +23,7 @@ from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
 KINDS = ("shaft", "crevasse", "rockfall")
 MIN_LENGTH = 2.0  # m: start and goal sit 1 m from either end of a cave, so shorter has no climb
 MAX_LENGTH = 1000.0  # m: a longer cave is a typo (and 1e308 overflows)
+MAX_ANCHOR_DENSITY = 20.0  # anchors per metre: one every 5 cm; denser caves take minutes to draw
 
 
 def length_problem(lo: float, hi: float) -> str | None:

@@ -181,8 +181,8 @@ def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
         info = path.stat()  # follows symlinks; never blocks, unlike opening a FIFO
     except FileNotFoundError:
         raise InputFileError("(file)", "no such file") from None
-    except OSError as e:  # a symlink loop, a name too long, no permission on a folder
-        raise InputFileError("(file)", f"cannot read: {e.strerror or e}") from None
+    except (OSError, ValueError) as e:  # a loop, a name too long or with a NUL byte, no access
+        raise InputFileError("(file)", f"cannot read: {getattr(e, 'strerror', 0) or e}") from None
     if stat.S_ISDIR(info.st_mode):
         raise InputFileError("(file)", "is a directory, not a file")
     if not stat.S_ISREG(info.st_mode):

@@ -40,6 +40,50 @@ __all__ = ["MeshcatView", "SimulationResult", "bundled_caves", "check", "draw",
 
 PLAN_DPI = 110  # `rbp plan`'s pictures
 SCENARIO_DPI = 120  # `rbp scenario show`'s default
+MAX_TRIALS = 1_000_000  # Monte Carlo climbs of one plan; more is a sweep's job
+
+
+def _whole(value: Any, field: str, lo: int, hi: int) -> int:
+    """`value` if it is a whole number (not a bool) from `lo` to `hi`, the command line's range;
+    else RbpInputError naming `field` (1.5 or 10**30 ended in numpy's TypeError or ValueError)."""
+    import operator
+
+    from rb_drake.errors import RbpInputError
+
+    try:
+        number = None if isinstance(value, bool) else operator.index(value)  # numpy's ints too
+    except TypeError:
+        number = None
+    if number is None or not lo <= number <= hi:
+        raise RbpInputError(f"must be a whole number from {lo:,} to {hi:,}, got {value!r:.60}",
+                            field=field)
+    return number
+
+
+def _number(value: Any, field: str) -> float:
+    """`value` as a float if it is a real number (not a bool); else RbpInputError on `field`."""
+    import numbers
+
+    from rb_drake.errors import RbpInputError
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise RbpInputError(f"must be a number, got {value!r:.60}", field=field)
+    return float(value)
+
+
+def _output(path: Any, picture: bool = False) -> Path:
+    """`path` as an output file, refused as the command line refuses one (RbpInputError naming
+    it: a folder, an unwritable place, a picture's suffix matplotlib cannot write)."""
+    from rb_drake.errors import RbpInputError
+    from rb_drake.files import output_problem, picture_format_problem
+
+    if not isinstance(path, str | Path):
+        raise RbpInputError(f"expected a file path (str or Path), got {type(path).__name__}",
+                            field="path")
+    problem = output_problem(path) or (picture_format_problem(path) if picture else None)
+    if problem is not None:
+        raise RbpInputError(problem, file=str(path))
+    return Path(path)
 
 
 def bundled_caves() -> dict[str, Path]:
@@ -54,10 +98,18 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
     (`bundled_caves()`; "rig" is the lab rig's frame). A file of that name wins over a bundled
     cave. `check_start` also checks that the start stance holds the robot. Raises
     `rb_drake.scenario.ScenarioError` (file, field, reason) for a bad or missing file."""
+    from rb_drake.errors import RbpInputError
     from rb_drake.scenario import load_scenario as load
 
+    if not isinstance(path_or_name, str | Path):
+        raise RbpInputError("expected a file path or a bundled cave's name (str or Path), got "
+                            f"{type(path_or_name).__name__}", field="path_or_name")
     spec = Path(path_or_name)
-    if not spec.exists():
+    try:
+        exists = spec.exists()
+    except (OSError, ValueError):  # a name too long, a NUL byte: the reader names the file
+        exists = True
+    if not exists:
         caves = bundled_caves()
         if str(path_or_name) in caves:
             return load(caves[str(path_or_name)], check_start=check_start)
@@ -78,15 +130,25 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     `config` (an `rb_drake.generate.CaveConfig`) for the other knobs; `length` and
     `anchor_density` then override it. Raises `RbpInputError` for a bad kind or length and
     `CaveGenerationError` when no draw has a feasible start stance."""
-    from rb_drake.errors import RbpInputError
-    from rb_drake.generate import CaveConfig, generate_cave, length_problem
+    from rb_drake.errors import MAX_SEED, RbpInputError
+    from rb_drake.generate import (
+        MAX_ANCHOR_DENSITY,
+        CaveConfig,
+        generate_cave,
+        length_problem,
+        values_problem,
+    )
 
-    lo, hi = length
+    lo, hi = (_number(x, "length") for x in length)
     if (problem := length_problem(lo, hi)) is not None:
         raise RbpInputError(problem, field="length")
-    if not anchor_density > 0:
-        raise RbpInputError(f"must be above 0 anchors per metre, got {anchor_density:g}",
-                            field="anchor_density")
+    anchor_density = _number(anchor_density, "anchor_density")
+    if not 0 < anchor_density <= MAX_ANCHOR_DENSITY:
+        raise RbpInputError(f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per "
+                            f"metre, got {anchor_density:g}", field="anchor_density")
+    if (problem := values_problem(hi, anchor_density)) is not None:
+        raise RbpInputError(problem)  # up front: a 1000 m cave takes minutes to draw
+    seed = _whole(seed, "seed", 0, MAX_SEED)
     cfg = dataclasses.replace(config or CaveConfig(), anchor_density=anchor_density,
                               length=(lo, hi))
     return generate_cave(kind, seed, cfg)
@@ -137,6 +199,7 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
 
     Returns the plan (`planning.plan_model.Plan`); when no climb is found it has
     `success` False and the `reason`, and is still a plan to write and draw."""
+    from planning.config_io import checked_config
     from planning.footsteps import expansion_budget
     from planning.pipeline import PLANNERS, PipelineConfig, plan_climb
     from rb_drake.errors import RbpInputError
@@ -148,8 +211,12 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
         raise RbpInputError("a partial climb is flown through the whole pipeline of the rbp "
                             "planner: not with the naive planner or footsteps only",
                             field="partial")
-    scn = scenario if not isinstance(scenario, str | Path) else load_scenario(scenario)
-    cfg = config or PipelineConfig()
+    if config is not None and not isinstance(config, PipelineConfig):
+        raise RbpInputError(f"expected a planning.pipeline.PipelineConfig or None, got "
+                            f"{type(config).__name__}", field="config")
+    # held to a configuration file's ranges before any work (dt=0 failed after the search)
+    cfg = PipelineConfig() if config is None else checked_config(config)
+    scn = _scenario(scenario, "scenario")
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)
     with SearchProgress(f"{planner} on {scn.name}", budget, quiet=not progress) as bar:
@@ -167,6 +234,19 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                           footsteps_done=footsteps_done, partial=partial)
 
 
+def _scenario(scenario: Any, field: str) -> Scenario:
+    """`scenario` as a Scenario: a Scenario, or what `load_scenario` takes."""
+    from rb_drake.errors import RbpInputError
+    from rb_drake.scenario import Scenario
+
+    if isinstance(scenario, Scenario):
+        return scenario
+    if not isinstance(scenario, str | Path):
+        raise RbpInputError("expected a Scenario, a scenario file or a bundled cave's name, got "
+                            f"{type(scenario).__name__}", field=field)
+    return load_scenario(scenario)
+
+
 def _same_cave(plan: Plan, scn: Scenario) -> bool:
     """Whether `plan` was made for the cave and robot of `scn` (the plan keeps both)."""
     cave = scn.to_dict(resolved=True)
@@ -174,18 +254,20 @@ def _same_cave(plan: Plan, scn: Scenario) -> bool:
     return plan.scenario == cave and plan.robot == scn.robot.to_dict()
 
 
-def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
+def check(plan: Plan | dict[str, Any], scenario: Scenario | str | Path | None = None,
           progress: bool = False) -> list[str]:
     """What `rbp check` finds wrong with `plan`, one line each ("WHERE: RULE: WHAT"); an empty
     list when the plan holds. Every configuration is recomputed from scratch against the cave
-    and robot the plan carries (`planning.check.check_plan`); given a `scenario`, the plan must
-    also have been made for that cave and robot. `progress` shows a progress line on stderr
-    (on a terminal only, after a second)."""
-    from planning.plan_model import plan_of
+    and robot the plan carries (`planning.check.check_plan`); given a `scenario` (a Scenario,
+    or what `load_scenario` takes), the plan must also have been made for that cave and robot.
+    `progress` shows a progress line on stderr (on a terminal only, after a second). A plan
+    dict is read as a plan file is: a malformed one raises PlanFileError naming the field."""
+    from planning.plan_file import plan_from
     from rbp.progress import CheckProgress
     from systems.plan_check import plan_problems
 
-    model = plan_of(plan)
+    model = plan_from(plan)
+    scenario = None if scenario is None else _scenario(scenario, "scenario")
     problems = []
     if scenario is not None and not _same_cave(model, scenario):
         problems.append(f"scenario: the plan was made for another cave or robot than "
@@ -197,18 +279,27 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | None = None,
 
 def read_plan(path: str | Path) -> Plan:
     """A plan file (`rbp plan`'s JSON), validated against its schema (NaN and Infinity
-    refused); raises `planning.plan_file.PlanFileError` naming the field and the reason."""
+    refused); raises `planning.plan_file.PlanFileError` naming the file, the field and the
+    reason."""
+    from planning.plan_file import PlanFileError
     from planning.plan_file import read_plan as read
 
-    return read(path)
+    try:
+        return read(path)
+    except PlanFileError as e:  # named as load_scenario names its file
+        raise PlanFileError(str(e.field), e.reason, file=str(path)) from None
 
 
 def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:
     """Write `plan` to `path` as a plan file (JSON, checked against the schema first; written
-    to a temporary file and renamed, so never half-written); returns the path."""
+    to a temporary file and renamed, so never half-written); returns the path. A plan dict is
+    checked as a plan file is read (PlanFileError naming the field), and a path that cannot be
+    written (a folder, an unwritable place) raises RbpInputError naming it, before writing."""
     from planning.plan import write_plan as write
+    from planning.plan_file import plan_from
 
-    return write(plan, path)
+    model = plan_from(plan)
+    return write(model, _output(path))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -255,26 +346,24 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
     flown, and `systems.diagram.SimulationError` when the solver fails."""
     import numpy as np
 
-    from planning.plan_model import plan_of
+    from planning.plan_file import plan_from
     from rb_drake.errors import MAX_SEED, RbpInputError
     from systems.diagram import ClimbSimulator
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
     from systems.trajectory import PlanTrajectory, plan_scenario
 
-    model = plan_of(plan)
-    if not model.success:
-        raise RbpInputError(f"the plan found no route ({model.reason}); nothing to simulate",
-                            field="success")
-    if trials < 0:
-        raise RbpInputError(f"must be 0 or more, got {trials}", field="trials")
-    if not 0 <= seed <= MAX_SEED:
-        raise RbpInputError(f"must be 0 or more (at most 2**63 - 1), got {seed}", field="seed")
+    trials = _whole(trials, "trials", 0, MAX_TRIALS)  # `rbp simulate --trials`'s range
+    seed = _whole(seed, "seed", 0, MAX_SEED)
     if replan not in (None, "retry", "footsteps"):
         raise RbpInputError(f"must be None, 'retry' or 'footsteps', got {replan!r}",
                             field="replan")
     if replan is not None and trials == 0:
         raise RbpInputError("replanning continues failed trials; give trials > 0",
                             field="replan")
+    model = plan_from(plan)  # a dict as a plan file: a NaN pose aborted Drake
+    if not model.success:
+        raise RbpInputError(f"the plan found no route ({model.reason}); nothing to simulate",
+                            field="success")
     scn = plan_scenario(model)
     traj = PlanTrajectory(model, scn)
     simulator = ClimbSimulator(scn, plant=plant)
@@ -297,24 +386,31 @@ def draw(scenario_or_plan: Scenario | Plan | dict[str, Any], path: str | Path,
          dpi: int | None = None) -> Path:
     """Draw a cave or a plan into `path` (.png, .pdf, .svg), the picture the command line
     writes: for a Scenario, `rbp scenario show`'s (the robot in its start stance); for a plan,
-    `rbp plan`'s snapshots of the climb. `dpi` defaults to theirs (120 and 110). Returns the
-    path written."""
-    from planning.plan_model import Plan, plan_dict, plan_scenario
-    from rb_drake.files import atomic_save_figure
+    `rbp plan`'s snapshots of the climb. `dpi` defaults to theirs (120 and 110); it must be
+    20 to 600, as the command line's --dpi. Returns the path written. Raises RbpInputError for
+    a bad path or dpi, and PlanFileError for a malformed plan dict."""
+    from planning.plan_file import plan_from
+    from planning.plan_model import Plan, plan_scenario
+    from rb_drake.errors import RbpInputError
+    from rb_drake.files import MAX_DPI, MIN_DPI, atomic_save_figure
     from rb_drake.scenario import Scenario
 
+    if not isinstance(scenario_or_plan, Scenario | Plan | dict):
+        raise RbpInputError("expected a Scenario, a Plan or a plan-file object (a dict), got "
+                            f"{type(scenario_or_plan).__name__}", field="scenario_or_plan")
+    out = _output(path, picture=True)
+    if dpi is not None:
+        dpi = _whole(dpi, "dpi", MIN_DPI, MAX_DPI)  # 100000 ran out of memory in matplotlib
     if isinstance(scenario_or_plan, Scenario):
         from rb_drake.draw import scenario_figure
 
         fig = scenario_figure(scenario_or_plan)
-        return atomic_save_figure(fig, path, dpi=dpi or SCENARIO_DPI)
-    if not isinstance(scenario_or_plan, Plan | dict):
-        raise TypeError(f"draw takes a Scenario or a Plan, got {type(scenario_or_plan).__name__}")
+        return atomic_save_figure(fig, out, dpi=dpi or SCENARIO_DPI)
     from planning.figures import snapshots_figure
 
-    data = plan_dict(scenario_or_plan)
+    data = plan_from(scenario_or_plan, "scenario_or_plan").to_dict()
     fig = snapshots_figure(plan_scenario(data), data)
-    return atomic_save_figure(fig, path, dpi=dpi or PLAN_DPI)
+    return atomic_save_figure(fig, out, dpi=dpi or PLAN_DPI)
 
 
 @dataclasses.dataclass

@@ -54,12 +54,17 @@ EXIT_STATUSES = """exit status:
      `| head` does): no output file is left half-written"""
 
 
-MAX_ANCHOR_DENSITY = 20.0  # anchors per metre: one every 5 cm; denser caves take minutes to draw
 
 
 def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.files import atomic_write_text
-    from rb_drake.generate import CaveConfig, generate_cave, length_problem, values_problem
+    from rb_drake.generate import (
+        MAX_ANCHOR_DENSITY,
+        CaveConfig,
+        generate_cave,
+        length_problem,
+        values_problem,
+    )
     from rb_drake.scenario import scenario_to_yaml
 
     lo, hi = args.length

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from rb_drake.errors import EXIT_INTERRUPTED, MAX_SEED, RbpInputError, one_line
-from rb_drake.files import remove_live_temporary
+from rb_drake.files import MAX_DPI, MIN_DPI, remove_live_temporary
 
 
 def plural(n: int, word: str) -> str:
@@ -123,7 +123,6 @@ def clean_interrupts() -> Iterator[None]:
             raise interrupt()  # swallowed, and the command ended in time: still an interrupt
 
 
-MIN_DPI, MAX_DPI = 20, 600  # a picture's resolution: 600 dpi draws a cave in ~100 M pixels
 
 
 def check_seed(seed: int, flag: str = "--seed") -> None:

@@ -20,8 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
-
-MAX_TRIALS = 1_000_000  # Monte Carlo climbs of one plan; more is a sweep's job
+from rbp.api import MAX_TRIALS
 
 
 def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:

@@ -202,10 +202,17 @@ def body_in_rock(robot: RobotParams, rock: Rock, poses: np.ndarray) -> np.ndarra
 
 def rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
     """Whether some rock polygon lies entirely inside the body square (its vertex inside)."""
-    if not len(rock.vertex):
+    # only the vertices within all the squares' box can be inside one: a grid row of bodies
+    # against thousands of small polygons tested (P, W, 4) sides, 1.2 s of a 2,000-piece import
+    flat = corners.reshape(-1, 2)
+    finite = np.isfinite(flat)  # a NaN pose meets nothing; it must not hide the others' box
+    lo = np.where(finite, flat, np.inf).min(axis=0, initial=np.inf)
+    hi = np.where(finite, flat, -np.inf).max(axis=0, initial=-np.inf)
+    box = np.all((rock.vertex >= lo) & (rock.vertex <= hi), axis=1)
+    if not box.any():
         return np.zeros(corners.shape[0], dtype=bool)
-    c = corners[:, None, :, :]        # (P, 1, 4, 2)
-    v = rock.vertex[None, :, None, :]  # (1, W, 1, 2)
+    c = corners[:, None, :, :]             # (P, 1, 4, 2)
+    v = rock.vertex[box][None, :, None, :]  # (1, W', 1, 2)
     e = np.roll(corners, -1, axis=1)[:, None] - c
     side = e[..., 0] * (v[..., 1] - c[..., 1]) - e[..., 1] * (v[..., 0] - c[..., 0])
     return (side > 0).all(axis=2).any(axis=1)

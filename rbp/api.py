@@ -57,7 +57,11 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
     from rb_drake.scenario import load_scenario as load
 
     spec = Path(path_or_name)
-    if not spec.exists():
+    try:
+        exists = spec.exists()
+    except (OSError, ValueError):  # a name too long, a NUL: the reader names the file and why
+        exists = False
+    if not exists:
         caves = bundled_caves()
         if str(path_or_name) in caves:
             return load(caves[str(path_or_name)], check_start=check_start)

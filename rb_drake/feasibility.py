@@ -13,6 +13,7 @@ import numpy as np
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE, Rock
+from rb_drake.errors import apart
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, statics_problem
@@ -266,10 +267,11 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
         out.append(f"statics: no tensions within [{robot.boom_tension[0]}, "
                    f"{robot.boom_tension[1]}] N balance gravity at this pose")
     elif not alloc.robustness[0] >= robot.log_p_min:
-        probs = ", ".join(f"boom {i} {np.exp(alloc.log_probs[0, i]):.3f}"
+        # digits enough to read below p_min (p_min 1: 0.9999999999, not 1.000)
+        probs = ", ".join(f"boom {i} {apart(float(np.exp(alloc.log_probs[0, i])), robot.p_min)}"
                           for i in np.flatnonzero(stance.attached))
-        out.append(f"probability {np.exp(alloc.robustness[0]):.3f} below p_min "
-                   f"{robot.p_min} ({probs})")
+        out.append(f"probability {apart(float(np.exp(alloc.robustness[0])), robot.p_min)} "
+                   f"below p_min {robot.p_min} ({probs})")
     if not out:  # the vectorised check failed on something the words above do not cover
         out.append(REASON_TEXT[Reason(int(check.reason[0]))])
     return out

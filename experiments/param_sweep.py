@@ -95,15 +95,17 @@ def sweep_figure(param: str, values: list[float], summary: list[dict[str, Any]],
 
 
 def parse_values(parser: argparse.ArgumentParser, param: str, text: str) -> list[float]:
+    given = [v.strip() for v in text.split(",") if v.strip()]
     try:
-        values = [float(v) for v in text.split(",") if v.strip()]
+        values = [float(v) for v in given]
     except ValueError:
         parser.error(f"--values: comma-separated numbers, got {text!r}")
     if not values or len(set(values)) != len(values):
         parser.error(f"--values: give distinct values, got {text!r}")
-    bad = [v for v in values if not PARAMETERS[param][1](v)]
+    # as given: 20.0000001 printed with %g read "20 is not ... at most 20"
+    bad = [g for g, v in zip(given, values, strict=True) if not PARAMETERS[param][1](v)]
     if bad:
-        parser.error(f"--values: {bad[0]:g} is not a valid {param}: must be "
+        parser.error(f"--values: {bad[0]} is not a valid {param}: must be "
                      f"{PARAMETERS[param][2]}")
     return values
 

@@ -43,6 +43,15 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def apart(value: float, limit: float, decimals: int = 3) -> str:
+    """`value` with `decimals` decimals, or as many more as it takes to read different from
+    `limit`: a value refused just past a limit is never printed as the limit itself."""
+    for places in range(decimals, 18):
+        if float(text := f"{value:.{places}f}") != limit:
+            return text
+    return repr(value)
+
+
 # The exit status of an rbp command or an experiment script (`rbp --help` lists them). Plain
 # ints, as `sys.exit` and the tests compare them.
 EXIT_OK: Final = 0           # done: a plan was found and written, a plan verified, ...

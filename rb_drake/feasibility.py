@@ -13,6 +13,7 @@ import numpy as np
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE, Rock
+from rb_drake.errors import apart
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import Allocation, StaticsProblem, allocate, null_vector, statics_problem
@@ -202,10 +203,17 @@ def body_in_rock(robot: RobotParams, rock: Rock, poses: np.ndarray) -> np.ndarra
 
 def rock_inside_body(rock: Rock, corners: np.ndarray) -> np.ndarray:
     """Whether some rock polygon lies entirely inside the body square (its vertex inside)."""
-    if not len(rock.vertex):
+    # only the vertices within all the squares' box can be inside one: a grid row of bodies
+    # against thousands of small polygons tested (P, W, 4) sides, 1.2 s of a 2,000-piece import
+    flat = corners.reshape(-1, 2)
+    finite = np.isfinite(flat)  # a NaN pose meets nothing; it must not hide the others' box
+    lo = np.where(finite, flat, np.inf).min(axis=0, initial=np.inf)
+    hi = np.where(finite, flat, -np.inf).max(axis=0, initial=-np.inf)
+    box = np.all((rock.vertex >= lo) & (rock.vertex <= hi), axis=1)
+    if not box.any():
         return np.zeros(corners.shape[0], dtype=bool)
-    c = corners[:, None, :, :]        # (P, 1, 4, 2)
-    v = rock.vertex[None, :, None, :]  # (1, W, 1, 2)
+    c = corners[:, None, :, :]             # (P, 1, 4, 2)
+    v = rock.vertex[box][None, :, None, :]  # (1, W', 1, 2)
     e = np.roll(corners, -1, axis=1)[:, None] - c
     side = e[..., 0] * (v[..., 1] - c[..., 1]) - e[..., 1] * (v[..., 0] - c[..., 0])
     return (side > 0).all(axis=2).any(axis=1)
@@ -259,10 +267,11 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
         out.append(f"statics: no tensions within [{robot.boom_tension[0]}, "
                    f"{robot.boom_tension[1]}] N balance gravity at this pose")
     elif not alloc.robustness[0] >= robot.log_p_min:
-        probs = ", ".join(f"boom {i} {np.exp(alloc.log_probs[0, i]):.3f}"
+        # digits enough to read below p_min (p_min 1: 0.9999999999, not 1.000)
+        probs = ", ".join(f"boom {i} {apart(float(np.exp(alloc.log_probs[0, i])), robot.p_min)}"
                           for i in np.flatnonzero(stance.attached))
-        out.append(f"probability {np.exp(alloc.robustness[0]):.3f} below p_min "
-                   f"{robot.p_min} ({probs})")
+        out.append(f"probability {apart(float(np.exp(alloc.robustness[0])), robot.p_min)} "
+                   f"below p_min {robot.p_min} ({probs})")
     if not out:  # the vectorised check failed on something the words above do not cover
         out.append(REASON_TEXT[Reason(int(check.reason[0]))])
     return out

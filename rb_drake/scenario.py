@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import unicodedata
 from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
@@ -17,7 +18,7 @@ import numpy as np
 import yaml
 
 from rb_drake.collision import Rock, polygon_is_simple, signed_area
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, apart
 from rb_drake.input_files import InputFileError, load_yaml, read_text
 from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
 from rb_drake.stance import Stance
@@ -26,6 +27,9 @@ FORMAT = "reachbot-scenario/1"
 MARS_GRAVITY = (0.0, -3.71)
 ANCHOR_DEPTH_TOL = 0.01  # m: an anchor may sit this far inside its rock (numerical slack)
 ANCHOR_GAP_TOL = 0.05    # m: ... and this far off the rock surface (a gripper grasps rock)
+TOL_SLACK = 1e-9         # m: an anchor written at a tolerance (1.21 beside 1.2) is within it,
+#                          though its computed distance is a rounding over (0.010000000000000009)
+MIN_EDGE = 1e-12         # m: shorter wall edges are repeated vertices (as polygon_is_simple's)
 
 # Physically meaningful magnitudes (docs/formats.md): a value beyond them is a typo or an attack,
 # and refusing it at reading keeps overflow (1e308 squared) out of the planner.
@@ -285,6 +289,12 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
         if not isinstance(poly, list) or len(poly) < 3:
             raise rd.fail(field, f"expected a polygon of >= 3 [x, y] points, got {_describe(poly)}")
         pts = np.array([rd.vector(f"{field}[{i}]", p, 2) for i, p in enumerate(poly)])
+        edges = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
+        k = int(np.argmin(edges))
+        if edges[k] < MIN_EDGE:
+            raise rd.fail(field, f"not a simple polygon: vertices {k} and {(k + 1) % len(pts)} "
+                          f"are {edges[k]:.3g} m apart, closer than {MIN_EDGE:g} m (a repeated "
+                          "vertex)")
         simple, why = polygon_is_simple(pts)
         if not simple:
             raise rd.fail(field, f"not a simple polygon: {why}")
@@ -298,8 +308,9 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
         raise rd.fail("anchors", f"expected a non-empty list, got {_describe(anchors_raw)}")
     anchors: list[Anchor] = []
     seen: set[str] = set()
+    normalised: dict[str, str] = {}  # NFC form -> the id: ids that look the same are one id
     for k, raw in enumerate(anchors_raw):
-        anchors.append(_parse_anchor(rd, f"anchors[{k}]", raw, seen, rock))
+        anchors.append(_parse_anchor(rd, f"anchors[{k}]", raw, (seen, normalised), rock))
 
     start = rd.closed("start", rd.require("", data, "start"), {"pose", "stance"})
     pose = rd.vector("start.pose", rd.require("start", start, "pose"), 3,
@@ -334,15 +345,14 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     return scn
 
 
-def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock) -> Anchor:
+def _parse_anchor(rd: _Reader, field: str, raw: Any,
+                  ids: tuple[set[str], dict[str, str]], rock: Rock) -> Anchor:
     raw = rd.closed(field, raw, {"id", "position", "normal", "limit", "sigma"})
     aid = rd.require(field, raw, "id")
     if not isinstance(aid, str | int) or isinstance(aid, bool):
         raise rd.fail(f"{field}.id", f"expected a string, got {_describe(aid)}")
     aid = str(aid)
-    if aid in seen:
-        raise rd.fail(f"{field}.id", f"duplicate anchor id {aid!r}")
-    seen.add(aid)
+    _check_id(rd, f"{field}.id", aid, *ids)
     pos = rd.vector(f"{field}.position", rd.require(field, raw, "position"), 2)
     normal_raw = rd.require(field, raw, "normal")
     if isinstance(normal_raw, int | float) and not isinstance(normal_raw, bool):
@@ -367,16 +377,40 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any, seen: set[str], rock: Rock)
     st = rd.number(f"{field}.sigma.lateral", rd.require(f"{field}.sigma", sigma, "lateral"),
                    positive=True, bound=MAX_FORCE, least=MIN_FORCE)
     p = np.array(pos)
-    if rock.polygons and rock.contains(p) and rock.distance(p) > ANCHOR_DEPTH_TOL:
-        raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is inside rock "
-                      f"({float(rock.distance(p)):.3f} m from the surface)")
+    if (rock.polygons and rock.contains(p)
+            and (depth := float(rock.distance(p))) > ANCHOR_DEPTH_TOL + TOL_SLACK):
+        raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is inside rock: "
+                      f"{apart(depth, ANCHOR_DEPTH_TOL)} m from the surface (at most "
+                      f"{ANCHOR_DEPTH_TOL} m inside)")
     if rock.polygons and rock.contains(p + 0.05 * np.array(normal)):
         raise rd.fail(f"{field}.normal", f"anchor {aid!r}: the normal points into the rock; "
                       "it must point out of the wall, into free space")
-    if rock.polygons and (gap := float(rock.distance(p))) > ANCHOR_GAP_TOL and not rock.contains(p):
+    if (rock.polygons and (gap := float(rock.distance(p))) > ANCHOR_GAP_TOL + TOL_SLACK
+            and not rock.contains(p)):
         raise rd.fail(f"{field}.position", f"anchor {aid!r} at {list(pos)} is off its wall: "
-                      f"{gap:.3f} m from the nearest rock surface (at most {ANCHOR_GAP_TOL} m)")
+                      f"{apart(gap, ANCHOR_GAP_TOL)} m from the nearest rock surface (at most "
+                      f"{ANCHOR_GAP_TOL} m)")
     return Anchor(aid, (pos[0], pos[1]), normal, fn, ft, sn, st)
+
+
+def _check_id(rd: _Reader, field: str, aid: str, seen: set[str],
+              normalised: dict[str, str]) -> None:
+    """An anchor id is visible text, unique even once Unicode-normalised (NFC): an empty id,
+    U+202E (which reverses the text after it) or 'e' + U+0301 beside 'é' would name anchors
+    a reader cannot tell apart in a plan, a summary or an error."""
+    if not aid.strip():
+        raise rd.fail(field, f"an anchor id must not be empty or only spaces, got {aid!r}")
+    if not aid.isprintable():  # control, format (bidi, zero-width) and separator characters
+        bad = next(c for c in aid if not c.isprintable())
+        raise rd.fail(field, f"anchor id {aid!r} holds the invisible or control character "
+                      f"U+{ord(bad):04X} ({unicodedata.category(bad)}); use visible text")
+    key = unicodedata.normalize("NFC", aid)
+    if aid in seen or key in normalised:
+        same = "" if normalised.get(key, aid) == aid else (  # escaped: they print alike
+            f" ({aid!a}: the same as {normalised[key]!a} once Unicode-normalised)")
+        raise rd.fail(field, f"duplicate anchor id {aid!r}{same}")
+    seen.add(aid)
+    normalised[key] = aid
 
 
 def _check_goal(rd: _Reader, rock: Rock, goal: np.ndarray, tolerance: float) -> None:

@@ -91,8 +91,8 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     command = (f"rbp scenario generate --kind {args.kind} --seed {args.seed} "
                f"--length {lo:g} {hi:g} --anchor-density {args.anchor_density:g}")
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
-    print(f"wrote {args.output}: {scn.name}, {len(scn.anchors)} anchors, "
-          f"start stance {list(scn.start_stance)}")
+    print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.anchors)} anchors, "
+                   f"start stance {list(scn.start_stance)}"))
     return EXIT_OK
 
 
@@ -125,9 +125,9 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     # one line: a newline in a file name or --name would end the comment
     command = shlex.join(words).replace("\n", " ").replace("\r", " ")
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
-    print(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
-          f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "
-          f"{list(scn.start_stance)}, goal {list(scn.goal_position)}")
+    print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
+                   f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "
+                   f"{list(scn.start_stance)}, goal {list(scn.goal_position)}"))
     return EXIT_OK
 
 
@@ -147,13 +147,13 @@ def cmd_scenario_check(args: argparse.Namespace) -> int:
     scn = load_scenario_spec(args.scenario)
     check = check_poses(scn, scn.stance(scn.start_stance), np.array(scn.start_pose))
     alloc = check.allocation
-    print(f"{scn.source}: ok: {scn.name}")
+    print(one_line(f"{scn.source}: ok: {scn.name}"))  # user text: escaped, as in errors
     print(f"  {len(scn.walls)} rock polygons, {len(scn.anchors)} anchors, gravity "
           f"{list(scn.gravity)} m/s^2")
     print(f"  start pose {list(scn.start_pose)} in stance {list(scn.start_stance)}: "
           f"P = {check.probability[0]:.5f} (p_min {scn.robot.p_min})")
     for i, aid in enumerate(scn.start_stance):
-        print(f"    boom {i} -> {aid}: tension {alloc.tensions[0, i]:6.2f} N, pull angle "
+        print(f"    boom {i} -> {one_line(aid)}: tension {alloc.tensions[0, i]:6.2f} N, pull angle "
               f"{np.degrees(alloc.pull_angles[0, i]):+6.1f} deg, P = "
               f"{np.exp(alloc.log_probs[0, i]):.5f}")
     print(f"  goal {list(scn.goal_position)} +- {scn.goal_tolerance} m")
@@ -361,8 +361,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         },
     }
     data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
-    print(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
-          f"wrote {picture} and {data}")
+    print(one_line(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
+                   f"wrote {picture} and {data}"))
     if args.plan:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig

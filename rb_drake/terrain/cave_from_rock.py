@@ -97,6 +97,12 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
                    anchors=tuple(anchors), start_pose=(0.0, 0.0, 0.0), start_stance=("",) * 4,
                    goal_position=(0.0, 0.0), goal_tolerance=GOAL_TOLERANCE, source=source,
                    robot_overrides={} if robot == RobotParams() else robot.to_dict())
+    if max_values is not None:  # the file as it will be written (a start and goal of the same
+        #                         shape fill in later), refused before the start and goal search
+        from rb_drake.input_files import count_values
+
+        if (values := count_values(scn.to_dict())) > max_values:
+            raise too_many_values(source, f"{values:,}", max_values)
     grid = _Grid(scn) if start is None or goal is None else None
     if start is not None:
         pose = np.array([start[0], start[1], 0.0])

@@ -131,7 +131,10 @@ class MemoryPool:
         if self.cap_bytes is not None and cap >= self.cap_bytes:
             self.lowered_cap = None
             return
+        # never under the floor, nor (a cap below the floor, as the tests set) over its own cap
         self.lowered_cap = max(GOVERNOR_FLOOR_MB * 2.0 ** 20, cap)
+        if self.cap_bytes is not None:
+            self.lowered_cap = min(self.lowered_cap, self.cap_bytes)
         self.lowest_cap = min(self.lowered_cap, self.lowest_cap or math.inf)
 
     def unpacked(self, cache: BoundedCache[Any, Any], key: Hashable, nbytes: int) -> None:

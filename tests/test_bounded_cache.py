@@ -245,6 +245,10 @@ def test_a_pool_watching_the_process_gives_way_and_recovers(monkeypatch) -> None
         cache.get(key)
     assert pool.lowered_cap == GOVERNOR_FLOOR_MB * mib, pool.stats()
     assert pool.stats()["lowest_cap"] == GOVERNOR_FLOOR_MB * mib
+    small = MemoryPool(cap_bytes=1 * mib)  # a cap under the floor is never raised to it
+    small.process_budget = 1000 * mib
+    small._watch_process(small.process_budget)
+    assert small.lowered_cap == 1 * mib, small.stats()
     resident["bytes"] = 300 * mib  # room again: its own cap
     for key in range(GOVERNOR_EVERY):
         cache.get(key)

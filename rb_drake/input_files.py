@@ -17,7 +17,7 @@ goes through `read_text`, and the YAML ones through `load_yaml`. The bounds (doc
   levels, with no scalar over MAX_SCALAR_CHARS characters nor a number over MAX_NUMBER_CHARS
   (Python refuses to convert an integer of more than 4,300 digits), without duplicate keys in
   a mapping (the last one would silently win);
-- JSON of at most MAX_JSON_UNITS units, counted on its separators before parsing: a value
+- JSON of at most a quarter of the size limit in units (at least MAX_JSON_UNITS), counted: a value
   (after a `,`, `[` or `{`) one, a list one more, an object or key (`{`, `:`) five more, as a
   parsed object or key takes five times a number's memory (`json_units`).
 A refusal raises InputFileError(field, reason); each reader turns it into its own error class,
@@ -54,9 +54,9 @@ DEFAULT_MAX_NODES = 50_000
 MAX_ALIASES = 10_000    # alias uses in a YAML document
 MAX_SCALAR_CHARS = 1_000_000  # one YAML value: names and notes need a few hundred
 MAX_NUMBER_CHARS = 4_000  # a YAML number's characters: below Python's 4,300-digit conversion limit
-# Units of a JSON document (`json_units`), about 32 bytes parsed each: 2,000,000 keep a hostile
-# file's parse to about 64 MB (990,000 `{"a":0}` took 192 MB: a parsed dict costs six
-# numbers). A 7.4 MB plan of 28,000 steps counts 1.4 M (21 MB parsed; 300 phases, 5 MB: 1 M).
+# Units of a JSON document (`json_units`), ~32 bytes parsed each: a quarter of the size limit's
+# bytes, at least MAX_JSON_UNITS: a parse of 8x the limit (990,000 `{"a":0}` took 192 MB); rbp's
+# plans count 0.12 a byte (a fixed 2 M refused a 24 MiB plan rbp wrote, whatever the limit).
 MAX_JSON_UNITS = 2_000_000
 JSON_OBJECT_UNITS = 5  # more for each `{` and `:`: a dict's 180 bytes, a key's pair and slot
 # A YAML document's nodes are counted on its events (which need no tree) only when a cheap
@@ -428,11 +428,11 @@ def load_json(text: str, max_values: int | None = None, **options: Any) -> Any:
     `max_values` also bounds its values, for a document of a smaller kind (a scenario inside a
     rig log holds at most what a scenario file may)."""
     text = text.removeprefix("\ufeff")
-    units = json_units(text)
-    if units > MAX_JSON_UNITS:
+    units, most = json_units(text), max(MAX_JSON_UNITS, int(max_input_bytes() / 4))
+    if units > most:
         raise InputFileError("(file)", f"too many values and objects to read: {units:,} units "
                              f"(a value 1, a list 2, an object or key {JSON_OBJECT_UNITS + 1}), "
-                             f"over the limit of {MAX_JSON_UNITS:,}")
+                             f"over the limit of {most:,}")
     if max_values is not None and (bound := sum(text.count(c) for c in ",[{") + 1) > max_values:
         raise InputFileError("(file)", f"may hold up to {bound:,} values (its commas and "
                              f"brackets), over the limit of {max_values:,}")

@@ -15,11 +15,12 @@ GOLDEN = Path(__file__).parent / "data" / "golden"
 
 
 def test_json_of_many_small_objects_refused_before_parsing():
-    """990,000 `{"a":0}` in 8 MB were under the value bound and parsed to 192 MB."""
+    """990,000 `{"a":0}` in 8 MB were under the value bound and parsed to 192 MB; the units
+    limit is a quarter of the 8 MiB size limit."""
     text = "[" + ",".join(['{"a":0}'] * 990_000) + "]"
     tracemalloc.start()
     try:
-        with pytest.raises(InputFileError, match="over the limit of 2,000,000"):
+        with pytest.raises(InputFileError, match="over the limit of 2,097,152"):
             load_json(text)
         _, peak = tracemalloc.get_traced_memory()
     finally:
@@ -149,3 +150,17 @@ def test_plan_refuses_a_bad_scenario_before_the_planners_imports(tmp_path, given
                             env={**os.environ, "LCM_DEFAULT_URL": "memq://"})
     assert result.stdout.split() == ["2", "False", "False"], (result.stdout, result.stderr)
     assert result.stderr.strip().splitlines()[0].startswith(f"error: {bad}: "), result.stderr
+
+
+def test_json_units_grow_with_the_size_limit(monkeypatch):
+    """rbp wrote a 24 MiB plan (a 20 m climb at --dt 0.01) and said which RBP_MAX_INPUT_MB
+    reads it back, but a fixed 2,000,000 units refused it (rbp's plans count about 0.12 units a
+    byte): the units limit is a quarter of the size limit's bytes, at least MAX_JSON_UNITS."""
+    plan = json.loads((GOLDEN / "demo-shaft.json").read_text())
+    plan["phases"] = plan["phases"] * 100  # about 25 MB of rbp's own density
+    text = json.dumps(plan)
+    assert json_units(text) > MAX_JSON_UNITS, "the plan should be over the default's units"
+    with pytest.raises(InputFileError, match="units"):
+        load_json(text)
+    monkeypatch.setenv("RBP_MAX_INPUT_MB", str(len(text) // 2**20 + 1))
+    assert len(load_json(text)["phases"]) == len(plan["phases"])

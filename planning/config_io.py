@@ -18,7 +18,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from planning.config_ranges import field_problem
+from planning.config_ranges import SECTIONS, field_problem, unknown_key
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
@@ -57,6 +57,10 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     where = prefix or "(top level)"
     if not isinstance(data, dict):
         raise ConfigError(source, where, f"expected a mapping, got {_describe(data)}")
+    if not prefix and SECTIONS.get(cls.__name__) == "" and (found := unknown_key(data)):
+        # a whole file's keys before its values, as `rbp plan` checks them before its imports:
+        # the same first problem named either way
+        raise ConfigError(source, *found)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     hints = typing.get_type_hints(cls)
     changes = {}

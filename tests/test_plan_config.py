@@ -332,3 +332,16 @@ def test_unknown_keys_found_without_the_planner_as_its_classes_find_them(tmp_pat
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert "footstep.anytime.improve_factr: unknown key" in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("data", [{"dt": -1.0, "zzz": 1}, {"footstep": "x", "zzz": 1},
+                                  {"footstep": {"max_expansions": "abc", "lattice": {"zzz": 1}}}])
+def test_a_file_s_keys_are_checked_before_its_values_by_either_reader(data) -> None:
+    """`rbp plan` checks a configuration's keys before its imports; the full reader (the API,
+    --from-plan) checks a whole file's keys before its values too, so both name the same first
+    problem (an earlier bad value was named by one, a later unknown key by the other)."""
+    from planning.config_ranges import unknown_key
+
+    with pytest.raises(ConfigError) as refused:
+        config_from_dict(PipelineConfig, data, "c.yaml")
+    assert (refused.value.field, refused.value.reason) == unknown_key(data), refused.value

@@ -194,7 +194,7 @@ def test_plan_objects_are_read_as_plan_files(plan_obj: rbp.Plan, edit: Any, fiel
                  lambda p: rbp.draw(p, tmp_path / "w.png")):
         with pytest.raises(PlanFileError) as e:
             call(bad)
-        assert e.value.field.startswith(field)  # which of 4 tensions: jsonschema's choice
+        assert (e.value.field or "").startswith(field)  # which of 4 tensions: jsonschema's choice
     assert list(tmp_path.iterdir()) == []
 
 
@@ -220,6 +220,7 @@ def test_paths_of_a_wrong_type_name_the_argument(path: Any) -> None:
     ({"start_stance": ("x",)}, "start.stance"),
     ({"goal_tolerance": -1.0}, "goal.tolerance"),
     ({"start_pose": None}, "(top level)"),
+    ({"robot": None}, "(top level)"),
 ])
 def test_scenario_objects_are_read_as_scenario_files(changes: dict[str, Any], field: str,
                                                      tmp_path: Path) -> None:
@@ -230,6 +231,17 @@ def test_scenario_objects_are_read_as_scenario_files(changes: dict[str, Any], fi
     with pytest.raises(ScenarioError, match=r"^\(scenario_or_plan argument\): "):
         rbp.draw(bad, tmp_path / "x.png")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_valid_scenario_object_is_read_back_unchanged() -> None:
+    from rb_drake.scenario import checked_scenario
+
+    scn = rbp.load_scenario("demo-shaft")
+    assert checked_scenario(scn, "(x)").to_dict() == scn.to_dict()  # overrides kept
+    heavy = dataclasses.replace(scn, robot=dataclasses.replace(scn.robot,
+                                                               body_mass=float("nan")))
+    with pytest.raises(ScenarioError, match=r"^\(x\): robot.body_mass: must be finite"):
+        checked_scenario(heavy, "(x)")  # a replaced robot, not its overrides
 
 
 def test_flags_must_be_bools() -> None:

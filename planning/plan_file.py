@@ -212,13 +212,17 @@ def _kind(value: Any) -> str:
 
 
 def plan_from(plan: Any, what: str = "plan") -> Plan:
-    """`plan` (argument `what` of the Python API) as a Plan: a Plan as it is (the planner's, or
-    read from a file: already valid); a plan-file object (a dict) checked as a plan file is,
-    through its JSON text (the reading limits, non-finite numbers, the schema, the times), so
-    that a NaN, a bool or 10**400 is refused (PlanFileError naming the field) before numpy or
-    Drake meet it (a NaN pose aborted the interpreter in Drake)."""
+    """`plan` (argument `what` of the Python API) as a Plan: a Plan or a plan-file object (a
+    dict) checked as a plan file is, through its JSON text (the reading limits, non-finite
+    numbers, the schema, the times), so that a NaN, a bool or 10**400 is refused (PlanFileError
+    naming the field) before numpy or Drake meet it (a NaN pose aborted the interpreter in
+    Drake). A Plan is checked too: its fields are the caller's to replace (about 0.1 s for the
+    demo plan)."""
     if isinstance(plan, Plan):
-        return plan
+        try:
+            plan = plan.to_dict()  # the form write_plan writes: checked as it will be read
+        except (TypeError, ValueError, AttributeError, KeyError, RecursionError) as e:
+            raise PlanFileError("(top level)", f"not a plan's values: {e}") from None
     if not isinstance(plan, dict):
         raise RbpInputError("expected a Plan (rbp.plan, rbp.read_plan) or a plan-file object "
                             f"(a dict), got {type(plan).__name__}", field=what)

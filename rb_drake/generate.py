@@ -18,7 +18,7 @@ from rb_drake.collision import Rock
 from rb_drake.errors import RbpError, RbpInputError
 from rb_drake.feasibility import check_poses
 from rb_drake.params import NUM_BOOMS, RobotParams
-from rb_drake.scenario import MARS_GRAVITY, Anchor, Scenario
+from rb_drake.scenario import MARS_GRAVITY, MAX_FORCE, MAX_GRAVITY, MIN_FORCE, Anchor, Scenario
 
 KINDS = ("shaft", "crevasse", "rockfall")
 MIN_LENGTH = 2.0  # m: start and goal sit 1 m from either end of a cave, so shorter has no climb
@@ -76,6 +76,43 @@ class CaveConfig:
     roughness: float = 0.08                # m, std of wall vertex jitter
     gravity: tuple[float, float] = MARS_GRAVITY
     max_redraws: int = 20
+
+
+# CaveConfig's ranges (rbp.generate_scenario checks them before any draw): each (lo, hi) pair
+# within these bounds with lo <= hi; forces within the scenario reader's (rb_drake.scenario)
+_PAIRS = {"limit_normal": (0.1, 1e5), "lateral_ratio": (0.01, 10.0),
+          "sigma_normal": (MIN_FORCE, MAX_FORCE), "sigma_lateral": (MIN_FORCE, MAX_FORCE),
+          "length": (MIN_LENGTH, MAX_LENGTH), "width": (0.1, 20.0),
+          "passage_height": (0.1, 20.0)}
+_SINGLES = {"anchor_density": (1e-3, MAX_ANCHOR_DENSITY), "normal_noise_deg": (0.0, 180.0),
+            "roughness": (0.0, 1.0)}
+MAX_REDRAWS = 1000  # each draw that fails takes up to about 0.75 s
+
+
+def config_problem(cfg: CaveConfig) -> tuple[str, str] | None:
+    """(field, reason) for the first CaveConfig value out of its range, or None: a NaN
+    gravity drew 20 caves in 15 s before failing, a negative width drew one."""
+    def number(x: object) -> bool:  # finite and not huge (NaN fails the comparison)
+        return isinstance(x, int | float) and not isinstance(x, bool) and abs(x) <= MAX_FORCE
+
+    for name, (lo, hi) in _SINGLES.items():
+        v = getattr(cfg, name)
+        if not (number(v) and lo <= v <= hi):
+            return name, f"must be a number from {lo:g} to {hi:g}, got {v!r:.60}"
+    for name, (lo, hi) in _PAIRS.items():
+        v = getattr(cfg, name)
+        if not (isinstance(v, tuple | list) and len(v) == 2 and all(map(number, v))
+                and lo <= v[0] <= v[1] <= hi):
+            return name, f"must be (MIN, MAX) with {lo:g} <= MIN <= MAX <= {hi:g}, got {v!r:.60}"
+    g = cfg.gravity
+    if not (isinstance(g, tuple | list) and len(g) == 2 and all(map(number, g))
+            and all(abs(x) <= MAX_GRAVITY for x in g)):
+        return "gravity", (f"must be 2 finite numbers at most {MAX_GRAVITY:g} m/s^2 in "
+                           f"magnitude, got {g!r:.60}")
+    r = cfg.max_redraws
+    if isinstance(r, bool) or not isinstance(r, int) or not 1 <= r <= MAX_REDRAWS:
+        return "max_redraws", f"must be a whole number from 1 to {MAX_REDRAWS}, got {r!r:.60}"
+    return None
 
 
 class Surface:

@@ -432,6 +432,25 @@ def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
     return scenario_from_dict(data, str(path), check_start=check_start)
 
 
+def checked_scenario(scn: Scenario, source: str) -> Scenario:
+    """A Scenario object (its fields the caller's to replace) read again as its file would be:
+    a NaN start or an unknown stance id raises ScenarioError naming `source` and the field,
+    before a planner or numpy meets it. The object's own source is kept for the messages that
+    name the cave."""
+    try:
+        data = scn.to_dict()
+        checked = scenario_from_dict(data, source, check_start=False)
+        if checked.robot != scn.robot:  # `robot` replaced, not its overrides: read it whole
+            data["robot"] = scn.robot.to_dict()
+            checked = scenario_from_dict(data, source, check_start=False)
+    except (TypeError, ValueError, AttributeError, RecursionError) as e:
+        if isinstance(e, ScenarioError):
+            raise
+        raise ScenarioError(source, "(top level)", f"not a scenario's values: {e}") from None
+    return dataclasses.replace(checked, source=scn.source if isinstance(scn.source, str)
+                               else source)
+
+
 def read_yaml_file(path: str | Path, error: type[ScenarioError] = ScenarioError) -> Any:
     """The YAML document of a file, read within rb_drake.input_files' bounds; a missing,
     unreadable, oversized or non-regular file, bad YAML, an alias or a duplicate key raises

@@ -60,6 +60,16 @@ def _whole(value: Any, field: str, lo: int, hi: int) -> int:
     return number
 
 
+def _flag(value: Any, field: str) -> bool:
+    """`value` if it is a bool (numpy's too), else RbpInputError naming `field`: "no" was taken
+    as true."""
+    from rb_drake.errors import RbpInputError
+
+    if not isinstance(value, bool) and type(value).__name__ != "bool_":
+        raise RbpInputError(f"expected True or False, got {value!r:.60}", field=field)
+    return bool(value)
+
+
 def _number(value: Any, field: str) -> float:
     """`value` as a float if it is a real number (not a bool); else RbpInputError on `field`."""
     import numbers
@@ -71,15 +81,24 @@ def _number(value: Any, field: str) -> float:
     return float(value)
 
 
+def _path(value: Any, field: str, what: str = "a file path") -> str | Path:
+    """`value` if it is a str or Path, else RbpInputError naming the argument `field` (pathlib's
+    TypeError on 5, bytes or None told nothing of which argument)."""
+    from rb_drake.errors import RbpInputError
+
+    if not isinstance(value, str | Path):
+        raise RbpInputError(f"expected {what} (str or Path), got {type(value).__name__}",
+                            field=field)
+    return value
+
+
 def _output(path: Any, picture: bool = False) -> Path:
     """`path` as an output file, refused as the command line refuses one (RbpInputError naming
     it: a folder, an unwritable place, a picture's suffix matplotlib cannot write)."""
     from rb_drake.errors import RbpInputError
     from rb_drake.files import output_problem, picture_format_problem
 
-    if not isinstance(path, str | Path):
-        raise RbpInputError(f"expected a file path (str or Path), got {type(path).__name__}",
-                            field="path")
+    _path(path, "path")
     problem = output_problem(path) or (picture_format_problem(path) if picture else None)
     if problem is not None:
         raise RbpInputError(problem, file=str(path))
@@ -98,12 +117,10 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
     (`bundled_caves()`; "rig" is the lab rig's frame). A file of that name wins over a bundled
     cave. `check_start` also checks that the start stance holds the robot. Raises
     `rb_drake.scenario.ScenarioError` (file, field, reason) for a bad or missing file."""
-    from rb_drake.errors import RbpInputError
     from rb_drake.scenario import load_scenario as load
 
-    if not isinstance(path_or_name, str | Path):
-        raise RbpInputError("expected a file path or a bundled cave's name (str or Path), got "
-                            f"{type(path_or_name).__name__}", field="path_or_name")
+    _path(path_or_name, "path_or_name", "a file path or a bundled cave's name")
+    check_start = _flag(check_start, "check_start")
     spec = Path(path_or_name)
     try:
         exists = spec.exists()
@@ -134,11 +151,14 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     from rb_drake.generate import (
         MAX_ANCHOR_DENSITY,
         CaveConfig,
+        config_problem,
         generate_cave,
         length_problem,
         values_problem,
     )
 
+    if not isinstance(length, tuple | list) or len(length) != 2:
+        raise RbpInputError(f"expected (MIN, MAX) in m, got {length!r:.60}", field="length")
     lo, hi = (_number(x, "length") for x in length)
     if (problem := length_problem(lo, hi)) is not None:
         raise RbpInputError(problem, field="length")
@@ -149,8 +169,13 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     if (problem := values_problem(hi, anchor_density)) is not None:
         raise RbpInputError(problem)  # up front: a 1000 m cave takes minutes to draw
     seed = _whole(seed, "seed", 0, MAX_SEED)
+    if config is not None and not isinstance(config, CaveConfig):
+        raise RbpInputError("expected an rb_drake.generate.CaveConfig or None, got "
+                            f"{type(config).__name__}", field="config")
     cfg = dataclasses.replace(config or CaveConfig(), anchor_density=anchor_density,
                               length=(lo, hi))
+    if (bad := config_problem(cfg)) is not None:  # before any draw (a NaN gravity took 15 s)
+        raise RbpInputError(bad[1], field=f"config.{bad[0]}")
     return generate_cave(kind, seed, cfg)
 
 
@@ -173,7 +198,7 @@ def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
     (file and reason) for a file that is not closed, simple rock or makes no cave."""
     from rb_drake.terrain.import_cave import ImportOptions, import_cave
 
-    return import_cave(path, ImportOptions(
+    return import_cave(_path(path, "path"), ImportOptions(
         unit=unit, scale=scale, simplify=simplify, anchor_density=anchor_density, seed=seed,
         start=start, goal=goal, name=name, plane_origin=plane_origin,
         plane_normal=plane_normal, resolution=resolution))
@@ -207,6 +232,8 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
 
     if planner not in PLANNERS:
         raise RbpInputError(f"must be one of {PLANNERS}, got {planner!r}", field="planner")
+    footsteps_only = _flag(footsteps_only, "footsteps_only")
+    partial = _flag(partial, "partial")
     if partial and (planner != "rbp" or footsteps_only):
         raise RbpInputError("a partial climb is flown through the whole pipeline of the rbp "
                             "planner: not with the naive planner or footsteps only",
@@ -235,12 +262,13 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
 
 
 def _scenario(scenario: Any, field: str) -> Scenario:
-    """`scenario` as a Scenario: a Scenario, or what `load_scenario` takes."""
+    """`scenario` as a Scenario: a Scenario (checked again by the scenario reader, its file
+    named "(FIELD argument)"), or what `load_scenario` takes."""
     from rb_drake.errors import RbpInputError
-    from rb_drake.scenario import Scenario
+    from rb_drake.scenario import Scenario, checked_scenario
 
     if isinstance(scenario, Scenario):
-        return scenario
+        return checked_scenario(scenario, f"({field} argument)")
     if not isinstance(scenario, str | Path):
         raise RbpInputError("expected a Scenario, a scenario file or a bundled cave's name, got "
                             f"{type(scenario).__name__}", field=field)
@@ -273,7 +301,7 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | str | Path | None = 
         problems.append(f"scenario: the plan was made for another cave or robot than "
                         f"{scenario.name} ({scenario.source})")
     with CheckProgress("checking the plan", quiet=not progress) as bar:
-        problems += plan_problems(model, progress=bar)[0]
+        problems += plan_problems(model, "<plan>", progress=bar)[0]  # named as simulate's
     return problems
 
 
@@ -285,7 +313,7 @@ def read_plan(path: str | Path) -> Plan:
     from planning.plan_file import read_plan as read
 
     try:
-        return read(path)
+        return read(_path(path, "path"))
     except PlanFileError as e:  # named as load_scenario names its file
         raise PlanFileError(str(e.field), e.reason, file=str(path)) from None
 
@@ -404,7 +432,7 @@ def draw(scenario_or_plan: Scenario | Plan | dict[str, Any], path: str | Path,
     if isinstance(scenario_or_plan, Scenario):
         from rb_drake.draw import scenario_figure
 
-        fig = scenario_figure(scenario_or_plan)
+        fig = scenario_figure(_scenario(scenario_or_plan, "scenario_or_plan"))
         return atomic_save_figure(fig, out, dpi=dpi or SCENARIO_DPI)
     from planning.figures import snapshots_figure
 
@@ -463,8 +491,9 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
     if not speedup > 0:
         raise RbpInputError(f"must be above 0, got {speedup:g}", field="speedup")
     if isinstance(what, Scenario):
+        scn = _scenario(what, "what")
         server = start_meshcat()
-        show_scenario(server, what)
+        show_scenario(server, scn)
         return MeshcatView(server.web_url(), server)
     # simulated before the server starts: a plan that cannot be flown leaves none behind
     result = what if isinstance(what, SimulationResult) else simulate(what)

@@ -149,3 +149,128 @@ def test_plan_checks_its_configuration_before_any_work() -> None:
     with pytest.raises(RbpInputError, match=r"^config: expected a planning.pipeline"):
         rbp.plan("demo-shaft", "x", footsteps_only=True)  # type: ignore[arg-type]
     assert calls == []  # refused before the footstep search
+
+
+def _phase(plan: rbp.Plan, **changes: Any) -> rbp.Plan:
+    phases = list(plan.phases)
+    phases[0] = dataclasses.replace(phases[0], **changes)
+    return plan.replace(phases=tuple(phases))
+
+
+def _step(plan: rbp.Plan, **changes: Any) -> rbp.Plan:
+    steps = list(plan.phases[0].steps)
+    steps[1] = dataclasses.replace(steps[1], **changes)
+    return _phase(plan, steps=tuple(steps))
+
+
+@pytest.fixture(scope="module")
+def plan_obj(plan_dict: dict[str, Any]) -> rbp.Plan:
+    return rbp.Plan.from_dict(plan_dict)
+
+
+@pytest.mark.parametrize(("edit", "field"), [
+    (lambda p: _step(p, pose=(float("nan"), 1.0, 0.0)), "phases[0].steps[1].pose[0]"),
+    (lambda p: _step(p, pose=(1.0,)), "phases/0/steps/1/pose"),
+    (lambda p: _step(p, pose=None), "phases/0/steps/1/pose"),
+    (lambda p: _step(p, t="x"), "phases/0/steps/1/t"),
+    (lambda p: _step(p, tension=(1e308,) * 4), "phases/0/steps/1/tension/"),
+    (lambda p: _phase(p, steps=()), "phases/0/steps"),
+    (lambda p: _phase(p, kind="zzz"), "phases/0/kind"),
+    (lambda p: p.replace(phases=None), "phases"),
+    (lambda p: p.replace(scenario=None), "scenario"),
+    (lambda p: p.replace(scenario="x"), "scenario"),
+    (lambda p: p.replace(format="x"), "format"),
+    (lambda p: p.replace(timing="x"), "timing"),
+    (lambda p: p.replace(success="x"), "success"),
+    (lambda p: p.replace(time_step=5e-324), "time_step"),
+    (lambda p: p.replace(robot={**p.robot, "body_mass": float("nan")}), "robot.body_mass"),
+])
+def test_plan_objects_are_read_as_plan_files(plan_obj: rbp.Plan, edit: Any, field: str,
+                                             tmp_path: Path) -> None:
+    """A Plan's fields are the caller's to replace: checked as its file would be read (a NaN
+    pose ended rbp.simulate in Drake's abort, a SystemExit; others in numpy's errors)."""
+    bad = edit(plan_obj)
+    for call in (rbp.check, rbp.simulate, lambda p: rbp.write_plan(p, tmp_path / "w.json"),
+                 lambda p: rbp.draw(p, tmp_path / "w.png")):
+        with pytest.raises(PlanFileError) as e:
+            call(bad)
+        assert (e.value.field or "").startswith(field)  # which of 4 tensions: jsonschema's choice
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_valid_plan_object_is_unchanged(plan_obj: rbp.Plan) -> None:
+    from planning.plan_file import plan_from
+
+    assert plan_from(plan_obj) == plan_obj
+    assert rbp.check(plan_obj) == []
+
+
+@pytest.mark.parametrize("path", [5, b"plan.json", None, ["plan.json"]])
+def test_paths_of_a_wrong_type_name_the_argument(path: Any) -> None:
+    with pytest.raises(RbpInputError, match=r"^path: expected a file path \(str or Path\)"):
+        rbp.read_plan(path)
+    with pytest.raises(RbpInputError, match=r"^path: expected a file path \(str or Path\)"):
+        rbp.import_scenario(path)
+    with pytest.raises(RbpInputError, match=r"^path_or_name: expected a file path"):
+        rbp.load_scenario(path)
+
+
+@pytest.mark.parametrize(("changes", "field"), [
+    ({"start_pose": (float("nan"), 0.0, 0.0)}, "start.pose[0]"),
+    ({"start_stance": ("x",)}, "start.stance"),
+    ({"goal_tolerance": -1.0}, "goal.tolerance"),
+    ({"start_pose": None}, "(top level)"),
+    ({"robot": None}, "(top level)"),
+])
+def test_scenario_objects_are_read_as_scenario_files(changes: dict[str, Any], field: str,
+                                                     tmp_path: Path) -> None:
+    bad = dataclasses.replace(rbp.load_scenario("demo-shaft"), **changes)
+    with pytest.raises(ScenarioError, match=r"^\(scenario argument\): ") as e:
+        rbp.plan(bad, footsteps_only=True)
+    assert e.value.field == field
+    with pytest.raises(ScenarioError, match=r"^\(scenario_or_plan argument\): "):
+        rbp.draw(bad, tmp_path / "x.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_valid_scenario_object_is_read_back_unchanged() -> None:
+    from rb_drake.scenario import checked_scenario
+
+    scn = rbp.load_scenario("demo-shaft")
+    assert checked_scenario(scn, "(x)").to_dict() == scn.to_dict()  # overrides kept
+    heavy = dataclasses.replace(scn, robot=dataclasses.replace(scn.robot,
+                                                               body_mass=float("nan")))
+    with pytest.raises(ScenarioError, match=r"^\(x\): robot.body_mass: must be finite"):
+        checked_scenario(heavy, "(x)")  # a replaced robot, not its overrides
+
+
+def test_flags_must_be_bools() -> None:
+    with pytest.raises(RbpInputError, match=r"^check_start: expected True or False"):
+        rbp.load_scenario("demo-shaft", check_start="no")  # type: ignore[arg-type]
+    with pytest.raises(RbpInputError, match=r"^footsteps_only: expected True or False"):
+        rbp.plan("demo-shaft", footsteps_only="x")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    ({"length": (4.0, 5.0, 6.0)}, "length"),
+    ({"length": 5.0}, "length"),
+    ({"config": "x"}, "config"),
+    ({"config": rbp.CaveConfig(roughness=float("nan"))}, "config.roughness"),
+    ({"config": rbp.CaveConfig(width=(-1.0, 1.0))}, "config.width"),
+    ({"config": rbp.CaveConfig(limit_normal=None)}, "config.limit_normal"),  # type: ignore
+    ({"config": rbp.CaveConfig(max_redraws=-1)}, "config.max_redraws"),
+    ({"config": rbp.CaveConfig(max_redraws=10**9)}, "config.max_redraws"),
+    ({"config": rbp.CaveConfig(gravity=(float("nan"), 0.0))}, "config.gravity"),
+    ({"config": rbp.CaveConfig(sigma_normal=(10**400, 1.0))}, "config.sigma_normal"),
+])
+def test_generate_scenario_checks_its_config_before_any_draw(
+        kwargs: dict[str, Any], field: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    import rb_drake.generate
+
+    def no_draw(*args: Any) -> None:
+        raise AssertionError("drew a cave")
+
+    monkeypatch.setattr(rb_drake.generate, "_shaft", no_draw)
+    with pytest.raises(RbpInputError) as e:
+        rbp.generate_scenario(**kwargs)
+    assert e.value.field == field

@@ -214,8 +214,9 @@ def calibration_figure(rows: list[dict[str, Any]]):
     lo = min([0.5, *x, *ci[:, 0]]) - 0.02
     ax.plot([lo, 1.0], [lo, 1.0], "k--", lw=0.8, label="calibrated")
     cf = np.array([r["ci_simultaneous"] for r in rows]).reshape(-1, 2)
-    ax.errorbar(x, y, yerr=[y - cf[:, 0], cf[:, 1] - y], fmt="none", ecolor="#9ecae1",
-                elinewidth=4, label="simultaneous 95 % CI (all plans)")
+    # the counts' interval holds successes / runs, the rate to the record check's tolerance
+    ax.errorbar(x, y, yerr=np.maximum(0.0, [y - cf[:, 0], cf[:, 1] - y]), fmt="none",
+                ecolor="#9ecae1", elinewidth=4, label="simultaneous 95 % CI (all plans)")
     ax.errorbar(x, y, yerr=[y - ci[:, 0], ci[:, 1] - y], fmt="o", ms=4, color="#2171b5",
                 capsize=2, label="simulated rate, 95 % CI")
     ax.plot(x, ps, "x", color="#cb181d", ms=6, label="p_sim (simulated forces)")

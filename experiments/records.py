@@ -39,6 +39,8 @@ PROBABILITY: Rule = (lambda v: _number(v) and 0.0 <= v <= 1.0, "a number from 0 
 SECONDS: Rule = (lambda v: _number(v) and 0.0 <= v <= MAX_SECONDS,
                  "a number of seconds from 0 to 1e9")
 MEGABYTES: Rule = (lambda v: _number(v) and 0.0 <= v <= 1e9, "a number from 0 to 1e9")
+# an error's size (metres, radians): the tables scale it (mm, degrees), so finite is not enough
+MAGNITUDE: Rule = MEGABYTES
 COUNT: Rule = (lambda v: _whole(v, MAX_COUNT), "a whole number from 0 to 1e12")
 INTERVAL: Rule = (lambda v: isinstance(v, list) and len(v) == 2
                   and all(PROBABILITY[0](x) for x in v) and v[0] <= v[1],

@@ -347,3 +347,35 @@ def test_a_record_of_another_trial_names_what_differs(tmp_path: Path) -> None:
             finished_record(tmp_path, trial)
         message = str(info.value)
         assert f"t.json: {field}: " in message and len(message) < 300, message[:300]
+
+
+@pytest.mark.parametrize("field", ["max_position_error", "max_heading_error"])
+def test_calibration_errors_are_bounded(tmp_path: Path, field: str) -> None:
+    """1e308 m (or rad) was finite, then 1000x (mm) or 57.3x (degrees) in the table made inf:
+    'Out of range float values are not JSON compliant' writing results.json."""
+    from experiments.calibration import CALIBRATION_TRIAL
+
+    cal = Trial("demo-shaft", CALIBRATION_TRIAL, {"cave": {"bundled": "demo-shaft"}})
+    record = {"result": {"plan": {"success": True, "reason": "", "p_path": 0.9, "regrasps": 3,
+                                  "problems": []},
+                         "simulated": {**SIMULATED, "max_heading_error": 0.01,
+                                       "climb_seconds": 60.0, field: 1e308}},
+              "timing": {"trial": 1.0}}
+    _refused(tmp_path, cal, record, f"result.simulated.{field}")
+
+
+def test_calibration_figure_draws_a_rate_off_by_the_tolerance() -> None:
+    """The simultaneous interval comes from the counts: a rate 1e-10 past it drew a negative
+    error bar (matplotlib ValueError) before it was widened to the rate."""
+    from experiments.calibration import calibration_figure, rows_of
+
+    sim = {**SIMULATED, "runs": 10, "successes": 0, "rate": 1e-10, "ci95": [0.0, 0.3],
+           "max_heading_error": 0.01, "climb_seconds": 60.0}
+    record = {"name": "c", "result": {"plan": {"success": True, "reason": "", "p_path": 0.0,
+                                               "regrasps": 3, "problems": []},
+                                      "simulated": sim}}
+    rows = rows_of([record])
+    rows[0]["ci_simultaneous"][0] = 2e-10  # as a rounding could leave it
+    import matplotlib.pyplot as plt
+
+    plt.close(calibration_figure(rows))

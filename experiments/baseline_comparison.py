@@ -77,7 +77,9 @@ def oracle_summary(records: list[dict[str, Any]], planners: list[str]) -> dict[s
     return {"labels": counts,
             "resolution": f"{lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg",
             # labelling the benchmark: the oracle's footstep time summed over the caves
-            "seconds_total": sum(r["timing"]["oracle"]["footstep"] for r in records),
+            # a cave the generator could not make has no planner's timing
+            "seconds_total": sum(r["timing"]["oracle"]["footstep"] for r in records
+                                 if "oracle" in r["timing"]),
             "planned_of_route": planned,
             "oracle_regrasps": quantiles([o["regrasps"] for o in oracle_ok]),
             "by_kind": {k: {lab: sum(1 for r, x in zip(records, labels, strict=True)

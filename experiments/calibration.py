@@ -30,7 +30,7 @@ from experiments.records import (
     BOOLEAN,
     COUNT,
     INTERVAL,
-    NUMBER,
+    MAGNITUDE,
     PROBABILITY,
     SECONDS,
     STRING,
@@ -154,7 +154,7 @@ _PLAN = {"success": BOOLEAN, "reason": STRING, "p_path": maybe(PROBABILITY),
          "regrasps": (lambda v: COUNT[0](v) and v <= 10**6, "a whole number from 0 to 1,000,000"),
          "problems": (lambda v: isinstance(v, list), "a list")}
 _SIMULATED = {"runs": COUNT, "successes": COUNT, "rate": PROBABILITY, "ci95": INTERVAL,
-              "p_sim": PROBABILITY, "max_position_error": NUMBER, "max_heading_error": NUMBER,
+              "p_sim": PROBABILITY, "max_position_error": MAGNITUDE, "max_heading_error": MAGNITUDE,
               "climb_seconds": SECONDS}
 RESULT_CHECKS[CALIBRATION_TRIAL] = lambda params, record: simulation_problem(
     record, _PLAN, _SIMULATED)
@@ -214,6 +214,9 @@ def calibration_figure(rows: list[dict[str, Any]]):
     lo = min([0.5, *x, *ci[:, 0]]) - 0.02
     ax.plot([lo, 1.0], [lo, 1.0], "k--", lw=0.8, label="calibrated")
     cf = np.array([r["ci_simultaneous"] for r in rows]).reshape(-1, 2)
+    # the counts' interval holds successes / runs, the rate only to the record check's
+    # tolerance: widened to the rate, so that no error bar is negative
+    cf = np.column_stack([np.minimum(cf[:, 0], y), np.maximum(cf[:, 1], y)])
     ax.errorbar(x, y, yerr=[y - cf[:, 0], cf[:, 1] - y], fmt="none", ecolor="#9ecae1",
                 elinewidth=4, label="simultaneous 95 % CI (all plans)")
     ax.errorbar(x, y, yerr=[y - ci[:, 0], ci[:, 1] - y], fmt="o", ms=4, color="#2171b5",

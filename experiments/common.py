@@ -228,8 +228,11 @@ def climb_result_problem(params: dict[str, Any], record: dict[str, Any]) -> str 
                                       _OPTIONAL)) is not None:
             return problem if planner in record["result"] else f"{where}: missing"
         row = record["result"][planner]
-        if row["success"] and row["p_path"] is None:
-            return f"{where}.p_path: a successful plan's must be a number from 0 to 1"
+        for key in ("p_path", "p_grasps"):  # the summaries count a success's probabilities
+            if row["success"] and row[key] is None:
+                return f"{where}.{key}: a successful plan's must be a number from 0 to 1"
+        if row["success"] and planner not in record["timing"]:  # a plan has its times
+            return f"timing.{planner}: missing (the planner succeeded)"
         if planner in record["timing"] and (problem := stage_seconds_problem(
                 record["timing"][planner], f"timing.{planner}", ("footstep",),
                 {"search": _search_problem})) is not None:

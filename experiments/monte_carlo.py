@@ -30,7 +30,7 @@ from experiments.records import (
     BOOLEAN,
     COUNT,
     INTERVAL,
-    NUMBER,
+    MAGNITUDE,
     PROBABILITY,
     STRING,
     fields_problem,
@@ -88,7 +88,7 @@ SIMULATE_TRIAL = "experiments.monte_carlo:simulate_trial"
 # What the summaries read of a simulated plan (its runs, the rate's interval); `simulated_problem`
 # (experiments.records.simulation_problem also checks that the counts agree)
 _SIMULATED = {"runs": COUNT, "successes": COUNT, "rate": PROBABILITY, "ci95": INTERVAL,
-              "p_sim": PROBABILITY, "max_position_error": NUMBER,
+              "p_sim": PROBABILITY, "max_position_error": MAGNITUDE,
               "failures": (lambda v: fields_problem(v, "", {}) is None, "an object")}
 
 

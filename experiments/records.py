@@ -15,6 +15,7 @@ Rule = tuple[Callable[[Any], bool], str]  # (test of a value, what the value mus
 
 MAX_SECONDS = 1e9  # a stage's or a trial's seconds (31 years)
 MAX_COUNT = 10**12  # expansions, runs, successes, failures
+RATE_TOLERANCE = 1e-9  # a simulation's rate against successes / runs (it is written exactly so)
 
 
 def _number(value: Any) -> bool:
@@ -38,6 +39,8 @@ PROBABILITY: Rule = (lambda v: _number(v) and 0.0 <= v <= 1.0, "a number from 0 
 SECONDS: Rule = (lambda v: _number(v) and 0.0 <= v <= MAX_SECONDS,
                  "a number of seconds from 0 to 1e9")
 MEGABYTES: Rule = (lambda v: _number(v) and 0.0 <= v <= 1e9, "a number from 0 to 1e9")
+# an error's size (metres, radians): the tables scale it (mm, degrees), so finite is not enough
+MAGNITUDE: Rule = MEGABYTES
 COUNT: Rule = (lambda v: _whole(v, MAX_COUNT), "a whole number from 0 to 1e12")
 INTERVAL: Rule = (lambda v: isinstance(v, list) and len(v) == 2
                   and all(PROBABILITY[0](x) for x in v) and v[0] <= v[1],
@@ -91,13 +94,22 @@ def stage_seconds_problem(obj: Any, where: str, required: tuple[str, ...] = (),
 
 def simulated_problem(simulated: Any, where: str, rules: Mapping[str, Rule]) -> str | None:
     """A simulation's problem ("FIELD: REASON"): its `rules`, at least one run, no more
-    successes than runs."""
+    successes than runs, its rate successes / runs and inside its interval."""
     if (problem := fields_problem(simulated, where, rules)) is not None:
         return problem
     if simulated["runs"] < 1:
         return f"{where}.runs: must be 1 or more, got {simulated['runs']}"
-    if simulated["successes"] > simulated["runs"]:
-        return f"{where}.successes: more than its {simulated['runs']} runs"
+    runs, successes = simulated["runs"], simulated["successes"]
+    if successes > runs:
+        return f"{where}.successes: more than its {runs} runs"
+    # the figures draw the rate's error bars to its interval's ends (and calibration's
+    # simultaneous interval is the counts'): a rate outside either makes a negative bar
+    if "rate" in rules and abs(simulated["rate"] - successes / runs) > RATE_TOLERANCE:
+        return (f"{where}.rate: must be successes / runs = {successes / runs:.6g}, "
+                f"got {simulated['rate']}")
+    if "ci95" in rules and "rate" in rules and not (
+            simulated["ci95"][0] <= simulated["rate"] <= simulated["ci95"][1]):
+        return f"{where}.ci95: must hold the rate {simulated['rate']}, got {simulated['ci95']}"
     return None
 
 

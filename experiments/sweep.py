@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import IO, Any, NamedTuple
 
 from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
+from experiments.records import shown
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
 from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
@@ -141,12 +142,18 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
         return None
     # Compare through JSON, as stored: tuples become lists.
     wanted = json.loads(json.dumps({"function": trial.function, "params": trial.params}))
-    if {"function": record.get("function"), "params": record.get("params")} != wanted:
-        raise SweepError(f"{path}: recorded for other parameters ({record.get('params')}), "
-                         f"not {trial.params}: use another --out folder or delete it")
-    if record.get("error"):
+    if (problem := _other_trial(record, wanted)) is not None:
+        raise SweepError(f"{path}: {problem}: use another --out folder or delete it")
+    # `error` is what says whether to run the trial again: only null (finished) or a message
+    if "error" not in record:
+        problem = "error: missing"
+    elif record["error"] is not None and not (isinstance(record["error"], str)
+                                              and record["error"]):
+        problem = f"error: must be null or a non-empty string, got {shown(record['error'])}"
+    elif record["error"] is not None:
         return None
-    problem = _record_problem(record, trial)
+    else:
+        problem = _record_problem(record, trial)
     if problem is not None:
         raise SweepError(f"{path}: {problem}; delete the file to run the trial again")
     return record
@@ -160,8 +167,32 @@ def _no_constant(name: str) -> Any:
     raise _NonFiniteError(name)
 
 
+def _other_trial(record: dict[str, Any], wanted: dict[str, Any]) -> str | None:
+    """"FIELD: REASON" when the record was made by another trial function or for other
+    parameters (naming the first that differs, shortened), or None."""
+    if record.get("function") != wanted["function"]:
+        return (f"function: made by another trial function ({shown(record.get('function'))}),"
+                f" not {wanted['function']!r}")
+    params = record.get("params")
+    if not isinstance(params, dict):
+        return f"params: expected an object, got {json_type(params)}"
+    for key in sorted(set(params) | set(wanted["params"]), key=str):
+        field = f"params.{key if str(key).isidentifier() else shown(key)}"
+        if key not in params:
+            return f"{field}: missing: recorded for other parameters"
+        if key not in wanted["params"]:
+            return f"{field}: recorded for other parameters, not this sweep's"
+        if params[key] != wanted["params"][key]:
+            return (f"{field}: recorded for other parameters "
+                    f"({shown(params[key])}, not {shown(wanted['params'][key])})")
+    return None
+
+
 def _record_problem(record: dict[str, Any], trial: Trial) -> str | None:
     """What is wrong with a finished record's fields ("FIELD: REASON"), or None."""
+    if record.get("name") != trial.name:  # the progress line and every summary name it
+        return ("name: missing" if "name" not in record
+                else f"name: expected {trial.name!r}, got {shown(record['name'])}")
     if record.get("format") != RECORD_FORMAT:
         return f"format: expected {RECORD_FORMAT!r}, got {str(record.get('format'))[:40]!r}"
     for field in ("result", "timing", "worker"):

@@ -245,3 +245,137 @@ def test_bench_compare_created_checked_and_printed_escaped(
         heading = text.strip().splitlines()[0]
         assert heading.startswith("compared with a\\udcffb.json (") and "forged" not in \
             text.replace(heading, ""), text
+
+
+def _write_record(out: Path, trial: Trial, **changes: Any) -> None:
+    """MC_RECORD stored for `trial`, with the top-level `changes` (... removes a field)."""
+    record = {"format": "rbp-trial/1", "name": trial.name, "function": trial.function,
+              "params": trial.params, **MC_RECORD, "error": None, "worker": {}}
+    record.update(changes)
+    path = trial_path(out, trial.name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({k: v for k, v in record.items() if v is not ...}))
+
+
+@pytest.mark.parametrize("field, value", [
+    ("error", ...), ("name", ...), ("name", "other"), ("name", 5),
+    ("error", False), ("error", 0), ("error", ""), ("error", []),
+])
+def test_a_record_without_a_sound_error_or_name_is_refused(tmp_path: Path, field: str,
+                                                           value: Any) -> None:
+    """F2, S3: a missing `error` or `name` was a KeyError in the summaries; a falsy `error`
+    (false, 0, "", []) was neither run again nor explained, and the experiment exited 1."""
+    from experiments.monte_carlo import SIMULATE_TRIAL
+
+    trial = Trial("t", SIMULATE_TRIAL, {"runs": 10, "mc_seed": 0})
+    _write_record(tmp_path, trial, **{field: value})
+    with pytest.raises(SweepError) as info:
+        finished_record(tmp_path, trial)
+    message = str(info.value)
+    assert message.startswith(f"{trial_path(tmp_path, trial.name)}: {field}: "), message
+    assert "\n" not in message and "delete the file" in message
+    _write_record(tmp_path, trial, error="Traceback: boom")
+    assert finished_record(tmp_path, trial) is None, "a trial that failed is run again"
+
+
+@pytest.mark.parametrize("simulated, field", [
+    ({"rate": 0.1}, "rate"), ({"ci95": [0.0, 0.5]}, "ci95"), ({"rate": 0.0}, "rate"),
+    ({"rate": 1.0, "successes": 10}, "ci95"),
+])
+def test_a_rate_must_agree_with_its_counts_and_interval(tmp_path: Path,
+                                                        simulated: dict[str, Any],
+                                                        field: str) -> None:
+    """F3: each field in range, the figures' error bars (rate - ci95[0], ...) were negative:
+    matplotlib's ValueError after the sweep. Both experiments share the check."""
+    from experiments.calibration import CALIBRATION_TRIAL
+    from experiments.monte_carlo import SIMULATE_TRIAL
+
+    trial = Trial("t", SIMULATE_TRIAL, {"runs": 10, "mc_seed": 0})
+    _refused(tmp_path, trial, _set(MC_RECORD, "result.simulated",
+                                   {**SIMULATED, **simulated}), f"result.simulated.{field}")
+    close = _set(MC_RECORD, "result.simulated.rate", 0.9 + 1e-12)  # rounding is no problem
+    _store(tmp_path, trial, close["result"], close["timing"])
+    assert finished_record(tmp_path, trial) is not None
+    cal = Trial("demo-shaft", CALIBRATION_TRIAL, {"cave": {"bundled": "demo-shaft"}})
+    record = {"result": {"plan": {"success": True, "reason": "", "p_path": 0.9, "regrasps": 3,
+                                  "problems": []},
+                         "simulated": {**SIMULATED, **simulated, "max_heading_error": 0.01,
+                                       "climb_seconds": 60.0}},
+              "timing": {"trial": 1.0}}
+    _refused(tmp_path, cal, record, f"result.simulated.{field}")
+
+
+@pytest.mark.parametrize("edit, field", [
+    ("timing.rbp", "timing.rbp"), ("timing.naive", "timing.naive"),
+    ("result.rbp.p_grasps", "result.rbp.p_grasps"),
+])
+def test_a_success_holds_what_the_baseline_summaries_read(tmp_path: Path, edit: str,
+                                                          field: str) -> None:
+    """F4, F5: a succeeded planner's timing (the rbp / rbp-sampled ratio: KeyError) and its
+    p_grasps (planner_summary's counts: TypeError); a cave never made has no timing."""
+    from experiments.common import CLIMB_TRIAL
+
+    both = _set(_set(CLIMB, "result.rbp", CLIMB["result"]["naive"]), "timing.rbp",
+                CLIMB["timing"]["naive"])
+    trial = Trial("c", CLIMB_TRIAL, {"kind": "shaft", "seed": 1, "planners": ["naive", "rbp"]})
+    _store(tmp_path, trial, both["result"], both["timing"])
+    assert finished_record(tmp_path, trial) is not None
+    _refused(tmp_path, trial, _set(both, edit, None if "p_grasps" in edit else ...), field)
+    failed = {"success": False, "reason": "no cave: x", "p_path": None, "p_grasps": None,
+              "regrasps": 0, "phases": {"body": 0, "reach": 0}}
+    no_cave = {"result": {"cave": None, "naive": failed, "rbp": failed},
+               "timing": {"trial": 1.0, "cave": 0.1}}
+    _store(tmp_path, trial, no_cave["result"], no_cave["timing"])
+    assert finished_record(tmp_path, trial) is not None
+
+
+def test_a_record_of_another_trial_names_what_differs(tmp_path: Path) -> None:
+    """Q2: another trial function's record printed two identical parameter dicts; a 1 MB
+    parameter made a 1 MB line."""
+    from experiments.monte_carlo import SIMULATE_TRIAL
+
+    trial = Trial("t", SIMULATE_TRIAL, {"runs": 10, "mc_seed": 0})
+    _write_record(tmp_path, trial, function="x\ny")
+    with pytest.raises(SweepError, match=r"t\.json: function: made by another trial function "
+                       r"\('x\\ny'\), not 'experiments\.monte_carlo:simulate_trial'"):
+        finished_record(tmp_path, trial)
+    for params, field in (({"runs": "a" * 1_000_000, "mc_seed": 0}, "params.runs"),
+                          ({"runs": 10}, "params.mc_seed"),
+                          ({"runs": 10, "mc_seed": 0, "x": 1}, "params.x")):
+        _write_record(tmp_path, trial, params=params)
+        with pytest.raises(SweepError) as info:
+            finished_record(tmp_path, trial)
+        message = str(info.value)
+        assert f"t.json: {field}: " in message and len(message) < 300, message[:300]
+
+
+@pytest.mark.parametrize("field", ["max_position_error", "max_heading_error"])
+def test_calibration_errors_are_bounded(tmp_path: Path, field: str) -> None:
+    """1e308 m (or rad) was finite, then 1000x (mm) or 57.3x (degrees) in the table made inf:
+    'Out of range float values are not JSON compliant' writing results.json."""
+    from experiments.calibration import CALIBRATION_TRIAL
+
+    cal = Trial("demo-shaft", CALIBRATION_TRIAL, {"cave": {"bundled": "demo-shaft"}})
+    record = {"result": {"plan": {"success": True, "reason": "", "p_path": 0.9, "regrasps": 3,
+                                  "problems": []},
+                         "simulated": {**SIMULATED, "max_heading_error": 0.01,
+                                       "climb_seconds": 60.0, field: 1e308}},
+              "timing": {"trial": 1.0}}
+    _refused(tmp_path, cal, record, f"result.simulated.{field}")
+
+
+def test_calibration_figure_draws_a_rate_off_by_the_tolerance() -> None:
+    """The simultaneous interval comes from the counts: a rate 1e-10 past it drew a negative
+    error bar (matplotlib ValueError) before it was widened to the rate."""
+    from experiments.calibration import calibration_figure, rows_of
+
+    sim = {**SIMULATED, "runs": 10, "successes": 0, "rate": 1e-10, "ci95": [0.0, 0.3],
+           "max_heading_error": 0.01, "climb_seconds": 60.0}
+    record = {"name": "c", "result": {"plan": {"success": True, "reason": "", "p_path": 0.0,
+                                               "regrasps": 3, "problems": []},
+                                      "simulated": sim}}
+    rows = rows_of([record])
+    rows[0]["ci_simultaneous"][0] = 2e-10  # as a rounding could leave it
+    import matplotlib.pyplot as plt
+
+    plt.close(calibration_figure(rows))

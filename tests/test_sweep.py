@@ -74,7 +74,7 @@ def test_a_failing_trial_is_recorded_and_run_again(tmp_path: Path) -> None:
 
 def test_a_folder_of_another_sweep_is_refused(tmp_path: Path) -> None:
     run_sweep([parse_trial("t0", {"v": 1})], tmp_path, workers=1, stream=io.StringIO())
-    with pytest.raises(SweepError, match=r"t0\.json: recorded for other parameters"):
+    with pytest.raises(SweepError, match=r"t0\.json: params\.\w+: recorded for other parameters"):
         run_sweep([parse_trial("t0", {"v": 2})], tmp_path, workers=1, stream=io.StringIO())
 
 
@@ -220,8 +220,8 @@ def test_an_edited_finished_record_is_refused_naming_its_field(tmp_path: Path) -
         trial_path(tmp_path, trial.name).parent.mkdir(parents=True, exist_ok=True)
         trial_path(tmp_path, trial.name).write_text(json.dumps(
             {"format": "rbp-trial/1", "name": trial.name, "function": CLIMB_TRIAL,
-             "params": trial.params, "result": result, "error": None, "timing": {},
-             "worker": {}}))
+             "params": trial.params, "result": result, "error": None,
+             "timing": {"naive": {"footstep": 0.5}}, "worker": {}}))
 
     stored({"cave": None, "naive": row})
     assert run_sweep([trial], tmp_path, workers=1, stream=io.StringIO())[0]["result"]["naive"]

@@ -47,7 +47,8 @@ EXIT_STATUSES = """exit status:
      plan as partial)
   1  ran but failed: no route or planning failed (rbp plan still writes the plan file, with
      success: false and the reason; with --partial, the climb to the stance nearest the
-     goal), a plan that does not verify, a failed execution
+     goal), a plan that does not verify, a failed execution, a plan of no route given to
+     simulate or rig-run (nothing to fly)
   2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
      output that cannot be written
   3  interrupted (Ctrl-C: one line on stderr; or the reader of the output closed it, as

@@ -269,3 +269,19 @@ def test_an_interrupt_during_an_import_lands_after_it(tmp_path: Path, name: str)
                           env=_env(), capture_output=True, text=True, timeout=120)
     lines = done.stdout.strip().splitlines()
     assert lines == ["interrupted once imported: True"], (lines, done.stderr[-2000:])
+
+
+def test_a_plan_of_no_route_is_a_failed_outcome_for_simulate_and_rig_run(tmp_path: Path) -> None:
+    """`rbp plan` writes a valid plan when it finds no route; `rbp simulate` and `rbp rig-run`
+    have nothing to fly: one line naming `success`, exit status 1 (a failed outcome), not 2
+    (bad input), and rig-run no longer says 'phases[0]: no such phase'."""
+    planned = run_rbp("plan", "blocked-shaft", "-o", "p.json", "--footsteps-only",
+                      "--no-pictures", cwd=tmp_path)
+    assert planned.returncode == 1 and (tmp_path / "p.json").exists(), planned.stderr
+    for args in (("simulate", "p.json", "--trials", "1"),
+                 ("rig-run", "--sim-rig", "p.json", "--log", "r.lcm")):
+        done = run_rbp(*args, cwd=tmp_path)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 1 and len(lines) == 1, (args, done.returncode, done.stderr)
+        assert "p.json: success: the plan found no route" in lines[0], lines[0]
+    assert not (tmp_path / "r.lcm").exists(), "rig-run wrote a log of nothing"

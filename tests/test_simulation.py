@@ -821,17 +821,12 @@ def test_cli_writes_json(good_plan: dict[str, Any], tmp_path: Path,
     (None, "(file)"),
     ("{ not json", "line 1, column 3"),  # a syntax error names its place
     ('{"format": "reachbot-plan/1"}', "(top level)"),
-    ("FAILED", "success"),
 ])
 def test_cli_user_errors_name_file_and_field(tmp_path: Path, good_plan: dict[str, Any],
                                              content: str | None, field: str) -> None:
     from rbp.commands.common import UserError
 
     path = tmp_path / "plan.json"
-    if content == "FAILED":
-        failed = copy.deepcopy(good_plan)
-        failed.update(success=False, reason="no route", p_path=None, p_min=None)
-        content = json.dumps(failed)
     if content is not None:
         path.write_text(content)
     with pytest.raises(UserError) as err:

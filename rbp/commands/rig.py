@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
@@ -93,6 +94,10 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     check_output(args.log, "--log", inputs={"the plan's file": args.plan})
     path = Path(args.plan)
     plan = read_plan(path)
+    if not plan["phases"]:  # a valid plan of no route: a failed outcome (1), as simulate's
+        print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
+                       "nothing to fly"), file=sys.stderr)
+        return EXIT_FAILED
     if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
         return EXIT_FAILED  # before any LCM traffic
     # imported once the plan is read: they take 80 MB, a refused plan's reading its own

@@ -49,12 +49,14 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
 
 def _load_plan(path: Path, verify: bool = True) -> dict[str, Any] | None:
     """The plan to simulate; None when it fails verification (the problems are printed)."""
-    from rbp.commands.common import UserError, read_plan, refuse_wrong_plan
+    from rb_drake.errors import one_line
+    from rbp.commands.common import read_plan, refuse_wrong_plan
 
     plan = read_plan(path)
-    if not plan["success"]:
-        raise UserError(f"{path}: success: the plan found no route ({plan['reason']}); "
-                        "nothing to simulate")
+    if not plan["success"]:  # a valid plan of no route: a failed outcome (1), not bad input (2)
+        print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
+                       "nothing to simulate"), file=sys.stderr)
+        return None
     return None if refuse_wrong_plan(plan, path, verify) else plan
 
 

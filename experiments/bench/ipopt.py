@@ -4,6 +4,7 @@ Drake (AutoDiffXd)."""
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from typing import Any
@@ -198,7 +199,15 @@ class NonlinearPhase:
                            (self.r, self.robustness(poses, tensions)),
                            (self.w, np.abs(np.diff(poses, axis=0)).max(axis=0))):
             self.prog.SetDecisionVariableValueInVector(var, value, guess)
-        result = self.solver.Solve(self.prog, guess, self.options)
+        # Drake logs IPOPT's stops (an iteration cap met) as warnings, one per phase: the
+        # status below reports them, in the benchmark's table, not as stray stderr lines
+        drake_log = logging.getLogger("drake")
+        level = drake_log.level
+        drake_log.setLevel(logging.ERROR)
+        try:
+            result = self.solver.Solve(self.prog, guess, self.options)
+        finally:
+            drake_log.setLevel(level)
         status = result.get_solution_result().name
         details = result.get_solver_details().ConvertStatusToString()
         if details:

@@ -199,3 +199,18 @@ def test_rbp_bench_hands_every_option_to_experiments_bench(
     assert (args.only, args.moves, args.samples, args.caves, args.compare) == (
         "scp", 2, 7, 5, "old.json"), vars(args)
     assert args.json is None and args.out == "out/bench", vars(args)
+
+
+def test_compare_refuses_a_file_that_is_not_a_bench_result(tmp_path, capsys) -> None:
+    """A GeoJSON given to --compare was compared ('no metric in common', exit 0): a results
+    file has its format (when given) and its sections."""
+    from experiments.bench import main
+
+    for text, words in (('{"type": "FeatureCollection", "features": []}', "sections: missing"),
+                        ('{"format": "geojson", "sections": {}}', "format: must be 'rbp-bench/1'")):
+        old = tmp_path / "old.json"
+        old.write_text(text)
+        assert main(["--only", "allocation", "--compare", str(old), "--out",
+                     str(tmp_path / "b")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err, err

@@ -226,7 +226,7 @@ def test_bench_compare_created_checked_and_printed_escaped(
     from experiments.bench.report import print_comparison
 
     old = tmp_path / "old.json"
-    old.write_text('{"created": {"a": 1}}')
+    old.write_text('{"sections": {}, "created": {"a": 1}}')
     assert main(["--only", "allocation", "--compare", str(old), "--out",
                  str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err

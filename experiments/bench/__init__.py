@@ -135,7 +135,12 @@ def comparable(old: Any) -> None:
     if not isinstance(old, dict):
         raise InputFileError("(file)", "must be a JSON object (an rbp bench results file), got "
                              f"{type(old).__name__}")
-    sections = old.get("sections", {})
+    if old.get("format", FORMAT) != FORMAT:  # a GeoJSON was compared with "no metric in common"
+        raise InputFileError("format", f"must be {FORMAT!r} (an rbp bench results file), got "
+                             f"{one_line(repr(old['format']))[:80]}")
+    if "sections" not in old:
+        raise InputFileError("sections", "missing: not an rbp bench results file")
+    sections = old["sections"]
     if not isinstance(sections, dict):
         raise InputFileError("sections", "must be an object")
     for name, section in sections.items():

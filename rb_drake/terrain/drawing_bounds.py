@@ -9,6 +9,7 @@ Only the standard library is imported.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 MAX_USE_DEPTH = 8  # <use> of a <use> ...: a drawing's clones are one or two deep
@@ -76,4 +77,47 @@ def use_copies(text: str, limit: int) -> str | None:
     if elements > limit:
         return (f"{elements:,} elements once <use> copies are expanded: more than {limit:,}; "
                 "simplify the drawing first")
+    return None
+
+
+MAX_SVG_DEPTH = 100  # elements inside elements: a drawing's groups are a few levels deep, and
+#                      svgelements recurses per level (50,000 levels overflow Python's stack)
+_TAG = re.compile(r"""<(?:[^<>"']|"[^"]*"|'[^']*')*>""")  # a quoted value may hold '>'
+_PATH = re.compile(r"<(?:[\w.-]+:)?path[\s/>]")
+_D = re.compile(r"""\sd\s*=\s*["']""")
+
+
+def without_comments(text: str) -> str:
+    """`text` without its `<!-- ... -->` comments (one pass of str.find, at C speed)."""
+    parts: list[str] = []
+    start = 0
+    while (opening := text.find("<!--", start)) >= 0:
+        parts.append(text[start:opening])
+        closing = text.find("-->", opening + 4)
+        start = len(text) if closing < 0 else closing + 3
+    return "".join(parts) + text[start:] if parts else text
+
+
+def svg_markup(text: str, limit: int) -> str | None:
+    """Why the SVG `text` is too big to hand to svgelements, which builds a Python object per
+    element and recurses per level of nesting (more than `limit` tags, nested more than
+    MAX_SVG_DEPTH levels, or a <path> it cannot read), or None. Tags are counted at C speed
+    before any is walked."""
+    text = without_comments(text)  # a commented-out drawing draws nothing
+    tags = text.count("<") - text.count("</")  # start tags, <?...?> and <!...>
+    if tags > limit:
+        return (f"holds up to {tags:,} elements, more than {limit:,}; simplify the drawing "
+                "first")
+    depth = 0
+    for tag in _TAG.finditer(text):  # at most 2 * `limit` + 1 before the depth goes below 0
+        if tag[0][1] == "/":
+            depth -= 1
+            if depth < 0:
+                return None  # svgelements says what is wrong with it
+        elif tag[0][1] not in "!?" and not tag[0].endswith("/>"):
+            depth += 1
+            if depth > MAX_SVG_DEPTH:
+                return f"elements nested more than {MAX_SVG_DEPTH} levels deep"
+        if _PATH.match(tag[0]) and not _D.search(tag[0]):  # svgelements: "NoneType has no len()"
+            return "a <path> without a d attribute (its outline); give it one or delete it"
     return None

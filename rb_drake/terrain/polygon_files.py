@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, max_scan_bytes, read_text
-from rb_drake.terrain.drawing_bounds import arc_chords, use_copies
+from rb_drake.terrain.drawing_bounds import arc_chords, svg_markup, use_copies
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -37,6 +37,7 @@ CURVE_TOLERANCE = 0.005  # m: arcs and Bézier curves become polylines this clos
 MAX_VERTICES = 50_000  # outline vertices in one file: a cave section needs a few thousand
 #                       (the scenario written, 3 YAML values a vertex, is checked against
 #                       the reader's limit on values: import_cave._check_readable)
+MAX_SVG_ELEMENTS = 5_000  # svgelements and the outline take ~100 µs a <rect> (measured)
 MAX_NUMBERS = 8 * MAX_VERTICES  # digit runs in a drawing: a vertex's two numbers need 2-4,
 #                                 a DXF's header a few thousand
 INSTALL_HINT = "pip install 'rbp[import]'"
@@ -397,13 +398,13 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
         import svgelements as se
     except ImportError:
         raise missing_extra("svgelements") from None
-    copies = use_copies(text, MAX_VERTICES)
-    if copies is not None:
-        raise _ReadError(None, copies)
+    for why in (svg_markup(text, MAX_SVG_ELEMENTS), use_copies(text, MAX_VERTICES)):
+        if why is not None:
+            raise _ReadError(None, why)
     with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
         warnings.simplefilter("ignore")
         try:
-            svg = se.SVG.parse(io.StringIO(text))
+            svg = se.SVG.parse(_Whole(text))
             if not isinstance(svg, se.SVG):
                 raise _ReadError(None, "not an SVG drawing: no <svg> element")
             # svgelements maps the viewBox to pixels; undo it, so that --unit names user units
@@ -439,6 +440,19 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
                 _count_vertices(total, ring)
                 polygons.append(_polygon(ring, [], where))
     return polygons, True
+
+
+class _Whole:
+    """The text as a file read in one piece: xml.etree's iterparse reads 16 kB at a time, and
+    expat scans a token that a read leaves unfinished (a 30 MB comment or attribute) again on
+    each read. (io.StringIO would also hold a copy of 4 bytes a character.)"""
+
+    def __init__(self, text: str):
+        self.text: str | None = text
+
+    def read(self, size: int = -1) -> str:
+        text, self.text = self.text or "", None
+        return text
 
 
 def _svg_ring(se: Any, sub: Any, factor: float, total: list[int]) -> tuple[Ring, bool]:

@@ -14,8 +14,13 @@ pytest.importorskip("svgelements", reason="the extra rbp[import] is not installe
 pytest.importorskip("shapely", reason="the extra rbp[import] is not installed")
 
 from rb_drake.errors import RbpInputError
-from rb_drake.terrain.drawing_bounds import MAX_SVG_DEPTH, svg_markup
-from rb_drake.terrain.polygon_files import MAX_SVG_ELEMENTS, _Whole, read_rock
+from rb_drake.terrain.drawing_bounds import MAX_SVG_DEPTH, dxf_entities, svg_markup
+from rb_drake.terrain.polygon_files import (
+    MAX_DXF_ENTITIES,
+    MAX_SVG_ELEMENTS,
+    _Whole,
+    read_rock,
+)
 from tests.cli_helpers import run_rbp
 
 HEAD = '<svg xmlns="http://www.w3.org/2000/svg">'
@@ -84,3 +89,36 @@ def test_long_comment_pi_and_attribute_keep_the_rock(tmp_path):
     long = "y" * 1_000_000
     body = f'<!--{long}--><?x {long}?><g class="{long}">{SQUARE}</g>'
     assert [p.wkt for p in read_rock(_svg(tmp_path, body))] == [p.wkt for p in plain]
+
+
+def _dxf_text(entities: int, closed: bool = True) -> str:
+    """A DXF (ezdxf's minimal R12 layout) of `entities` TEXT and one LWPOLYLINE square."""
+    text = "".join("0\nTEXT\n8\n0\n10\n0\n20\n0\n40\n1\n1\nx\n" for _ in range(entities))
+    square = "".join(f"10\n{x}\n20\n{y}\n" for x, y in ((0, 0), (9, 0), (9, 9), (0, 9)))
+    poly = f"0\nLWPOLYLINE\n8\n0\n90\n4\n70\n{1 if closed else 0}\n{square}"
+    return f"0\nSECTION\n2\nENTITIES\n{text}{poly}0\nENDSEC\n0\nEOF\n"
+
+
+def test_too_many_dxf_entities_refused_before_ezdxf(tmp_path):
+    pytest.importorskip("ezdxf", reason="the extra rbp[import] is not installed")
+    path = tmp_path / "many.dxf"
+    path.write_text(_dxf_text(MAX_DXF_ENTITIES + 1, closed=False))
+    with pytest.raises(RbpInputError, match=f"more than {MAX_DXF_ENTITIES:,} entities"):
+        read_rock(path)
+
+
+def test_dxf_entity_count_skips_values_of_zero():
+    """A value "0" (a layer, a coordinate) is followed by a group code, not an entity type."""
+    assert dxf_entities(_dxf_text(10), 5) == 6  # counting stops past the limit
+    values = "0\nLWPOLYLINE\n" + "10\n0\n20\n0\n" * 100
+    assert dxf_entities(values, 5) == 1
+
+
+def test_dxf_below_the_entity_limit_is_read(tmp_path):
+    ezdxf = pytest.importorskip("ezdxf", reason="the extra rbp[import] is not installed")
+    doc = ezdxf.new()
+    for k in range(1000):
+        doc.modelspace().add_text(f"note {k}")
+    doc.modelspace().add_lwpolyline([(0, 0), (9, 0), (9, 9), (0, 9)], close=True)
+    doc.saveas(tmp_path / "text.dxf")
+    assert [p.area for p in read_rock(tmp_path / "text.dxf")] == [81.0]

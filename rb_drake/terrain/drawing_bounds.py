@@ -8,6 +8,7 @@ Only the standard library is imported.
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 from typing import Any
@@ -121,3 +122,30 @@ def svg_markup(text: str, limit: int) -> str | None:
         if _PATH.match(tag[0]) and not _D.search(tag[0]):  # svgelements: "NoneType has no len()"
             return "a <path> without a d attribute (its outline); give it one or delete it"
     return None
+
+
+# a DXF group code 0 (its line "0") starts an entity, whose type follows: letters, where a
+# value "0" is followed by the next group code, digits
+_DXF_ENTITY = re.compile(r"^[ \t]*0[ \t]*\r?\n[ \t]*[A-Za-z_]", re.MULTILINE)
+
+
+def dxf_entities(text: str, limit: int) -> int:
+    """The DXF entities (and table records, section markers) of `text`, counted up to
+    `limit` + 1: ezdxf builds an object of ~25 µs for each (60,000 TEXT took 2.4 s)."""
+    if text.count("0\n") <= limit:  # an upper bound at C speed
+        return 0
+    return sum(1 for _ in itertools.islice(_DXF_ENTITY.finditer(text), limit + 1))
+
+
+class TextLines:
+    """`text` as a stream for ezdxf, which needs only readline(): io.StringIO would hold a copy
+    of 4 bytes a character (120 MB for a 30 MB file)."""
+
+    def __init__(self, text: str):
+        self.text = text
+        self.at = 0
+
+    def readline(self) -> str:
+        end = self.text.find("\n", self.at) + 1 or len(self.text)
+        line, self.at = self.text[self.at:end], end
+        return line

@@ -12,7 +12,6 @@ of another format.
 
 from __future__ import annotations
 
-import io
 import json
 import logging
 import math
@@ -24,7 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, max_scan_bytes, read_text
-from rb_drake.terrain.drawing_bounds import arc_chords, use_copies
+from rb_drake.terrain.drawing_bounds import (
+    TextLines,
+    arc_chords,
+    dxf_entities,
+    svg_markup,
+    use_copies,
+)
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -37,6 +42,9 @@ CURVE_TOLERANCE = 0.005  # m: arcs and Bézier curves become polylines this clos
 MAX_VERTICES = 50_000  # outline vertices in one file: a cave section needs a few thousand
 #                       (the scenario written, 3 YAML values a vertex, is checked against
 #                       the reader's limit on values: import_cave._check_readable)
+MAX_SVG_ELEMENTS = 5_000  # svgelements and the outline take ~100 µs a <rect> (measured)
+MAX_DXF_ENTITIES = 25_000  # ezdxf takes ~25 µs an entity; more than 16,600 outline vertices
+#                            make a scenario too big to read back, unless simplified
 MAX_NUMBERS = 8 * MAX_VERTICES  # digit runs in a drawing: a vertex's two numbers need 2-4,
 #                                 a DXF's header a few thousand
 INSTALL_HINT = "pip install 'rbp[import]'"
@@ -344,11 +352,14 @@ def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
         from ezdxf import path as dxf_path
     except ImportError:
         raise missing_extra("ezdxf") from None
+    if dxf_entities(text, MAX_DXF_ENTITIES) > MAX_DXF_ENTITIES:
+        raise _ReadError(None, f"holds more than {MAX_DXF_ENTITIES:,} entities (each VERTEX of a "
+                         "POLYLINE is one); simplify the drawing first")
     log = logging.getLogger("ezdxf")  # which would report what it skips on stderr
     level = log.level
     log.setLevel(logging.CRITICAL + 1)
     try:
-        doc = ezdxf.read(io.StringIO(text))
+        doc = ezdxf.read(TextLines(text))  # type: ignore[arg-type]  # readline() only
     except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
         raise _ReadError(None, f"not a DXF drawing: {_one_line(e)}") from None
     finally:
@@ -397,13 +408,13 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
         import svgelements as se
     except ImportError:
         raise missing_extra("svgelements") from None
-    copies = use_copies(text, MAX_VERTICES)
-    if copies is not None:
-        raise _ReadError(None, copies)
+    for why in (svg_markup(text, MAX_SVG_ELEMENTS), use_copies(text, MAX_VERTICES)):
+        if why is not None:
+            raise _ReadError(None, why)
     with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
         warnings.simplefilter("ignore")
         try:
-            svg = se.SVG.parse(io.StringIO(text))
+            svg = se.SVG.parse(_Whole(text))
             if not isinstance(svg, se.SVG):
                 raise _ReadError(None, "not an SVG drawing: no <svg> element")
             # svgelements maps the viewBox to pixels; undo it, so that --unit names user units
@@ -439,6 +450,19 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
                 _count_vertices(total, ring)
                 polygons.append(_polygon(ring, [], where))
     return polygons, True
+
+
+class _Whole:
+    """The text as a file read in one piece: xml.etree's iterparse reads 16 kB at a time, and
+    expat scans a token that a read leaves unfinished (a 30 MB comment or attribute) again on
+    each read. (io.StringIO would also hold a copy of 4 bytes a character.)"""
+
+    def __init__(self, text: str):
+        self.text: str | None = text
+
+    def read(self, size: int = -1) -> str:
+        text, self.text = self.text or "", None
+        return text
 
 
 def _svg_ring(se: Any, sub: Any, factor: float, total: list[int]) -> tuple[Ring, bool]:

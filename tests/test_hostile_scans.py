@@ -14,7 +14,7 @@ trimesh = pytest.importorskip("trimesh", reason="the optional extra 'import' (tr
 pytest.importorskip("shapely", reason="the optional extra 'import' (shapely) is missing")
 
 from rb_drake.terrain.examples import CLOUD_FILE, MESH_FILE  # noqa: E402
-from rb_drake.terrain.scan_bytes import scan_problem  # noqa: E402
+from rb_drake.terrain.scan_bytes import ScanBytesError, check_scan  # noqa: E402
 from rbp.cli import main  # noqa: E402
 
 PLY_XYZ = b"property float x\nproperty float y\nproperty float z\n"
@@ -34,14 +34,14 @@ def tube() -> trimesh.Trimesh:
 
 
 @pytest.mark.parametrize("text, line", [
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 2\n", 5),  # one short line: was a traceback
-    ("v 0 0\nv 1 0\nv 0 1\n", 1),                          # all 2D
-    ("# a cloud\nv 1\n", 2),                               # 1D
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nv 1 2\n", "line 5: 'v 1 2'"),  # was a traceback
+    ("v 0 0\nv 1 0\nv 0 1\n", "line 1: 'v 0 0'"),                          # all 2D
+    ("# a cloud\r\nv 1", "line 2: 'v 1'"),                                  # 1D
 ])
 def test_obj_vertex_of_fewer_than_3_coordinates(tmp_path, capsys, text, line):
     path = tmp_path / "cloud.obj"
-    path.write_text(text)
-    assert f"mesh: line {line} has fewer than 3 coordinates" in refused(path, capsys)
+    path.write_bytes(text.encode())
+    assert f"mesh: {line} has fewer than 3 coordinates" in refused(path, capsys)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
@@ -63,7 +63,7 @@ def test_text_non_finite_vertex_is_named(tmp_path, capsys, suffix, line):
     lines[at] = line
     path = tmp_path / f"tube.{suffix}"
     path.write_text("\n".join(lines) + "\n")
-    assert f"mesh: line {at + 1} has a non-finite coordinate: '{line}'" in refused(path, capsys)
+    assert f"mesh: line {at + 1}: '{line}' has a non-finite coordinate" in refused(path, capsys)
 
 
 def binary_ply(vertices: np.ndarray, faces: np.ndarray, counts: np.ndarray) -> bytes:
@@ -92,7 +92,7 @@ def test_binary_ply_corrupt_faces(tmp_path, capsys, count, index, reason):
     path.write_bytes(binary_ply(mesh.vertices, faces, counts))
     assert f"mesh: {reason}" in refused(path, capsys)
     path.write_bytes(binary_ply(mesh.vertices, mesh.faces, np.full(len(mesh.faces), 3)))
-    assert scan_problem(path.read_bytes(), ".ply") is None  # the same mesh, intact
+    assert check_scan(path.read_bytes(), ".ply") is None  # the same mesh, intact: trimesh's
 
 
 def ascii_cloud(n: int, last: bytes) -> bytes:
@@ -102,26 +102,48 @@ def ascii_cloud(n: int, last: bytes) -> bytes:
             + body + last)
 
 
-def test_ascii_ply_cloud_bad_line_named_in_bounded_memory() -> None:
-    """A short last line took numpy's wording, 4.8 s and 926 MB for 22 MB; now C's parser,
-    the line named, in memory a small multiple of the file's."""
-    data = ascii_cloud(100_000, b"1.0 2.0\n")
+def problem(data: bytes) -> str:
+    with pytest.raises(ScanBytesError) as info:
+        check_scan(data, ".ply")
+    return str(info.value)
+
+
+@pytest.mark.parametrize("last", [b"1.0 2.0\n", b"1.0 2.0 3.0 4.0"])
+def test_ascii_ply_cloud_bad_line_named_in_bounded_memory(last: bytes) -> None:
+    """A short last line took numpy's wording, 4.8 s and 926 MB for 22 MB; now numpy's
+    C parser, the line named, in memory a small multiple of the file's."""
+    data = ascii_cloud(100_000, last)
     tracemalloc.start()
     try:
-        problem = scan_problem(data, ".ply")
+        message = problem(data)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    assert problem == ("line 100,007 (vertex 100,000) holds 2 value(s), not the header's 3 "
-                       "properties: '1.0 2.0'"), problem
-    assert peak < 3 * len(data), f"{peak / 1e6:.1f} MB for a {len(data) / 1e6:.1f} MB cloud"
-    assert "non-finite" in (scan_problem(ascii_cloud(10, b"nan 0 0\n"), ".ply") or "")
-    assert scan_problem(ascii_cloud(10, b"0 0 0\n"), ".ply") is None
+    words = len(last.split())
+    assert message == (f"line 100,007: {last.strip().decode()!r} (vertex 100,000) holds {words} "
+                       "value(s), not the header's 3"), message
+    assert peak < 4 * len(data), f"{peak / 1e6:.1f} MB for a {len(data) / 1e6:.1f} MB cloud"
+    assert "(vertex 10) has a non-finite coordinate" in problem(ascii_cloud(10, b"nan 0 0\n"))
+    assert "line 17: '0 zero 0' holds a value that is not a number" in problem(
+        ascii_cloud(10, b"0 zero 0\n"))
+    assert "line 18: 'the end' holds a value" in problem(ascii_cloud(10, b"0 0 0\nthe end"))
+    assert "holds 9 vertex lines, not the header's 10" in problem(ascii_cloud(10, b""))
+
+
+def test_ascii_ply_cloud_reads_as_trimesh_does(tmp_path: Path) -> None:
+    """The points read without trimesh are trimesh's, bit for bit (float32 properties: each
+    number parsed as float64, then cast), so imports are unchanged."""
+    data = ascii_cloud(1_000, b"0.1 0.2 0.3\n4 5\n")  # numbers after the vertices: ignored
+    path = tmp_path / "cloud.ply"
+    path.write_bytes(data)
+    points = check_scan(data, ".ply")
+    assert points is not None and points.dtype == np.float64
+    assert np.array_equal(points, trimesh.load(path).vertices)
 
 
 def test_the_bundled_scans_pass_the_byte_checks() -> None:
     for path in (MESH_FILE, CLOUD_FILE):
-        assert scan_problem(Path(path).read_bytes(), ".ply") is None
+        assert check_scan(Path(path).read_bytes(), ".ply") is None  # binary: trimesh reads
 
 
 @pytest.mark.parametrize("flags", [["--scale", "1e300"], ["--scale", "1e150"],

@@ -42,7 +42,7 @@ import numpy as np
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, check_input_file, max_scan_bytes, read_bytes
-from rb_drake.terrain.scan_bytes import scan_problem, short_vertex_line
+from rb_drake.terrain.scan_bytes import ScanBytesError, check_scan
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -132,8 +132,10 @@ def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, An
                      f"{', '.join(MESH_SUFFIXES)} (a mesh, or a PLY point cloud)")
     data = _read_bytes(path)
     _check_scan_counts(path, data, suffix)
-    if (problem := scan_problem(data, suffix)) is not None:
-        raise _error(path, "mesh", problem)
+    try:
+        cloud = check_scan(data, suffix)  # an ASCII PLY cloud is read there, in C
+    except ScanBytesError as e:
+        raise _error(path, "mesh", str(e)) from None
     try:
         import trimesh
     except ImportError:
@@ -143,17 +145,17 @@ def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, An
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             # overflows while trimesh merges vertices of 1e308 or NaN: refused below instead
             warnings.simplefilter("ignore")
-            loaded = _load_mesh(trimesh, data, suffix)
+            loaded = cloud if cloud is not None else _load_mesh(trimesh, data, suffix)
     except _UnreadableError as e:
         raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {e}") from None
-    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
+    del data  # the file's bytes, before the geometry's arrays
+    vertices = cloud if cloud is not None else np.asarray(
+        getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if vertices.ndim != 2 or len(vertices) == 0:
         raise _error(path, "mesh", "holds no triangles or points: is this the right file?")
-    if vertices.shape[1] != 3:  # an OBJ's `v x y`: trimesh keeps the fewest columns
-        line = short_vertex_line(data) if suffix == ".obj" else None
-        raise _error(path, "mesh", line or f"has vertices of {vertices.shape[1]} coordinates, "
-                     "not 3 (x, y, z)")
+    if vertices.shape[1] != 3:  # an OBJ's `v x y` (found in check_scan unless \r ends lines)
+        raise _error(path, "mesh", f"has vertices of {vertices.shape[1]} coordinates, not 3")
     if not np.all(np.isfinite(vertices)):
         raise _error(path, "mesh", "has vertices with non-finite coordinates (nan or inf)")
     if np.abs(vertices).max() > MAX_SCAN_COORDINATE:

@@ -8,9 +8,9 @@ These are found here first, vectorised, and refused with the line or element tha
 
 from __future__ import annotations
 
-import io
 import re
 import warnings
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -22,9 +22,15 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
 _STL = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 
 
-def scan_problem(data: bytes, suffix: str) -> str | None:
-    """Why the bytes of a scan (suffix .stl, .obj or .ply) are not a valid one, or None (what
-    is not checked here is left to trimesh to refuse)."""
+class ScanBytesError(ValueError):
+    """Why a scan's bytes are not a valid scan (one line)."""
+
+
+def check_scan(data: bytes, suffix: str) -> np.ndarray | None:
+    """Raise ScanBytesError if the bytes of a scan (suffix .stl, .obj or .ply) are not a valid
+    one (what is not checked here is left to trimesh to refuse); return the (N, 3) points of an
+    ASCII PLY point cloud, read here as trimesh would read them, else None (trimesh reads it)."""
+    problem: str | None = None
     if suffix == ".stl":
         stated = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
         if len(data) - 84 == 50 * stated:  # binary, as trimesh decides
@@ -33,29 +39,58 @@ def scan_problem(data: bytes, suffix: str) -> str | None:
             if not finite.all():
                 i = int(np.argmin(finite))
                 value = corners[i][~np.isfinite(corners[i])][0]
-                return f"triangle {i + 1:,} has a non-finite vertex coordinate ({value})"
-            return None
-        return _text_non_finite(data, rb"vertex")
-    if suffix == ".obj":
-        return _text_non_finite(data, rb"v") or _obj_short_line(data)
-    return _ply_problem(data)
+                problem = f"triangle {i + 1:,} has a non-finite vertex coordinate ({value})"
+        else:
+            problem = _text_non_finite(data, rb"vertex")
+    elif suffix == ".obj":
+        problem = _text_non_finite(data, rb"v") or _obj_short_line(data)
+    else:
+        return _ply(data)
+    if problem is not None:
+        raise ScanBytesError(problem)
+    return None
+
+
+def _line_words(data: bytes, start: int, chunk: int = 1 << 22
+                ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+    """From `start` (a line's start) on, a few MB at a time: (the chunk's offset, its bytes,
+    its lines' starts within it, the number of words on each), counted in numpy (a regex
+    took 0.7 s on 27 MB, trimesh's per-line lists 800 MB)."""
+    while start < len(data):
+        end = data.find(b"\n", min(start + chunk, len(data)))
+        end = len(data) if end < 0 else end + 1
+        a = np.frombuffer(data, dtype=np.uint8, count=end - start, offset=start)
+        space = a <= 32  # blanks, tabs, line ends
+        word = np.flatnonzero(~space & np.concatenate(([True], space[:-1])))  # words' starts
+        lines = np.concatenate(([0], np.flatnonzero(a == 10) + 1))
+        lines = lines[lines < len(a)]
+        ends = np.append(lines[1:], len(a))
+        yield start, a, lines, np.searchsorted(word, ends) - np.searchsorted(word, lines)
+        start = end
+
+
+def _quote(data: bytes, offset: int) -> str:
+    """Line `n`: 'its text', of the line starting at `offset`."""
+    end = data.find(b"\n", offset)
+    text = data[offset:len(data) if end < 0 else end].strip()[:80].decode("latin-1")
+    return f"line {_line(data, offset):,}: {text!r}"
 
 
 def _text_non_finite(data: bytes, keyword: bytes) -> str | None:
     """The line of an ASCII STL or OBJ whose vertex (a line starting with `keyword`) has a
     nan or inf coordinate; the slower line search runs only if such a word occurs at all."""
     low = data.lower()
-    if low.find(b"nan") < 0 and low.find(b"inf") < 0:
+    first = min((at for at in (low.find(b"nan"), low.find(b"inf")) if at >= 0), default=-1)
+    if first < 0:
         return None
-    pattern = rb"(?m)^[ \t]*" + keyword + rb"[ \t][^\r\n]*(?:nan|inf)[^\r\n]*"
-    for match in re.finditer(pattern, low):
+    pattern = re.compile(rb"(?m)^[ \t]*" + keyword + rb"[ \t][^\r\n]*(?:nan|inf)[^\r\n]*")
+    for match in pattern.finditer(low, low.rfind(b"\n", 0, first) + 1):
         try:
             values = [float(t) for t in match.group().split()[1:]]
         except ValueError:
             continue  # not numbers: trimesh says so
         if not all(np.isfinite(values)):
-            return (f"line {_line(low, match.start()):,} has a non-finite "
-                    f"coordinate: {match.group().strip()[:80].decode('latin-1')!r}")
+            return f"{_quote(data, match.start())} has a non-finite coordinate"
     return None
 
 
@@ -64,39 +99,16 @@ def _line(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
-def _obj_short_line(data: bytes, chunk: int = 1 << 22) -> str | None:
-    """The first `v ` line (trimesh's vertex lines) with fewer than 3 coordinates, found by
-    counting each line's words in numpy, a few MB at a time (a regex took 0.7 s on 27 MB;
-    trimesh's own fallback for such a line, 7 s and 800 MB)."""
-    start = 0
-    while start < len(data):
-        end = data.find(b"\n", min(start + chunk, len(data)))
-        end = len(data) if end < 0 else end + 1
-        a = np.frombuffer(data, dtype=np.uint8, count=end - start, offset=start)
-        space = a <= 32  # blanks, tabs, line ends
-        word = np.flatnonzero(~space & np.concatenate(([True], space[:-1])))  # words' starts
-        lines = np.concatenate(([0], np.flatnonzero(a == 10) + 1))
-        lines = lines[lines < len(a) - 1]
-        vertex = lines[(a[lines] == ord("v")) & (a[lines + 1] == ord(" "))]
-        ends = np.append(lines, len(a))[np.searchsorted(lines, vertex) + 1]
-        words = np.searchsorted(word, ends) - np.searchsorted(word, vertex)
-        short = np.flatnonzero(words < 4)  # `v` and 3 numbers
+def _obj_short_line(data: bytes) -> str | None:
+    """The first `v ` line (trimesh's vertex lines) with fewer than 3 coordinates (trimesh
+    kept 2 columns and rbp failed on them; its fallback for such a line took 7 s and 800 MB)."""
+    for start, a, lines, words in _line_words(data, 0):
+        lines, words = lines[lines < len(a) - 1], words[lines < len(a) - 1]
+        vertex = (a[lines] == ord("v")) & (a[lines + 1] == ord(" "))
+        short = np.flatnonzero(vertex & (words < 4))  # `v` and 3 numbers
         if len(short):
-            offset = start + int(vertex[short[0]])
-            text = data[offset:data.find(b"\n", offset) % (len(data) + 1)]
-            return (f"line {_line(data, offset):,} has fewer than 3 coordinates: "
-                    f"{text.strip()[:80].decode('latin-1')!r}")
-        start = end
+            return f"{_quote(data, start + int(lines[short[0]]))} has fewer than 3 coordinates"
     return None
-
-
-def short_vertex_line(data: bytes) -> str | None:
-    """The first OBJ `v` line with fewer than 3 coordinates (on the refusal's path only)."""
-    match = re.search(rb"(?m)^[ \t]*v(?:[ \t]+[^\s]+){0,2}[ \t]*\r?$", data)
-    if match is None:
-        return None
-    return (f"line {_line(data, match.start()):,} has fewer than 3 coordinates: "
-            f"{match.group().strip()[:80].decode('latin-1')!r}")
 
 
 def _ply_header(data: bytes) -> tuple[str, list[tuple[str, int, list[list[str]]]], int] | None:
@@ -122,47 +134,69 @@ def _ply_header(data: bytes) -> tuple[str, list[tuple[str, int, list[list[str]]]
     return fmt, elements, body
 
 
-def _ply_problem(data: bytes) -> str | None:
+def _ply(data: bytes) -> np.ndarray | None:
     header = _ply_header(data)
     if header is None:
         return None
     fmt, elements, body = header
     if fmt == "ascii" and len(elements) == 1 and elements[0][0] == "vertex":
-        return _ascii_cloud_problem(data, elements[0][1], elements[0][2], body)
+        return _ascii_cloud(data, elements[0][1], elements[0][2], body)
     if fmt.startswith("binary") and [e[0] for e in elements] == ["vertex", "face"]:
-        return _binary_faces_problem(data, fmt, elements, body)
+        _check_binary_faces(data, fmt, elements, body)
     return None
 
 
-def _ascii_cloud_problem(data: bytes, count: int, props: list[list[str]],
-                         body: int) -> str | None:
-    """An ASCII point cloud: every vertex line holds one number a property (C's parser, not
-    trimesh's lists); the first short or long line is named."""
-    if count < 0 or any(len(p) != 2 or p[0] not in _PLY_TYPES for p in props) or not props:
-        return None  # lists, or a header trimesh refuses
-    k = len(props)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # fromstring's text mode is deprecated, not removed
-        values = np.fromstring(data[body:], sep=" ")  # stops at the first non-number
-    first = data.count(b"\n", 0, body) + 1  # the first vertex's line
-    if len(values) >= count * k:
-        bad = ~np.isfinite(values[: count * k])
-        if bad.any():
-            row = int(np.argmax(bad)) // k
-            return f"line {first + row:,} (vertex {row + 1:,}) has a non-finite coordinate"
-        return None
-    for row, line in enumerate(io.BytesIO(data[body:])):
-        if row >= count:
+def _ascii_cloud(data: bytes, count: int, props: list[list[str]], body: int
+                 ) -> np.ndarray | None:
+    """An ASCII point cloud's x, y, z as trimesh reads them (each line's numbers as float64,
+    cast to the property's type), by C's parser instead of trimesh's per-line lists (550 MB
+    for a valid 22 MB cloud); a line without one number a property is named."""
+    names = [p[1] for p in props if len(p) == 2]
+    if (count < 0 or not props or any(len(p) != 2 or p[0] not in _PLY_TYPES for p in props)
+            or not {"x", "y", "z"} <= set(names)):
+        return None  # lists, or a header trimesh reads or refuses
+    k, row = len(props), 0
+    for start, _, lines, words in _line_words(data, body):
+        take = min(len(lines), count - row)
+        wrong = np.flatnonzero(words[:take] != k)
+        if len(wrong):
+            i = int(wrong[0])
+            raise ScanBytesError(f"{_quote(data, start + int(lines[i]))} (vertex {row + i + 1:,}) "
+                                 f"holds {int(words[i])} value(s), not the header's {k}")
+        row += take
+        if row == count:
             break
-        if len(line.split()) != k:
-            return (f"line {first + row:,} (vertex {row + 1:,}) holds "
-                    f"{len(line.split())} value(s), not the header's {k} properties: "
-                    f"{line.strip()[:80].decode('latin-1')!r}")
-    return f"holds fewer numbers than its header's {count:,} vertices of {k} properties"
+    if row < count:
+        raise ScanBytesError(f"holds {row:,} vertex lines, not the header's {count:,}")
+    try:
+        # all lines, as trimesh parses them (numbers after the vertices are ignored, text not)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # fromstring's text mode is deprecated, not gone
+            values = np.fromstring(data[body:], sep=" ")[: count * k]
+    except ValueError:
+        bad = re.compile(rb"[^\s0-9eE+\-.nNaAiIfFtTyY]").search(data, body)
+        where = _quote(data, data.rfind(b"\n", 0, bad.start()) + 1) if bad else "a line"
+        raise ScanBytesError(f"{where} holds a value that is not a number") from None
+    values = values.reshape(count, k)
+    points = np.stack([values[:, names.index(c)].astype(_PLY_TYPES[props[names.index(c)][0]])
+                       for c in "xyz"], axis=1).astype(float)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise ScanBytesError(f"{_quote(data, _line_start(data, body, row))} (vertex {row + 1:,}) "
+                             "has a non-finite coordinate")
+    return points
 
 
-def _binary_faces_problem(data: bytes, fmt: str, elements: list[tuple[str, int, list[list[str]]]],
-                          body: int) -> str | None:
+def _line_start(data: bytes, start: int, row: int) -> int:
+    """The offset of the line `row` lines (from 0) after the line starting at `start`."""
+    for _ in range(row):
+        start = data.index(b"\n", start) + 1
+    return start
+
+
+def _check_binary_faces(data: bytes, fmt: str, elements: list[tuple[str, int, list[list[str]]]],
+                        body: int) -> None:
     """A binary mesh of vertices then triangles (one list property): every list holds 3
     indices of existing vertices. Files of another layout are left to trimesh."""
     (_, n_vertices, vprops), (_, n_faces, fprops) = elements
@@ -170,22 +204,21 @@ def _binary_faces_problem(data: bytes, fmt: str, elements: list[tuple[str, int, 
     if (any(len(p) != 2 or p[0] not in _PLY_TYPES for p in vprops) or len(fprops) != 1
             or len(fprops[0]) != 4 or fprops[0][0] != "list"
             or not {fprops[0][1], fprops[0][2]} <= set(_PLY_TYPES)):
-        return None
+        return
     vsize = sum(np.dtype(_PLY_TYPES[p[0]]).itemsize for p in vprops)
     face = np.dtype([("n", order + _PLY_TYPES[fprops[0][1]]),
                      ("i", order + _PLY_TYPES[fprops[0][2]], 3)])
     start = body + vsize * n_vertices
     if n_vertices < 0 or n_faces < 0 or len(data) - start != face.itemsize * n_faces:
-        return None  # not all triangles, or counts that lie: trimesh decides
+        return  # not all triangles, or counts that lie: trimesh decides
     faces = np.frombuffer(data, dtype=face, count=n_faces, offset=start)
     wrong = faces["n"] != 3
     if wrong.any():
         i = int(np.argmax(wrong))
-        return f"face {i + 1:,} has a list count of {int(faces['n'][i])}, not 3"
+        raise ScanBytesError(f"face {i + 1:,} has a list count of {int(faces['n'][i])}, not 3")
     index = faces["i"]
     outside = ((index < 0) | (index >= n_vertices)).any(axis=1)
     if outside.any():
         i = int(np.argmax(outside))
-        return (f"face {i + 1:,} has vertex indices {index[i].tolist()}, outside 0 to "
-                f"{n_vertices - 1:,}")
-    return None
+        raise ScanBytesError(f"face {i + 1:,} has vertex indices {index[i].tolist()}, outside "
+                             f"0 to {n_vertices - 1:,}")

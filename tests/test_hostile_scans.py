@@ -155,3 +155,15 @@ def test_scan_coordinates_checked_after_scaling(tmp_path, capsys, flags):
     message = refused(path, capsys, *flags)
     assert message.endswith("mesh: a coordinate beyond 10000 m once scaled; check --unit and "
                             "--scale"), message
+
+
+def test_stl_refused_before_trimesh_builds_arrays(tmp_path, capsys) -> None:
+    """A far coordinate in a binary STL (300 MB for 16 MB in trimesh's arrays) and an
+    ASCII STL without a `vertex` (32 MB of zeros: 202 MB) are refused from the bytes."""
+    data = bytearray(tube().export(file_type="stl"))
+    data[-14:-10] = np.float32(1e8).tobytes()
+    path = tmp_path / "far.stl"
+    path.write_bytes(bytes(data))
+    assert "mesh: has a coordinate beyond 1e+07 (in the file's unit)" in refused(path, capsys)
+    path.write_bytes(bytes(1000))
+    assert "mesh: holds no triangles or points" in refused(path, capsys)

@@ -42,7 +42,13 @@ import numpy as np
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, check_input_file, max_scan_bytes, read_bytes
-from rb_drake.terrain.scan_bytes import ScanBytesError, check_scan
+from rb_drake.terrain.scan_bytes import (
+    EMPTY,
+    FAR,
+    MAX_SCAN_COORDINATE,
+    ScanBytesError,
+    check_scan,
+)
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -74,7 +80,6 @@ DENSITY_SUBSET = 200_000  # a larger cloud's density is its random subset's, sca
 # (as a drawing's vertices, polygon_files.MAX_VERTICES) in at most MAX_SECTION_PIECES separate
 # curves (a cave's outline and its pillars: a few; 2,000 pieces take a fraction of a second).
 MAX_SECTION_SEGMENTS = 50_000
-MAX_SCAN_COORDINATE = 1e7  # in the file's unit, whatever --unit says: 10 km in millimetres
 MAX_METRES = 1e4  # once --unit and --scale are applied, as a drawing's (polygon_files)
 MAX_SECTION_PIECES = 2_000
 # Vertices of a PLY scan, from its header before it is loaded: trimesh took 5 s and 500 MB to
@@ -153,14 +158,13 @@ def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, An
         getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if vertices.ndim != 2 or len(vertices) == 0:
-        raise _error(path, "mesh", "holds no triangles or points: is this the right file?")
+        raise _error(path, "mesh", EMPTY)
     if vertices.shape[1] != 3:  # an OBJ's `v x y` (found in check_scan unless \r ends lines)
         raise _error(path, "mesh", f"has vertices of {vertices.shape[1]} coordinates, not 3")
     if not np.all(np.isfinite(vertices)):
         raise _error(path, "mesh", "has vertices with non-finite coordinates (nan or inf)")
     if np.abs(vertices).max() > MAX_SCAN_COORDINATE:
-        raise _error(path, "mesh", f"has a coordinate beyond {MAX_SCAN_COORDINATE:g} (in the "
-                     "file's unit): 10 km in millimetres; is this the right file?")
+        raise _error(path, "mesh", FAR)
     if metres_per_unit is not None and np.abs(vertices).max() * metres_per_unit > MAX_METRES:
         raise _error(path, "mesh", f"a coordinate beyond {MAX_METRES:g} m once scaled; check "
                      "--unit and --scale")

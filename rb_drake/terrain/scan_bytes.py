@@ -19,6 +19,10 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
               "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
               "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
               "float64": "f8"}
+MAX_SCAN_COORDINATE = 1e7  # in the file's unit, whatever --unit says: 10 km in millimetres
+FAR = (f"has a coordinate beyond {MAX_SCAN_COORDINATE:g} (in the file's unit): 10 km in "
+       "millimetres; is this the right file?")
+EMPTY = "holds no triangles or points: is this the right file?"
 _STL = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
 
 
@@ -40,10 +44,13 @@ def check_scan(data: bytes, suffix: str) -> np.ndarray | None:
                 i = int(np.argmin(finite))
                 value = corners[i][~np.isfinite(corners[i])][0]
                 problem = f"triangle {i + 1:,} has a non-finite vertex coordinate ({value})"
+            elif stated and np.abs(corners).max() > MAX_SCAN_COORDINATE:
+                problem = FAR  # before trimesh's arrays (300 MB for 16 MB)
         else:
-            problem = _text_non_finite(data, rb"vertex")
+            low = data.lower()
+            problem = _text_non_finite(low, rb"vertex") if b"vertex" in low else EMPTY
     elif suffix == ".obj":
-        problem = _text_non_finite(data, rb"v") or _obj_short_line(data)
+        problem = _text_non_finite(data.lower(), rb"v") or _obj_short_line(data)
     else:
         return _ply(data)
     if problem is not None:
@@ -76,10 +83,10 @@ def _quote(data: bytes, offset: int) -> str:
     return f"line {_line(data, offset):,}: {text!r}"
 
 
-def _text_non_finite(data: bytes, keyword: bytes) -> str | None:
-    """The line of an ASCII STL or OBJ whose vertex (a line starting with `keyword`) has a
-    nan or inf coordinate; the slower line search runs only if such a word occurs at all."""
-    low = data.lower()
+def _text_non_finite(low: bytes, keyword: bytes) -> str | None:
+    """The line of an ASCII STL or OBJ (lower case: `low`) whose vertex (a line starting with
+    `keyword`) has a nan or inf coordinate; the slower line search runs only if such a word
+    occurs at all."""
     first = min((at for at in (low.find(b"nan"), low.find(b"inf")) if at >= 0), default=-1)
     if first < 0:
         return None
@@ -90,7 +97,7 @@ def _text_non_finite(data: bytes, keyword: bytes) -> str | None:
         except ValueError:
             continue  # not numbers: trimesh says so
         if not all(np.isfinite(values)):
-            return f"{_quote(data, match.start())} has a non-finite coordinate"
+            return f"{_quote(low, match.start())} has a non-finite coordinate"
     return None
 
 

@@ -138,7 +138,7 @@ def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, An
     data = _read_bytes(path)
     _check_scan_counts(path, data, suffix)
     try:
-        cloud = check_scan(data, suffix)  # an ASCII PLY cloud is read there, in C
+        read = check_scan(data, suffix)  # an ASCII PLY is read there, in C
     except ScanBytesError as e:
         raise _error(path, "mesh", str(e)) from None
     try:
@@ -150,12 +150,13 @@ def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, An
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             # overflows while trimesh merges vertices of 1e308 or NaN: refused below instead
             warnings.simplefilter("ignore")
-            loaded = cloud if cloud is not None else _load_mesh(trimesh, data, suffix)
+            loaded = (_load_mesh(trimesh, data, suffix) if read is None
+                      else trimesh.PointCloud(read[0]) if read[1] is None
+                      else trimesh.Trimesh(vertices=read[0], faces=read[1]))
     except _UnreadableError as e:
         raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {e}") from None
     del data  # the file's bytes, before the geometry's arrays
-    vertices = cloud if cloud is not None else np.asarray(
-        getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if vertices.ndim != 2 or len(vertices) == 0:
         raise _error(path, "mesh", EMPTY)

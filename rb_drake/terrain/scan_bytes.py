@@ -30,10 +30,11 @@ class ScanBytesError(ValueError):
     """Why a scan's bytes are not a valid scan (one line)."""
 
 
-def check_scan(data: bytes, suffix: str) -> np.ndarray | None:
+def check_scan(data: bytes, suffix: str) -> tuple[np.ndarray, np.ndarray | None] | None:
     """Raise ScanBytesError if the bytes of a scan (suffix .stl, .obj or .ply) are not a valid
-    one (what is not checked here is left to trimesh to refuse); return the (N, 3) points of an
-    ASCII PLY point cloud, read here as trimesh would read them, else None (trimesh reads it)."""
+    one (what is not checked here is left to trimesh to refuse); return the (N, 3) vertices and
+    (M, 3) faces (None: a point cloud) of an ASCII PLY, read here as trimesh reads them, else
+    None (trimesh reads the file)."""
     problem: str | None = None
     if suffix == ".stl":
         stated = int.from_bytes(data[80:84], "little") if len(data) >= 84 else -1
@@ -141,58 +142,80 @@ def _ply_header(data: bytes) -> tuple[str, list[tuple[str, int, list[list[str]]]
     return fmt, elements, body
 
 
-def _ply(data: bytes) -> np.ndarray | None:
+def _ply(data: bytes) -> tuple[np.ndarray, np.ndarray | None] | None:
     header = _ply_header(data)
     if header is None:
         return None
     fmt, elements, body = header
-    if fmt == "ascii" and len(elements) == 1 and elements[0][0] == "vertex":
-        return _ascii_cloud(data, elements[0][1], elements[0][2], body)
-    if fmt.startswith("binary") and [e[0] for e in elements] == ["vertex", "face"]:
+    names = [e[0] for e in elements]
+    if fmt == "ascii" and names in (["vertex"], ["vertex", "face"]):
+        return _ascii_ply(data, elements, body)
+    if fmt.startswith("binary") and names == ["vertex", "face"]:
         _check_binary_faces(data, fmt, elements, body)
     return None
 
 
-def _ascii_cloud(data: bytes, count: int, props: list[list[str]], body: int
-                 ) -> np.ndarray | None:
-    """An ASCII point cloud's x, y, z as trimesh reads them (each line's numbers as float64,
-    cast to the property's type), by C's parser instead of trimesh's per-line lists (550 MB
-    for a valid 22 MB cloud); a line without one number a property is named."""
+def _ascii_ply(data: bytes, elements: list[tuple[str, int, list[list[str]]]], body: int
+               ) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """An ASCII PLY cloud's or triangle mesh's (x, y, z) and faces (None for a cloud) as
+    trimesh reads them (each line's numbers as float64, cast to the property's type), by
+    numpy's C parser instead of trimesh's per-line lists (550 MB for a valid 22 MB cloud, 18
+    MB a MB for a mesh); a line without one number a property (`3` and 3 indices a face) is
+    named. Other layouts: None, trimesh reads them."""
+    _, count, props = elements[0]
+    n_faces, face_type = 0, "i4"
+    if len(elements) == 2:
+        _, n_faces, fprops = elements[1]
+        if (len(fprops) != 1 or len(fprops[0]) != 4 or fprops[0][0] != "list"
+                or not {fprops[0][1], fprops[0][2]} <= set(_PLY_TYPES)):
+            return None
+        face_type = _PLY_TYPES[fprops[0][2]]
     names = [p[1] for p in props if len(p) == 2]
-    if (count < 0 or not props or any(len(p) != 2 or p[0] not in _PLY_TYPES for p in props)
-            or not {"x", "y", "z"} <= set(names)):
+    if (count < 0 or n_faces < 0 or not props or not {"x", "y", "z"} <= set(names)
+            or any(len(p) != 2 or p[0] not in _PLY_TYPES for p in props)):
         return None  # lists, or a header trimesh reads or refuses
-    k, row = len(props), 0
+    k, row, total = len(props), 0, count + n_faces
     for start, _, lines, words in _line_words(data, body):
-        take = min(len(lines), count - row)
-        wrong = np.flatnonzero(words[:take] != k)
+        take = min(len(lines), total - row)
+        expected = np.where(np.arange(row, row + take) < count, k, 4)
+        wrong = np.flatnonzero(words[:take] != expected)
         if len(wrong):
-            i = int(wrong[0])
-            raise ScanBytesError(f"{_quote(data, start + int(lines[i]))} (vertex {row + i + 1:,}) "
-                                 f"holds {int(words[i])} value(s), not the header's {k}")
+            i, at = int(wrong[0]), row + int(wrong[0])
+            what = f"vertex {at + 1:,}" if at < count else f"face {at - count + 1:,}"
+            raise ScanBytesError(f"{_quote(data, start + int(lines[i]))} ({what}) holds "
+                                 f"{int(words[i])} value(s), not {int(expected[i])}")
         row += take
-        if row == count:
+        if row == total:
             break
-    if row < count:
-        raise ScanBytesError(f"holds {row:,} vertex lines, not the header's {count:,}")
+    if row < total:
+        raise ScanBytesError(f"holds {row:,} element lines, not the header's {total:,}")
     try:
-        # all lines, as trimesh parses them (numbers after the vertices are ignored, text not)
+        # all lines, as trimesh parses them (numbers after the elements are ignored, text not)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # fromstring's text mode is deprecated, not gone
-            values = np.fromstring(data[body:], sep=" ")[: count * k]
+            values = np.fromstring(data[body:], sep=" ")[: count * k + 4 * n_faces]
     except ValueError:
         bad = re.compile(rb"[^\s0-9eE+\-.nNaAiIfFtTyY]").search(data, body)
         where = _quote(data, data.rfind(b"\n", 0, bad.start()) + 1) if bad else "a line"
         raise ScanBytesError(f"{where} holds a value that is not a number") from None
-    values = values.reshape(count, k)
-    points = np.stack([values[:, names.index(c)].astype(_PLY_TYPES[props[names.index(c)][0]])
+    rows = values[: count * k].reshape(count, k)
+    points = np.stack([rows[:, names.index(c)].astype(_PLY_TYPES[props[names.index(c)][0]])
                        for c in "xyz"], axis=1).astype(float)
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any():
         row = int(np.argmax(bad))
         raise ScanBytesError(f"{_quote(data, _line_start(data, body, row))} (vertex {row + 1:,}) "
                              "has a non-finite coordinate")
-    return points
+    if len(elements) == 1:
+        return points, None
+    lists = values[count * k:].reshape(n_faces, 4)
+    faces = lists[:, 1:].astype(face_type)
+    wrong = (lists[:, 0] != 3) | ((faces < 0) | (faces >= count)).any(axis=1)
+    if wrong.any():
+        row = int(np.argmax(wrong))
+        raise ScanBytesError(f"{_quote(data, _line_start(data, body, count + row))} (face "
+                             f"{row + 1:,}) is not 3 indices of the {count:,} vertices")
+    return points, faces
 
 
 def _line_start(data: bytes, start: int, row: int) -> int:

@@ -154,7 +154,7 @@ def test_ascii_ply_mesh_reads_as_trimesh_does(tmp_path: Path, capsys) -> None:
     text = path.read_text().splitlines()
     for line, reason in (("4 0 1 2 3", "(face 96) holds 5 value(s), not 4"),
                          ("3 0 1 99", "(face 96) is not 3 indices of the 50 vertices")):
-        path.write_text("\n".join(text[:-1] + [line]) + "\n")
+        path.write_text("\n".join([*text[:-1], line]) + "\n")
         assert f"line {len(text)}: '{line}' {reason}" in refused(path, capsys)
 
 

@@ -42,13 +42,7 @@ import numpy as np
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, check_input_file, max_scan_bytes, read_bytes
-from rb_drake.terrain.scan_bytes import (
-    EMPTY,
-    FAR,
-    MAX_SCAN_COORDINATE,
-    ScanBytesError,
-    check_scan,
-)
+from rb_drake.terrain.scan_bytes import EMPTY, FAR, MAX_SCAN_COORDINATE, ScanBytesError, check_scan
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon

@@ -226,7 +226,7 @@ def test_garbage_empty_and_unknown_files(tmp_path: Path) -> None:
     # headers that promise billions of elements in a few bytes: refused, not allocated
     lying_stl = tmp_path / "lying.stl"
     lying_stl.write_bytes(b"\0" * 80 + (4_000_000_000).to_bytes(4, "little") + b"\0" * 100)
-    assert ": mesh: not a readable STL file" in refusal(lying_stl)
+    assert ": mesh: holds no triangles or points" in refusal(lying_stl)
     lying_ply = tmp_path / "lying.ply"
     lying_ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
                           b"property float x\nproperty float y\nproperty float z\nend_header\n"

@@ -293,8 +293,8 @@ def test_meshes_go_to_mesh_section(monkeypatch, tmp_path):
     rings = example_rings()
     calls = []
 
-    def section_polygons(path, origin, normal, resolution, tolerance):
-        calls.append((path, origin, normal, resolution, tolerance))
+    def section_polygons(path, origin, normal, resolution, tolerance, metres_per_unit):
+        calls.append((path, origin, normal, resolution, tolerance, metres_per_unit))
         return [Polygon([(x * 100, y * 100) for x, y in ring]) for ring in rings]  # in cm
 
     fake = types.ModuleType("rb_drake.terrain.mesh_section")
@@ -305,7 +305,8 @@ def test_meshes_go_to_mesh_section(monkeypatch, tmp_path):
     scn = import_cave(mesh, ImportOptions(unit="cm", plane_origin=(0, 0, 1), resolution=0.05,
                                           plane_normal=(0, 1, 0), simplify=0.01,
                                           start=first.start_pose[:2], goal=first.goal_position))
-    assert calls == [(mesh, (0, 0, 1), (0, 1, 0), pytest.approx(5.0), pytest.approx(1.0))], calls
+    assert calls == [(mesh, (0, 0, 1), (0, 1, 0), pytest.approx(5.0), pytest.approx(1.0),
+                      pytest.approx(0.01))], calls
     assert_same_rock([Polygon(w) for w in scn.walls], [Polygon(w) for w in first.walls],
                      "the section in cm, read in metres")
 

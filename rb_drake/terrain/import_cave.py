@@ -124,5 +124,5 @@ def _mesh_rock(path: Path, opts: ImportOptions) -> list[Polygon]:
     simplify = opts.simplify if opts.simplify > 0 else MESH_SIMPLIFY
     section = section_polygons(path, opts.plane_origin, opts.plane_normal,
                                None if opts.resolution is None else opts.resolution / factor,
-                               simplify / factor)
+                               simplify / factor, metres_per_unit=factor)
     return [scaled(p, factor, factor, origin=(0.0, 0.0)) for p in section]

@@ -42,6 +42,7 @@ import numpy as np
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, check_input_file, max_scan_bytes, read_bytes
+from rb_drake.terrain.scan_bytes import EMPTY, FAR, MAX_SCAN_COORDINATE, ScanBytesError, check_scan
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -73,7 +74,7 @@ DENSITY_SUBSET = 200_000  # a larger cloud's density is its random subset's, sca
 # (as a drawing's vertices, polygon_files.MAX_VERTICES) in at most MAX_SECTION_PIECES separate
 # curves (a cave's outline and its pillars: a few; 2,000 pieces take a fraction of a second).
 MAX_SECTION_SEGMENTS = 50_000
-MAX_SCAN_COORDINATE = 1e7  # in the file's unit, whatever --unit says: 10 km in millimetres
+MAX_METRES = 1e4  # once --unit and --scale are applied, as a drawing's (polygon_files)
 MAX_SECTION_PIECES = 2_000
 # Vertices of a PLY scan, from its header before it is loaded: trimesh took 5 s and 500 MB to
 # load a 31 MB cloud of 2.6 million points that was then refused as too dense; a million
@@ -113,9 +114,11 @@ def plane_frame(normal: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.cross(y2, n), y2, n
 
 
-def load_scan(path: Path) -> tuple[str, Any]:
+def load_scan(path: Path, metres_per_unit: float | None = None) -> tuple[str, Any]:
     """("mesh", trimesh.Trimesh) or ("cloud", (N, 3) array) read from `path`; a refusal is one
-    RbpInputError naming the file ("mesh" field) and the reason."""
+    RbpInputError naming the file ("mesh" field) and the reason. With `metres_per_unit` (the
+    import's --unit times --scale), coordinates are also refused beyond MAX_METRES once scaled,
+    before any geometry is made of them (as a drawing's)."""
     path = Path(path)
     try:
         # a missing file or a directory, before its name's suffix
@@ -129,6 +132,10 @@ def load_scan(path: Path) -> tuple[str, Any]:
     data = _read_bytes(path)
     _check_scan_counts(path, data, suffix)
     try:
+        read = check_scan(data, suffix)  # an ASCII PLY is read there, in C
+    except ScanBytesError as e:
+        raise _error(path, "mesh", str(e)) from None
+    try:
         import trimesh
     except ImportError:
         raise _error(path, "mesh", "reading meshes needs the optional package trimesh "
@@ -137,18 +144,25 @@ def load_scan(path: Path) -> tuple[str, Any]:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             # overflows while trimesh merges vertices of 1e308 or NaN: refused below instead
             warnings.simplefilter("ignore")
-            loaded = _load_mesh(trimesh, data, suffix)
+            loaded = (_load_mesh(trimesh, data, suffix) if read is None
+                      else trimesh.PointCloud(read[0]) if read[1] is None
+                      else trimesh.Trimesh(vertices=read[0], faces=read[1]))
     except _UnreadableError as e:
         raise _error(path, "mesh", f"not a readable {suffix[1:].upper()} file: {e}") from None
+    del data  # the file's bytes, before the geometry's arrays
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if vertices.ndim != 2 or len(vertices) == 0:
-        raise _error(path, "mesh", "holds no triangles or points: is this the right file?")
+        raise _error(path, "mesh", EMPTY)
+    if vertices.shape[1] != 3:  # an OBJ's `v x y` (found in check_scan unless \r ends lines)
+        raise _error(path, "mesh", f"has vertices of {vertices.shape[1]} coordinates, not 3")
     if not np.all(np.isfinite(vertices)):
         raise _error(path, "mesh", "has vertices with non-finite coordinates (nan or inf)")
     if np.abs(vertices).max() > MAX_SCAN_COORDINATE:
-        raise _error(path, "mesh", f"has a coordinate beyond {MAX_SCAN_COORDINATE:g} (in the "
-                     "file's unit): 10 km in millimetres; is this the right file?")
+        raise _error(path, "mesh", FAR)
+    if metres_per_unit is not None and np.abs(vertices).max() * metres_per_unit > MAX_METRES:
+        raise _error(path, "mesh", f"a coordinate beyond {MAX_METRES:g} m once scaled; check "
+                     "--unit and --scale")
     if isinstance(loaded, trimesh.Trimesh) and len(faces) > 0:
         return "mesh", loaded
     return "cloud", vertices
@@ -251,7 +265,7 @@ def cloud_resolution(points: np.ndarray) -> float:
 
 def section_polygons(path: Path, origin: tuple[float, float, float] | None,
                      normal: tuple[float, float, float] | None, resolution: float | None,
-                     tolerance: float) -> list[Polygon]:
+                     tolerance: float, metres_per_unit: float | None = None) -> list[Polygon]:
     """The rock of the cave scanned in `path` (STL, OBJ or PLY mesh, or PLY point cloud) cut by
     the plane through `origin` (default: the scan's bounding-box centre) with `normal`
     (default: world +x, a vertical plane), as valid, non-empty, counter-clockwise shapely
@@ -261,9 +275,9 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
     `resolution` (m) matters for point clouds only: points within it of the plane are used, and
     their outline bridges gaps up to 2 × resolution; None takes it from the cloud's density
     (`cloud_resolution`: about 4 times its typical point spacing, 9 cm on the example cloud).
-    `tolerance` (m) simplifies the outline
-    (shapely's simplify, topology preserved). Bad input raises one RbpInputError naming the
-    file, the field ("plane", "mesh", "resolution", "tolerance") and the reason.
+    `tolerance` (m) simplifies the outline (shapely's simplify, topology preserved);
+    `metres_per_unit`: see load_scan. Bad input raises one RbpInputError naming the file, the
+    field ("plane", "mesh", "resolution", "tolerance") and the reason.
     """
     path = Path(path)
     for name, value in (("resolution", resolution), ("tolerance", tolerance)):
@@ -276,7 +290,7 @@ def section_polygons(path: Path, origin: tuple[float, float, float] | None,
     if np.linalg.norm(n_raw) < 1e-12:
         raise _error(path, "plane", f"the normal {tuple(n_raw.tolist())} is zero: give the "
                      "direction across the plane")
-    kind, scan = load_scan(path)
+    kind, scan = load_scan(path, metres_per_unit)
     vertices = np.asarray(scan.vertices if kind == "mesh" else scan, dtype=float)
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     o = (lo + hi) / 2.0 if origin is None else _vec(origin, path, "origin")

@@ -94,7 +94,7 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
     check_output(args.log, "--log", inputs={"the plan's file": args.plan})
     path = Path(args.plan)
     plan = read_plan(path)
-    if not plan["phases"]:  # a valid plan of no route: a failed outcome (1), as simulate's
+    if not plan["success"] and not plan["phases"]:  # a plan of no route: a failed outcome (1)
         print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
                        "nothing to fly"), file=sys.stderr)
         return EXIT_FAILED

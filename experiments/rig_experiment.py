@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     from planning.plan import write_plan
     from rb_drake.files import atomic_save_figure
     from systems.rig import RigSimConfig, load_rig_scenario, rig_plan
-    from systems.rig_interface import RigLcmConfig, replay_log, report_figure, run_rig
+    from systems.rig_interface import run_rig
+    from systems.rig_log import RigLcmConfig, replay_log, report_figure
 
     scn = load_rig_scenario()
     plan = rbp_body_plan(scn) if args.planner == "rbp" else rig_plan(scn)

@@ -48,15 +48,12 @@ from rb_drake.stance import Stance
 from systems.lcm_url import open_problem, quietly
 from systems.reachbot_lcm import rig_command_t, rig_setup_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, RigSimulatorLcm
-from systems.rig_log import (  # noqa: F401 (reading a log back, without Drake: here too)
+from systems.rig_log import (
     MAX_LOG_EVENTS,
     MEMQ,
     GraspRecord,
     RigInputError,
     RigLcmConfig,
-    RigLog,
-    replay_log,
-    report_figure,
 )
 from systems.rig_messages import LogWriter, RawSerializer, StatusFilter
 from systems.rig_safety import RigCommandSource, SafetyReport

@@ -20,20 +20,9 @@ from pydrake.systems.lcm import SerializerInterface
 
 from rb_drake.params import RobotParams
 from systems.reachbot_lcm import rig_command_t, rig_status_t
-from systems.rig_log import (  # noqa: F401 (the names rbp's log reading had here)
-    COMMAND_ROW,
-    MAX_LOG_EVENTS,
-    MEMQ,
-    STATUS_ROW,
-    FixedMessage,
+from systems.rig_log import (
     RigLcmConfig,
-    command_problem,
     decode_status,
-    first_bad_command,
-    fixed_message,
-    good_statuses,
-    read_log,
-    scan_log,
 )
 
 

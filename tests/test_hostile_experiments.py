@@ -376,6 +376,11 @@ def test_calibration_figure_draws_a_rate_off_by_the_tolerance() -> None:
                                       "simulated": sim}}
     rows = rows_of([record])
     rows[0]["ci_simultaneous"][0] = 2e-10  # as a rounding could leave it
+    assert rows[0]["ci_simultaneous"][0] > rows[0]["rate"], "the case: the rate past its interval"
     import matplotlib.pyplot as plt
 
-    plt.close(calibration_figure(rows))
+    fig = calibration_figure(rows)  # raised matplotlib's "'yerr' must not contain negative"
+    try:
+        assert len(fig.axes) == 2 and fig.axes[0].collections, "no error bars drawn"
+    finally:
+        plt.close(fig)

@@ -585,7 +585,7 @@ def test_damaged_rig_logs_refused_in_one_line(tmp_path):
     import lcm
 
     from systems.reachbot_lcm import rig_setup_t
-    from systems.rig_interface import RigLcmConfig
+    from systems.rig_log import RigLcmConfig
 
     channels = RigLcmConfig()
 
@@ -620,7 +620,7 @@ def test_rig_log_setup_printed_escaped_and_its_stance_checked(tmp_path):
     import lcm
 
     from systems.reachbot_lcm import rig_setup_t
-    from systems.rig_interface import RigLcmConfig
+    from systems.rig_log import RigLcmConfig
 
     channels = RigLcmConfig()
     scenario_json = json.dumps(load_scenario(DEMO).to_dict())
@@ -651,8 +651,7 @@ def test_rig_log_with_a_damaged_last_command_refused_by_the_header_scan(tmp_path
     import lcm
 
     from systems.reachbot_lcm import rig_command_t
-    from systems.rig_interface import RigLcmConfig
-    from systems.rig_messages import fixed_message, scan_log
+    from systems.rig_log import RigLcmConfig, fixed_message, scan_log
 
     channels = RigLcmConfig()
     path = tmp_path / "run.lcmlog"

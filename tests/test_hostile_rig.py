@@ -50,7 +50,7 @@ def _write(path: Path, events: list[tuple[bytes, bytes]]) -> Path:
 def test_non_utf8_channel_skipped_as_any_other_channel_and_non_utf8_file_name(tmp_path):
     """A channel named b'OTHER\\xff' was a UnicodeDecodeError traceback from lcm's reader; a
     file name that is not UTF-8 was refused as 'not an LCM log'."""
-    from systems.rig_interface import replay_log
+    from systems.rig_log import replay_log
 
     events = [(b"RIG_SETUP", _setup()), (b"OTHER\xff\n", b"x"), (b"OTHER", b"y"),
               (b"RIG_STATUS", _status(0, 2.0)), (b"RIG_STATUS", b"garbage")]
@@ -64,7 +64,8 @@ def test_replay_as_arrays_equals_the_monitor(tmp_path):
     from pydrake.common.value import AbstractValue
 
     from systems.reachbot_lcm import rig_status_t
-    from systems.rig_interface import GraspMonitor, replay_log
+    from systems.rig_interface import GraspMonitor
+    from systems.rig_log import replay_log
 
     statuses = [_status(k * 100_000, 2.0 + k) for k in range(5)]
     log = replay_log(_write(tmp_path / "run.lcm", [(b"RIG_SETUP", _setup())]
@@ -81,7 +82,7 @@ def test_replay_as_arrays_equals_the_monitor(tmp_path):
 
 def test_non_utf8_stance_id_escaped(tmp_path):
     """lcm's decoder puts U+FFFD for bytes that are not UTF-8: shown escaped."""
-    from systems.rig_interface import RigInputError, replay_log
+    from systems.rig_log import RigInputError, replay_log
 
     setup = _setup(stance=["aXY", "a6", "a1", "a20"]).replace(b"aXY", b"a\xff\xfe")
     path = _write(tmp_path / "run.lcm", [(b"RIG_SETUP", setup)])
@@ -91,7 +92,7 @@ def test_non_utf8_stance_id_escaped(tmp_path):
 
 def test_setup_scenario_bounded_by_a_scenario_files_values(tmp_path):
     """A setup scenario padded with 900,000 objects was parsed (354 MB) before refusal."""
-    from systems.rig_interface import RigInputError, replay_log
+    from systems.rig_log import RigInputError, replay_log
 
     padded = json.dumps({"zzz": [{"a": 0}] * 60_000})
     path = _write(tmp_path / "run.lcm", [(b"RIG_SETUP", _setup(padded))])
@@ -103,7 +104,7 @@ def test_setup_scenario_bounded_by_a_scenario_files_values(tmp_path):
 def test_bad_last_command_found_among_many(tmp_path):
     """The commands are checked as arrays; the first bad one is named by its event."""
     from systems.reachbot_lcm import rig_command_t
-    from systems.rig_interface import RigInputError, replay_log
+    from systems.rig_log import RigInputError, replay_log
 
     good, bad = rig_command_t(), rig_command_t()
     good.boom_length, good.tension_setpoint = [1.0] * 4, [5.0] * 4
@@ -131,7 +132,8 @@ def test_lone_surrogates_refused_at_reading(load, text, field):
 def test_rig_run_plan_source_of_a_non_utf8_file_name(tmp_path):
     """rig-run's plan_source of a file name that is not UTF-8 raised in the log's encoder."""
     from systems.rig import RigSimConfig, load_rig_scenario, rig_plan
-    from systems.rig_interface import RigLcmConfig, replay_log, run_rig
+    from systems.rig_interface import run_rig
+    from systems.rig_log import RigLcmConfig, replay_log
 
     plan = rig_plan(load_rig_scenario())
     run = run_rig(plan, 0, RigLcmConfig(period=0.5), tmp_path / "run.lcm",

@@ -30,12 +30,11 @@ from systems.reachbot_lcm import rig_command_t, rig_status_t
 from systems.rig import RigSimConfig, RigSimulator, fit_pose, load_rig_scenario, rig_plan
 from systems.rig_interface import (
     GraspMonitor,
-    RigLcmConfig,
     RigRun,
     body_phase,
-    replay_log,
     run_rig,
 )
+from systems.rig_log import RigLcmConfig, replay_log
 
 SIM = RigSimConfig(seed=7)
 # Measured minus planned tension is the load-cell noise alone while the winches keep up (the

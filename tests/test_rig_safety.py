@@ -28,14 +28,12 @@ from systems.reachbot_lcm import rig_command_t, rig_status_t
 from systems.rig import RigSimConfig, load_rig_scenario, rig_plan
 from systems.rig_interface import (
     GraspMonitor,
-    RigInputError,
-    RigLcmConfig,
     RigRun,
     StatusFilter,
     body_phase,
-    replay_log,
     run_rig,
 )
+from systems.rig_log import RigInputError, RigLcmConfig, replay_log
 
 CONFIG = RigLcmConfig()
 NO_RATE_BOUND = RigLcmConfig(max_length_rate=math.inf, max_tension_rate=math.inf)

@@ -155,6 +155,9 @@ def _pairs_cross(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> 
     return (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~((o1 == 0) & (o2 == 0))
 
 
+MIN_EDGE = 1e-12  # m: a shorter edge joins a repeated vertex
+
+
 def polygon_is_simple(poly: np.ndarray) -> tuple[bool, str]:
     """Whether a closed polygon is simple (no two non-adjacent edges meet); the reason if not."""
     poly = np.asarray(poly, dtype=float)
@@ -162,7 +165,7 @@ def polygon_is_simple(poly: np.ndarray) -> tuple[bool, str]:
     if n < 3:
         return False, f"needs at least 3 vertices, has {n}"
     q = np.roll(poly, -1, axis=0)
-    if np.any(np.linalg.norm(q - poly, axis=1) < 1e-12):
+    if np.any(np.linalg.norm(q - poly, axis=1) < MIN_EDGE):
         return False, "has a repeated vertex (an edge of zero length)"
     bad = _first_crossing(poly, q)
     if bad is not None:

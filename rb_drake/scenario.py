@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from rb_drake.collision import Rock, polygon_is_simple, signed_area
+from rb_drake.collision import MIN_EDGE, Rock, polygon_is_simple, signed_area
 from rb_drake.errors import RbpInputError, apart
 from rb_drake.input_files import InputFileError, load_yaml, read_text
 from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
@@ -29,7 +29,6 @@ ANCHOR_DEPTH_TOL = 0.01  # m: an anchor may sit this far inside its rock (numeri
 ANCHOR_GAP_TOL = 0.05    # m: ... and this far off the rock surface (a gripper grasps rock)
 TOL_SLACK = 1e-9         # m: an anchor written at a tolerance (1.21 beside 1.2) is within it,
 #                          though its computed distance is a rounding over (0.010000000000000009)
-MIN_EDGE = 1e-12         # m: shorter wall edges are repeated vertices (as polygon_is_simple's)
 
 # Physically meaningful magnitudes (docs/formats.md): a value beyond them is a typo or an attack,
 # and refusing it at reading keeps overflow (1e308 squared) out of the planner.

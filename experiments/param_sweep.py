@@ -28,8 +28,8 @@ from experiments.sweep import (
     write_results,
 )
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
+from rb_drake.generate import MAX_ANCHOR_DENSITY
 from rb_drake.scenario import MAX_FORCE, MAX_GRAVITY
-from rb_drake.terrain.import_cave import MAX_ANCHOR_DENSITY
 
 # The ranges of the scenario fields each parameter sets (rb_drake.scenario, docs/formats.md),
 # so that no swept value makes a cave the scenario reader would refuse (gravity 1e4 hung the

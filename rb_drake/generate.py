@@ -33,6 +33,15 @@ def length_problem(lo: float, hi: float) -> str | None:
     return None
 
 
+def density_problem(anchor_density: float) -> str | None:
+    """Why `anchor_density` is no density of anchors to draw or place, or None if it is one
+    (`rbp scenario generate`, `rbp scenario import` and the Python API share it)."""
+    if not 0 < anchor_density <= MAX_ANCHOR_DENSITY:  # NaN fails the comparison
+        return (f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per metre, got "
+                f"{anchor_density:g}")
+    return None
+
+
 def estimated_values(hi: float, anchor_density: float) -> int:
     """About how many values (YAML nodes) the file of a cave up to `hi` m long holds: measured
     2.0-2.1 anchors per metre of length and anchor a metre of rock (two walls and the ends),

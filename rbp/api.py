@@ -149,9 +149,9 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     `CaveGenerationError` when no draw has a feasible start stance."""
     from rb_drake.errors import MAX_SEED, RbpInputError
     from rb_drake.generate import (
-        MAX_ANCHOR_DENSITY,
         CaveConfig,
         config_problem,
+        density_problem,
         generate_cave,
         length_problem,
         values_problem,
@@ -163,9 +163,8 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     if (problem := length_problem(lo, hi)) is not None:
         raise RbpInputError(problem, field="length")
     anchor_density = _number(anchor_density, "anchor_density")
-    if not 0 < anchor_density <= MAX_ANCHOR_DENSITY:
-        raise RbpInputError(f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per "
-                            f"metre, got {anchor_density:g}", field="anchor_density")
+    if (problem := density_problem(anchor_density)) is not None:
+        raise RbpInputError(problem, field="anchor_density")
     if (problem := values_problem(hi, anchor_density)) is not None:
         raise RbpInputError(problem)  # up front: a 1000 m cave takes minutes to draw
     seed = _whole(seed, "seed", 0, MAX_SEED)

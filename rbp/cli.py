@@ -62,6 +62,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     from rb_drake.generate import (
         MAX_ANCHOR_DENSITY,
         CaveConfig,
+        density_problem,
         generate_cave,
         length_problem,
         values_problem,
@@ -71,9 +72,8 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
     lo, hi = args.length
     if (problem := length_problem(lo, hi)) is not None:
         raise UserError(f"--length: {problem}")
-    if not 0 < args.anchor_density <= MAX_ANCHOR_DENSITY:
-        raise UserError(f"--anchor-density: must be above 0 and at most {MAX_ANCHOR_DENSITY:g} "
-                        f"anchors per metre, got {args.anchor_density:g}")
+    if (problem := density_problem(args.anchor_density)) is not None:
+        raise UserError(f"--anchor-density: {problem}")
     if (problem := values_problem(hi, args.anchor_density)) is not None:
         raise UserError(problem)  # up front: a 1000 m cave takes minutes to draw
     check_seed(args.seed)

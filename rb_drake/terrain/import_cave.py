@@ -16,7 +16,6 @@ if TYPE_CHECKING:
 
     from rb_drake.scenario import Scenario
 
-MAX_ANCHOR_DENSITY = 20.0   # anchors per metre, as `rbp scenario generate` allows
 MESH_SIMPLIFY = 0.01      # m: a mesh section's outline simplified this far unless --simplify says
 
 
@@ -82,11 +81,12 @@ def _check_readable(path: Path, scn: Scenario) -> None:
 
 
 def _check(opts: ImportOptions) -> None:
+    from rb_drake.generate import density_problem  # the generator's range; it loads the kernel
+
     if opts.unit not in UNITS:
         raise RbpInputError(f"must be one of {sorted(UNITS)}, got {opts.unit!r}", field="--unit")
-    if not 0 < opts.anchor_density <= MAX_ANCHOR_DENSITY:
-        raise RbpInputError(f"must be above 0 and at most {MAX_ANCHOR_DENSITY:g} anchors per "
-                            f"metre, got {opts.anchor_density:g}", field="--anchor-density")
+    if (problem := density_problem(opts.anchor_density)) is not None:
+        raise RbpInputError(problem, field="--anchor-density")
     if opts.resolution is not None and not (math.isfinite(opts.resolution)
                                             and opts.resolution > 0):
         raise RbpInputError(f"must be a positive number of metres, got {opts.resolution:g}",

@@ -369,19 +369,19 @@ def variant_config(variant: str, time_limit: float | None):
     exhaustive = AnytimeConfig(improve_factor=None)
     table: dict[str, dict[str, Any]] = {
         "default": {},
-        "first": {"anytime": None},
-        "sampled": {"search": "sampled"},
+        "first": {"anytime": None, "heuristic_weight": 300.0},
+        "sampled": {"search": "sampled", "heuristic_weight": 300.0},
         "w30": {"heuristic_weight": 30.0, "anytime": None},
         "w3": {"heuristic_weight": 3.0, "anytime": None},
         "before": {"anytime": AnytimeConfig(weights=(10.0, 3.0, 1.0), restart=False),
-                   "expansions_per_metre": 0.0},
+                   "expansions_per_metre": 0.0, "heuristic_weight": 300.0},
         "ara": {"anytime": AnytimeConfig(restart=False)},
         "anytime-f1": {"anytime": AnytimeConfig(improve_factor=1.0)},
         "anytime-f4": {"anytime": AnytimeConfig(improve_factor=4.0)},
         "oracle": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive},
         "oracle-a*": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
                       "heuristic_weight": 1.0},
-        "repair": {"anytime": None, "repair": RepairConfig()},
+        "repair": {"anytime": None, "repair": RepairConfig(), "heuristic_weight": 300.0},
         "default-repair": {"repair": RepairConfig()},
         "segments": {"segments": SegmentConfig()},
         "travel7": {"ordering": "travel", "heuristic_weight": 7.0, "anytime": None},
@@ -392,12 +392,14 @@ def variant_config(variant: str, time_limit: float | None):
         radius, _, factor = variant.removeprefix("corridor").partition("-f")
         return FootstepConfig(anytime=AnytimeConfig(corridor=float(radius),
                                                     improve_factor=float(factor or 2.0)))
-    if variant.startswith("x-"):  # x-wW-fF-cR: today's default, any of its first route's
-        # weight W, improvement budget F and corridor R changed
+    if variant.startswith("x-"):  # x-wW-fF-cR-bB: today's default, any of its first route's
+        # weight W (default 300, the default before session 24), improvement budget F,
+        # corridor R and fallback point B changed
         settings = {part[0]: float(part[1:]) for part in variant.split("-")[1:]}
         anytime = AnytimeConfig(improve_factor=settings.get("f", 2.0),
                                 corridor=settings.get("c"))
-        return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime)
+        return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime,
+                              fallback_after=settings.get("b", 0.5))
     return FootstepConfig(**table[variant])
 
 

@@ -149,6 +149,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     bound = RegraspHeuristic(scn)
     weight = heuristic_weight
     exact = heuristic_weight <= 1.0  # A*: ordered by the admissible bound itself
+    fallback = config.fallback_weight if config.fallback_weight is not None and \
+        config.fallback_weight > heuristic_weight and not exact else None
     # Until the first route, each vertex is expanded once, as the first-route search always
     # did; an entry that would lower an expanded vertex's cost then waits in `deferred` (ARA*'s
     # INCONS list) and rejoins the open list with the first route, from which on vertices are
@@ -417,6 +419,17 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                     progress(expansions, tested, nearest, bound=_ratio(best_cost, lo))
                 if best_cost <= anytime.target_bound * lo:
                     break
+        if (best is None and fallback is not None and max_expansions is not None
+                and expansions >= config.fallback_after * max_expansions):
+            # No route yet at the moderate weight: start again, greedy (CompleteConfig)
+            weight, fallback = fallback, None
+            open_list = start_entries()
+            closed.clear()
+            parent.clear()
+            deferred.clear()
+            deferred_moves.clear()
+            current = math.inf
+            continue
         if max_expansions is not None and expansions >= max_expansions and best is None:
             stop = Stop.BUDGET
             reason = (f"gave up after {expansions} expansions without reaching the goal "

@@ -64,6 +64,12 @@ class CompleteConfig:
     # the goal (`DistanceHeuristic`), or "travel", each boom's travel (`TravelHeuristic`)
     heuristic_weight: float = 300.0
     ordering: str = "distance"
+    # None: no fallback; else, when no route is found after `fallback_after` of
+    # `max_expansions`, the search starts again at this weight (the lattice work kept in the
+    # memo): a moderate weight finds better first routes in about the same time on most caves,
+    # a greedy one finds a route on the few where the moderate one wanders (docs/model.md)
+    fallback_weight: float | None = None
+    fallback_after: float = 0.5
     max_expansions: int | None = None  # stop with Stop.BUDGET after this many; None: no limit
     time_limit: float | None = None    # s: stop with Stop.BUDGET after it; None: no limit
     ignore_grasps: bool = False        # decide poses without the grasps' probabilities

@@ -107,6 +107,8 @@ FIELDS: dict[str, dict[str, Range | Choice]] = {
         "search": Choice(("hybrid", "complete", "sampled")),
         "sampled_expansions": count(1, 10_000_000),
         "heuristic_weight": Range(0.0, 10_000.0),
+        "fallback_weight": Range(0.0, 10_000.0),
+        "fallback_after": Range(0.0, 1.0),
         "ordering": Choice(("distance", "travel", "distance+travel")),
         "min_success": Range(0.0, 1.0, open_lo=True, open_hi=True),
         "candidates_per_boom": count(1, 1000),

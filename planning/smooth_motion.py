@@ -256,16 +256,21 @@ def plan_knots(plan: Plan, resample: float | None = RESAMPLE) -> list[PhaseKnots
 
 
 def plan_paths(plan: Plan) -> list[tuple[int, SmoothPath]]:
-    """(phase, its smooth path) of every phase of several steps of a motion plan: the path
-    `rbp simulate` follows between those steps (`systems.trajectory.PlanTrajectory` builds
-    its body's path with the same `plan_knots` and `join_knots`)."""
+    """(phase, its smooth path over all its steps' knots) of every phase of several steps of
+    a motion plan: the path `rbp simulate` follows between those steps
+    (`systems.trajectory.PlanTrajectory` builds its body's path with the same `plan_knots`
+    and `join_knots`)."""
     knots = plan_knots(plan)
     if not knots:
         return []
     pose = join_knots(knots)[3]
     velocity = pose.derivative(1)
-    return [(k, SmoothPath(kn.motion_times, pose, velocity, kn.free_tip,
-                           None if kn.free_tip is None else kn.free_tip.derivative(1), kn.lead))
+    # every knot of the phase, its ramps' too: the spline's interval from the last attach
+    # ramp step to the first motion step (and from the dwell to the release ramp) moves
+    # unless the two poses are equal to 1e-12 (`continuous_acceleration_rates`), which rule
+    # `attach` does not require (1e-9); a smooth phase has one knot per step
+    return [(k, SmoothPath(kn.t, pose, velocity, kn.free_tip,
+                           None if kn.free_tip is None else kn.free_tip.derivative(1), 0))
             for k, kn in enumerate(knots) if kn.smooth]
 
 

@@ -156,7 +156,8 @@ class PlanTrajectory:
         if not self.phases:
             raise PlanError("phases", "the plan has no phases")
         times, poses, rates, self.pose = join_knots(knots, resample)
-        smooth = [(k, kn.motion_times, kn.lead) for k, kn in enumerate(knots) if kn.smooth]
+        # every knot of the phase, its ramps' too, as the verifier samples it (`plan_paths`)
+        smooth = [(k, kn.t, 0) for k, kn in enumerate(knots) if kn.smooth]
         # how far the smooth path strays from the verified straight motion (resolutions)
         self.departure, self.departure_phase = self._departure(times, poses, rates, smooth)
         if resample is not None:

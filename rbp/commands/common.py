@@ -224,27 +224,39 @@ def warn_unverified(path: Path) -> None:
           "is executed as it is", file=sys.stderr)
 
 
-def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True) -> bool:
+def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
+                      executes: bool = False) -> bool:
     """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
     since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
-    `warn_unverified`, once the plan is accepted)."""
+    `warn_unverified`, once the plan is accepted). `executes` (rig-run, which commands the
+    straight motion between steps): a footstep plan's motion, which `rbp check` and its stamp
+    leave unverified, must pass rule `between` too (`executed_motion_problems`)."""
     from planning.plan_file import has_valid_stamp
 
     if not verify:
         return False
-    if has_valid_stamp(plan):
-        return False
     from rbp.progress import CheckProgress
-    from systems.plan_check import plan_problems
+    from systems.plan_check import executed_motion_problems, plan_problems
 
-    with CheckProgress(f"verifying {path}") as bar:
-        problems, _ = plan_problems(plan, str(path), progress=bar)
+    problems: list[str] = []
+    if not has_valid_stamp(plan):
+        with CheckProgress(f"verifying {path}") as bar:
+            problems, _ = plan_problems(plan, str(path), progress=bar)
+    footstep = False
+    if executes and not problems:
+        problems = executed_motion_problems(plan, str(path))
+        footstep = True
     for p in problems[:20]:
         print(one_line(f"error: {path}: {p}"), file=sys.stderr)
     if problems:
         count = plural(len(problems), "problem")
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
-        print(one_line(f"error: {path}: the plan fails verification ({count}{shown}); "
-                       f"refused (rbp check {path} lists them all)"), file=sys.stderr)
+        print(one_line(
+            f"error: {path}: a footstep plan whose motion between steps, which rig-run "
+            f"commands, fails rule between ({count}{shown}; rbp check verifies its end "
+            "configurations only); refused: plan with motion (rbp plan without "
+            "--footsteps-only)" if footstep else
+            f"error: {path}: the plan fails verification ({count}{shown}); "
+            f"refused (rbp check {path} lists them all)"), file=sys.stderr)
     return bool(problems)

@@ -98,7 +98,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
                        "nothing to fly"), file=sys.stderr)
         return EXIT_FAILED
-    if refuse_wrong_plan(plan, path, getattr(args, "verify", True)):
+    # executes: a footstep plan's straight motion, which rig-run commands, is verified too
+    if refuse_wrong_plan(plan, path, getattr(args, "verify", True), executes=True):
         return EXIT_FAILED  # before any LCM traffic
     # imported once the plan is read: they take 80 MB, a refused plan's reading its own
     from systems.rig import RigSimConfig

@@ -7,8 +7,9 @@ transition is searched only when A* pops it.
 
 Cost and heuristic are `planning.search_cost`'s: an edge costs the regrasp's attach cost plus
 each boom's worst -log P over the move's configurations, and the goal-distance heuristic is
-multiplied by `heuristic_weight` (default 300: progress toward the goal dominates, the paper's
-distance-driven search) to find a first route fast. The complete search then goes on for better
+multiplied by `heuristic_weight` (default 10, falling back to 300, the paper's distance-driven
+search, where 10 finds no route in half the budget) to find a first route fast. The complete
+search then goes on for better
 routes (`FootstepConfig.anytime`), with an admissible bound that proves how far the best one
 is from the optimum (docs/model.md, "Route cost, its lower bound and the anytime search").
 

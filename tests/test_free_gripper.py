@@ -116,3 +116,21 @@ def test_rbp_check_refuses_a_gripper_through_a_rock_spike(golden: dict[str, Any]
     assert result.returncode == 1, result.stdout + result.stderr
     assert (f"phases[{REACH}] (reach) step {MID} " in result.stdout
             and "collision: boom 2 collides with rock" in result.stdout)
+
+
+def test_kernel_and_check_poses_agree_near_an_anchor(golden: dict[str, Any]) -> None:
+    """Tips around the new anchor, 0 to 3 cm from it, in and out of its rock: the kernel's
+    per-tip clearance decides as check_poses' does, pose for pose."""
+    pose, anchor = _step(golden, LAST)
+    scn = _scenario(golden)
+    stance = scn.stance(tuple(golden["phases"][REACH]["stance"]))
+    rng = np.random.default_rng(3)
+    radius = rng.uniform(0.0, 0.03, 400)
+    angle = rng.uniform(0.0, 2 * np.pi, 400)
+    tips = anchor + np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    poses = np.broadcast_to(pose, (len(tips), 3))
+    check = check_poses(scn, stance, poses, tips, full=True)
+    kernel = score_poses(scn, stance, poses, tips)
+    np.testing.assert_array_equal(kernel.reason, check.reason)
+    hit = check.reason == Reason.BOOM_COLLISION
+    assert hit.any() and (~hit).any(), "the sample should hold tips both clear and in rock"

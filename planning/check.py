@@ -29,7 +29,7 @@ from planning.smooth_motion import smooth_path_problems
 from planning.verify_between import between_problems
 from planning.verify_climb import Problem, climb_problems, locate
 from rb_drake import geometry
-from rb_drake.collision import ANCHOR_CLEARANCE
+from rb_drake.collision import boom_clearances
 from rb_drake.feasibility import MIN_CONDITIONING, pull_within, wrench_conditioning
 from rb_drake.statics import STATICS_TOL, statics_problem
 
@@ -158,7 +158,8 @@ def _check_configuration(scn, stance, pose, tip, step: Step, fail):
     if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any():
         fail("collision", "body collides with rock")
     booms = np.flatnonzero(used)
-    ends = geo.shoulders[0, booms] + geo.d[0, booms] - ANCHOR_CLEARANCE * geo.u[0, booms]
+    clearance = boom_clearances(scn.anchor_positions, 1, stance.free_boom, tip)[0, booms]
+    ends = geo.shoulders[0, booms] + geo.d[0, booms] - clearance[:, None] * geo.u[0, booms]
     for i in booms[rock.segments_hit(geo.shoulders[0, booms], ends)]:  # one batch per pose
         fail("collision", f"boom {i} collides with rock")
     att = stance.attached

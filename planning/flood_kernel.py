@@ -67,7 +67,8 @@ def flood_kernel(seed, box, dx, dphi, n_phi, prm, positions, normals, f_normal, 
             if 0 <= a < body.shape[0] and 0 <= b < body.shape[1]:
                 known[w] = body[a, b, wave[w, 2] - m0]
         score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral,
-                      sigma_normal, sigma_lateral, attached, tips, rows, zeros, zeros, edges,
+                      sigma_normal, sigma_lateral, attached, tips, rows, zeros, zeros,
+                      np.empty(0), edges,
                       owner, vertices, ignore_grasps, decide_only, collide, reason, r,
                       np.empty((n_wave, NUM_BOOMS)), np.empty((n_wave, NUM_BOOMS)),
                       np.empty(n_wave), rel, known, np.int64(ALL_BOOMS))

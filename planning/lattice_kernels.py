@@ -329,8 +329,8 @@ def transition_boom_costs(pose, prm, table_positions, table_normals, table_f_nor
     lp = np.empty((_CONFIGS, NUM_BOOMS))
     score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
                  sigma_lateral, attached, tip_points, np.zeros(_CONFIGS, dtype=np.int64),
-                 stance_row, tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
-                 np.empty(_CONFIGS, dtype=np.int64), np.empty(_CONFIGS), lp,
+                 stance_row, tip_row, np.empty(0), edges, owner, vertices, ignore_grasps,
+                 decide_only, collide, np.empty(_CONFIGS, dtype=np.int64), np.empty(_CONFIGS), lp,
                  np.empty((_CONFIGS, NUM_BOOMS)), np.empty(_CONFIGS), np.empty((0, NUM_BOOMS)),
                  np.empty(0, dtype=np.int8), np.int64(ALL_BOOMS), np.int64(0), np.int64(1))
     costs = np.empty(NUM_BOOMS)
@@ -375,7 +375,8 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, table_posi
     zeros = np.zeros(n, dtype=np.int64)
     reason = np.empty(n, dtype=np.int64)
     score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                  sigma_lateral, attached, tips, np.arange(n), zeros, zeros, edges, owner,
+                  sigma_lateral, attached, tips, np.arange(n), zeros, zeros, np.empty(0),
+                  edges, owner,
                   vertices, ignore_grasps, decide_only, collide, reason, np.empty(n),
                   np.empty((n, NUM_BOOMS)), np.empty((n, NUM_BOOMS)), np.empty(n),
                   np.empty((0, NUM_BOOMS)), np.empty(0, dtype=np.int8), np.int64(0))
@@ -398,7 +399,8 @@ def lattice_move_kernel(keys, rows, boom, span, dx, dphi, n_phi, prm, table_posi
     r2 = np.empty(m)
     rel = np.empty((m, NUM_BOOMS))
     score_threads(threads, second, prm, positions, normals, f_normal, f_lateral,
-                  sigma_normal, sigma_lateral, attached, tips, np.arange(m), ones, ones, edges,
+                  sigma_normal, sigma_lateral, attached, tips, np.arange(m), ones, ones,
+                  np.empty(0), edges,
                   owner, vertices, ignore_grasps, decide_only, np.int64(0), reason2, r2,
                   np.empty((m, NUM_BOOMS)), np.empty((m, NUM_BOOMS)), np.empty(m), rel,
                   np.empty(0, dtype=np.int8), np.int64(1) << boom)

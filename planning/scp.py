@@ -54,7 +54,7 @@ from planning.scp_linearise import Iterate
 from planning.scp_linearise import Linearisation as Linearisation  # re-exported
 from planning.scp_program import Margins, ScpConfig, Subproblem, SubproblemProgram
 from rb_drake import geometry
-from rb_drake.collision import ANCHOR_CLEARANCE
+from rb_drake.collision import boom_clearances
 from rb_drake.feasibility import (
     MIN_CONDITIONING,
     Reason,
@@ -160,7 +160,9 @@ class PhaseProgram(SubproblemProgram):
             if (rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any()
                     or rock_inside_body(rock, corners).any()):
                 return "body collides with rock"
-            end = self.targets - ANCHOR_CLEARANCE * geo.u
+            clearance = boom_clearances(self.world.anchor_positions, len(it.poses),
+                                        self.stance.free_boom, self.tips)
+            end = self.targets - clearance[..., None] * geo.u
             if rock.segments_hit(geo.shoulders, end).any():
                 return "boom collides with rock"
         lp = self.stance.log_prob(np.nan_to_num(self.tensions4(it.tensions)),

@@ -38,6 +38,7 @@ class NaiveWorld:
         self.robot = scn.robot
         self.rock = scn.rock
         self.gravity_vector = scn.gravity_vector
+        self.anchor_positions = scn.anchor_positions
 
 
 def pack_rows(table: AnchorTable, rows: list[list[int]],

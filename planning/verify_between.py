@@ -215,6 +215,7 @@ class _World(NamedTuple):
     robot: RobotParams
     rock: Rock
     gravity_vector: np.ndarray
+    anchor_positions: np.ndarray  # (A, 2): a free gripper may touch rock only near these
 
 
 def verification_world(scn: Scenario | World) -> _World:
@@ -223,7 +224,7 @@ def verification_world(scn: Scenario | World) -> _World:
     robot = scn.robot
     lo, hi = robot.boom_tension
     slack = dataclasses.replace(robot, boom_tension=(max(0.0, lo - TENSION_SLACK), hi))
-    return _World(slack, scn.rock, scn.gravity_vector)
+    return _World(slack, scn.rock, scn.gravity_vector, scn.anchor_positions)
 
 
 Fail = Callable[[int, int, str], None]

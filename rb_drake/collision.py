@@ -3,7 +3,8 @@
 Rock is a set of closed polygons. A segment collides when it crosses a polygon edge or lies
 inside a polygon; the body collides when an edge of its square crosses rock, when it lies inside
 rock, or when rock lies inside it. A boom may touch rock only at its own anchor, so boom segments
-are checked from the shoulder to a point `ANCHOR_CLEARANCE` short of the anchor.
+are checked from the shoulder to a point `ANCHOR_CLEARANCE` short of the anchor; a free gripper
+only within ANCHOR_CLEARANCE of an anchor (`free_clearance`).
 """
 
 from __future__ import annotations
@@ -13,10 +14,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from rb_drake.params import NUM_BOOMS
+
 if TYPE_CHECKING:
     from rb_drake.edge_index import EdgeIndex
 
 ANCHOR_CLEARANCE = 0.02  # m; a boom's last 2 cm, at its gripper, may touch the rock it grasps.
+CLEARANCE_PAIRS = 1 << 20  # tips x anchors measured at once by `free_clearance`
 INDEX_EDGES = 2048  # rock of more edges finds a segment's edges in a quadtree (edge_index), not
 #                     by testing all in the batch's box: drawn caves have up to 50,000 edges ...
 DENSE_PAIRS = 1 << 16  # ... unless a batch's segments x edges in its box are this few (a body's
@@ -25,6 +29,49 @@ DENSE_PAIRS = 1 << 16  # ... unless a batch's segments x edges in its box are th
 
 CONTAINS_PAIRS = 1 << 19  # points x edges tested at once by `Rock.contains` (a few arrays of
 #                          this many floats: 600 points in 4,000 small rocks took 163 MB)
+
+
+def free_clearance(anchor_positions: np.ndarray, tips: np.ndarray) -> np.ndarray:
+    """How far short of a FREE gripper at each of `tips` (..., 2) its boom is checked for rock:
+    ANCHOR_CLEARANCE - d, clipped to [0, ANCHOR_CLEARANCE], d the distance to the nearest anchor.
+
+    A held boom may touch rock in its last ANCHOR_CLEARANCE, the rock its gripper grasps. A free
+    gripper grasps nothing: only where it takes or leaves an anchor may it touch that anchor's
+    rock, so the boom is exempt only where it lies within ANCHOR_CLEARANCE of an anchor (its
+    last ANCHOR_CLEARANCE - d); mid-reach (d >= ANCHOR_CLEARANCE) it is checked to its tip, and
+    at an anchor (d = 0) it is a held boom's rule. A NaN tip (no free gripper): ANCHOR_CLEARANCE.
+    The one rule of feasibility.check_poses, the kernel, rbp check's `collision` and SCP."""
+    pts = np.asarray(tips, dtype=float)
+    flat = pts.reshape(-1, 2)
+    out = np.full(len(flat), ANCHOR_CLEARANCE)
+    finite = np.flatnonzero(np.isfinite(flat).all(axis=1))
+    if not len(finite):
+        return out.reshape(pts.shape[:-1])
+    out[finite] = 0.0
+    anchors = np.asarray(anchor_positions, dtype=float).reshape(-1, 2)
+    # only anchors within ANCHOR_CLEARANCE of the tips' box can shorten a tip's check
+    lo = flat[finite].min(axis=0) - ANCHOR_CLEARANCE
+    hi = flat[finite].max(axis=0) + ANCHOR_CLEARANCE
+    near = anchors[np.all((anchors >= lo) & (anchors <= hi), axis=1)]
+    if len(near):
+        size = max(1, CLEARANCE_PAIRS // len(near))
+        for k in range(0, len(finite), size):
+            rows = finite[k:k + size]
+            d = np.linalg.norm(flat[rows, None, :] - near[None, :, :], axis=2).min(axis=1)
+            out[rows] = np.clip(ANCHOR_CLEARANCE - d, 0.0, ANCHOR_CLEARANCE)
+    return out.reshape(pts.shape[:-1])
+
+
+def boom_clearances(anchor_positions: np.ndarray, P: int, free_boom: int | None,
+                    free_tip: np.ndarray | None) -> np.ndarray:
+    """Per pose and boom (P, 4), how far short of its tip each boom is checked for rock:
+    ANCHOR_CLEARANCE for a held boom, `free_clearance` for the free one at `free_tip`
+    ((2,) or (P, 2))."""
+    out = np.full((P, NUM_BOOMS), ANCHOR_CLEARANCE)
+    if free_boom is not None and free_tip is not None:
+        tips = np.broadcast_to(np.asarray(free_tip, dtype=float).reshape(-1, 2), (P, 2))
+        out[:, free_boom] = free_clearance(anchor_positions, tips)
+    return out
 
 
 class Rock:

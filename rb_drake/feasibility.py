@@ -12,7 +12,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from rb_drake import geometry
-from rb_drake.collision import ANCHOR_CLEARANCE, Rock
+from rb_drake.collision import Rock, boom_clearances
 from rb_drake.errors import apart
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
@@ -30,6 +30,9 @@ class World(Protocol):
 
     @property
     def gravity_vector(self) -> np.ndarray: ...
+
+    @property
+    def anchor_positions(self) -> np.ndarray: ...  # (A, 2): where a free gripper may touch rock
 
 
 class Reason(IntEnum):
@@ -148,8 +151,9 @@ def check_poses(world: World, stance: Stance, poses: np.ndarray,
         rows = survivors()
         flag(body_in_rock(robot, rock, poses[rows]), Reason.BODY_COLLISION, rows)
         rows = survivors()
+        clearance = boom_clearances(world.anchor_positions, P, stance.free_boom, free_tip)
         with np.errstate(invalid="ignore"):
-            end = targets[rows] - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[rows])
+            end = targets[rows] - clearance[rows, :, None] * np.nan_to_num(geo.u[rows])
         # Shoulders lie on the body, which is clear of rock wherever this result counts (a
         # pose whose body collides already failed), so only edge crossings are tested.
         boom_hit = rock.segments_hit(geo.shoulders[rows], np.nan_to_num(end),
@@ -244,7 +248,8 @@ def diagnose_pose(world: World, stance: Stance, pose: np.ndarray,
     if rock.polygons:
         if body_in_rock(robot, rock, pose[None])[0]:
             out.append("body collides with rock")
-        end = targets - ANCHOR_CLEARANCE * np.nan_to_num(geo.u[0])
+        clearance = boom_clearances(world.anchor_positions, 1, stance.free_boom, free_tip)[0]
+        end = targets - clearance[:, None] * np.nan_to_num(geo.u[0])
         for i in range(NUM_BOOMS):
             if np.isfinite(targets[i, 0]) and rock.segments_hit(geo.shoulders[0, i],
                                                                  end[i])[()]:

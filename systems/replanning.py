@@ -130,7 +130,9 @@ class FootstepReplanner:
     any other, trajectories and tensions included.
 
     Candidates are the reachable anchors nearest the goal whose 3-stance (gripper there) and
-    4-stance both hold at the current pose; the first `candidates` are tried in turn."""
+    4-stance both hold at the current pose; the first `candidates` are tried in turn. The
+    gripper moves on the straight line where it is clear of rock, else along the planner's
+    tip arc (`planning.reach_seeds`): a free gripper may touch rock only near an anchor."""
 
     candidates: int = 3
     max_expansions: int = 400
@@ -163,6 +165,13 @@ class FootstepReplanner:
             _, ok_c = configuration(scn, four, pose, None, REACH_DURATION)
             if not (ok_a and ok_b and ok_c):
                 continue
+            reach = Phase(kind="reach", stance=tuple(request.stance), free_boom=j,
+                          from_anchor=request.anchor, to_anchor=new.id, steps=(a, b))
+            if _crosses(scn, reach):  # the executors run the straight line: it must hold too
+                arc = _arc_reach(scn, held, j, new.id, pose, reach)
+                if arc is None:
+                    continue
+                reach = arc
             tried += 1
             start = dataclasses.replace(
                 scn, start_pose=(float(pose[0]), float(pose[1]), float(pose[2])),
@@ -173,8 +182,38 @@ class FootstepReplanner:
             plan = plan_climb(start, "rbp", config)
             if not plan.success:
                 continue
-            reach = Phase(kind="reach", stance=tuple(request.stance), free_boom=j,
-                          from_anchor=request.anchor, to_anchor=new.id, steps=(a, b))
             rest = shifted_phases(plan.phases, REACH_DURATION)
             return _finish_plan(request, [reach, *rest], plan)
         return None
+
+
+def _crosses(scn: Scenario, reach: Phase) -> bool:
+    """Whether the straight motion between a reach's steps fails `rbp check`'s rule `between`
+    (the free gripper's straight line from anchor to anchor often runs along the rock, which
+    a free gripper may touch only within 2 cm of an anchor)."""
+    from planning.verify_between import failing_intervals, phase_samples, verification_world
+
+    return bool(failing_intervals(verification_world(scn), scn.stance(reach.stance), reach,
+                                  phase_samples(scn.robot, reach)))
+
+
+def _arc_reach(scn: Scenario, held: tuple[str, ...], j: int, to_anchor: str, pose: np.ndarray,
+               straight: Phase) -> Phase | None:
+    """The reach along the planner's collision-free tip arc (`planning.reach_seeds`), one step
+    per arc point over REACH_DURATION, where the straight line from anchor to anchor crosses
+    rock; None where no arc holds."""
+    from planning.plan import REACH_DURATION
+    from planning.reach_seeds import reach_seed
+
+    seed = reach_seed(scn, held, j, to_anchor, pose)
+    if not seed.success or seed.tips is None:
+        return None
+    times = np.linspace(0.0, REACH_DURATION, len(seed.tips))
+    steps: list[Step] = []
+    for q, tip, t in zip(seed.poses, seed.tips, times, strict=True):
+        step, ok = configuration(scn, straight.stance, q, tip, float(t))
+        if not ok:
+            return None
+        steps.append(step)
+    reach = dataclasses.replace(straight, steps=tuple(steps))
+    return None if _crosses(scn, reach) else reach

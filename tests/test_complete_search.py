@@ -437,7 +437,8 @@ def test_rows_scored_on_threads_equal_one_thread(demo: Scenario) -> None:
         out = [np.empty(P, np.int64), np.empty(P), np.empty((P, 4)), np.empty((P, 4)),
                np.empty(P), np.full((P, 4), np.nan), np.zeros(P, np.int8)]
         score_threads(threads, poses, prm, *packed, np.full((1, 2), np.nan), rows, zeros,
-                      zeros, *packed_rock(demo.rock), False, True, int(ALL_SEGMENTS), *out,
+                      zeros, np.empty(0), *packed_rock(demo.rock), False, True,
+                      int(ALL_SEGMENTS), *out,
                       int(ALL_BOOMS))
         return out
 

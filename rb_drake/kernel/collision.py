@@ -96,11 +96,14 @@ def near_edges(poses, edges, reach) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, error_model="numpy")
-def collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance, edges, owner,
-                    near_hit, near_ray, parity, vertices, collide) -> int:
+def collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance, free,
+                   free_clearance, edges, owner, near_hit, near_ray, parity, vertices,
+                   collide) -> int:
     """REASON_BODY_COLLISION, BOOM_COLLISION or 0 for the pose (x, y, phi = atan2(s, c)) whose
     booms run from the shoulders sh to the targets tg along u (collision.Rock's tests), testing
-    the segments of `collide`'s bits only (layout.ALL_SEGMENTS)."""
+    the segments of `collide`'s bits only (layout.ALL_SEGMENTS). Booms are tested to
+    `clearance` short of their tips, the free one (boom `free`, -1: none) to `free_clearance`
+    short (collision.free_clearance)."""
     if collide & BODY_SEGMENT:
         code = body_collision(x, y, c, s, corner_x, corner_y, cx, cy, edges, owner, near_hit,
                                near_ray, parity, vertices)
@@ -111,8 +114,9 @@ def collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh, clearance,
             continue
         ux = u[i, 0] if math.isfinite(u[i, 0]) else 0.0
         uy = u[i, 1] if math.isfinite(u[i, 1]) else 0.0
-        ex = tg[i, 0] - clearance * ux
-        ey = tg[i, 1] - clearance * uy
+        short = free_clearance if i == free else clearance
+        ex = tg[i, 0] - short * ux
+        ey = tg[i, 1] - short * uy
         if segment_hits(sh[i, 0], sh[i, 1], ex, ey, edges, near_hit):
             return REASON_BOOM_COLLISION
     return 0

@@ -81,10 +81,15 @@ def _reject(row, code, reason_out, r_out, lp_out, f_out, v_out) -> None:
 
 @njit(cache=True, error_model="numpy")
 def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                 sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
-                 vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out, f_out,
-                 v_out, release_out, body_known, release_booms, first, stride) -> None:
+                 sigma_lateral, attached, tips, pose_row, stance_row, tip_row, tip_clearance,
+                 edges, owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                 lp_out, f_out, v_out, release_out, body_known, release_booms, first,
+                 stride) -> None:
     """check_poses(full=True) and violation for each row (see score_rows), into the outputs.
+
+    `tip_clearance` (T,) or (0,): how far short of each tip of `tips` a free boom is tested for
+    rock (collision.free_clearance); (0,): every free gripper sits at an anchor
+    (ANCHOR_CLEARANCE, as the lattice's moves and costs have it).
 
     `release_out` (R, 4) or (0, 4): with decide_only, for each feasible 4-stance row, the r of
     the 3-stance with boom j's gripper still at its anchor, for the booms j of the bits of
@@ -163,6 +168,9 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
                 free = i
         if free >= 0 and not (math.isfinite(tips[tk, 0]) and math.isfinite(tips[tk, 1])):
             raise ValueError("a 3-stance row needs a finite free-gripper position")
+        # the free boom is tested this far short of its tip (collision.free_clearance); no
+        # clearances given: every tip sits at an anchor (the lattice's moves)
+        free_short = tip_clearance[tk] if tip_clearance.shape[0] else prm[P_CLEARANCE]
         x, y, phi = poses[k, 0], poses[k, 1], poses[k, 2]
         c, s = math.cos(phi), math.sin(phi)
         fn, ft = f_normal[sk], f_lateral[sk]
@@ -241,8 +249,8 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
         # allocation's tests, which reject more poses for less)
         if code == 0 and has_rock and not decide_only:
             code = collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
-                                   prm[P_CLEARANCE], edges, owner, near_hit, near_ray, parity,
-                                   vertices, ALL_SEGMENTS)
+                                  prm[P_CLEARANCE], free, free_short, edges, owner, near_hit,
+                                  near_ray, parity, vertices, ALL_SEGMENTS)
         if decide_only and code != 0:
             _reject(row, code, reason_out, r_out, lp_out, f_out, v_out)
             continue
@@ -345,8 +353,8 @@ def score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_norm
                     segments = collide & ~BODY_SEGMENT
                 if code == 0:
                     code = collision_code(x, y, c, s, corner_x, corner_y, cx, cy, u, tg, sh,
-                                           prm[P_CLEARANCE], edges, owner, near_hit, near_ray,
-                                           parity, vertices, segments)
+                                          prm[P_CLEARANCE], free, free_short, edges, owner,
+                                          near_hit, near_ray, parity, vertices, segments)
             if code != 0:
                 reason_out[row] = code
                 v_out[row] = math.nan

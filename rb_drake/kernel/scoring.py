@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from rb_drake.collision import free_clearance
 from rb_drake.feasibility import World
 from rb_drake.kernel.collision import packed_rock
 from rb_drake.kernel.layout import ALL_BOOMS, ALL_SEGMENTS, robot_params
@@ -103,9 +104,11 @@ def score_rows(world: World, stances: PackedStances, tips: np.ndarray, poses: np
     release_r = np.full((R if release else 0, NUM_BOOMS), np.nan)
     if R:
         edges, owner, vertices = packed_rock(world.rock)
+        tips = _floats(tips, (-1, 2))
+        clearance = free_clearance(world.anchor_positions, tips)  # check_poses' rule
         score_kernel(_floats(poses, (-1, 3)), robot_params(world.robot, world.gravity_vector),
-                     *stances, _floats(tips, (-1, 2)), _indices(pose_row), _indices(stance_row),
-                     _indices(tip_row), edges, owner, vertices, bool(ignore_grasps),
+                     *stances, tips, _indices(pose_row), _indices(stance_row),
+                     _indices(tip_row), clearance, edges, owner, vertices, bool(ignore_grasps),
                      bool(decide_only), int(collide), reason, robustness, log_probs, tensions,
                      violation, release_r, np.empty(0, dtype=np.int8), int(ALL_BOOMS), 0, 1)
     return KernelCheck(reason == 0, reason, robustness, log_probs, tensions, violation,

@@ -88,8 +88,8 @@ def held_kernel_threads() -> Iterator[int]:
 @njit(cache=True, parallel=True, error_model="numpy")
 def score_interleaved(threads, poses, prm, positions, normals, f_normal, f_lateral,
                       sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
-                      tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
-                      reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
+                      tip_row, tip_clearance, edges, owner, vertices, ignore_grasps, decide_only,
+                      collide, reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
                       release_booms) -> None:  # pragma: no cover - compiled
     """`score_kernel` with thread t scoring chunks t, t + threads, t + 2 threads, ... of
     ROW_CHUNK rows: the same outputs, row for row (each row is scored on its own and writes its
@@ -97,29 +97,29 @@ def score_interleaved(threads, poses, prm, positions, normals, f_normal, f_later
     evenly."""
     for t in prange(threads):
         score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
-                     owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
-                     lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(t),
-                     threads)
+                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, tip_clearance,
+                     edges, owner, vertices, ignore_grasps, decide_only, collide, reason_out,
+                     r_out, lp_out, f_out, v_out, release_out, body_known, release_booms,
+                     np.int64(t), threads)
 
 
 @njit(cache=True, error_model="numpy")
 def score_threads(threads, poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                  sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges, owner,
-                  vertices, ignore_grasps, decide_only, collide, reason_out, r_out, lp_out,
-                  f_out, v_out, release_out, body_known,
+                  sigma_lateral, attached, tips, pose_row, stance_row, tip_row, tip_clearance,
+                  edges, owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
+                  lp_out, f_out, v_out, release_out, body_known,
                   release_booms) -> None:  # pragma: no cover - compiled
     """`score_kernel`, on up to `threads` threads where the rows are many enough."""
     use = min(threads, pose_row.shape[0] // MIN_ROWS_PER_THREAD)
     if use > 1:
         score_interleaved(use, poses, prm, positions, normals, f_normal, f_lateral,
                           sigma_normal, sigma_lateral, attached, tips, pose_row, stance_row,
-                          tip_row, edges, owner, vertices, ignore_grasps, decide_only, collide,
-                          reason_out, r_out, lp_out, f_out, v_out, release_out, body_known,
-                          release_booms)
+                          tip_row, tip_clearance, edges, owner, vertices, ignore_grasps,
+                          decide_only, collide, reason_out, r_out, lp_out, f_out, v_out,
+                          release_out, body_known, release_booms)
     else:
         score_kernel(poses, prm, positions, normals, f_normal, f_lateral, sigma_normal,
-                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, edges,
-                     owner, vertices, ignore_grasps, decide_only, collide, reason_out, r_out,
-                     lp_out, f_out, v_out, release_out, body_known, release_booms, np.int64(0),
-                     np.int64(1))
+                     sigma_lateral, attached, tips, pose_row, stance_row, tip_row, tip_clearance,
+                     edges, owner, vertices, ignore_grasps, decide_only, collide, reason_out,
+                     r_out, lp_out, f_out, v_out, release_out, body_known, release_booms,
+                     np.int64(0), np.int64(1))

@@ -399,7 +399,7 @@ def variant_config(variant: str, time_limit: float | None):
         anytime = AnytimeConfig(improve_factor=settings.get("f", 2.0),
                                 corridor=settings.get("c"))
         return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime,
-                              fallback_after=settings.get("b", 0.5))
+                              fallback_after=settings.get("b", 0.75))
     return FootstepConfig(**table[variant])
 
 

@@ -85,12 +85,13 @@ class FootstepConfig:
     lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
     # The first route's weight (<= 1: A* on the admissible bound, optimal routes); without a
     # route after `fallback_after` of the expansion budget, the search starts again at
-    # `fallback_weight` (None: never). On the 69 benchmark routes a weight of 10 found routes
-    # with 27 % fewer regrasps than 300 in about the same time, and 300 found the one route
-    # that 10 missed within the budget (docs/benchmarks.md, "Session 24")
+    # `fallback_weight` (None: never), greedy: it finds a route in few expansions where it
+    # finds one. On the 69 benchmark routes a weight of 10 found routes with 27 % fewer
+    # regrasps than 300 in about the same time, and 300 found the one route that 10 missed
+    # within the budget (docs/benchmarks.md, "Session 24")
     heuristic_weight: float = 10.0
     fallback_weight: float | None = 300.0
-    fallback_after: float = 0.5
+    fallback_after: float = 0.75
     # complete search: what the weight multiplies (planning.complete_config.CompleteConfig)
     ordering: str = "distance"
     # complete search only: after the first route, better ones for twice its expansions, with

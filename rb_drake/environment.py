@@ -100,3 +100,31 @@ def quiet_matplotlib() -> None:
             atexit.register(shutil.rmtree, fresh, ignore_errors=True)
             os.environ["MPLCONFIGDIR"] = fresh
             return
+
+
+def standard_streams() -> None:
+    """Make the standard output and error safe to print to, once at start-up.
+
+    A closed descriptor (`rbp ... >&-`, `2>&-`) leaves sys.stdout or sys.stderr None: the
+    exit's flush ended in a traceback after the work was done, and the progress line's terminal
+    test stopped `rbp plan` silently. The descriptor is reopened on the null device (so that no
+    file rbp opens takes descriptor 1 or 2, where a library's C code would write into it) and
+    the stream with it. Text that the stream's encoding cannot hold (a cave named `é洞` with
+    PYTHONIOENCODING=ascii) is written as backslash escapes, as the error lines are, instead
+    of ending a successful command in UnicodeEncodeError."""
+    import sys
+
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+        except OSError:  # closed: take the lowest free descriptor, then move it to fd
+            null = os.open(os.devnull, os.O_WRONLY)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            setattr(sys, name, open(fd, "w", closefd=False))  # noqa: SIM115 (lives on)
+        stream = getattr(sys, name)
+        if stream is None:
+            setattr(sys, name, open(os.devnull, "w"))  # noqa: SIM115 (lives on)
+        elif hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")

@@ -565,6 +565,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (EXIT_STATUSES)."""
+    from rb_drake.environment import standard_streams
+
+    standard_streams()  # a closed stdout or stderr, an ASCII-only one
     try:
         with clean_interrupts():  # Ctrl-C and SIGTERM unwind: no temporary file left
             return _main(argv)

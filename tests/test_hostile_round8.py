@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import copy
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +16,7 @@ import pytest
 
 import rbp
 from planning.plan_file import PlanFileError
-from tests.cli_helpers import run_rbp
+from tests.cli_helpers import ROOT, run_rbp
 
 
 @pytest.fixture(scope="module")
@@ -54,3 +57,31 @@ def test_integers_written_as_floats_are_refused_by_every_reader(
             assert done.stderr.endswith(f"error: p.json: {field}: expected an integer, "
                                         f"got {plan['phases'][k]['free_boom']}\n"), done.stderr
             assert done.stderr.count("\n") == 1, done.stderr
+
+
+def _shell(command: str, cwd: Path, **env: str) -> subprocess.CompletedProcess[str]:
+    """`python -m rbp` through sh, for redirections such as `>&-` (a closed stdout)."""
+    full = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+            "PYTHONPATH": str(ROOT), **env}
+    return subprocess.run(["sh", "-c", f"exec '{sys.executable}' -m rbp {command}"], cwd=cwd,
+                          env=full, capture_output=True, text=True, timeout=300, check=False)
+
+
+def test_a_closed_stdout_or_stderr_ends_cleanly(tmp_path: Path) -> None:
+    done = _shell("scenario check demo-shaft >&-", tmp_path)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    (tmp_path / "bad.yaml").write_text("format: reachbot-scenario/1\nname: [\n")
+    done = _shell("scenario check bad.yaml 2>&-", tmp_path)
+    assert (done.returncode, done.stdout) == (2, ""), done.stdout  # the line went to stdout
+    done = _shell("scenario check demo-shaft >&- 2>&-", tmp_path)
+    assert done.returncode == 0
+
+
+def test_non_ascii_names_on_an_ascii_stdout_are_escaped(tmp_path: Path) -> None:
+    from rb_drake.scenario import bundled_caves
+
+    cave = tmp_path / "é洞.yaml"
+    cave.write_text(bundled_caves()["demo-shaft"].read_text())
+    done = _shell("scenario check 'é洞.yaml'", tmp_path, PYTHONIOENCODING="ascii")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("\\xe9\\u6d1e.yaml: ok"), done.stdout

@@ -46,6 +46,10 @@ def threads_adapt_setting() -> bool:
 
 # numba's threading layers (NUMBA_THREADING_LAYER): another name ended in numba's traceback
 NUMBA_LAYERS = ("default", "safe", "forksafe", "threadsafe", "tbb", "omp", "workqueue")
+NUMBA_PRIORITY = ("tbb", "omp", "workqueue")  # NUMBA_THREADING_LAYER_PRIORITY's permutation
+# numba's variables rbp reads or lets through (checked here, or a folder numba checks itself)
+NUMBA_SUPPORTED = ("NUMBA_CACHE_DIR", "NUMBA_NUM_THREADS", "NUMBA_THREADING_LAYER",
+                   "NUMBA_THREADING_LAYER_PRIORITY")
 
 
 def library_settings() -> None:
@@ -63,6 +67,20 @@ def library_settings() -> None:
     if layer is not None and layer not in NUMBA_LAYERS:
         raise RbpInputError(f"must be one of {', '.join(NUMBA_LAYERS)}, got {layer!r}",
                             field="NUMBA_THREADING_LAYER (environment)")
+    priority = os.environ.get("NUMBA_THREADING_LAYER_PRIORITY")
+    if priority is not None and sorted(priority.split()) != sorted(NUMBA_PRIORITY):
+        raise RbpInputError(f"must list {', '.join(NUMBA_PRIORITY)} once each, in any order, "
+                            f"separated by spaces, got {priority!r}",
+                            field="NUMBA_THREADING_LAYER_PRIORITY (environment)")
+    for name in sorted(os.environ):
+        if name.startswith("NUMBA_") and name not in NUMBA_SUPPORTED:
+            raise RbpInputError(
+                # they change how the kernels compile or run: NUMBA_DISABLE_JIT=1 ran for
+                # minutes, NUMBA_CPU_NAME recompiled every kernel, NUMBA_OPT=abc printed a
+                # traceback as a warning
+                f"not supported by rbp (it changes how rbp's compiled kernels build or run): "
+                f"unset it; rbp lets through only {', '.join(NUMBA_SUPPORTED)}",
+                field=f"{name} (environment)")
 
 
 def _whole_threads(value: str) -> bool:

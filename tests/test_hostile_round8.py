@@ -85,3 +85,32 @@ def test_non_ascii_names_on_an_ascii_stdout_are_escaped(tmp_path: Path) -> None:
     done = _shell("scenario check 'é洞.yaml'", tmp_path, PYTHONIOENCODING="ascii")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("\\xe9\\u6d1e.yaml: ok"), done.stdout
+
+
+@pytest.mark.parametrize("variable,value", [
+    ("NUMBA_THREADING_LAYER_PRIORITY", "foo"), ("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb"),
+    ("NUMBA_OPT", "abc"), ("NUMBA_BOUNDSCHECK", "abc"), ("NUMBA_CPU_NAME", "bogus"),
+    ("NUMBA_CPU_FEATURES", "+garbage"), ("NUMBA_DISABLE_JIT", "1"), ("NUMBA_OPT", "3")])
+def test_numba_variables_rbp_does_not_support_are_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        variable: str, value: str) -> None:
+    """A traceback (a wrong priority), a traceback-shaped warning (NUMBA_OPT=abc), every kernel
+    recompiled (NUMBA_CPU_NAME: 47 s) or a run of minutes (NUMBA_DISABLE_JIT=1): refused
+    before any work, naming the variable."""
+    from rbp.cli import main
+
+    monkeypatch.setenv(variable, value)
+    out = tmp_path / "p.json"
+    assert main(["plan", "demo-shaft", "--no-pictures", "-o", str(out)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {variable} (environment): "), lines
+    assert not out.exists()
+
+
+def test_a_threading_layer_priority_in_another_order_is_accepted(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from rbp.cli import main
+
+    monkeypatch.setenv("NUMBA_THREADING_LAYER_PRIORITY", "workqueue omp tbb")
+    assert main(["scenario", "check", "demo-shaft"]) == 0
+    assert capsys.readouterr().err == ""

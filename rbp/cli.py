@@ -34,6 +34,7 @@ from rbp.commands.common import (
     clean_interrupts,
     forget_outputs,
     load_scenario_spec,
+    output_flag,
     plural,
     read_plan,
     refuse_empty_paths,
@@ -638,7 +639,9 @@ def _main(argv: list[str] | None) -> int:
     except BrokenPipeError:
         raise  # the reader went away (`main` handles it), not a file of the user's
     except OSError as e:  # an output that cannot be written, an input that cannot be read
-        print(one_line(f"error: {e.filename or ''}: {e.strerror}"), file=sys.stderr)
+        flag = output_flag(e.filename)  # `-o`, `--json`, ...: which option's file failed
+        where = f"{e.filename or '(output)'}: {flag}" if flag else (e.filename or "(file)")
+        print(one_line(f"error: {where}: {e.strerror}"), file=sys.stderr)
         return EXIT_USAGE
 
 

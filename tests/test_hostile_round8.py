@@ -114,3 +114,38 @@ def test_a_threading_layer_priority_in_another_order_is_accepted(
     monkeypatch.setenv("NUMBA_THREADING_LAYER_PRIORITY", "workqueue omp tbb")
     assert main(["scenario", "check", "demo-shaft"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_a_full_disk_names_the_output_and_its_option(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """ENOSPC while writing was `error: : No space left on device` (no file, no option)."""
+    import errno
+
+    import rb_drake.files
+    from rbp.cli import main
+
+    def full(path: str | Path, write: Any) -> Path:
+        def no_room(data: bytes) -> int:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(path, lambda f: no_room(b""))
+
+    real = rb_drake.files.atomic_write
+    monkeypatch.setattr(rb_drake.files, "atomic_write", full)
+    out = tmp_path / "c.png"
+    assert main(["scenario", "show", "demo-shaft", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {out}: -o: cannot write: {os.strerror(errno.ENOSPC)}\n", err
+    assert list(tmp_path.iterdir()) == []  # no temporary file left
+
+
+def test_a_folder_that_refuses_new_files_is_refused_before_the_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """/proc/self/fd is writable by its mode, yet no file can be made there: refused after
+    the planning before, without the option's name."""
+    from rbp.cli import main
+
+    out = "/proc/self/fd/rbp-probe.json"
+    assert main(["plan", "demo-shaft", "--no-pictures", "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {out}: -o: cannot write a file there ("), err

@@ -149,3 +149,23 @@ def test_a_folder_that_refuses_new_files_is_refused_before_the_work(
     assert main(["plan", "demo-shaft", "--no-pictures", "-o", out]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"error: {out}: -o: cannot write a file there ("), err
+
+
+@pytest.mark.parametrize("kwargs,field", [({"footsteps_done": 5}, "footsteps_done"),
+                                          ({"progress": "no"}, "progress")])
+def test_plan_refuses_a_callback_or_flag_of_a_wrong_type_up_front(
+        kwargs: dict[str, Any], field: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """footsteps_done=5 was called after the footstep search: builtins TypeError."""
+    import planning.pipeline
+
+    def never(*args: Any, **kw: Any) -> None:
+        raise AssertionError("planned before the arguments were checked")
+
+    monkeypatch.setattr(planning.pipeline, "plan_climb", never)
+    with pytest.raises(rbp.RbpInputError, match=f"^{field}: expected "):
+        rbp.plan("demo-shaft", **kwargs)
+
+
+def test_check_refuses_a_progress_flag_of_a_wrong_type(plan_dict: dict[str, Any]) -> None:
+    with pytest.raises(rbp.RbpInputError, match="^progress: expected True or False"):
+        rbp.check(plan_dict, progress="no")

@@ -167,5 +167,5 @@ def test_plan_refuses_a_callback_or_flag_of_a_wrong_type_up_front(
 
 
 def test_check_refuses_a_progress_flag_of_a_wrong_type(plan_dict: dict[str, Any]) -> None:
-    with pytest.raises(rbp.RbpInputError, match="^progress: expected True or False"):
+    with pytest.raises(rbp.RbpInputError, match=r"^progress: expected True or False"):
         rbp.check(plan_dict, progress="no")

@@ -169,3 +169,20 @@ def test_plan_refuses_a_callback_or_flag_of_a_wrong_type_up_front(
 def test_check_refuses_a_progress_flag_of_a_wrong_type(plan_dict: dict[str, Any]) -> None:
     with pytest.raises(rbp.RbpInputError, match=r"^progress: expected True or False"):
         rbp.check(plan_dict, progress="no")
+
+
+@pytest.mark.parametrize("args,start", [
+    (["plan", "demo-shaft", "-o", "p.json", "--seed", "1e3"], "error: --seed: invalid int "),
+    (["plan", "-o", "-o"], "error: -o/--output: expected one argument"),
+    (["scenario", "generate", "--length", "300"], "error: --length: expected 2 arguments"),
+    (["nosuch"], "error: command: invalid choice: 'nosuch'")])
+def test_usage_errors_are_one_line(args: list[str], start: str,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """argparse printed its usage block and `rbp plan: error: argument --seed: ...`."""
+    from rbp.cli import main
+
+    with pytest.raises(SystemExit) as ended:
+        main(args)
+    assert ended.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(start) and err.count("\n") == 1, err

@@ -186,3 +186,45 @@ def test_usage_errors_are_one_line(args: list[str], start: str,
     assert ended.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith(start) and err.count("\n") == 1, err
+
+
+def _with_provenance(plan: dict[str, Any], **config: Any) -> dict[str, Any]:
+    from planning.config_io import config_to_dict
+    from planning.pipeline import PipelineConfig
+
+    plan = copy.deepcopy(plan)
+    recorded = config_to_dict(PipelineConfig()) | config
+    plan["provenance"] = {"rbp_version": "test", "command": "rbp plan demo-shaft",
+                          "planner": "rbp", "motion": False, "seed": 0,
+                          "scenario_source": "demo-shaft", "config": recorded}
+    return plan
+
+
+@pytest.mark.parametrize("config,words", [
+    ({"dt": 1e308}, "provenance.config.dt: must be a number from "),
+    ({"motion_retries": 10.0}, "provenance.config.motion_retries: expected an integer")])
+def test_check_reads_provenance_config_as_from_plan_does(
+        plan_dict: dict[str, Any], config: dict[str, Any], words: str, tmp_path: Path) -> None:
+    """`rbp check` said ok to a recorded configuration that `rbp plan --from-plan` refused."""
+    (tmp_path / "p.json").write_text(json.dumps(_with_provenance(plan_dict, **config)))
+    for args in (["check", "p.json"], ["plan", "--from-plan", "p.json", "-o", "q.json"]):
+        done = run_rbp(*args, cwd=tmp_path)
+        assert done.returncode == 2 and done.stderr.startswith(f"error: p.json: {words}"), \
+            (args, done.stderr)
+        assert not (tmp_path / "q.json").exists()
+
+
+def test_from_plan_refuses_two_robots_that_disagree(plan_dict: dict[str, Any],
+                                                    tmp_path: Path) -> None:
+    """A reachbot-plan/1 file's scenario.robot differing from its robot: rbp check's rule
+    robot refused it; --from-plan planned with the top-level robot without a word."""
+    plan = _with_provenance(plan_dict)
+    plan["format"] = "reachbot-plan/1"
+    plan["scenario"]["robot"] = copy.deepcopy(plan["robot"]) | {"p_min": 0.5}
+    (tmp_path / "p.json").write_text(json.dumps(plan))
+    done = run_rbp("plan", "--from-plan", "p.json", "-o", "q.json", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr == ("error: p.json: robot: the robot under scenario differs from the "
+                           "top-level robot in ['p_min']\n"), done.stderr
+    done = run_rbp("check", "p.json", cwd=tmp_path)
+    assert done.returncode == 1 and "plan: robot: the robot under scenario differs" in done.stdout

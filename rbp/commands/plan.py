@@ -212,23 +212,30 @@ def _from_plan(path: Path, read: tuple[Scenario, Provenance, bool] | None = None
                ) -> tuple[Scenario, Provenance, PipelineConfig, bool]:
     """The scenario, provenance and configuration a plan file was planned with, and whether
     it is a partial plan (`rbp plan --partial`); `read` is `_read_from_plan(path)` if done."""
+    scn, recorded, partial = read or _read_from_plan(path)
+    return scn, recorded, recorded_config(recorded.config, path), partial
+
+
+def recorded_config(config: Any, path: Path) -> PipelineConfig:
+    """A plan's provenance.config as the PipelineConfig it records, held to a configuration
+    file's types and ranges (ConfigError naming `provenance.config.FIELD`): `rbp plan
+    --from-plan` and `rbp check` (which accepted a dt of 1e308 that --from-plan refused)."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
 
-    scn, recorded, partial = read or _read_from_plan(path)
-    cfg = config_from_dict(PipelineConfig, recorded.config, str(path),
-                           prefix="provenance.config")
-    return scn, recorded, cfg, partial
+    return config_from_dict(PipelineConfig, config, str(path), prefix="provenance.config")
 
 
 def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     """The plan file's scenario and provenance, and whether it is partial: without the
     planner's modules (`read_plan_inputs`)."""
-    from planning.plan_model import Plan, plan_scenario
+    from planning.plan_model import Plan, plan_scenario, scenario_robot_problem
     from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
 
     plan = Plan.from_dict(read_plan(path))
+    if (problem := scenario_robot_problem(plan)) is not None:  # as rbp check's rule robot
+        raise UserError(f"{path}: robot: {problem}")
     recorded = plan.provenance
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "

@@ -56,7 +56,7 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     base = cls() if base is None else base
     where = prefix or "(top level)"
     if not isinstance(data, dict):
-        raise ConfigError(source, where, f"expected a mapping, got {_describe(data)}")
+        raise ConfigError(source, where, f"expected a mapping, got {describe(data)}")
     if not prefix and SECTIONS.get(cls.__name__) == "" and (found := unknown_key(data)):
         # a whole file's keys before its values, as `rbp plan` checks them before its imports:
         # the same first problem named either way
@@ -83,7 +83,7 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
 
 def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
     def fail(expected: str) -> ConfigError:
-        return ConfigError(source, field, f"expected {expected}, got {_describe(value)}")
+        return ConfigError(source, field, f"expected {expected}, got {describe(value)}")
 
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):  # a hint: a class, not an instance
         return config_from_dict(tp, value, source, base=current, prefix=field)
@@ -143,7 +143,8 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
     return value  # a type this reader does not know: taken as written
 
 
-def _describe(value: Any) -> str:
+def describe(value: Any) -> str:
+    """A value as the errors show it: its type and its repr, cut to 60 characters."""
     text = repr(value)
     if len(text) > 60:
         text = text[:57] + "..."

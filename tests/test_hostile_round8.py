@@ -267,3 +267,32 @@ def test_rig_run_refuses_its_phase_and_bus_before_the_verifiers_imports(
                               capture_output=True, text=True, timeout=300, check=False)
         assert done.returncode == 2 and words in done.stderr, (extra, n, done.stderr)
         assert done.stdout == "light\n", extra
+
+
+@pytest.mark.parametrize("text,words", [
+    ("footstep: {time_limit: .inf}\n", "footstep.time_limit: must be a number above 0"),
+    ("footstep: {max_expansions: 1000.0}\n",
+     "footstep.max_expansions: expected an integer, got float 1000.0"),
+    ("footstep: {transition: [1]}\n", "footstep.transition: expected a mapping, got list [1]"),
+    ("footstep: {search: quantum}\n", "footstep.search: must be one of hybrid, complete"),
+    ("dt: 1.0e+308\n", "dt: must be a number from 0.01 to 60 s")])
+def test_config_values_are_refused_before_the_planners_imports(
+        text: str, words: str, tmp_path: Path) -> None:
+    """In the reader's words (the same line after the imports), without them."""
+    from planning.config_io import ConfigError, load_config
+    from planning.pipeline import PipelineConfig
+
+    (tmp_path / "c.yaml").write_text(text)
+    with pytest.raises(ConfigError) as late:
+        load_config(tmp_path / "c.yaml", PipelineConfig)
+    code = ("import sys; from rbp.cli import main; status = main(sys.argv[1:]); "
+            "print('pipeline' if 'planning.pipeline' in sys.modules else 'light'); "
+            "sys.exit(status)")
+    full = {**os.environ, "LCM_DEFAULT_URL": "memq://", "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", code, "plan", "demo-shaft", "-o", "p.json",
+                           "--no-pictures", "--config", "c.yaml"], cwd=tmp_path, env=full,
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 2 and done.stderr == f"error: c.yaml: {words}" + \
+        done.stderr[len(f"error: c.yaml: {words}"):], done.stderr
+    assert done.stderr.strip().endswith(late.value.reason), (done.stderr, late.value.reason)
+    assert done.stdout == "light\n"

@@ -77,7 +77,7 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     issue 28's 1 s and 200 MB; `rbp scenario check` refused the same in 0.55 s and 100 MB.
     The configurations' keys are checked in `plan_setup`, against the planner's classes."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import unknown_key
+    from planning.config_ranges import range_problem, unknown_key
     from rb_drake.scenario import read_yaml_file
     from rbp.commands.common import load_scenario_spec
 
@@ -89,8 +89,8 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     if args.config:
         data = read_yaml_file(args.config, ConfigError)
         args.config_data = {} if data is None else data
-        if found := unknown_key(args.config_data):  # as plan_setup's classes would refuse it
-            raise ConfigError(args.config, *found)
+        if found := unknown_key(args.config_data) or range_problem(args.config_data):
+            raise ConfigError(args.config, *found)  # as plan_setup's classes would refuse it
 
 
 def check_options(args: argparse.Namespace) -> None:
@@ -251,6 +251,8 @@ def recorded_config(config: Any, path: Path) -> PipelineConfig:
 def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     """The plan file's scenario and provenance, and whether it is partial: without the
     planner's modules (`read_plan_inputs`)."""
+    from planning.config_io import ConfigError
+    from planning.config_ranges import range_problem, unknown_key
     from planning.plan_model import Plan, plan_scenario, scenario_robot_problem
     from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
@@ -262,6 +264,8 @@ def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
                         "(written by an older rbp), so it cannot be repeated")
+    if found := unknown_key(recorded.config) or range_problem(recorded.config):
+        raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
     try:
         scn = plan_scenario(plan, str(path), check_start=True)
     except ScenarioError as e:

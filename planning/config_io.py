@@ -18,7 +18,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from planning.config_ranges import SECTIONS, field_problem, unknown_key
+from planning.config_ranges import SECTIONS, describe, field_problem, unknown_key
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
@@ -141,14 +141,6 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
             raise fail("a string")
         return value
     return value  # a type this reader does not know: taken as written
-
-
-def describe(value: Any) -> str:
-    """A value as the errors show it: its type and its repr, cut to 60 characters."""
-    text = repr(value)
-    if len(text) > 60:
-        text = text[:57] + "..."
-    return f"{type(value).__name__} {text}"
 
 
 def checked_config(config: T, source: str = "config") -> T:

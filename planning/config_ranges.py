@@ -262,8 +262,6 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
     number field are judged here, in the reader's words (planning.config_io); any
     other value (a list, null, a string for a number) is left to the reader, which may then
     name another problem first; so is a section's check of two keys together."""
-    from planning.config_io import describe
-
     if not isinstance(data, dict):
         return None
     cls = next(name for name, prefix in SECTIONS.items() if prefix == section)
@@ -290,3 +288,12 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
         if problem := spec.problem(value if spec.integer else float(value)):
             return field, problem
     return None
+
+
+def describe(value: Any) -> str:
+    """A value as the configuration errors show it: its type and its repr, cut to 60
+    characters."""
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(value).__name__} {text}"

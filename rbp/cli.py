@@ -300,9 +300,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     path = Path(args.plan)
     plan = read_plan(path)
     if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
-        from rbp.commands.plan import recorded_config
+        from rbp.commands.plan import check_recorded_config
 
-        recorded_config(plan["provenance"]["config"], path)
+        check_recorded_config(plan["provenance"]["config"], path)
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
     for p in problems:

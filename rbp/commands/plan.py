@@ -238,10 +238,21 @@ def _from_plan(path: Path, read: tuple[Scenario, Provenance, bool] | None = None
     return scn, recorded, recorded_config(recorded.config, path), partial
 
 
+def check_recorded_config(config: Any, path: str | Path) -> None:
+    """Refuse (ConfigError naming `provenance.config.FIELD`) a plan's recorded configuration
+    with an unknown key or a value out of its range, without the planner's imports: `rbp plan
+    --from-plan` before them, and `rbp check` (which said ok to a dt of 1e308 that
+    --from-plan refused)."""
+    from planning.config_io import ConfigError
+    from planning.config_ranges import range_problem, unknown_key
+
+    if found := unknown_key(config) or range_problem(config):
+        raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
+
+
 def recorded_config(config: Any, path: Path) -> PipelineConfig:
     """A plan's provenance.config as the PipelineConfig it records, held to a configuration
-    file's types and ranges (ConfigError naming `provenance.config.FIELD`): `rbp plan
-    --from-plan` and `rbp check` (which accepted a dt of 1e308 that --from-plan refused)."""
+    file's types and ranges (ConfigError naming `provenance.config.FIELD`)."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
 
@@ -251,8 +262,6 @@ def recorded_config(config: Any, path: Path) -> PipelineConfig:
 def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     """The plan file's scenario and provenance, and whether it is partial: without the
     planner's modules (`read_plan_inputs`)."""
-    from planning.config_io import ConfigError
-    from planning.config_ranges import range_problem, unknown_key
     from planning.plan_model import Plan, plan_scenario, scenario_robot_problem
     from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
@@ -264,8 +273,7 @@ def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
                         "(written by an older rbp), so it cannot be repeated")
-    if found := unknown_key(recorded.config) or range_problem(recorded.config):
-        raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
+    check_recorded_config(recorded.config, path)
     try:
         scn = plan_scenario(plan, str(path), check_start=True)
     except ScenarioError as e:

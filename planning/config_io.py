@@ -18,7 +18,7 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from planning.config_ranges import SECTIONS, field_problem, unknown_key
+from planning.config_ranges import SECTIONS, describe, field_problem, unknown_key
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
@@ -56,7 +56,7 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     base = cls() if base is None else base
     where = prefix or "(top level)"
     if not isinstance(data, dict):
-        raise ConfigError(source, where, f"expected a mapping, got {_describe(data)}")
+        raise ConfigError(source, where, f"expected a mapping, got {describe(data)}")
     if not prefix and SECTIONS.get(cls.__name__) == "" and (found := unknown_key(data)):
         # a whole file's keys before its values, as `rbp plan` checks them before its imports:
         # the same first problem named either way
@@ -83,7 +83,7 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
 
 def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
     def fail(expected: str) -> ConfigError:
-        return ConfigError(source, field, f"expected {expected}, got {_describe(value)}")
+        return ConfigError(source, field, f"expected {expected}, got {describe(value)}")
 
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):  # a hint: a class, not an instance
         return config_from_dict(tp, value, source, base=current, prefix=field)
@@ -141,13 +141,6 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
             raise fail("a string")
         return value
     return value  # a type this reader does not know: taken as written
-
-
-def _describe(value: Any) -> str:
-    text = repr(value)
-    if len(text) > 60:
-        text = text[:57] + "..."
-    return f"{type(value).__name__} {text}"
 
 
 def checked_config(config: T, source: str = "config") -> T:

@@ -149,7 +149,7 @@ def read_plan_file(path: str | Path) -> dict[str, Any]:
 def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
     """A parsed plan checked against the schema; raises PlanFileError with the field (`quick`:
     the compiled validator's words, see plan_schema.schema_error)."""
-    from planning.plan_schema import schema_error
+    from planning.plan_schema import float_integer, schema_error
 
     if not isinstance(plan, dict):
         raise PlanFileError("(top level)", f"must be a JSON object, got {_kind(plan)}")
@@ -159,6 +159,10 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
     if error is not None:
         field = "/".join(str(p) for p in error.absolute_path) or "(top level)"
         raise PlanFileError(field, error.message)
+    found = float_integer(plan)  # the schema's "integer" accepts 2.0
+    if found is not None:
+        path, value = found
+        raise PlanFileError("/".join(map(str, path)), f"expected an integer, got {value!r}")
     check_times(plan)
     return plan
 

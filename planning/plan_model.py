@@ -464,3 +464,23 @@ def plan_scenario(plan: Plan | Mapping[str, Any], source: str = "<plan>",
     except ScenarioError as e:
         field = e.field if e.field.startswith("robot") else f"scenario.{e.field}"
         raise ScenarioError(source, field, e.reason) from None
+
+
+def scenario_robot_problem(plan: Plan) -> str | None:
+    """What is wrong with a `reachbot-plan/1` file's second robot, under `scenario` (it must be
+    the plan's robot), or None: rule `robot` of `rbp check`, and `rbp plan --from-plan`'s
+    refusal (it planned with the top-level robot without a word)."""
+    from rb_drake.params import ParamError, robot_from_dict
+
+    block = plan.scenario_robot
+    if block is None:
+        return None
+    try:
+        inner = robot_from_dict(block)
+    except ParamError as e:
+        return f"scenario.robot.{e.field}: {e.reason}"
+    a, b = inner.to_dict(), robot_from_dict(plan.robot).to_dict()
+    if a == b:
+        return None
+    names = [name for name in a if a[name] != b[name]]
+    return f"the robot under scenario differs from the top-level robot in {names}"

@@ -82,3 +82,67 @@ def validate(plan: dict[str, Any]) -> None:
     error = schema_error(plan)
     if error is not None:
         raise error
+
+
+def _is_integer_schema(sub: dict[str, Any]) -> bool:
+    kinds = sub.get("type")
+    return kinds == "integer" or (isinstance(kinds, list) and "integer" in kinds)
+
+
+@functools.cache
+def _cached_schema() -> dict[str, Any]:
+    return schema()
+
+
+def _has_integer(sub: Any, seen: frozenset[str] = frozenset()) -> bool:
+    """Whether a part of the schema holds an integer field somewhere (`float_integer` walks
+    only those parts: not the steps' numbers)."""
+    if isinstance(sub, list):
+        return any(_has_integer(s, seen) for s in sub)
+    if not isinstance(sub, dict):
+        return False
+    ref = sub.get("$ref", "")
+    if ref.startswith("#/$defs/"):
+        name = ref.removeprefix("#/$defs/")
+        return name not in seen and _has_integer(_cached_schema()["$defs"][name], seen | {name})
+    return _is_integer_schema(sub) or any(_has_integer(v, seen) for v in sub.values())
+
+
+_HAS_INTEGER: dict[int, bool] = {}  # by id() of a part of _cached_schema(), which lives on
+
+
+def float_integer(plan: Any) -> tuple[list[Any], float] | None:
+    """The path and value of the first float (2.0) where the schema asks for an integer, in a
+    plan that follows the schema: JSON Schema's "integer" is any number with no fraction, so
+    jsonschema and fastjsonschema accept 2.0, which then failed as an index (issue 28, F1)."""
+    defs = _cached_schema()["$defs"]
+
+    def walk(value: Any, sub: Any, path: list[Any]) -> tuple[list[Any], float] | None:
+        if not isinstance(sub, dict):
+            return None
+        if id(sub) not in _HAS_INTEGER:
+            _HAS_INTEGER[id(sub)] = _has_integer(sub)
+        if not _HAS_INTEGER[id(sub)]:
+            return None
+        ref = sub.get("$ref", "")
+        if ref.startswith("#/$defs/"):
+            return walk(value, defs[ref.removeprefix("#/$defs/")], path)
+        if _is_integer_schema(sub) and isinstance(value, float):
+            return path, value
+        parts = [sub] + [sub[k] for k in ("then", "else") if isinstance(sub.get(k), dict)]
+        for part in parts:
+            if isinstance(value, dict):
+                props = part.get("properties", {})
+                for key, item in value.items():
+                    inner = props.get(key, part.get("additionalProperties"))
+                    found = walk(item, inner, [*path, key])
+                    if found is not None:
+                        return found
+            elif isinstance(value, list) and isinstance(part.get("items"), dict):
+                for n, item in enumerate(value):
+                    found = walk(item, part["items"], [*path, n])
+                    if found is not None:
+                        return found
+        return None
+
+    return walk(plan, _cached_schema(), [])

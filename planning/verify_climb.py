@@ -17,9 +17,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from planning.plan_model import Phase, Plan, Step
+from planning.plan_model import Phase, Plan, Step, scenario_robot_problem
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION
-from rb_drake.params import ParamError, robot_from_dict
 from rb_drake.scenario import Scenario
 
 RULES = {
@@ -129,18 +128,8 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
 
 def _robot(plan: Plan, fail) -> None:
     """A `reachbot-plan/1` file's second robot, under `scenario`, is the plan's robot."""
-    block = plan.scenario_robot
-    if block is None:
-        return
-    try:
-        inner = robot_from_dict(block)
-    except ParamError as e:
-        fail("robot", f"scenario.robot.{e.field}: {e.reason}")
-        return
-    if inner != robot_from_dict(plan.robot):
-        a, b = inner.to_dict(), robot_from_dict(plan.robot).to_dict()
-        names = [name for name in a if a[name] != b[name]]
-        fail("robot", f"the robot under scenario differs from the top-level robot in {names}")
+    if (problem := scenario_robot_problem(plan)) is not None:
+        fail("robot", problem)
 
 
 def _start(plan: Plan, scn: Scenario, fail) -> None:

@@ -46,6 +46,10 @@ def threads_adapt_setting() -> bool:
 
 # numba's threading layers (NUMBA_THREADING_LAYER): another name ended in numba's traceback
 NUMBA_LAYERS = ("default", "safe", "forksafe", "threadsafe", "tbb", "omp", "workqueue")
+NUMBA_PRIORITY = ("tbb", "omp", "workqueue")  # NUMBA_THREADING_LAYER_PRIORITY's permutation
+# numba's variables rbp reads or lets through (checked here, or a folder numba checks itself)
+NUMBA_SUPPORTED = ("NUMBA_CACHE_DIR", "NUMBA_NUM_THREADS", "NUMBA_THREADING_LAYER",
+                   "NUMBA_THREADING_LAYER_PRIORITY")
 
 
 def library_settings() -> None:
@@ -63,6 +67,20 @@ def library_settings() -> None:
     if layer is not None and layer not in NUMBA_LAYERS:
         raise RbpInputError(f"must be one of {', '.join(NUMBA_LAYERS)}, got {layer!r}",
                             field="NUMBA_THREADING_LAYER (environment)")
+    priority = os.environ.get("NUMBA_THREADING_LAYER_PRIORITY")
+    if priority is not None and sorted(priority.split()) != sorted(NUMBA_PRIORITY):
+        raise RbpInputError(f"must list {', '.join(NUMBA_PRIORITY)} once each, in any order, "
+                            f"separated by spaces, got {priority!r}",
+                            field="NUMBA_THREADING_LAYER_PRIORITY (environment)")
+    for name in sorted(os.environ):
+        if name.startswith("NUMBA_") and name not in NUMBA_SUPPORTED:
+            raise RbpInputError(
+                # they change how the kernels compile or run: NUMBA_DISABLE_JIT=1 ran for
+                # minutes, NUMBA_CPU_NAME recompiled every kernel, NUMBA_OPT=abc printed a
+                # traceback as a warning
+                f"not supported by rbp (it changes how rbp's compiled kernels build or run): "
+                f"unset it; rbp lets through only {', '.join(NUMBA_SUPPORTED)}",
+                field=f"{name} (environment)")
 
 
 def _whole_threads(value: str) -> bool:
@@ -100,3 +118,31 @@ def quiet_matplotlib() -> None:
             atexit.register(shutil.rmtree, fresh, ignore_errors=True)
             os.environ["MPLCONFIGDIR"] = fresh
             return
+
+
+def standard_streams() -> None:
+    """Make the standard output and error safe to print to, once at start-up.
+
+    A closed descriptor (`rbp ... >&-`, `2>&-`) leaves sys.stdout or sys.stderr None: the
+    exit's flush ended in a traceback after the work was done, and the progress line's terminal
+    test stopped `rbp plan` silently. The descriptor is reopened on the null device (so that no
+    file rbp opens takes descriptor 1 or 2, where a library's C code would write into it) and
+    the stream with it. Text that the stream's encoding cannot hold (a cave named `é洞` with
+    PYTHONIOENCODING=ascii) is written as backslash escapes, as the error lines are, instead
+    of ending a successful command in UnicodeEncodeError."""
+    import sys
+
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+        except OSError:  # closed: take the lowest free descriptor, then move it to fd
+            null = os.open(os.devnull, os.O_WRONLY)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            setattr(sys, name, open(fd, "w", closefd=False))  # noqa: SIM115 (lives on)
+        stream = getattr(sys, name)
+        if stream is None:
+            setattr(sys, name, open(os.devnull, "w"))  # noqa: SIM115 (lives on)
+        elif hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")

@@ -62,6 +62,13 @@ def output_problem(path: str | Path,
     for what, given in (inputs or {}).items():
         if given is not None and _same_file(path, given):
             return f"is {what}; the output would overwrite it"
+    if folder == target.parent:  # the mode says writable, but can a file be made there?
+        try:  # (/proc/self/fd refused only after the work): make and remove one
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+            os.close(fd)
+            os.unlink(tmp)
+        except OSError as e:
+            return f"cannot write a file there ({e.strerror})"
     return None
 
 
@@ -112,6 +119,12 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
             write(f)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        if e.filename is not None or isinstance(e, BrokenPipeError):
+            raise
+        # a full disk: name the output (the error had no file: "error: : No space left")
+        raise OSError(e.errno, f"cannot write: {e.strerror}", str(given)) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

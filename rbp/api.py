@@ -233,6 +233,10 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
         raise RbpInputError(f"must be one of {PLANNERS}, got {planner!r}", field="planner")
     footsteps_only = _flag(footsteps_only, "footsteps_only")
     partial = _flag(partial, "partial")
+    progress = _flag(progress, "progress")
+    if footsteps_done is not None and not callable(footsteps_done):  # failed after the search
+        raise RbpInputError(f"expected a callable or None, got {type(footsteps_done).__name__}",
+                            field="footsteps_done")
     if partial and (planner != "rbp" or footsteps_only):
         raise RbpInputError("a partial climb is flown through the whole pipeline of the rbp "
                             "planner: not with the naive planner or footsteps only",
@@ -299,7 +303,7 @@ def check(plan: Plan | dict[str, Any], scenario: Scenario | str | Path | None = 
     if scenario is not None and not _same_cave(model, scenario):
         problems.append(f"scenario: the plan was made for another cave or robot than "
                         f"{scenario.name} ({scenario.source})")
-    with CheckProgress("checking the plan", quiet=not progress) as bar:
+    with CheckProgress("checking the plan", quiet=not _flag(progress, "progress")) as bar:
         problems += plan_problems(model, "<plan>", progress=bar)[0]  # named as simulate's
     return problems
 

@@ -34,6 +34,7 @@ from rbp.commands.common import (
     clean_interrupts,
     forget_outputs,
     load_scenario_spec,
+    output_flag,
     plural,
     read_plan,
     refuse_empty_paths,
@@ -298,6 +299,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
     path = Path(args.plan)
     plan = read_plan(path)
+    if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
+        from rbp.commands.plan import check_recorded_config
+
+        check_recorded_config(plan["provenance"]["config"], path)
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
     for p in problems:
@@ -389,8 +394,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with its usage errors in rbp's one line (`error: --seed: invalid int
+    value: '1e3' (see rbp plan --help)`, exit status 2) instead of the usage block and
+    `rbp plan: error: argument --seed: ...`; `--help` is unchanged. The subcommands' parsers
+    are of this class too (add_subparsers makes its parent's class)."""
+
+    def error(self, message: str) -> NoReturn:
+        message = message.removeprefix("argument ")
+        self.exit(EXIT_USAGE, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rbp", description=__doc__.split("\n\n")[0],
+    parser = _Parser(prog="rbp", description=__doc__.split("\n\n")[0],
                                      epilog=EXIT_STATUSES,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -565,6 +581,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (EXIT_STATUSES)."""
+    from rb_drake.environment import standard_streams
+
+    standard_streams()  # a closed stdout or stderr, an ASCII-only one
     try:
         with clean_interrupts():  # Ctrl-C and SIGTERM unwind: no temporary file left
             return _main(argv)
@@ -635,7 +654,9 @@ def _main(argv: list[str] | None) -> int:
     except BrokenPipeError:
         raise  # the reader went away (`main` handles it), not a file of the user's
     except OSError as e:  # an output that cannot be written, an input that cannot be read
-        print(one_line(f"error: {e.filename or ''}: {e.strerror}"), file=sys.stderr)
+        flag = output_flag(e.filename)  # `-o`, `--json`, ...: which option's file failed
+        where = f"{e.filename or '(output)'}: {flag}" if flag else (e.filename or "(file)")
+        print(one_line(f"error: {where}: {e.strerror}"), file=sys.stderr)
         return EXIT_USAGE
 
 

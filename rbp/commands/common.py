@@ -172,6 +172,11 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
 _OUTPUTS: dict[str, str] = {}  # this command's outputs checked so far: real path -> option
 
 
+def output_flag(path: str | Path | None) -> str | None:
+    """The option whose output `path` is (checked by `check_output`), or None."""
+    return None if path is None else _OUTPUTS.get(os.path.realpath(path))
+
+
 def forget_outputs() -> None:
     """Start a command: no output checked yet (`check_output`)."""
     _OUTPUTS.clear()

@@ -77,10 +77,11 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     issue 28's 1 s and 200 MB; `rbp scenario check` refused the same in 0.55 s and 100 MB.
     The configurations' keys are checked in `plan_setup`, against the planner's classes."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import unknown_key
+    from planning.config_ranges import range_problem, unknown_key
     from rb_drake.scenario import read_yaml_file
     from rbp.commands.common import load_scenario_spec
 
+    check_options(args)
     if args.scenario is not None and not args.from_plan:
         args.loaded_scenario = load_scenario_spec(args.scenario)
     elif args.from_plan and args.scenario is None:
@@ -88,8 +89,29 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     if args.config:
         data = read_yaml_file(args.config, ConfigError)
         args.config_data = {} if data is None else data
-        if found := unknown_key(args.config_data):  # as plan_setup's classes would refuse it
-            raise ConfigError(args.config, *found)
+        if found := unknown_key(args.config_data) or range_problem(args.config_data):
+            raise ConfigError(args.config, *found)  # as plan_setup's classes would refuse it
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """The options' own ranges (`plan_setup`'s checks of them, in its words), before the
+    planner's imports: `--seed -1` was refused in 1.5 s and 170 MB, `--phase-figure -1` in
+    0.3 s."""
+    from planning.config_ranges import FIELDS
+    from rbp.commands.common import UserError, check_seed
+
+    for flag, (cls, name) in OPTION_FIELDS.items():
+        value = getattr(args, name, None)
+        if value is not None and (problem := FIELDS[cls][name].problem(value)):
+            raise UserError(f"{flag}: {problem}")
+    if args.seed is not None:
+        check_seed(args.seed, "--seed")
+    if args.dt is not None and not MIN_DT <= args.dt <= MAX_DT:
+        raise UserError(f"--dt: seconds between trajectory steps must be at least {MIN_DT:g} "
+                        f"(the simulator's plant step) and at most {MAX_DT:g}, got {args.dt:g}")
+    wanted = getattr(args, "min_success", None)
+    if wanted is not None and not args.thorough and not 0.0 < wanted < 1.0:
+        raise UserError(f"--min-success: must lie strictly between 0 and 1, got {wanted}")
 
 
 def plan_setup(args: argparse.Namespace):
@@ -212,27 +234,46 @@ def _from_plan(path: Path, read: tuple[Scenario, Provenance, bool] | None = None
                ) -> tuple[Scenario, Provenance, PipelineConfig, bool]:
     """The scenario, provenance and configuration a plan file was planned with, and whether
     it is a partial plan (`rbp plan --partial`); `read` is `_read_from_plan(path)` if done."""
+    scn, recorded, partial = read or _read_from_plan(path)
+    return scn, recorded, recorded_config(recorded.config, path), partial
+
+
+def check_recorded_config(config: Any, path: str | Path) -> None:
+    """Refuse (ConfigError naming `provenance.config.FIELD`) a plan's recorded configuration
+    with an unknown key or a value out of its range, without the planner's imports: `rbp plan
+    --from-plan` before them, and `rbp check` (which said ok to a dt of 1e308 that
+    --from-plan refused)."""
+    from planning.config_io import ConfigError
+    from planning.config_ranges import range_problem, unknown_key
+
+    if found := unknown_key(config) or range_problem(config):
+        raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
+
+
+def recorded_config(config: Any, path: Path) -> PipelineConfig:
+    """A plan's provenance.config as the PipelineConfig it records, held to a configuration
+    file's types and ranges (ConfigError naming `provenance.config.FIELD`)."""
     from planning.config_io import config_from_dict
     from planning.pipeline import PipelineConfig
 
-    scn, recorded, partial = read or _read_from_plan(path)
-    cfg = config_from_dict(PipelineConfig, recorded.config, str(path),
-                           prefix="provenance.config")
-    return scn, recorded, cfg, partial
+    return config_from_dict(PipelineConfig, config, str(path), prefix="provenance.config")
 
 
 def _read_from_plan(path: Path) -> tuple[Scenario, Provenance, bool]:
     """The plan file's scenario and provenance, and whether it is partial: without the
     planner's modules (`read_plan_inputs`)."""
-    from planning.plan_model import Plan, plan_scenario
+    from planning.plan_model import Plan, plan_scenario, scenario_robot_problem
     from rb_drake.scenario import ScenarioError
     from rbp.commands.common import UserError, read_plan
 
     plan = Plan.from_dict(read_plan(path))
+    if (problem := scenario_robot_problem(plan)) is not None:  # as rbp check's rule robot
+        raise UserError(f"{path}: robot: {problem}")
     recorded = plan.provenance
     if recorded is None:
         raise UserError(f"{path}: provenance: missing: the plan does not say how it was made "
                         "(written by an older rbp), so it cannot be repeated")
+    check_recorded_config(recorded.config, path)
     try:
         scn = plan_scenario(plan, str(path), check_start=True)
     except ScenarioError as e:

@@ -177,17 +177,25 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     # after it by travel
     by_travel = config.ordering == "travel"
 
-    def heuristic(stance: tuple) -> float:
-        if exact:
-            return bound(stance)
-        if by_travel and travel is not None:
-            return weight * travel(stance)
-        # the weighted distance, in the order it always had
-        return weight * c_attach * distance(stance) / distance_heuristic.max_step
+    def frozen_heuristic() -> Callable[[tuple], float]:
+        """The heuristic as the search orders by it now, frozen (a `MoveGroup` finds its moves'
+        f again from it): made again wherever its weight or ordering changes."""
+        now_exact, now_travel, now_weight = exact, by_travel and travel is not None, weight
+
+        def h(stance: tuple) -> float:
+            if now_exact:
+                return bound(stance)
+            if now_travel:
+                return now_weight * travel(stance)  # type: ignore[misc]
+            # the weighted distance, in the order it always had
+            return now_weight * c_attach * distance(stance) / distance_heuristic.max_step
+        return h
+
+    heuristic = frozen_heuristic()
 
     # Entries: (f, tie, g, kind, child stance, payload). Entry.REACHED: a stance reached by an
-    # evaluated move, payload ((stance, component or None while unknown), move, pose, P4,
-    # the transition's rows it may use (None: all), parent's g, edge cost); Entry.MOVE: a move
+    # evaluated move, payload ((stance, component or None while unknown), move, pose, the
+    # transition's rows it may use (None: all), parent's g, edge cost); Entry.MOVE: a move
     # to evaluate, payload (parent vertex, boom, anchor) (its rows are in `memo.move_table`), g
     # the parent's g plus the least an edge costs.
     start_pose = np.asarray(scn.start_pose, dtype=float)
@@ -196,7 +204,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if not math.isfinite(bound(start)):
             return []
         return sorted((heuristic(start), next(tie), 0.0, Entry.REACHED, start,
-                       ((start, comp), None, start_pose, None, None, 0.0, 0.0))
+                       ((start, comp), None, start_pose, None, 0.0, 0.0))
                       for comp in joined)
 
     open_list: list = start_entries()
@@ -251,13 +259,12 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         (None: every pose of `tr`). It keeps the transition's memo key, not the transition:
         most entries are never popped, and transitions are most of their memory."""
         (stance, _), j, anchor = move
-        poses, p4 = best_poses(tr, _rows(tr, pick), cfg)
-        pose = poses[0].copy()  # not a view: it would keep all the alternatives alive
+        pose = best_poses(tr, _rows(tr, pick), cfg)[0][0].copy()  # no view: of them all
         cost = edge_cost(scn, stance, j, anchor, pose)
         g_child = g_parent + cost
         graph.add(move[0], child, cost)
         return (g_child + heuristic(child), next(tie), g_child, Entry.REACHED, child,
-                ((child, comp), move, pose, p4, pick, g_parent, cost))
+                ((child, comp), move, pose, pick, g_parent, cost))
 
     def beaten(g: float, stance: tuple) -> bool:
         """Whether nothing through `stance` at `g` can beat the best route (or reach the goal)."""
@@ -268,12 +275,14 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         search knows): vertices, and per edge its pose, P4 and alternatives; its cost."""
         path, poses, probs, others, cost = [vertex], [], [], [], 0.0
         while parent[path[-1]][0] is not None:
-            move, pz, pp, pick, c = parent[path[-1]]
+            move, pick, c = parent[path[-1]]
             pv = move[0]
             tr = memo.transitions[_transition_key(move)]
-            poses.append(pz)
+            # as `edge_entry` found them (the memo gives back the same transition)
+            alternatives, pp = best_poses(tr, _rows(tr, pick), cfg)
+            poses.append(alternatives[0].copy())
             probs.append(pp)
-            others.append(best_poses(tr, _rows(tr, pick), cfg)[0])
+            others.append(alternatives)
             path.append(pv)
             cost += c
         return path[::-1], poses[::-1], probs[::-1], others[::-1], cost
@@ -333,7 +342,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
             # the child is popped: most children are never expanded.
             heapq.heappush(open_list, edge_entry(g - c_attach, move, tr, None, child, None))
             continue
-        (child, comp), move, pose, p4, pick, g_parent, cost = payload
+        (child, comp), move, pose, pick, g_parent, cost = payload
         if comp is None:  # entered through a move: split among the child's components
             tr = memo.transitions[_transition_key(move)]
             comps = stance_components(scn, memo, child, cfg, ignore_grasps).component_of(tr.keys)
@@ -356,8 +365,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
         if redundant(vertex, g, popped):
             continue
         closed[vertex] = g
-        # the edge's alternative poses are found again for the route's edges only (`finished`)
-        parent[vertex] = (move, pose, p4, pick, cost)
+        # the edge's pose, P4 and alternatives are found again for the route's edges (`route`)
+        parent[vertex] = (move, pick, cost)
         expanded.append((vertex, pose))
         expansions += 1
         stance, comp = vertex
@@ -377,6 +386,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 if first_expansions < 0:
                     first_expansions = expansions
                     by_travel = travel is not None
+                    heuristic = frozen_heuristic()
                 history.append((now, best_cost, lower(), expansions))
                 if progress is not None:
                     progress(expansions, tested, nearest, bound=_ratio(best_cost, history[-1][2]))
@@ -398,6 +408,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 if schedule:
                     weight = schedule.pop(0)
                     exact = weight <= 1.0
+                    heuristic = frozen_heuristic()
                     if anytime.restart:  # the open list's lower bound is recorded above
                         open_list = start_entries()
                         closed.clear()
@@ -457,7 +468,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 waiting.append((g + c_attach + heuristic(child), next(tie), j,
                                 anchor_row(scn, anchor), bound(child)))
         if waiting:
-            group = MoveGroup(vertex, g + c_attach, waiting)
+            group = MoveGroup(vertex, g + c_attach, waiting, heuristic)
             heapq.heappush(open_list, group.entry(scn, Entry.MOVES))
         current = math.inf  # its successors are in the open list
     if best is not None:

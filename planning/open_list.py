@@ -48,28 +48,46 @@ def _decoded(scn: Scenario, stance: tuple, code: int) -> tuple[int, int, int, st
 
 class MoveGroup:
     """The moves of `vertex` (a (stance, component) pair) reached at `g` (its cost plus the
-    least an edge costs) still waiting in the open list, sorted by (f, tie): per move its key
-    f, and a code holding its tie number, boom and anchor row; and, for the search's lower
-    bound, the least admissible bound of the child stances from each move on."""
+    least an edge costs) still waiting in the open list, sorted by (f, tie), f = g + key(child)
+    (`key`: the search's heuristic as it was when they were keyed, a pure function of the
+    stance, so f is found again, the same float, when a move comes first): per move a code
+    holding its tie number (less the group's first), boom and anchor row; and, for the search's
+    lower bound, the least admissible bound of the child stances from each move on, as runs (it
+    only rises from one move to the next, and a vertex's children's bounds differ by a regrasp
+    or two).
 
-    __slots__ = ("code", "g", "pos", "values", "vertex")
+    A code takes 4 bytes where the group's span of ties, booms and anchors fits, 8 otherwise:
+    a long search's groups hold tens of moves each (about 100 at 20 anchors a metre), most of
+    what it keeps per vertex outside its memo; 24 bytes a move before (f, the least bound and
+    the code as 8 bytes each; docs/benchmarks.md, session 24)."""
 
-    def __init__(self, vertex: tuple, g: float, moves: list[tuple[float, int, int, int, float]]
-                 ) -> None:
-        """`moves`: (f, tie, boom, anchor row, bound of the child), in any order."""
-        self.vertex, self.g = vertex, g
+    __slots__ = ("base", "bits", "code", "g", "key", "pos", "run", "values", "vertex")
+
+    def __init__(self, vertex: tuple, g: float, moves: list[tuple[float, int, int, int, float]],
+                 key: Callable[[tuple], float]) -> None:
+        """`moves`: (f, tie, boom, anchor row, bound of the child), in any order, each f
+        computed as `g + key(child)`."""
+        self.vertex, self.g, self.key = vertex, g, key
         self._fill(moves)
 
     def _fill(self, moves: list[tuple[float, int, int, int, float]]) -> None:
         moves.sort()  # by (f, tie): the order the open list pops them in
         self.pos = 0
+        self.run = 0  # the run of least bounds that holds move `pos`
         least, suffix = math.inf, []
         for m in reversed(moves):
             least = min(least, m[4])
             suffix.append(least)
-        # f of each move, then the least bound from each move on (array: 64 bytes a header)
-        self.values = array("d", [m[0] for m in moves] + suffix[::-1])
-        self.code = array("q", [_code(m[1], m[2], m[3]) for m in moves])
+        suffix.reverse()  # the least bound from each move on: it only rises
+        runs = [x for i, v in enumerate(suffix) if i == 0 or v != suffix[i - 1]
+                for x in (float(i), v)]
+        self.values = array("d", runs)  # (first move, least bound from it on) per run
+        self.base = min((m[1] for m in moves), default=0)
+        row_bits = max((m[3] for m in moves), default=0).bit_length()
+        boom_bits = max((m[2] for m in moves), default=0).bit_length()
+        self.bits = row_bits * 8 + boom_bits  # < 256: Python's shared small ints
+        codes = [((((m[1] - self.base) << boom_bits) | m[2]) << row_bits) | m[3] for m in moves]
+        self.code = array("I" if max(codes, default=0) < 2**32 else "q", codes)
 
     def __len__(self) -> int:
         return len(self.code) - self.pos
@@ -77,24 +95,38 @@ class MoveGroup:
     def move(self, scn: Scenario, n: int) -> tuple[int, int, int, str, tuple]:
         """The n-th waiting move (0: the first): its tie number, boom, anchor row, anchor id
         and child."""
-        return _decoded(scn, self.vertex[0], self.code[self.pos + n])
+        code, row_bits, boom_bits = self.code[self.pos + n], self.bits >> 3, self.bits & 7
+        k = code & ((1 << row_bits) - 1)
+        j = (code >> row_bits) & ((1 << boom_bits) - 1)
+        offset = code >> (row_bits + boom_bits)
+        anchor = scn.anchors[k].id
+        stance = self.vertex[0]
+        return (self.base + offset, j, k, anchor,
+                tuple(anchor if i == j else a for i, a in enumerate(stance)))
 
     def entry(self, scn: Scenario, kind: int) -> tuple:
-        """The open-list entry of the first waiting move: (f, tie, g, kind, child, self)."""
+        """The open-list entry of the first waiting move: (f, tie, g, kind, None, self) (its
+        child is found again when it is popped: 72 bytes a waiting vertex)."""
         tie, _, _, _, child = self.move(scn, 0)
-        return (self.values[self.pos], tie, self.g, kind, child, self)
+        return (self.g + self.key(child), tie, self.g, kind, None, self)
 
     def pop(self, scn: Scenario, kind: int) -> tuple:
         """The first waiting move as one move's entry (f, tie, g, kind, child, (vertex, boom,
         anchor)), taken out of the group."""
         tie, j, _, anchor, child = self.move(scn, 0)
-        f = self.values[self.pos]
+        f = self.g + self.key(child)
         self.pos += 1
         return (f, tie, self.g, kind, child, (self.vertex, j, anchor))
 
     def least(self) -> float:
         """The least g + bound over the waiting moves (inf: none wait)."""
-        return self.g + self.values[len(self.code) + self.pos] if len(self) else math.inf
+        if not len(self):
+            return math.inf
+        values = self.values
+        runs = len(values) // 2
+        while self.run + 1 < runs and values[2 * (self.run + 1)] <= self.pos:
+            self.run += 1
+        return self.g + values[2 * self.run + 1]
 
     def rekey(self, scn: Scenario, key: Callable[[tuple], float],
               bound: Callable[[tuple], float]) -> None:
@@ -103,6 +135,7 @@ class MoveGroup:
         for i in range(len(self)):
             tie, j, k, _, child = self.move(scn, i)
             moves.append((self.g + key(child), tie, j, k, bound(child)))
+        self.key = key
         self._fill(moves)
 
 

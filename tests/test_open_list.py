@@ -20,8 +20,15 @@ def demo():
     return load_scenario(bundled_caves()["demo-shaft"])
 
 
+def _key(child: tuple) -> float:
+    """A heuristic of coarse values, so that ties between f are common and tie numbers
+    decide."""
+    return float(sum(ord(c) for a in child for c in a) % 4) * 0.25
+
+
 def _groups(demo, rng: np.random.Generator, vertices: int) -> list[tuple]:
-    """Random vertices of the demo's start stance with random moves: (vertex, g, moves)."""
+    """Random vertices of the demo's start stance with random moves: (vertex, g, moves),
+    each move's f = g + _key(child) as the search keys them."""
     stance = tuple(demo.start_stance)
     tie = itertools.count()
     out = []
@@ -29,10 +36,9 @@ def _groups(demo, rng: np.random.Generator, vertices: int) -> list[tuple]:
         g = float(rng.uniform(0, 1))
         moves = []
         for _ in range(int(rng.integers(1, 12))):
-            # coarse f values, so that ties between f are common and tie numbers decide
-            f = g + float(rng.integers(0, 4)) * 0.25
-            moves.append((f, next(tie), int(rng.integers(0, 4)),
-                          int(rng.integers(0, len(demo.anchors))), float(rng.uniform(0, 2))))
+            j, k = int(rng.integers(0, 4)), int(rng.integers(0, len(demo.anchors)))
+            child = tuple(demo.anchors[k].id if i == j else a for i, a in enumerate(stance))
+            moves.append((g + _key(child), next(tie), j, k, float(rng.uniform(0, 2))))
         out.append(((stance, v), g, moves))
     return out
 
@@ -46,7 +52,7 @@ def test_groups_pop_in_the_order_of_one_entry_per_move(demo) -> None:
             heapq.heappush(single, (f, tie, g, Entry.MOVE, None, (vertex, j, demo.anchors[k].id)))
     grouped: list = []
     for vertex, g, moves in groups:
-        heapq.heappush(grouped, MoveGroup(vertex, g, list(moves)).entry(demo, Entry.MOVES))
+        heapq.heappush(grouped, MoveGroup(vertex, g, list(moves), _key).entry(demo, Entry.MOVES))
     popped = []
     while grouped:
         entry = heapq.heappop(grouped)
@@ -69,8 +75,11 @@ def test_groups_pop_in_the_order_of_one_entry_per_move(demo) -> None:
 def test_least_and_rekey_cover_exactly_the_waiting_moves(demo) -> None:
     rng = np.random.default_rng(3)
     (vertex, g, moves), = _groups(demo, rng, 1)
-    moves += [(g + 5.0, 10_000 + i, i % 4, i, float(i)) for i in range(3)]
-    group = MoveGroup(vertex, g, list(moves))
+    stance = vertex[0]
+    for i in range(3):  # with large tie numbers: a wide group's codes
+        child = tuple(demo.anchors[i].id if n == i % 4 else a for n, a in enumerate(stance))
+        moves.append((g + _key(child), 10_000 + i, i % 4, i, float(i)))
+    group = MoveGroup(vertex, g, list(moves), _key)
     order = sorted(moves)
     for n in range(len(order)):
         want = min(g + m[4] for m in order[n:])
@@ -78,7 +87,7 @@ def test_least_and_rekey_cover_exactly_the_waiting_moves(demo) -> None:
         group.pop(demo, Entry.MOVE)
     assert group.least() == math.inf and len(group) == 0
     # keyed again: each f = g + key(child), sorted again, ties kept
-    group = MoveGroup(vertex, g, list(moves))
+    group = MoveGroup(vertex, g, list(moves), _key)
     entry = rekeyed(demo, group.entry(demo, Entry.MOVES), lambda child: 0.0,
                     lambda child: 1.0)
     assert entry[0] == pytest.approx(g) and entry[1] == min(m[1] for m in moves), (
@@ -90,7 +99,7 @@ def test_deferred_moves_come_back_as_they_were_popped(demo) -> None:
     rng = np.random.default_rng(11)
     popped = []
     for vertex, g, moves in _groups(demo, rng, 10):
-        group = MoveGroup(vertex, g, list(moves))
+        group = MoveGroup(vertex, g, list(moves), _key)
         while len(group):
             popped.append(group.pop(demo, Entry.MOVE))
     store = DeferredMoves()

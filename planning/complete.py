@@ -434,6 +434,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
                 and expansions >= config.fallback_after * max_expansions):
             # No route yet at the moderate weight: start again, greedy (CompleteConfig)
             weight, fallback = fallback, None
+            heuristic = frozen_heuristic()
             open_list = start_entries()
             closed.clear()
             parent.clear()

@@ -392,12 +392,16 @@ def variant_config(variant: str, time_limit: float | None):
         radius, _, factor = variant.removeprefix("corridor").partition("-f")
         return FootstepConfig(anytime=AnytimeConfig(corridor=float(radius),
                                                     improve_factor=float(factor or 2.0)))
-    if variant.startswith("x-"):  # x-wW-fF-cR-bB: today's default, any of its first route's
-        # weight W (default 300, the default before session 24), improvement budget F,
-        # corridor R and fallback point B changed
-        settings = {part[0]: float(part[1:]) for part in variant.split("-")[1:]}
+    if variant.startswith("x-"):  # x-wW-fF-cR-bB-sA_B: today's default, any of its first
+        # route's weight W (default 300, the default before session 24), improvement budget F,
+        # corridor R, fallback point B and passes' weights A, B, ... changed
+        parts = variant.split("-")[1:]
+        settings = {p[0]: float(p[1:]) for p in parts if p[0] != "s"}
+        # sA_B_C: the passes' weights A, B, C (default today's)
+        weights = [tuple(float(w) for w in p[1:].split("_")) for p in parts if p[0] == "s"]
         anytime = AnytimeConfig(improve_factor=settings.get("f", 2.0),
-                                corridor=settings.get("c"))
+                                corridor=settings.get("c"),
+                                **({"weights": weights[0]} if weights else {}))
         return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime,
                               fallback_after=settings.get("b", 0.75))
     return FootstepConfig(**table[variant])

@@ -12,9 +12,20 @@ import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from rb_drake.errors import EXIT_USAGE, MAX_SEED, one_line
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser with its usage errors in rbp's one line (`error: --trials: invalid
+    whole number value: 'x' (see rbp experiment monte_carlo --help)`, exit status 2) instead
+    of the usage block and `PROG: error: argument --trials: ...`; `--help` is unchanged. The
+    main `rbp` parser, `rbp bench` and every experiment script's parser are of this class."""
+
+    def error(self, message: str) -> NoReturn:
+        message = message.removeprefix("argument ")
+        self.exit(EXIT_USAGE, f"error: {one_line(message)} (see {self.prog} --help)\n")
 
 
 def whole(lo: int, hi: int) -> Callable[[str], int]:

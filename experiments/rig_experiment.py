@@ -16,7 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 from experiments.arguments import OneLineParser, number, seed_number
-from experiments.sweep import machine_info, write_results
+from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 
@@ -71,6 +71,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     if problem:
         parser.error(f"--lcm-url: {args.lcm_url!r} {problem}" if problem.startswith("is not")
                      else f"--lcm-url: {args.lcm_url!r}: {problem}")
+    check_out_files(args.out, ("plan.json", "rig.lcm", "rig.png", "results.json"))
 
     import numpy as np
 

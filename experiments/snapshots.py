@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from experiments.arguments import MAX_EXPANSIONS, OneLineParser, number, seed_number, whole
 from experiments.common import make_cave, plan_cave, plan_record
-from experiments.sweep import machine_info, write_results
+from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_OK
 
 
@@ -37,6 +37,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         parser.error("--tries, --panels and --max-expansions must be 1 or more")
     if not 2.0 <= args.length[0] <= args.length[1]:
         parser.error(f"--length: need 2 <= MIN <= MAX, got {args.length}")
+    check_out_files(args.out, ("plan.json", "snapshots.png", "results.json"))
 
     from planning.figures import snapshots_figure
     from planning.plan import write_plan

@@ -299,6 +299,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from systems.plan_check import plan_problems
 
     path = Path(args.plan)
+    if args.stamp:  # before the verification: an unwritable folder was found after its ok line
+        check_output(path, "--stamp", picture=None)
     plan = read_plan(path)
     if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
         from rbp.commands.plan import check_recorded_config

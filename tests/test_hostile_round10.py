@@ -199,3 +199,23 @@ def test_check_stamp_checks_the_folder_before_the_verification(
     captured = capsys.readouterr()
     assert captured.err == f"error: {path}: --stamp: the folder {tmp_path} is not writable\n"
     assert captured.out == ""
+
+
+@pytest.mark.parametrize("args,line", [
+    (["--version"], "error: unrecognized arguments: --version (see rbp --help)"),
+    (["plan", "--bad"], "error: unrecognized arguments: --bad (see rbp plan --help)"),
+    (["check", "--bad"], "error: unrecognized arguments: --bad (see rbp check --help)"),
+    (["scenario", "check", "--bad", "x"],
+     "error: unrecognized arguments: --bad (see rbp scenario check --help)"),
+    (["plan", "demo-shaft"],
+     "error: the following arguments are required: -o/--output (see rbp plan --help)")])
+def test_a_usage_error_names_the_unknown_option_and_the_commands_help(
+        args: list[str], line: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """An unknown option was reported as a missing argument, and a subcommand's unknown
+    option pointed at `rbp --help`."""
+    from rbp.cli import main
+
+    with pytest.raises(SystemExit) as ended:
+        main(args)
+    assert ended.value.code == 2
+    assert capsys.readouterr().err == line + "\n"

@@ -328,7 +328,9 @@ def _as_number(value: Any) -> tuple[float, str]:
 
 def describe(value: Any) -> str:
     """A value as the configuration errors show it: its type and its repr, cut to 60
-    characters."""
+    characters; a null as the files write it (it was `NoneType None`)."""
+    if value is None:
+        return "null"
     text = repr(value)
     if len(text) > 60:
         text = text[:57] + "..."

@@ -91,7 +91,7 @@ def plan_dict() -> dict[str, Any]:
 
 
 @pytest.mark.parametrize("section,key,value,words", [
-    ("footstep", "fallback_after", None, "expected a number, got NoneType None"),
+    ("footstep", "fallback_after", None, "expected a number, got null"),
     ("footstep", "fallback_weight", "x", "expected a number, got str 'x'"),
     ("footstep", "fallback_weight", True, "expected a number, got bool True"),
     ("scp", "max_iterations", "ten", "expected an integer, got str 'ten'"),

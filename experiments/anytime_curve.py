@@ -13,12 +13,11 @@ search's history.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
-from experiments.arguments import number
+from experiments.arguments import OneLineParser, number
 from experiments.common import make_cave
 from rb_drake.errors import EXIT_OK
 
@@ -74,7 +73,7 @@ def curve_figure(runs: list[dict]):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.anytime_curve",
+    parser = OneLineParser(prog="python -m experiments.anytime_curve",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--caves", default="shaft:7,rockfall:8,crevasse:18",
                         help="kind:seed, comma-separated")

@@ -12,9 +12,56 @@ import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from rb_drake.errors import EXIT_USAGE, MAX_SEED, one_line
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse's parser with its usage errors in rbp's one line (`error: --trials: invalid
+    whole number value: 'x' (see rbp experiment monte_carlo --help)`, exit status 2) instead
+    of the usage block and `PROG: error: argument --trials: ...`; `--help` is unchanged. The
+    main `rbp` parser, `rbp bench` and every experiment script's parser are of this class."""
+
+    _innermost: OneLineParser | None = None  # the parser that ran last: the command's
+    _given: tuple[str, ...] = ()  # this parser's arguments, for `_unknown_options`
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        # a subcommand's parser runs inside its parent's: the last one is the command's
+        OneLineParser._innermost = self
+        self._given = tuple(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args: Any = None, namespace: Any = None) -> Any:
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:  # named with the command's help (`rbp scenario check --bad` said `rbp`)
+            (self._innermost or self).error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace
+
+    def error(self, message: str) -> NoReturn:
+        message = message.removeprefix("argument ")
+        if message.startswith("the following arguments are required") and \
+                (unknown := self._unknown_options()):
+            # the mistake first (`rbp plan --bad` said -o was missing, `rbp --version` that
+            # the command was)
+            message = f"unrecognized arguments: {' '.join(unknown)}"
+        self.exit(EXIT_USAGE, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+    def _unknown_options(self) -> list[str]:
+        """The options given to this parser that it does not know (nor abbreviates)."""
+        known = self._option_string_actions
+        unknown = []
+        for arg in self._given:
+            if arg == "--":
+                break
+            name = arg.split("=", 1)[0]
+            if not name.startswith("-") or name == "-" or name[1:2].isdigit() or \
+                    name[1:2] == ".":
+                continue
+            if not (any(k.startswith(name) for k in known) if name.startswith("--")
+                    else name[:2] in known):
+                unknown.append(name)
+        return unknown
 
 
 def whole(lo: int, hi: int) -> Callable[[str], int]:

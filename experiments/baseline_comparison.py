@@ -25,7 +25,7 @@ import argparse
 from datetime import UTC, datetime
 from typing import Any
 
-from experiments.arguments import number
+from experiments.arguments import OneLineParser, number
 from experiments.common import (
     ORACLE_SECONDS,
     OTHER_PLANNERS,
@@ -195,7 +195,7 @@ def labelled_sweep(args: argparse.Namespace, planners: list[str]) -> list[dict[s
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/baseline_comparison")
     add_cave_arguments(parser)
     parser.add_argument("--planners", default=",".join(PLANNERS),

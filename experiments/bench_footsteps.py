@@ -9,14 +9,20 @@ regrasps, and writes every trial and the summary to OUT/bench_footsteps.json.
 
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import statistics
 import time
 from pathlib import Path
 
-from experiments.arguments import MAX_EXPANSIONS, MAX_TRIALS, number, seed_number, whole
+from experiments.arguments import (
+    MAX_EXPANSIONS,
+    MAX_TRIALS,
+    OneLineParser,
+    number,
+    seed_number,
+    whole,
+)
 from planning.baseline import plan_naive
 from planning.footsteps import FootstepConfig, plan_footsteps
 from planning.plan import build_plan
@@ -27,7 +33,7 @@ from rb_drake.generate import KINDS, CaveConfig, generate_cave
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", default="shaft",
                         help="cave kinds, comma-separated: shaft, crevasse, rockfall")
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=5)

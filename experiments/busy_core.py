@@ -23,7 +23,6 @@ with a core busy, and idle at least as fast as before: `--modes default,one,befo
 
 from __future__ import annotations
 
-import argparse
 import json
 import multiprocessing
 import os
@@ -33,7 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, number, seed_number, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, OneLineParser, number, seed_number, whole
 from experiments.common import ROUTE_VARIANTS, cave_kind
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
@@ -112,7 +111,7 @@ def summarise(caves: list[dict[str, Any]], modes: tuple[str, ...]) -> dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.busy_core",
+    parser = OneLineParser(prog="python -m experiments.busy_core",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=100,
                         help="caves (default 100)")

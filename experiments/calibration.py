@@ -25,7 +25,7 @@ import argparse
 import time
 from typing import Any
 
-from experiments.arguments import MAX_EXPANSIONS, MAX_RUNS, seed_number, whole
+from experiments.arguments import MAX_EXPANSIONS, MAX_RUNS, OneLineParser, seed_number, whole
 from experiments.records import (
     BOOLEAN,
     COUNT,
@@ -261,7 +261,7 @@ def calibration_figure(rows: list[dict[str, Any]]):
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=len(CAVES), out="out/calibration")
     parser.add_argument("--runs", type=whole(1, MAX_RUNS), default=2000,
                         help="stochastic climbs per plan 1 to 100,000 (default 2000)")

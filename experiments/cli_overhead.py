@@ -14,7 +14,6 @@ on both alike. A benchmark, not a test: the numbers depend on the machine.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -23,7 +22,7 @@ import time
 from pathlib import Path
 from statistics import median
 
-from experiments.arguments import whole
+from experiments.arguments import OneLineParser, whole
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 FLOOR_IMPORTS = ("numpy", "scipy.special", "scipy.sparse", "scipy.ndimage", "numba", "networkx",
@@ -41,7 +40,7 @@ def timed(cmd: list[str], cwd: Path, tree: str | None) -> tuple[float,
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--cave", default="demo-shaft", help="scenario (default demo-shaft)")
     parser.add_argument("--repeats", type=whole(1, 1000), default=3,
                         help="runs of each (default 3)")

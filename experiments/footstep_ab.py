@@ -21,7 +21,6 @@ expansion budget, `--time-limit` seconds), else the default search.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -30,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import json_argument, number, seed_number
+from experiments.arguments import OneLineParser, json_argument, number, seed_number
 from experiments.common import cave_kind
 from experiments.sweep import quantiles
 from rb_drake.errors import EXIT_OK
@@ -88,7 +87,7 @@ def _result(side: str, proc: subprocess.Popen, kind: str, seed: int) -> dict[str
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--old", type=Path, required=True, help="the old source tree")
     parser.add_argument("--new", type=Path, default=Path(__file__).resolve().parents[1],
                         help="the new source tree (default: this one)")

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from experiments.arguments import seed_number, whole
+from experiments.arguments import OneLineParser, seed_number, whole
 
 # Values a field may be replaced by: extreme and awkward numbers, wrong types, big structures.
 HOSTILE_VALUES: tuple[Any, ...] = (
@@ -137,12 +137,11 @@ READERS = {"scenario": scenario_reader, "config": config_reader, "plan": plan_re
 
 
 def main(argv: list[str] | None = None) -> int:
-    import argparse
     import json
     import sys
     import time
 
-    parser = argparse.ArgumentParser(prog="python -m experiments.fuzz_readers",
+    parser = OneLineParser(prog="python -m experiments.fuzz_readers",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--documents", type=whole(1, 10_000_000), default=10_000, help="per reader")
     parser.add_argument("--seed", type=seed_number, default=0)

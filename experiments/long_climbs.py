@@ -12,7 +12,6 @@ seconds per metre, against length.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import multiprocessing
@@ -23,7 +22,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_WORKERS, number, whole
+from experiments.arguments import MAX_WORKERS, OneLineParser, number, whole
 from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
@@ -111,7 +110,7 @@ def draw(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.long_climbs",
+    parser = OneLineParser(prog="python -m experiments.long_climbs",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--lengths", type=number(0, 1e4), nargs="+", default=[5.0, 10.0, 15.0,
                         20.0])

@@ -17,7 +17,7 @@ import argparse
 import itertools
 from typing import Any
 
-from experiments.arguments import MAX_RUNS, seed_number, whole
+from experiments.arguments import MAX_RUNS, OneLineParser, seed_number, whole
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -164,7 +164,7 @@ def calibration_figure(rows: list[dict[str, Any]], bins: list[dict[str, Any]]):
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=50, out="out/monte_carlo")
     add_cave_arguments(parser)
     parser.add_argument("--runs", type=whole(1, MAX_RUNS), default=1000,

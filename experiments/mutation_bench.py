@@ -13,7 +13,6 @@ classes (the between-steps class alone: --classes between-cut).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -21,7 +20,7 @@ from collections import Counter
 
 import numpy as np
 
-from experiments.arguments import seed_number, whole
+from experiments.arguments import OneLineParser, seed_number, whole
 from planning.pipeline import plan_climb
 from planning.plan_faults import FAULTS, judge, random_fault
 from planning.plan_model import plan_dict
@@ -33,7 +32,7 @@ CAVES = ("demo-shaft", "demo-crevasse", "rockfall-3")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--faults", type=whole(1, 1_000_000), default=1000,
                         help="faults to try (default 1000)")
     parser.add_argument("--seed", type=seed_number, default=0, help="seed of the faults' draws")

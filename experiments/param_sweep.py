@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from experiments.arguments import OneLineParser
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -111,7 +112,7 @@ def parse_values(parser: argparse.ArgumentParser, param: str, text: str) -> list
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=10, out="out/param_sweep")
     add_cave_arguments(parser)
     parser.add_argument("--param", required=True, choices=tuple(PARAMETERS))

@@ -13,11 +13,10 @@ the end and its minimum.
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
-from experiments.arguments import number, seed_number
-from experiments.sweep import machine_info, write_results
+from experiments.arguments import OneLineParser, number, seed_number
+from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 
@@ -45,7 +44,7 @@ def rbp_body_plan(scn) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out/rig_experiment", help="output folder")
     parser.add_argument("--planner", choices=("rbp", "straight"), default="rbp",
                         help="the body movement: RBP seed + SCP (default) or the straight line")
@@ -72,6 +71,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     if problem:
         parser.error(f"--lcm-url: {args.lcm_url!r} {problem}" if problem.startswith("is not")
                      else f"--lcm-url: {args.lcm_url!r}: {problem}")
+    check_out_files(args.out, ("plan.json", "rig.lcm", "rig.png", "results.json"))
 
     import numpy as np
 

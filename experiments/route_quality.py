@@ -30,6 +30,7 @@ from typing import Any
 from experiments.arguments import (
     MAX_TRIALS,
     MAX_WORKERS,
+    OneLineParser,
     json_argument,
     number,
     seed_number,
@@ -174,7 +175,7 @@ def write_ompl_log(args: argparse.Namespace, caves: list[dict[str, Any]], varian
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m experiments.route_quality",
+    parser = OneLineParser(prog="python -m experiments.route_quality",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=100,
                         help="caves (default 100)")

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import number, whole
+from experiments.arguments import OneLineParser, number, whole
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 
@@ -112,7 +112,7 @@ def _cave(text: str) -> tuple[str, int, float]:
 def main(argv: list[str] | None = None) -> int:
     from rb_drake.files import atomic_save_figure, atomic_write_text
 
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--old", type=Path, required=True, help="the old source tree")
     parser.add_argument("--new", type=Path, default=Path(__file__).resolve().parents[1],
                         help="the new source tree (default: this one)")

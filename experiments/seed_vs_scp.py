@@ -14,9 +14,9 @@ found a plan (planned again here, from the same parameters).
 
 from __future__ import annotations
 
-import argparse
 from typing import Any
 
+from experiments.arguments import OneLineParser
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -132,7 +132,7 @@ def phase_figures(record: dict[str, Any], out: str) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/seed_vs_scp")
     add_cave_arguments(parser)
     args = parser.parse_args(argv)

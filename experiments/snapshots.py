@@ -10,16 +10,14 @@ until one gives a plan.
 
 from __future__ import annotations
 
-import argparse
-
-from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
+from experiments.arguments import MAX_EXPANSIONS, OneLineParser, number, seed_number, whole
 from experiments.common import make_cave, plan_cave, plan_record
-from experiments.sweep import machine_info, write_results
+from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_OK
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out/snapshots", help="output folder")
     parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
     parser.add_argument("--seed", type=seed_number, default=1, help="cave seed (default 1)")
@@ -39,6 +37,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
         parser.error("--tries, --panels and --max-expansions must be 1 or more")
     if not 2.0 <= args.length[0] <= args.length[1]:
         parser.error(f"--length: need 2 <= MIN <= MAX, got {args.length}")
+    check_out_files(args.out, ("plan.json", "snapshots.png", "results.json"))
 
     from planning.figures import snapshots_figure
     from planning.plan import write_plan

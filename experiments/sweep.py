@@ -34,7 +34,7 @@ from typing import IO, Any, NamedTuple
 
 from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
 from experiments.records import shown
-from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError
+from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError, one_line
 from rb_drake.files import atomic_write_text, output_problem
 from rb_drake.input_files import InputFileError, load_json, read_text
 
@@ -362,6 +362,18 @@ def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, A
         print(f"interrupted: finished trials are kept in {Path(args.out) / 'trials'}; run the "
               "same command again to resume", file=sys.stderr)
         raise SystemExit(EXIT_INTERRUPTED) from None
+
+
+def check_out_files(out: str | Path, names: Sequence[str]) -> None:
+    """End a script with one line naming --out (status EXIT_USAGE) when the files `names`
+    cannot be written in output folder `out`, before the work, as a sweep's trials are
+    (`finished_record`): snapshots and rig_experiment found out only after planning, without
+    naming the option."""
+    for name in names:
+        path = Path(out) / name
+        if (problem := output_problem(path)) is not None:
+            print(one_line(f"error: {path}: --out: {problem}"), file=sys.stderr)
+            raise SystemExit(EXIT_USAGE)
 
 
 def write_results(out: str | Path, results: dict[str, Any], name: str = "results.json") -> Path:

@@ -14,14 +14,13 @@ The same as, from the command line:
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from experiments.arguments import seed_number
+from experiments.arguments import OneLineParser, seed_number
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS_FIGURE = ROOT / "docs" / "figures" / "terrain-import.png"
@@ -91,7 +90,7 @@ def climb_figure(scan: Path, scn: Any, plan: Any, out: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scan", type=Path, default=MESH,
                         help="a mesh or point cloud (.stl, .obj, .ply; default the lava tube)")
     parser.add_argument("--seed", type=seed_number, default=0, help="the anchors' seed (default 0)")

@@ -12,10 +12,10 @@ are averages over 100 trials), with the machine they ran on.
 
 from __future__ import annotations
 
-import argparse
 import json
 from typing import Any
 
+from experiments.arguments import OneLineParser
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -133,7 +133,7 @@ def trial_machines(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_sweep_arguments(parser, trials=100, out="out/timing_table")
     add_cave_arguments(parser)
     args = parser.parse_args(argv)

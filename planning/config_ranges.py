@@ -256,45 +256,81 @@ def unknown_key(data: Any, section: str = "") -> tuple[str, str] | None:
 
 
 
+# The fields that may be null (`X | None` in their dataclass; tests/test_hostile_round10.py
+# holds this to the classes), the sections among them too
+NULLABLE = {"SeedConfig": ("ompl_time",), "AnytimeConfig": ("improve_factor", "corridor"),
+            "FootstepConfig": ("fallback_weight", "anytime", "min_success", "repair",
+                               "segments", "max_expansions", "search_memory_mb", "time_limit")}
+
+
 def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
-    """(field, reason) of the first number of configuration `data` outside its range, in
-    `planning.config_io`'s words, or None: checked before the planner's imports (`rbp plan
-    --config`, and --from-plan's provenance.config, took 1.5-2.1 s and 170 MB a refusal with
-    them). A section that is not a mapping, a word not among a field's and a number given for a
-    number field are judged here, in the reader's words (planning.config_io); any
-    other value (a list, null, a string for a number) is left to the reader, which may then
-    name another problem first; so is a section's check of two keys together."""
+    """(field, reason) of the first value of configuration `data` of the wrong type or outside
+    its range, in `planning.config_io`'s words, or None: checked before the planner's imports
+    (`rbp plan --config`, and --from-plan's provenance.config, took 1.5-2.1 s and 170 MB a
+    refusal with them), and by `rbp check` (which said ok to a null or a string that
+    --from-plan refused). A section's check of two keys together is left to the reader."""
     if not isinstance(data, dict):
         return None
     cls = next(name for name, prefix in SECTIONS.items() if prefix == section)
     for key, value in data.items():
         field = f"{section}{key}"
+        nullable = key in NULLABLE.get(cls, ())
         if f"{field}." in SECTIONS.values():
-            if value is not None and not isinstance(value, dict):
+            if not isinstance(value, dict) and not (value is None and nullable):
                 return field, f"expected a mapping, got {describe(value)}"
             if found := range_problem(value, f"{field}."):
                 return found
             continue
-        spec = FIELDS.get(cls, {}).get(key)
-        if isinstance(spec, Choice) and isinstance(value, str) and spec.problem(value):
-            return field, spec.problem(value)
-        if (not isinstance(spec, Range) or spec.items or isinstance(value, bool)
-                or not isinstance(value, int | float)):
+        if value is None and nullable:
             continue
-        if spec.integer and not isinstance(value, int):
-            return field, f"expected an integer, got {describe(value)}"
-        nan = isinstance(value, float) and math.isnan(value)
-        huge = isinstance(value, int) and abs(value) > sys.float_info.max
-        if not spec.integer and (nan or huge):
-            continue  # the reader: "not nan", "within the float range"
-        if problem := spec.problem(value if spec.integer else float(value)):
+        spec = FIELDS.get(cls, {}).get(key)
+        if key in SWITCHES.get(cls, ()):
+            if not isinstance(value, bool):
+                return field, f"expected true or false, got {describe(value)}"
+            continue
+        if isinstance(spec, Choice):
+            if not isinstance(value, str):
+                return field, f"expected a string, got {describe(value)}"
+        elif isinstance(spec, Range) and spec.items:
+            if not isinstance(value, list | tuple):
+                return field, f"expected a list, got {describe(value)}"
+            converted = []
+            for i, item in enumerate(value):
+                number, reason = _as_number(item)
+                if reason:
+                    return f"{field}[{i}]", reason
+                converted.append(number)
+            value = tuple(converted)
+        elif isinstance(spec, Range) and spec.integer:
+            if isinstance(value, bool) or not isinstance(value, int):
+                return field, f"expected an integer, got {describe(value)}"
+        elif isinstance(spec, Range):
+            value, reason = _as_number(value)
+            if reason:
+                return field, reason
+        if spec is not None and (problem := spec.problem(value)):
             return field, problem
     return None
 
 
+def _as_number(value: Any) -> tuple[float, str]:
+    """`value` as a float field reads it (planning.config_io), or the reader's reason not."""
+    if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):
+        return float(value), ""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return 0.0, f"expected a number, got {describe(value)}"
+    if isinstance(value, int) and abs(value) > sys.float_info.max:
+        return 0.0, f"expected a number within the float range, got {describe(value)}"
+    if math.isnan(value):
+        return 0.0, f"expected a number (not nan), got {describe(value)}"
+    return float(value), ""
+
+
 def describe(value: Any) -> str:
     """A value as the configuration errors show it: its type and its repr, cut to 60
-    characters."""
+    characters; a null as the files write it (it was `NoneType None`)."""
+    if value is None:
+        return "null"
     text = repr(value)
     if len(text) > 60:
         text = text[:57] + "..."

@@ -67,6 +67,8 @@ def library_settings() -> None:
     if layer is not None and layer not in NUMBA_LAYERS:
         raise RbpInputError(f"must be one of {', '.join(NUMBA_LAYERS)}, got {layer!r}",
                             field="NUMBA_THREADING_LAYER (environment)")
+    if layer is not None:
+        _layer_available(layer)
     priority = os.environ.get("NUMBA_THREADING_LAYER_PRIORITY")
     if priority is not None and sorted(priority.split()) != sorted(NUMBA_PRIORITY):
         raise RbpInputError(f"must list {', '.join(NUMBA_PRIORITY)} once each, in any order, "
@@ -81,6 +83,57 @@ def library_settings() -> None:
                 f"not supported by rbp (it changes how rbp's compiled kernels build or run): "
                 f"unset it; rbp lets through only {', '.join(NUMBA_SUPPORTED)}",
                 field=f"{name} (environment)")
+    if os.path.isfile(NUMBA_CONFIG_FILE):  # as numba looks for it, in the current folder
+        raise RbpInputError(
+            # numba applies its keys as NUMBA_* values at import, past the check above:
+            # `opt: abc` printed a traceback-shaped warning, `disable_jit: 1` ran for minutes
+            "numba's configuration file in the current folder, not supported by rbp (numba "
+            "would apply its keys as NUMBA_* settings, which change how rbp's compiled "
+            "kernels build or run): remove it or run rbp from another folder",
+            field=NUMBA_CONFIG_FILE)
+
+
+NUMBA_CONFIG_FILE = ".numba_config.yaml"  # numba reads it from the current folder at import
+# the layers each NUMBA_THREADING_LAYER value may load (numba.np.ufunc.parallel): tbb, omp or
+# workqueue; `default` and `forksafe` fall back to workqueue, which is always there
+_LAYER_NEEDS = {"tbb": ("tbb",), "safe": ("tbb",), "threadsafe": ("tbb", "omp"),
+                "omp": ("omp",)}
+
+
+def _layer_available(layer: str) -> None:
+    """Refuse a threading layer that numba cannot load here (TBB not installed): numba found
+    out in the first parallel kernel, in a 77-line traceback. Loads the library numba would
+    load, so no numba import."""
+    needs = _LAYER_NEEDS.get(layer, ())
+    if not needs or any(_loads(library) for library in needs):
+        return
+    what = " or ".join({"tbb": "Intel TBB (libtbb.so.12, 2021.6 or later)",
+                        "omp": "OpenMP (libgomp.so.1)"}[n] for n in needs)
+    raise RbpInputError(f"{layer!r} needs {what}, which is not installed here: unset it or "
+                        "use default, forksafe or workqueue",
+                        field="NUMBA_THREADING_LAYER (environment)")
+
+
+def _loads(library: str) -> bool:
+    """Whether numba's threading layer `library` (tbb or omp) can load: the shared library
+    it needs opens (and TBB is the version numba asks for)."""
+    import ctypes
+    import sys
+
+    if library == "omp" and sys.platform != "linux":
+        return True  # numba's own check there (Intel OpenMP on macOS) is left to numba
+    names = {"tbb": {"win32": "tbb12.dll", "darwin": "libtbb.12.dylib"}.get(
+                 sys.platform, "libtbb.so.12"),
+             "omp": "libgomp.so.1"}
+    try:
+        loaded = ctypes.CDLL(names[library])
+        if library == "tbb":
+            version = loaded.TBB_runtime_interface_version
+            version.argtypes, version.restype = [], ctypes.c_int
+            return bool(version() >= 12060)  # numba's own bound
+    except (OSError, AttributeError):
+        return False
+    return True
 
 
 def _whole_threads(value: str) -> bool:

@@ -17,6 +17,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
+from experiments.arguments import OneLineParser
 from rb_drake.errors import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -298,6 +299,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     from systems.plan_check import plan_problems
 
     path = Path(args.plan)
+    if args.stamp:  # before the verification: an unwritable folder was found after its ok line
+        check_output(path, "--stamp", picture=None)
     plan = read_plan(path)
     if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
         from rbp.commands.plan import check_recorded_config
@@ -394,19 +397,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse's parser with its usage errors in rbp's one line (`error: --seed: invalid int
-    value: '1e3' (see rbp plan --help)`, exit status 2) instead of the usage block and
-    `rbp plan: error: argument --seed: ...`; `--help` is unchanged. The subcommands' parsers
-    are of this class too (add_subparsers makes its parent's class)."""
-
-    def error(self, message: str) -> NoReturn:
-        message = message.removeprefix("argument ")
-        self.exit(EXIT_USAGE, f"error: {one_line(message)} (see {self.prog} --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="rbp", description=__doc__.split("\n\n")[0],
+    # its usage errors in one line (`error: ... (see rbp plan --help)`); the subcommands'
+    # parsers are of its class too (add_subparsers makes its parent's class)
+    parser = OneLineParser(prog="rbp", description=__doc__.split("\n\n")[0],
                                      epilog=EXIT_STATUSES,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)

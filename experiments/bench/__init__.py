@@ -48,7 +48,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import json_type, read_json_file, seed_number, whole
+from experiments.arguments import OneLineParser, json_type, read_json_file, seed_number, whole
 from experiments.bench.allocation import run_allocation
 from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
@@ -152,6 +152,6 @@ def comparable(old: Any) -> None:
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))

@@ -32,7 +32,8 @@ class World(Protocol):
     def gravity_vector(self) -> np.ndarray: ...
 
     @property
-    def anchor_positions(self) -> np.ndarray: ...  # (A, 2): where a free gripper may touch rock
+    def anchor_positions(self) -> np.ndarray: ...  # (A, 2): a free gripper may touch rock
+    #                                                   near these (`reach_world`)
 
 
 class ReachWorld(NamedTuple):

@@ -69,6 +69,9 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
             continue
         stance = scn.stance(tuple(phase.stance))
         reach = phase.kind == "reach"
+        # a free gripper may touch rock only near its own anchors (feasibility.reach_world)
+        ids = (phase.from_anchor, phase.to_anchor) if reach else ()
+        own = scn.anchor_positions[[scn.anchor_index[a] for a in ids if a in scn.anchor_index]]
         efforts = []
         for n, step in enumerate(phase.steps):
             out: list[Problem] = []
@@ -79,8 +82,8 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
             pose = np.asarray(step.pose, dtype=float)
             tip = np.asarray(step.free_tip, dtype=float) if reach else None
             with np.errstate(all="ignore"):  # absurd numbers fail the checks, not numpy
-                p_grasp, p_success, effort = _check_configuration(scn, stance, pose, tip, step,
-                                                                  fail)
+                p_grasp, p_success, effort = _check_configuration(scn, own, stance, pose, tip,
+                                                                  step, fail)
             problems += out
             efforts.append(effort)
             recomputed.append(Configuration(tuple(phase.stance), p_grasp, p_success))
@@ -137,8 +140,9 @@ def _check_motion(plan: Plan, k: int, efforts: list[float],
                                     f"to {a}", k, n, locate(plan, k, n)))
 
 
-def _check_configuration(scn, stance, pose, tip, step: Step, fail):
-    """Checks one configuration; (p_grasp per boom, P, summed tension) recomputed."""
+def _check_configuration(scn, own, stance, pose, tip, step: Step, fail):
+    """Checks one configuration; (p_grasp per boom, P, summed tension) recomputed. `own`
+    (2, 2): the free gripper's anchors, where it may touch rock."""
     robot = scn.robot
     f = np.array([np.nan if v is None else v for v in step.tension], dtype=float)
     prob = statics_problem(robot, scn.gravity_vector, pose, stance, tip)
@@ -158,7 +162,7 @@ def _check_configuration(scn, stance, pose, tip, step: Step, fail):
     if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any():
         fail("collision", "body collides with rock")
     booms = np.flatnonzero(used)
-    clearance = boom_clearances(scn.anchor_positions, 1, stance.free_boom, tip)[0, booms]
+    clearance = boom_clearances(own, 1, stance.free_boom, tip)[0, booms]
     ends = geo.shoulders[0, booms] + geo.d[0, booms] - clearance[:, None] * geo.u[0, booms]
     for i in booms[rock.segments_hit(geo.shoulders[0, booms], ends)]:  # one batch per pose
         fail("collision", f"boom {i} collides with rock")

@@ -30,9 +30,9 @@ from planning.plan_steps import steps_with_tensions
 from planning.probability import holdings_of
 from planning.ramps import CONTROL_TENSION_FLOOR
 from planning.smooth_motion import phase_path, smooth_problem
-from planning.verify_between import phase_arrays
+from planning.verify_between import phase_arrays, phase_world
 from rb_drake import geometry
-from rb_drake.feasibility import check_poses
+from rb_drake.feasibility import check_poses, reach_world
 from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -96,7 +96,8 @@ def ease_phase(scn: Scenario, phase: Phase, dt: float, t0: float,
         new_tips = _interpolate(tips, s)
         new_tips[exact] = tips[np.round(s[exact]).astype(int)]
     stance = scn.stance(tuple(phase.stance))
-    check = check_poses(scn, stance, new_poses, new_tips, full=True)
+    # a free gripper touches rock only near its own anchors, where its path starts and ends
+    check = check_poses(reach_world(scn, new_tips), stance, new_poses, new_tips, full=True)
     if not check.feasible.all():
         return None
     tensions = check.allocation.tensions.copy()
@@ -179,7 +180,8 @@ def inertial_load(scn: Scenario, stance: Stance, times: np.ndarray, poses: np.nd
     if path.tip is not None and stance.free_boom is not None:
         tip = path.tip.vector_values(t).T
         a_t = path.tip.derivative(2).vector_values(t).T
-    check = score_poses(scn, stance, q, tip)  # compiled: check_poses' decisions
+    # compiled: check_poses' decisions (a free gripper near its own anchors, `tips`' ends)
+    check = score_poses(reach_world(scn, tips), stance, q, tip)
     held = check.feasible
     robot = scn.robot
     m = robot.body_mass
@@ -231,8 +233,9 @@ def _verifier_fails(scn: Scenario, phase: Phase) -> bool:
     straight motion or the smooth path at the rule's resolution, with its tolerance."""
     times, poses, tips = phase_arrays(phase)
     stance = scn.stance(tuple(phase.stance))
-    return bool(dense_problem(scn, stance, poses, tips)
-                or smooth_problem(scn, stance, poses, tips, times, dwell=False))
+    world = phase_world(scn, phase)
+    return bool(dense_problem(world, stance, poses, tips)
+                or smooth_problem(world, stance, poses, tips, times, dwell=False))
 
 
 def _between_fails(scn: Scenario, phase: Phase) -> bool:
@@ -242,8 +245,8 @@ def _between_fails(scn: Scenario, phase: Phase) -> bool:
     with np.errstate(divide="ignore"):
         lp = np.log(np.array([[1.0 if p is None else p for p in st.p_grasp]
                               for st in phase.steps]))
-    return bool(between_steps(scn, scn.stance(tuple(phase.stance)), poses, lp, tips, times,
-                              dwell=False))
+    return bool(between_steps(phase_world(scn, phase), scn.stance(tuple(phase.stance)), poses,
+                              lp, tips, times, dwell=False))
 
 
 def _motion_score(scn: Scenario, phase: Phase) -> tuple[bool, float, float]:

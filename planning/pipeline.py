@@ -28,7 +28,7 @@ from planning.plan_model import PhaseKind, Plan
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
 from planning.smooth_motion import smooth_path_problems
-from rb_drake.feasibility import check_poses
+from rb_drake.feasibility import check_poses, reach_world
 from rb_drake.scenario import Scenario
 from rb_drake.statics import allocate, statics_problem
 
@@ -178,11 +178,12 @@ def _seed_between(scn: Scenario, motion: PhaseMotion) -> str:
         return ""
     stance = scn.stance(motion.stance)
     tips = motion.seed.tips
-    lp = check_poses(scn, stance, motion.seed.poses, tips).allocation.log_probs
+    world = reach_world(scn, tips)  # a free gripper touches rock only near its own anchors
+    lp = check_poses(world, stance, motion.seed.poses, tips).allocation.log_probs
     # the straight motion only: a seed whose smooth path fails is eased (planning.easing),
     # and searching another route for it loses good routes (crevasse-8m-s2 went from 26 to
     # 27 regrasps, and its new route's feed-forward overloaded a grasp in simulation)
-    failed = between_steps(scn, stance, motion.seed.poses, lp, tips, smooth=False)
+    failed = between_steps(world, stance, motion.seed.poses, lp, tips, smooth=False)
     return f"its seed fails between steps ({failed})" if failed else ""
 
 

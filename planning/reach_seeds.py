@@ -28,6 +28,7 @@ from planning.seed_common import (
 )
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE
+from rb_drake.feasibility import World, reach_world
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
 
@@ -148,7 +149,8 @@ def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor:
     na, nb = scn.anchor_normals[k_from], scn.anchor_normals[k_to]
     pose = np.asarray(pose, dtype=float).reshape(3)
     ends = np.column_stack([np.vstack([pose, pose]), np.vstack([a, b])])
-    check = check_configurations(scn, three, ends)
+    world = reach_world(scn, np.vstack([a, b]))  # rock may be touched near a and b only
+    check = check_configurations(world, three, ends)
     for k, where in enumerate(("old", "new")):
         if not check.feasible[k]:
             return failed_seed(describe_infeasible(
@@ -158,12 +160,12 @@ def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor:
     shoulder = geometry.shoulder_positions(scn.robot, pose)[0, boom]
     for tips in _clear_arcs(scn, a, b, na, nb, cfg, shoulder):
         hold = np.column_stack([np.broadcast_to(pose, (len(tips), 3)), tips])
-        check = check_configurations(scn, three, hold)
+        check = check_configurations(world, three, hold)
         if check.feasible.all():
             return found_seed("hold", hold, check.allocation.robustness)
         reasons.append(describe_infeasible(check, hold, "holding the pose"))
 
-        found = _sway(scn, three, pose, tips, cfg, rng)
+        found = _sway(world, three, pose, tips, cfg, rng)
         if found is not None:
             return found_seed("local", *found)
         reasons.append(f"no feasible sway among {cfg.local_rounds * cfg.local_samples} sampled "
@@ -174,7 +176,7 @@ def reach_seed(scn: Scenario, stance_ids: tuple[str, ...], boom: int, to_anchor:
     return failed_seed("; ".join(reasons), reach=True)
 
 
-def _sway(scn: Scenario, three: Stance, pose: np.ndarray, tips: np.ndarray, cfg: SeedConfig,
+def _sway(world: World, three: Stance, pose: np.ndarray, tips: np.ndarray, cfg: SeedConfig,
           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
     """Local sampling for a reach phase. Body offsets from the transition pose, shared by all tip
     positions (zero first, then `local_samples` per spread, the spread doubling over
@@ -194,7 +196,7 @@ def _sway(scn: Scenario, three: Stance, pose: np.ndarray, tips: np.ndarray, cfg:
         part = tips[k:k + per]
         grid = np.column_stack([np.tile(pose + offsets, (len(part), 1)),
                                 np.repeat(part, C, axis=0)])
-        feasible[k:k + per] = check_configurations(scn, three, grid).feasible.reshape(-1, C)
+        feasible[k:k + per] = check_configurations(world, three, grid).feasible.reshape(-1, C)
     d = offsets[:, None, :] - offsets[None, :, :]
     cost = np.maximum(np.linalg.norm(d[..., :2], axis=-1) / cfg.step,
                       np.abs(d[..., 2]) / cfg.turn_step)  # steps from offset i to offset j
@@ -204,7 +206,7 @@ def _sway(scn: Scenario, three: Stance, pose: np.ndarray, tips: np.ndarray, cfg:
             return None
         waypoints = np.column_stack([pose + offsets[path], tips])
         configs = subdivide(waypoints, cfg.step, cfg.turn_step)
-        check = check_configurations(scn, three, configs)
+        check = check_configurations(world, three, configs)
         if check.feasible.all():
             return configs, check.allocation.robustness
         bad = int(np.argmin(check.feasible))

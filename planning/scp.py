@@ -60,6 +60,7 @@ from rb_drake.feasibility import (
     Reason,
     check_poses,
     pull_within,
+    reach_world,
     rock_inside_body,
     wrench_conditioning,
 )
@@ -347,7 +348,8 @@ def _optimise(scn: Scenario, stance: Stance, seed_poses: np.ndarray, tips: np.nd
     N = poses.shape[0]
     seed_alloc = allocate(robot, scn.gravity_vector, poses, stance, tips)
     seed_r = seed_alloc.robustness
-    program = PhaseProgram(scn, stance, N, dt, cfg, tips)
+    world = reach_world(scn, tips)  # a free gripper touches rock only near its own anchors
+    program = PhaseProgram(world, stance, N, dt, cfg, tips)
 
     def result(it: Iterate, r: np.ndarray, improved: bool, status: str, history: list,
                infeasible: list[str]) -> ScpResult:
@@ -366,7 +368,7 @@ def _optimise(scn: Scenario, stance: Stance, seed_poses: np.ndarray, tips: np.nd
         floor = max(floor, float(seed_r.min()))
     it, ev, history, status, infeasible = program.run(seed, floor)
     accepted = any(h.accepted for h in history)
-    check = check_poses(scn, stance, it.poses, tips)  # the library's own verdict, once
+    check = check_poses(world, stance, it.poses, tips)  # the library's own verdict, once
     if (accepted and ev.feasible and check.feasible.all()
             and ev.robustness.min() >= seed_r.min() - 1e-12):
         return result(it, ev.robustness, True, status, history, infeasible)

@@ -12,8 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rb_drake.errors import RbpInputError
-from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, check_poses
-from rb_drake.scenario import Scenario
+from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
 from rb_drake.stance import Stance
 
 MAX_OMPL_CHECKS = 1_000_000  # RRTConnect's budget at most: minutes, not hours, per seed
@@ -83,11 +82,12 @@ def subdivide(waypoints: np.ndarray, step: float, turn_step: float) -> np.ndarra
     return np.vstack([w[seg] + t[:, None] * np.diff(w, axis=0)[seg], w[-1:]])
 
 
-def check_configurations(scn: Scenario, stance: Stance,
+def check_configurations(world: World, stance: Stance,
                          configs: np.ndarray) -> PoseCheck:
-    """check_poses on configurations (N, 3) or (N, 5) (pose, free tip)."""
+    """check_poses on configurations (N, 3) or (N, 5) (pose, free tip); a reach phase's in
+    its `reach_world`."""
     tips = configs[:, 3:5] if configs.shape[1] > 3 else None
-    return check_poses(scn, stance, configs[:, :3], tips)
+    return check_poses(world, stance, configs[:, :3], tips)
 
 
 def describe_infeasible(check: PoseCheck, configs: np.ndarray, what: str,

@@ -28,7 +28,15 @@ import numpy as np
 
 from planning.plan_model import Phase
 from rb_drake.collision import Rock
-from rb_drake.feasibility import REASON_TEXT, PoseCheck, Reason, World, check_poses
+from rb_drake.feasibility import (
+    REASON_TEXT,
+    PoseCheck,
+    ReachWorld,
+    Reason,
+    World,
+    check_poses,
+    reach_world,
+)
 from rb_drake.params import RobotParams
 from rb_drake.scenario import Scenario
 from rb_drake.stance import Stance
@@ -227,6 +235,18 @@ def verification_world(scn: Scenario | World) -> _World:
     return _World(slack, scn.rock, scn.gravity_vector, scn.anchor_positions)
 
 
+def phase_world(world: _World | World, phase: Phase) -> _World | World:
+    """`world` for the configurations of `phase`: in a reach phase its free gripper may touch
+    rock only near its own anchors, where its steps start and end (rule reach-ends puts them
+    on from_anchor and to_anchor; rb_drake.feasibility.reach_world)."""
+    if phase.kind != "reach" or not phase.steps:
+        return world
+    ends = [phase.steps[0].free_tip, phase.steps[-1].free_tip]
+    if any(e is None for e in ends):  # other rules report it; no allowance meanwhile
+        return ReachWorld(world.robot, world.rock, world.gravity_vector, np.zeros((0, 2)))
+    return reach_world(world, np.array(ends, dtype=float))
+
+
 Fail = Callable[[int, int, str], None]
 
 
@@ -264,6 +284,7 @@ def failing_intervals(world: _World | World, stance: Stance, phase: Phase, s: Sa
     names the motion sampled, e.g. rbp simulate's smooth path; empty: the straight one)."""
     out: list[tuple[int, str]] = []
     failed: set[int] = set()
+    world = phase_world(world, phase)
     for lo in range(0, len(s.t), CHUNK):
         rows = slice(lo, lo + CHUNK)
         tips = None if s.tips is None else s.tips[rows]

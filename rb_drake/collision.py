@@ -4,7 +4,7 @@ Rock is a set of closed polygons. A segment collides when it crosses a polygon e
 inside a polygon; the body collides when an edge of its square crosses rock, when it lies inside
 rock, or when rock lies inside it. A boom may touch rock only at its own anchor, so boom segments
 are checked from the shoulder to a point `ANCHOR_CLEARANCE` short of the anchor; a free gripper
-only within ANCHOR_CLEARANCE of an anchor (`free_clearance`).
+only within ANCHOR_CLEARANCE of its own anchors (`free_clearance`, feasibility.reach_world).
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ CONTAINS_PAIRS = 1 << 19  # points x edges tested at once by `Rock.contains` (a 
 
 def free_clearance(anchor_positions: np.ndarray, tips: np.ndarray) -> np.ndarray:
     """How far short of a FREE gripper at each of `tips` (..., 2) its boom is checked for rock:
-    ANCHOR_CLEARANCE - d, clipped to [0, ANCHOR_CLEARANCE], d the distance to the nearest anchor.
+    ANCHOR_CLEARANCE - d, clipped to [0, ANCHOR_CLEARANCE], d the distance to the nearest of
+    `anchor_positions`: in a reach phase the gripper's own two (feasibility.reach_world).
 
     A held boom may touch rock in its last ANCHOR_CLEARANCE, the rock its gripper grasps. A free
     gripper grasps nothing: only where it takes or leaves an anchor may it touch that anchor's

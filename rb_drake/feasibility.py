@@ -32,7 +32,29 @@ class World(Protocol):
     def gravity_vector(self) -> np.ndarray: ...
 
     @property
-    def anchor_positions(self) -> np.ndarray: ...  # (A, 2): where a free gripper may touch rock
+    def anchor_positions(self) -> np.ndarray: ...  # (A, 2): a free gripper may touch rock
+    #                                                   near these (`reach_world`)
+
+
+class ReachWorld(NamedTuple):
+    """A World in which a reach phase's configurations are checked (`reach_world`)."""
+
+    robot: RobotParams
+    rock: Rock
+    gravity_vector: np.ndarray
+    anchor_positions: np.ndarray  # (2, 2): the free gripper's own anchors
+
+
+def reach_world(world: World, tips: np.ndarray | None) -> World:
+    """`world` for a reach phase whose free gripper follows `tips` (N, 2): it may touch rock
+    only near its OWN anchors, the one it leaves and the one it reaches, where its path starts
+    and ends (rule reach-ends). Near any anchor of the cave, a gripper passing a rock nub that
+    carries an unrelated anchor crossed it unseen. `world` itself when `tips` is None."""
+    path = None if tips is None else np.asarray(tips, dtype=float).reshape(-1, 2)
+    if path is None or not len(path):
+        return world
+    ends = path[[0, -1]]
+    return ReachWorld(world.robot, world.rock, world.gravity_vector, ends)
 
 
 class Reason(IntEnum):

@@ -361,8 +361,9 @@ def _ramps(plan: Plan, fail) -> None:
         after = phases[k + 1] if k + 1 < len(phases) else None
         if before is not None and before.kind == "reach":
             j = before.free_boom
+            # a phase of ramp steps only: its ramp ends on its last step (`attach` says so)
             lead = _ramp_run(steps, j, from_end=False)
-            _check_ramp(plan, k, j, list(range(lead + 1)), "attach", fail)
+            _check_ramp(plan, k, j, list(range(min(lead, len(steps) - 1) + 1)), "attach", fail)
         if after is not None and after.kind == "reach" and len(steps) > lead:
             j = after.free_boom
             trail = min(_ramp_run(steps, j, from_end=True), len(steps) - lead - 1)

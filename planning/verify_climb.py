@@ -72,13 +72,14 @@ LIMIT_TOL = 1e-9  # m, rad: above a step limit by more than this is a jump
 # Successive steps of a phase at least this far apart in time: time stamps have 6 decimals and
 # the splines of `rbp simulate` and `between` need increasing knots (Drake: 2.2e-16 s apart).
 MIN_STEP_GAP = 1e-3  # s
-# How fast a plan may move (rule `speed`): the planner's plans at time_step >= 0.05 s move the
-# body at most 0.68 m/s and 0.61 rad/s and a free gripper at most 0.31 m/s on the bundled caves
-# (docs/model.md "How fast a plan moves"); a plan's steps are executed as straight lines between
-# them, so faster steps are not what rbp simulate and the rig's rate bounds can follow.
-BODY_SPEED_MAX = 1.0  # m/s
-TURN_SPEED_MAX = 1.0  # rad/s
-GRIPPER_SPEED_MAX = 1.0  # m/s
+# How fast a plan may move (rule `speed`, docs/model.md "How fast a plan moves"): the planner's
+# steps (`limits.step` 0.1 m, `turn_step` 0.1 rad) every MIN_TIME_STEP (0.25 s) at most; its
+# default plans (time_step 0.5 s) move at most 0.17 m/s, 0.10 rad/s and a gripper 0.10 m/s on
+# the bundled caves. Its plans at 0.02 s on demo-shaft (0.45 m/s, 0.41 rad/s) failed every
+# rbp simulate trial, and a continuation's spliced reach moved a gripper 0.57 m in 1 us.
+BODY_SPEED_MAX = 0.4  # m/s
+TURN_SPEED_MAX = 0.4  # rad/s
+GRIPPER_SPEED_MAX = 0.4  # m/s
 # The planner's step limits when a plan file does not record them (plans before `limits`):
 # PipelineConfig's seed step and turn step (0.05 m, 0.05 rad) stretched by STEP_STRETCH.
 STEP_STRETCH = 2.0  # SCP may lengthen a seed's step up to this factor (planning.plan)

@@ -95,7 +95,9 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
         problems.append(Problem("between", text, k, n, locate(plan, k, n)))
 
     if plan.time_step is not None:  # a footstep plan holds end configurations, no motion
-        between_problems(plan.phases, scn, bad_form, between)
+        # steps out of time order have no motion between them to verify (`time-order`)
+        unordered = {p.phase for p in problems if p.rule == "time-order"}
+        between_problems(plan.phases, scn, bad_form | unordered, between)
         if not problems:  # the phases are well formed and join: the smooth path exists
             smooth_path_problems(plan, scn, lambda k: scn.stance(tuple(plan.phases[k].stance)),
                                  between)

@@ -101,7 +101,7 @@ def positive(lo: float, hi: float, unit: str = "") -> Range:
 PI = round(math.pi, 4)
 FIELDS: dict[str, dict[str, Range | Choice]] = {
     "PipelineConfig": {
-        "dt": Range(0.01, 60.0, "s"),  # the simulator's plant step .. a minute
+        "dt": Range(0.25, 60.0, "s"),  # plan_model.MIN_TIME_STEP .. a minute
         "motion_retries": count(0, 100),
     },
     "FootstepConfig": {

@@ -50,9 +50,12 @@ FORCE4 = {"$ref": "#/$defs/force4"}  # 4 tensions (N) or nulls, each within MAX_
 MAX_COORDINATE = 1e4  # m for positions and steps, rad for angles (rb_drake.scenario)
 MAX_FORCE = 1e6       # N for tensions, N m for torques (rb_drake.params)
 MAX_TIME = 1e7        # s: a plan's times (115 days; a climb takes minutes)
-# rbp plan --dt's range, and a plan's time_step: a step is at least one of the simulator's plant
-# steps and a 5 cm step takes at most a minute (rbp.commands.plan)
-MIN_TIME_STEP, MAX_TIME_STEP = 0.01, 60.0
+# rbp plan --dt's range, and a plan's time_step: the planner's steps (at most `limits.step`,
+# 0.1 m, and `turn_step`, 0.1 rad) every 0.25 s keep within rule `speed` (planning.verify_climb,
+# 0.4 m/s and rad/s; its plans at 0.1 s on demo-crevasse and rockfall-3, at 0.05 s on shaft-1 and
+# at 0.02 s on demo-shaft failed every rbp simulate trial, docs/model.md "How fast a plan
+# moves") and a 5 cm step takes at most a minute (rbp.commands.plan)
+MIN_TIME_STEP, MAX_TIME_STEP = 0.25, 60.0
 # The longest wait between successive steps (planning.plan_file.check_times): the simulator and
 # the rig sample a plan over its time, so a plan stretched in time (a step a day apart) must be
 # refused at reading, not run out of memory later.

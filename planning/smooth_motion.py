@@ -36,6 +36,7 @@ from planning.verify_between import (
     parts_for,
     verification_world,
 )
+from planning.verify_climb import TIME_TOL
 from rb_drake.feasibility import World
 from rb_drake.params import RobotParams
 from rb_drake.stance import Stance
@@ -220,7 +221,9 @@ def join_knots(phases: Sequence[PhaseKnots], resample: float | None = RESAMPLE
     vs: list[np.ndarray] = []
     for kn in phases:
         t, q, v = kn.t, kn.q, kn.v.copy()
-        if ts and abs(t[0] - ts[-1][-1]) < 1e-9:  # the shared boundary step
+        # the shared boundary step: rule `phase-join` lets the times differ by TIME_TOL, and
+        # `time-order` keeps other steps MIN_STEP_GAP apart, so the spline's knots increase
+        if ts and abs(t[0] - ts[-1][-1]) <= TIME_TOL:
             last = vs[-1]
             last[-1] = np.where(np.isnan(last[-1]), v[0], last[-1])
             t, q, v = t[1:], q[1:], v[1:]

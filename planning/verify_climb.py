@@ -34,7 +34,12 @@ RULES = {
               "next body phase holds it on to_anchor)",
     "reach-ends": "the free gripper starts on from_anchor and ends on to_anchor",
     "phase-join": "each phase starts where and when the phase before ended",
-    "time-order": "time strictly increases within a phase; in a trajectory, by time_step",
+    "time-order": "time increases within a phase by at least MIN_STEP_GAP; in a trajectory, "
+                  "by time_step",
+    "speed": "between every two successive steps of the plan (within and across phases, "
+             "continuations' spliced phases and footstep plans too) the body moves at most "
+             "BODY_SPEED_MAX, turns at most TURN_SPEED_MAX and the free gripper moves at most "
+             "GRIPPER_SPEED_MAX",
     "release": "a body phase that a reach phase follows ends with a release ramp at the "
                "transition pose: the freed boom's tension falls (its shoulder taking up its "
                "limb) over at least RAMP_DURATION to at most RELEASE_TENSION when its "
@@ -64,6 +69,17 @@ RULES = {
 POSE_TOL = 1e-9   # m, rad: phases join and the climb starts exactly (plans copy these values)
 TIME_TOL = 1e-6   # s: plans round time stamps to 6 decimals
 LIMIT_TOL = 1e-9  # m, rad: above a step limit by more than this is a jump
+# Successive steps of a phase at least this far apart in time: time stamps have 6 decimals and
+# the splines of `rbp simulate` and `between` need increasing knots (Drake: 2.2e-16 s apart).
+MIN_STEP_GAP = 1e-3  # s
+# How fast a plan may move (rule `speed`, docs/model.md "How fast a plan moves"): the planner's
+# steps (`limits.step` 0.1 m, `turn_step` 0.1 rad) every MIN_TIME_STEP (0.25 s) at most; its
+# default plans (time_step 0.5 s) move at most 0.17 m/s, 0.10 rad/s and a gripper 0.10 m/s on
+# the bundled caves. Its plans at 0.02 s on demo-shaft (0.45 m/s, 0.41 rad/s) failed every
+# rbp simulate trial, and a continuation's spliced reach moved a gripper 0.57 m in 1 us.
+BODY_SPEED_MAX = 0.4  # m/s
+TURN_SPEED_MAX = 0.4  # rad/s
+GRIPPER_SPEED_MAX = 0.4  # m/s
 # The planner's step limits when a plan file does not record them (plans before `limits`):
 # PipelineConfig's seed step and turn step (0.05 m, 0.05 rad) stretched by STEP_STRETCH.
 STEP_STRETCH = 2.0  # SCP may lengthen a seed's step up to this factor (planning.plan)
@@ -120,6 +136,7 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     _stances(plan, scn, fail)
     _joins(plan, fail)
     _times(plan, fail)
+    _speeds(plan, fail)
     _continuity(plan, fail)
     _ramps(plan, fail)
     _goal(plan, scn, fail)
@@ -255,12 +272,40 @@ def _times(plan: Plan, fail) -> None:
             fail("phase-form", "a trajectory (motion) in a plan without time_step", k)
         for n in range(1, len(steps)):
             gap = steps[n].t - steps[n - 1].t
-            if not gap > 0:
-                fail("time-order", f"t = {steps[n].t} does not follow t = "
-                     f"{steps[n - 1].t}", k, n)
+            if not gap >= MIN_STEP_GAP - TIME_TOL:
+                fail("time-order", f"t = {steps[n].t} does not follow t = {steps[n - 1].t} "
+                     f"by at least {MIN_STEP_GAP} s", k, n)
             elif regular and dt is not None and abs(gap - dt) > TIME_TOL:
                 fail("time-order", f"{gap:.6g} s after the step before, not time_step {dt} s",
                      k, n)
+
+
+def _speeds(plan: Plan, fail) -> None:
+    """Rule `speed`: per phase and quantity, the fastest of its step intervals over the limit
+    (the interval into a phase's first step from the phase before's last included)."""
+    for k, phase in enumerate(plan.phases):
+        steps = phase.steps
+        joined = (plan.phases[k - 1].steps[-1],) if k > 0 else ()  # the join: no motion
+        t = np.array([s.t for s in joined + steps], dtype=float)
+        q = np.array([s.pose for s in joined + steps], dtype=float)
+        with np.errstate(all="ignore"):  # absurd numbers fail the rule, not numpy
+            gap = np.maximum(np.diff(t), 0.0)  # phase-join allows TIME_TOL back at the join
+            d = np.diff(q, axis=0)
+            moves = [("the body moves", np.hypot(d[:, 0], d[:, 1]), BODY_SPEED_MAX, "m"),
+                     ("the body turns", np.abs(d[:, 2]), TURN_SPEED_MAX, "rad")]
+            if phase.kind == "reach" and all(s.free_tip is not None for s in steps):
+                tips = np.array([s.free_tip for s in steps], dtype=float)
+                travel = np.linalg.norm(np.diff(tips, axis=0), axis=1)
+                moves.append(("the free gripper moves", np.r_[np.zeros(len(joined)), travel],
+                              GRIPPER_SPEED_MAX, "m"))
+            for what, size, limit, unit in moves:
+                over = np.flatnonzero(~(size <= limit * gap + LIMIT_TOL))
+                if not len(over):
+                    continue
+                n = int(over[np.argmax(size[over] / np.maximum(gap[over], 1e-300))])
+                more = f" (and {len(over) - 1} more steps)" if len(over) > 1 else ""
+                fail("speed", f"{what} {size[n]:.4g} {unit} in {gap[n]:.3g} s, over "
+                     f"{limit:g} {unit}/s{more}", k, n + 1 - len(joined))
 
 
 def _continuity(plan: Plan, fail) -> None:
@@ -361,8 +406,9 @@ def _ramps(plan: Plan, fail) -> None:
         after = phases[k + 1] if k + 1 < len(phases) else None
         if before is not None and before.kind == "reach":
             j = before.free_boom
+            # a phase of ramp steps only: its ramp ends on its last step (`attach` says so)
             lead = _ramp_run(steps, j, from_end=False)
-            _check_ramp(plan, k, j, list(range(lead + 1)), "attach", fail)
+            _check_ramp(plan, k, j, list(range(min(lead, len(steps) - 1) + 1)), "attach", fail)
         if after is not None and after.kind == "reach" and len(steps) > lead:
             j = after.free_boom
             trail = min(_ramp_run(steps, j, from_end=True), len(steps) - lead - 1)

@@ -455,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--time-limit", type=float, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
     plan.add_argument("--dt", type=float,
-                      help="seconds between trajectory steps, 0.01 to 60 (default 0.5; steps "
+                      help="seconds between trajectory steps, 0.25 to 60 (default 0.5; steps "
                            "are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",
                       help="keep the seed trajectories (no sequential convex programming)")

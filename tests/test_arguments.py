@@ -80,7 +80,7 @@ def test_dt_refused_up_front_with_its_range(tmp_path: Path, dt: str) -> None:
     assert result.returncode == 2, (dt, result.returncode, result.stderr[-1500:])
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: --dt:"), result.stderr
-    assert "at least 0.01" in lines[0] and "at most 60" in lines[0], lines[0]
+    assert "at least 0.25" in lines[0] and "at most 60" in lines[0], lines[0]
     assert time.perf_counter() - start < 30 and not (tmp_path / "p.json").exists()
 
 

@@ -140,7 +140,7 @@ def test_simulate_takes_the_command_lines_ranges(plan_dict: dict[str, Any],
 
 def test_plan_checks_its_configuration_before_any_work() -> None:
     calls: list[object] = []
-    with pytest.raises(ConfigError, match=r"^config: dt: must be a number from 0\.01"):
+    with pytest.raises(ConfigError, match=r"^config: dt: must be a number from 0\.25"):
         rbp.plan("demo-shaft", rbp.PipelineConfig(dt=0.0), footsteps_done=calls.append)
     footstep = dataclasses.replace(rbp.FootstepConfig(), max_expansions=-5)
     with pytest.raises(ConfigError, match=r"^config: footstep.max_expansions: must be a whole"):

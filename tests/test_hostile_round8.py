@@ -275,7 +275,7 @@ def test_rig_run_refuses_its_phase_and_bus_before_the_verifiers_imports(
      "footstep.max_expansions: expected an integer, got float 1000.0"),
     ("footstep: {transition: [1]}\n", "footstep.transition: expected a mapping, got list [1]"),
     ("footstep: {search: quantum}\n", "footstep.search: must be one of hybrid, complete"),
-    ("dt: 1.0e+308\n", "dt: must be a number from 0.01 to 60 s")])
+    ("dt: 1.0e+308\n", "dt: must be a number from 0.25 to 60 s")])
 def test_config_values_are_refused_before_the_planners_imports(
         text: str, words: str, tmp_path: Path) -> None:
     """In the reader's words (the same line after the imports), without them."""

@@ -285,7 +285,7 @@ def test_docs_list_every_range() -> None:
     ({"footstep": {"search": "greedy"}}, "footstep.search", "one of hybrid, complete, sampled"),
     ({"scp": {"robustness_weight": "inf"}}, "scp.robustness_weight", "got inf"),
     ({"scp": {"solver": "foo"}}, "scp.solver", "one of clarabel, osqp, got 'foo'"),
-    ({"dt": 1e-300}, "dt", "from 0.01 to 60 s"),
+    ({"dt": 1e-300}, "dt", "from 0.25 to 60 s"),
 ])
 def test_values_outside_their_range_refused_at_reading(data, field: str, words: str) -> None:
     for prefix in ("", "provenance.config"):  # a --config file, a plan's provenance

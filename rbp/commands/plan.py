@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from planning.plan_model import Plan, Provenance
     from rb_drake.scenario import Scenario
 
-# --dt's range, a plan's time_step's (planning.plan_model): a step of the plan is at least one of
-# the simulator's plant steps (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as
+# --dt's range, a plan's time_step's (planning.plan_model): the planner's steps keep within
+# rule `speed` (`_check_speed`); a step of the plan is at least one of the simulator's plant
+# steps (systems.diagram.PLANT_TIME_STEP; below, SCP's dynamics scale as
 # 1/dt^2 and its solver fails, and the plan's time stamps, rounded to 1 us, cannot keep the steps
 # apart), and a 5 cm step takes at most a minute
 MIN_DT, MAX_DT = MIN_TIME_STEP, MAX_TIME_STEP
@@ -108,7 +109,7 @@ def check_options(args: argparse.Namespace) -> None:
         check_seed(args.seed, "--seed")
     if args.dt is not None and not MIN_DT <= args.dt <= MAX_DT:
         raise UserError(f"--dt: seconds between trajectory steps must be at least {MIN_DT:g} "
-                        f"(the simulator's plant step) and at most {MAX_DT:g}, got {args.dt:g}")
+                        f"(rule speed) and at most {MAX_DT:g}, got {args.dt:g}")
     wanted = getattr(args, "min_success", None)
     if wanted is not None and not args.thorough and not 0.0 < wanted < 1.0:
         raise UserError(f"--min-success: must lie strictly between 0 and 1, got {wanted}")
@@ -184,8 +185,8 @@ def plan_setup(args: argparse.Namespace):
         source = "--dt" if args.dt is not None else (
             f"{args.config or args.from_plan or '(configuration)'}: dt")
         raise UserError(f"{source}: seconds between trajectory steps must be at least "
-                        f"{MIN_DT:g} (the simulator's plant step) and at most {MAX_DT:g}, "
-                        f"got {cfg.dt:g}")
+                        f"{MIN_DT:g} (rule speed) and at most {MAX_DT:g}, got {cfg.dt:g}")
+    _check_speed(cfg, args)
     if not 0 <= cfg.footstep.seed <= MAX_SEED:  # -1 ended in numpy's traceback
         source = "--seed" if args.seed is not None else (
             f"{args.config or args.from_plan or '(configuration)'}: footstep.seed")
@@ -371,3 +372,26 @@ def check_animation(path: str, inputs: dict[str, str | None] | None = None) -> N
         if not writers.is_available("ffmpeg"):
             raise UserError(f"{path}: --animate: an .mp4 needs ffmpeg, which is not installed "
                             "(a .gif needs nothing more)")
+
+
+def _check_speed(cfg: Any, args: argparse.Namespace) -> None:
+    """The planner's steps, up to STEP_STRETCH times the seeds' `step` and `turn_step` every
+    `dt`, within rule `speed` (planning.verify_climb), so that its plans pass `rbp check`."""
+    from planning.verify_climb import (
+        BODY_SPEED_MAX,
+        GRIPPER_SPEED_MAX,
+        STEP_STRETCH,
+        TURN_SPEED_MAX,
+    )
+    from rbp.commands.common import UserError
+
+    # a free gripper's steps are held to seed.step too (`limits.step`)
+    need = STEP_STRETCH * max(cfg.seed.step / min(BODY_SPEED_MAX, GRIPPER_SPEED_MAX),
+                              cfg.seed.turn_step / TURN_SPEED_MAX)
+    if cfg.dt < need * (1 - 1e-9):
+        source = "--dt" if args.dt is not None else (
+            f"{args.config or args.from_plan or '(configuration)'}: dt")
+        raise UserError(f"{source}: steps of up to {STEP_STRETCH:g} x seed.step "
+                        f"{cfg.seed.step:g} m and seed.turn_step {cfg.seed.turn_step:g} rad "
+                        f"every {cfg.dt:g} s exceed rule speed ({BODY_SPEED_MAX:g} m/s, "
+                        f"{TURN_SPEED_MAX:g} rad/s); give dt at least {need:.6g}")

@@ -399,9 +399,9 @@ def variant_config(variant: str, time_limit: float | None):
         settings = {p[0]: float(p[1:]) for p in parts if p[0] != "s"}
         # sA_B_C: the passes' weights A, B, C (default today's)
         weights = [tuple(float(w) for w in p[1:].split("_")) for p in parts if p[0] == "s"]
-        anytime = AnytimeConfig(improve_factor=settings.get("f", 2.0),
-                                corridor=settings.get("c"),
-                                **({"weights": weights[0]} if weights else {}))
+        anytime = AnytimeConfig(weights=weights[0] if weights else AnytimeConfig().weights,
+                                improve_factor=settings.get("f", 2.0),
+                                corridor=settings.get("c"))
         return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime,
                               fallback_after=settings.get("b", 0.75))
     return FootstepConfig(**table[variant])

@@ -61,6 +61,24 @@ PROCESS_HEADROOM_MB = 1024.0
 CACHES = ("components", "transitions", "moves")  # the memo's caches, sharing one cap
 
 
+# What an entry holds besides its arrays' bytes (numpy headers, tuples, dict slots), measured by
+# tracemalloc on a 5 m rockfall at 3 and 20 anchors a metre (a move table's entry: 210-231
+# bytes; a transition: about 606; a stance's components: about 5,200): counted with them, so
+# that the memo's cap bounds what it really holds (its arrays alone were 83 % of it at 20
+# anchors a metre, where rows are short)
+MOVE_ENTRY_BYTES = 220
+TRANSITION_BYTES = 600
+COMPONENTS_BYTES = 5200
+
+
+def _transition_bytes(tr: LatticeTransition) -> int:
+    return array_bytes(tr) + TRANSITION_BYTES
+
+
+def _moves_bytes(table: MoveTable) -> int:
+    return sum(rows.nbytes for rows in table.values()) + MOVE_ENTRY_BYTES * len(table)
+
+
 class LatticeMemo:
     """Stance components and transitions already decided on one scenario (same lattice), in
     at most `memory_mb` MiB (None: no cap): past it the least recently used are dropped and
@@ -73,14 +91,14 @@ class LatticeMemo:
         self._ignore_grasps = False
         self.pool = MemoryPool()
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
-            lambda sc: sc.nbytes, self._components_again, lambda sc: sc.seeds,
+            lambda sc: sc.nbytes + COMPONENTS_BYTES, self._components_again, lambda sc: sc.seeds,
             pool=self.pool, name="components", grows=True, pack=StanceComponents.packed,
             unpack=self._components_unpacked, version=lambda sc: len(sc.seeds))
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
-            array_bytes, self._transition_again, pool=self.pool, name="transitions",
+            _transition_bytes, self._transition_again, pool=self.pool, name="transitions",
             pack=pack_transition, unpack=lambda _key, blob: unpack_transition(blob))
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
-            lambda table: sum(rows.nbytes for rows in table.values()), self._moves_again,
+            _moves_bytes, self._moves_again,
             pool=self.pool, name="moves", pack=pack_moves,
             unpack=lambda _vertex, blob: unpack_moves(blob))
         self.set_memory(memory_mb)

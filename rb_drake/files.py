@@ -112,7 +112,8 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as e:  # name the output, not the temporary file (a folder such as /proc)
-        raise OSError(e.errno, f"cannot write a file there ({e.strerror})", str(path)) from None
+        why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
+        raise OSError(e.errno, f"cannot write a file there ({why})", str(path)) from None
     LIVE_TEMPORARY.add(tmp)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -124,7 +125,8 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         if e.filename is not None or isinstance(e, BrokenPipeError):
             raise
         # a full disk: name the output (the error had no file: "error: : No space left")
-        raise OSError(e.errno, f"cannot write: {e.strerror}", str(given)) from None
+        why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
+        raise OSError(e.errno, f"cannot write: {why}", str(given)) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -126,12 +126,20 @@ def _expanded(entities: Any, where: str = "") -> Iterator[tuple[str, Any]]:
         if kind != "INSERT":
             yield here, entity
             continue
+        skipped: list[str] = []  # what ezdxf cannot transform (a non-uniform scale) it skips
+
+        def skip(e: Any, why: str, skipped: list[str] = skipped) -> None:
+            skipped.append(f"{e.dxftype()} ({_one_line(Exception(why))})")
+
         try:
             copies = list(entity.multi_insert()) if entity.mcount > 1 else [entity]
-            parts = [list(c.virtual_entities()) for c in copies]
+            parts = [list(c.virtual_entities(skipped_entity_callback=skip)) for c in copies]
         except Exception as e:  # a singular transform, a missing block ezdxf complains of
             raise _ReadError(here, f"block {entity.dxf.name!r} cannot be expanded: "
                              f"{_one_line(e)}") from None
+        if skipped:
+            raise _ReadError(here, f"block {entity.dxf.name!r}: {len(skipped)} entities cannot "
+                             f"be placed, the first {skipped[0]}; explode the block first")
         for part in parts:
             yield from _expanded(part, f"{here} block {entity.dxf.name!r}")
 

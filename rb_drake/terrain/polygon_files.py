@@ -13,23 +13,35 @@ of another format.
 from __future__ import annotations
 
 import json
-import logging
 import math
-import re
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
 from rb_drake.input_files import InputFileError, load_json, max_scan_bytes, read_text
-from rb_drake.terrain.drawing_bounds import (
-    TextLines,
-    arc_chords,
-    dxf_entities,
-    svg_markup,
-    use_copies,
+from rb_drake.terrain.drawing_bounds import svg_markup, use_copies
+from rb_drake.terrain.drawing_outline import (
+    CURVE_TOLERANCE,
+    MAX_VERTICES,
+    Ring,
+    _closed,
+    _count_vertices,
+    _one_line,
+    _polygon,
+    _ReadError,
+    _scaled,
+    missing_extra,
+    validity_reason,
 )
+from rb_drake.terrain.drawing_outline import (
+    MAX_COORDINATE as MAX_COORDINATE,
+)
+from rb_drake.terrain.drawing_outline import (
+    MAX_DXF_ENTITIES as MAX_DXF_ENTITIES,
+)
+from rb_drake.terrain.dxf_rock import read_dxf
 
 if TYPE_CHECKING:
     from shapely.geometry import Polygon
@@ -37,25 +49,9 @@ if TYPE_CHECKING:
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}  # metres per unit
 POLYGON_SUFFIXES = (".geojson", ".json", ".dxf", ".svg")
 MESH_SUFFIXES = (".stl", ".obj", ".ply")  # sectioned by rb_drake.terrain.mesh_section
-MAX_COORDINATE = 1e4  # m, as rb_drake.scenario.MAX_COORDINATE: farther is a wrong unit or scale
-CURVE_TOLERANCE = 0.005  # m: arcs and Bézier curves become polylines this close to them
-MAX_VERTICES = 50_000  # outline vertices in one file: a cave section needs a few thousand
-#                       (the scenario written, 3 YAML values a vertex, is checked against
-#                       the reader's limit on values: import_cave._check_readable)
 MAX_SVG_ELEMENTS = 5_000  # svgelements and the outline take ~100 µs a <rect> (measured)
-MAX_DXF_ENTITIES = 25_000  # ezdxf takes ~25 µs an entity; more than 16,600 outline vertices
-#                            make a scenario too big to read back, unless simplified
 MAX_NUMBERS = 8 * MAX_VERTICES  # digit runs in a drawing: a vertex's two numbers need 2-4,
 #                                 a DXF's header a few thousand
-INSTALL_HINT = "pip install 'rbp[import]'"
-
-Ring = list[tuple[float, float]]
-
-
-def missing_extra(module: str) -> RbpInputError:
-    """The error for an optional dependency of `rbp scenario import` that is not installed."""
-    return RbpInputError(f"importing caves needs {module}, of the optional extra 'import': "
-                         f"{INSTALL_HINT}")
 
 
 def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
@@ -74,7 +70,7 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
         raise RbpInputError(f"must be 0 or more metres, got {simplify:g}", field="--simplify")
     suffix = path.suffix.lower()
     readers: dict[str, Callable[[str, float], tuple[list[Polygon], bool]]] = {
-        ".geojson": _geojson, ".json": _geojson, ".dxf": _dxf, ".svg": _svg}
+        ".geojson": _geojson, ".json": _geojson, ".dxf": read_dxf, ".svg": _svg}
     if suffix not in readers:
         known = ", ".join(POLYGON_SUFFIXES + MESH_SUFFIXES)
         raise RbpInputError(f"unknown suffix {suffix or '(none)'!r}; rock is read from {known}",
@@ -115,46 +111,6 @@ def _number_bound(text: str) -> int:
     return runs.count(b" 0") + runs.startswith(b"0")
 
 
-class _ReadError(Exception):
-    """A reader's complaint: where in the file (`where`, or None for the file) and why."""
-
-    def __init__(self, where: str | None, reason: str):
-        super().__init__(reason)
-        self.where = where
-        self.reason = reason
-
-
-def _polygon(shell: Ring, holes: Sequence[Ring], where: str) -> Polygon:
-    """A valid polygon from rings already in metres, or a _ReadError saying why not."""
-    from shapely.geometry import Polygon
-
-    for ring in (shell, *holes):
-        if len({(round(x, 9), round(y, 9)) for x, y in ring}) < 3:
-            raise _ReadError(where, "fewer than 3 distinct points; rock must enclose an area")
-        if not all(abs(v) <= MAX_COORDINATE for p in ring for v in p):  # NaN fails too
-            raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
-                           "and --scale")
-    poly = Polygon(shell, holes)
-    if not poly.is_valid:
-        raise _ReadError(where, f"not a simple outline: {validity_reason(poly)}")
-    if poly.area <= 0:
-        raise _ReadError(where, "encloses no area")
-    return poly
-
-
-def validity_reason(poly: Polygon) -> str:
-    """Why shapely finds `poly` invalid: "Self-intersection[1 1]" as "self-intersection at
-    (1, 1) m"."""
-    from shapely.validation import explain_validity
-
-    validity = explain_validity(poly)
-    match = re.fullmatch(r"(.*?)\[(\S+) (\S+)\]", validity.strip())
-    if match is None:
-        return validity.lower()
-    what, x, y = match.groups()
-    return f"{what.lower()} at ({float(x):g}, {float(y):g}) m"
-
-
 def _combine(polygons: list[Polygon], even_odd: bool) -> list[Polygon]:
     """Overlapping rock merged (GeoJSON), or outlines nested by the even-odd rule (DXF, SVG)."""
     from shapely import union_all
@@ -193,24 +149,6 @@ def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
                                 f"{validity_reason(poly)}; give a smaller --simplify",
                                 file=name)
     return rock
-
-
-def _scaled(points: Iterator[Sequence[float]], factor: float, flip_y: bool = False) -> Ring:
-    sign = -1.0 if flip_y else 1.0
-    return [(float(p[0]) * factor, sign * float(p[1]) * factor) for p in points]
-
-
-def _closed(ring: Ring, tolerance: float) -> bool:
-    return len(ring) >= 2 and math.dist(ring[0], ring[-1]) <= tolerance
-
-
-def _count_vertices(total: list[int], ring: Ring, coming: int = 0) -> None:
-    """Adds the ring's vertices to the file's total; refuses a total (with `coming` vertices
-    still to be made) past MAX_VERTICES."""
-    total[0] += len(ring)
-    if total[0] + coming > MAX_VERTICES:
-        raise _ReadError(None, f"more than {MAX_VERTICES} outline vertices; simplify the "
-                       "drawing first")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -332,71 +270,9 @@ def _finite(value: Any) -> bool:
         return False
 
 
-def _one_line(error: Exception) -> str:
-    """A parser's message on one line (ezdxf quotes the offending line, newline and all)."""
-    return " ".join(str(error).split())[:200]
-
-
 def _describe(value: Any) -> str:
     text = repr(value)
     return f"{type(value).__name__} {text[:57] + '...' if len(text) > 60 else text}"
-
-
-# ---------------------------------------------------------------------------------------------
-# DXF: closed LWPOLYLINE and 2D/3D POLYLINE entities of model space, in the drawing's x and y
-
-
-def _dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
-    try:
-        import ezdxf
-        from ezdxf import path as dxf_path
-    except ImportError:
-        raise missing_extra("ezdxf") from None
-    if dxf_entities(text, MAX_DXF_ENTITIES) > MAX_DXF_ENTITIES:
-        raise _ReadError(None, f"holds more than {MAX_DXF_ENTITIES:,} entities (each VERTEX of a "
-                         "POLYLINE is one); simplify the drawing first")
-    log = logging.getLogger("ezdxf")  # which would report what it skips on stderr
-    level = log.level
-    log.setLevel(logging.CRITICAL + 1)
-    try:
-        doc = ezdxf.read(TextLines(text))  # type: ignore[arg-type]  # readline() only
-    except Exception as e:  # ezdxf raises DXFError subclasses and, on garbage, others
-        raise _ReadError(None, f"not a DXF drawing: {_one_line(e)}") from None
-    finally:
-        log.setLevel(level)
-    polygons: list[Polygon] = []
-    others: dict[str, int] = {}
-    total = [0]
-    entity: Any  # LWPOLYLINE and POLYLINE have what a DXFGraphic lacks
-    for k, entity in enumerate(doc.modelspace(), start=1):
-        kind = entity.dxftype()
-        where = f"entity {k} ({kind}, handle {entity.dxf.handle})"
-        if kind == "POLYLINE" and (entity.is_poly_face_mesh or entity.is_polygon_mesh):
-            raise _ReadError(where, "a mesh, not an outline; rock must be closed 2D polylines")
-        if kind not in ("LWPOLYLINE", "POLYLINE"):
-            others[kind] = others.get(kind, 0) + 1
-            continue
-        if not entity.is_closed:
-            raise _ReadError(where, "open polyline; rock must be closed")
-        # arcs (bulges) become short chords: counted first, as a bulge of 1e10 makes billions
-        chords = arc_chords(entity, CURVE_TOLERANCE / factor, MAX_VERTICES)
-        if chords is None:
-            raise _ReadError(where, "a bulge that is not a finite number")
-        _count_vertices(total, [], chords)
-        try:
-            with warnings.catch_warnings():  # ezdxf's overflow warnings: the error says it
-                warnings.simplefilter("ignore")
-                points = list(dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor))
-        except Exception as e:  # a malformed entity
-            raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
-        ring = _scaled(((p.x, p.y) for p in points), factor)
-        _count_vertices(total, ring)
-        polygons.append(_polygon(ring, [], where))
-    if not polygons and others:
-        found = ", ".join(f"{n} {kind}" for kind, n in sorted(others.items()))
-        raise _ReadError(None, f"no closed LWPOLYLINE or POLYLINE (found {found}); rock must be "
-                       "closed polylines")
-    return polygons, True
 
 
 # ---------------------------------------------------------------------------------------------

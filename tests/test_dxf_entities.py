@@ -1,0 +1,107 @@
+"""DXF entities beyond polylines (probe 11 F3): circles, ellipses, splines and block references
+are rock; entities rbp cannot read are refused by name, never dropped without a word."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from rb_drake.errors import RbpInputError
+from rb_drake.terrain.dxf_rock import MAX_INSERT_DEPTH
+from rb_drake.terrain.polygon_files import MAX_DXF_ENTITIES, read_rock
+from tests.cli_helpers import run_rbp
+
+ezdxf = pytest.importorskip("ezdxf", reason="the extra rbp[import] is not installed")
+
+WALLS = ([(-3, -1), (-1, -1), (-1, 6), (-3, 6)], [(1, -1), (3, -1), (3, 6), (1, 6)])
+
+
+def _doc() -> tuple[object, object]:
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    msp.add_text("a label, not rock")
+    for ring in WALLS:
+        msp.add_lwpolyline(ring, close=True)
+    return doc, msp
+
+
+def _save(doc: object, path: Path) -> Path:
+    doc.saveas(path)  # type: ignore[attr-defined]
+    return path
+
+
+def _contains(rock: list, x: float, y: float) -> bool:
+    from shapely.geometry import Point
+
+    return any(poly.contains(Point(x, y)) for poly in rock)
+
+
+def test_circle_ellipse_spline_and_block_are_rock(tmp_path):
+    doc, msp = _doc()
+    msp.add_circle((0, 3), 0.4)  # a boulder
+    msp.add_ellipse((0, 4.5), (0.3, 0), 0.5)
+    msp.add_open_spline([(-0.5, 0), (0.5, 0), (0.5, 0.5), (-0.5, 0.5), (-0.5, 0)])  # ends meet
+    block = doc.blocks.new("ROCK")
+    block.add_lwpolyline([(-0.3, -0.2), (0.3, -0.2), (0.3, 0.2), (-0.3, 0.2)], close=True)
+    inner = doc.blocks.new("TWO")
+    inner.add_blockref("ROCK", (0, 0))
+    msp.add_blockref("TWO", (0, 2))  # a block of a block: expanded with its transforms
+    rock = read_rock(_save(doc, tmp_path / "boulder.dxf"))
+    assert len(rock) == 6
+    for x, y in ((0, 3), (0, 4.5), (0, 2), (0, 0.25)):
+        assert _contains(rock, x, y), (x, y)
+    circle = next(p for p in rock if _contains([p], 0, 3))
+    assert circle.area == pytest.approx(3.14159 * 0.16, rel=0.02)  # chords within 5 mm
+
+
+def test_unreadable_entities_refused_by_name(tmp_path):
+    doc, msp = _doc()
+    for y in (1, 3):
+        msp.add_solid([(-0.2, y), (0.2, y), (-0.2, y + 0.3), (0.2, y + 0.3)])
+    with pytest.raises(RbpInputError, match="entities: 2 SOLID entities not imported"):
+        read_rock(_save(doc, tmp_path / "solid.dxf"))
+
+
+def test_open_ellipse_arc_refused(tmp_path):
+    doc, msp = _doc()
+    msp.add_ellipse((0, 3), (0.3, 0), 0.5, start_param=0, end_param=3)
+    with pytest.raises(RbpInputError, match=r"entity 4 \(ELLIPSE.*open curve"):
+        read_rock(_save(doc, tmp_path / "arc.dxf"))
+
+
+def test_block_inserting_itself_refused(tmp_path):
+    doc, msp = _doc()
+    block = doc.blocks.new("LOOP")
+    block.add_lwpolyline([(0, 0), (1, 0), (1, 1)], close=True)
+    block.add_blockref("LOOP", (2, 0))
+    msp.add_blockref("LOOP", (0, 0))
+    with pytest.raises(RbpInputError, match=f"nested more than {MAX_INSERT_DEPTH} deep"):
+        read_rock(_save(doc, tmp_path / "loop.dxf"))
+
+
+def test_minsert_copies_counted_before_expansion(tmp_path):
+    doc, msp = _doc()
+    block = doc.blocks.new("W")
+    block.add_lwpolyline([(0, 0), (0.1, 0), (0.1, 0.1)], close=True)
+    msp.add_blockref("W", (0, 0)).grid(size=(30000, 30000), spacing=(1, 1))
+    with pytest.raises(RbpInputError, match=f"more than {MAX_DXF_ENTITIES:,} once block"):
+        read_rock(_save(doc, tmp_path / "minsert.dxf"))
+
+
+def test_huge_circle_refused_before_flattening(tmp_path):
+    doc, msp = _doc()
+    msp.add_circle((0, 3), 1e300)
+    with pytest.raises(RbpInputError, match=r"CIRCLE.*a coordinate beyond"):
+        read_rock(_save(doc, tmp_path / "huge.dxf"))
+
+
+def test_cli_one_line_for_refused_entity(tmp_path):
+    doc, msp = _doc()
+    msp.add_solid([(-0.2, 1), (0.2, 1), (-0.2, 1.3), (0.2, 1.3)])
+    _save(doc, tmp_path / "solid.dxf")
+    res = run_rbp("scenario", "import", "solid.dxf", "-o", "c.yaml", cwd=tmp_path)
+    assert res.returncode == 2
+    assert res.stderr.count("\n") == 1
+    assert res.stderr.startswith("error: solid.dxf: entities: 1 SOLID entities not imported")
+    assert not (tmp_path / "c.yaml").exists()

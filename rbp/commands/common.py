@@ -240,6 +240,12 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
     from planning.plan_file import has_valid_stamp
 
     if not verify:
+        from systems.trajectory import PlanError, check_flyable
+
+        try:  # a plan that cannot become a trajectory, refused in one line even so
+            check_flyable(plan)
+        except PlanError as e:
+            raise UserError(f"{path}: {e}") from None
         return False
     from rbp.progress import CheckProgress
     from systems.plan_check import executed_motion_problems, plan_problems

@@ -98,3 +98,58 @@ def test_no_verify_refuses_in_one_line(golden: Plan, tmp_path: Path, command: li
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}: phases["), lines
+
+
+# F1, S2: one check of dt against seed.step/seed.turn_step for the CLI, the API and rbp check
+SPEED = "steps of up to 2 x seed.step 0.1 m and seed.turn_step 0.05 rad every 0.25 s exceed " \
+        "rule speed"
+
+
+def test_api_plan_refuses_dt_too_short_for_the_seed_steps() -> None:
+    from planning.config_io import ConfigError
+    from planning.pipeline import PipelineConfig
+    from planning.seed_common import SeedConfig
+
+    cfg = PipelineConfig(dt=0.25, seed=SeedConfig(step=0.1, turn_step=0.05))
+    with pytest.raises(ConfigError, match=r"config: dt: " + SPEED):
+        rbp.plan("demo-shaft", cfg)
+
+
+def test_check_and_from_plan_refuse_the_recorded_config(golden: Plan, tmp_path: Path) -> None:
+    plan = copy.deepcopy(golden)
+    config = plan["provenance"]["config"]
+    config["dt"] = 0.25
+    config["seed"].update(step=0.1, turn_step=0.05)
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps(plan))
+    for args in (["check", str(path)],
+                 ["plan", "--from-plan", str(path), "-o", str(tmp_path / "o.json"), "-q",
+                  "--no-pictures"]):
+        r = run(*args)
+        assert r.returncode == 2, r.stderr
+        assert r.stderr.splitlines() == [
+            f"error: {path}: provenance.config.dt: {SPEED} (0.4 m/s, 0.4 rad/s); give dt at "
+            "least 0.5"], r.stderr
+
+
+def test_cli_config_refused_in_the_same_words(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("dt: 0.25\nseed: {step: 0.1, turn_step: 0.05}\n")
+    r = run("plan", "demo-shaft", "--config", str(cfg), "-o", str(tmp_path / "o.json"), "-q",
+            "--no-pictures")
+    assert r.returncode == 2 and r.stderr.splitlines() == [
+        f"error: {cfg}: dt: {SPEED} (0.4 m/s, 0.4 rad/s); give dt at least 0.5"], r.stderr
+
+
+def test_deleted_current_folder_names_the_file_and_option(tmp_path: Path) -> None:
+    """F8: `error: (file): No such file or directory` named neither."""
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    env = dict(os.environ, LCM_DEFAULT_URL="memq://", RBP_THREADS="1",
+               PYTHONPATH=str(ROOT))  # no empty entry: Python makes it absolute at start
+    r = subprocess.run(["sh", "-c", f'cd "{gone}" && rmdir "{gone}" && exec "{sys.executable}" '
+                        "-m rbp plan demo-shaft -o x.json -q --no-pictures"],
+                       capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 2 and r.stderr.splitlines() == [
+        "error: x.json: -o: the current folder no longer exists (deleted while the shell was "
+        "in it): give an absolute path or change folder"], r.stderr

@@ -313,6 +313,28 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
     return None
 
 
+DEFAULT_DT = 0.5  # s: planning.pipeline.PipelineConfig.dt's default (with 5 cm steps, 0.1 m/s)
+
+
+def recorded_speed_problem(config: Any) -> str | None:
+    """`speed_problem` of a configuration mapping (a plan's provenance.config), the defaults
+    for the keys it leaves out, without the planner's imports (rbp check does without them).
+    Call it once `range_problem` found nothing."""
+    from types import SimpleNamespace
+
+    from planning.seed_common import SeedConfig
+
+    if not isinstance(config, dict):
+        return None
+    seed = config.get("seed")
+    seed = seed if isinstance(seed, dict) else {}
+    default = SeedConfig()
+    return speed_problem(SimpleNamespace(
+        dt=config.get("dt", DEFAULT_DT),
+        seed=SimpleNamespace(step=seed.get("step", default.step),
+                             turn_step=seed.get("turn_step", default.turn_step))))
+
+
 def speed_problem(config: Any) -> str | None:
     """Why a PipelineConfig's `dt` is too short for its `seed.step`/`seed.turn_step`, or None:
     the planner's steps, up to STEP_STRETCH times them every `dt`, must keep within rule

@@ -249,10 +249,9 @@ def check_recorded_config(config: Any, path: str | Path) -> None:
 
     if found := unknown_key(config) or range_problem(config):
         raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
-    from planning.config_ranges import speed_problem
+    from planning.config_ranges import recorded_speed_problem
 
-    # the fields together, with the defaults of those left out (the planner's imports)
-    if problem := speed_problem(recorded_config(config, Path(path))):
+    if problem := recorded_speed_problem(config):
         raise ConfigError(str(path), "provenance.config.dt", problem)
 
 

@@ -153,3 +153,22 @@ def test_deleted_current_folder_names_the_file_and_option(tmp_path: Path) -> Non
     assert r.returncode == 2 and r.stderr.splitlines() == [
         "error: x.json: -o: the current folder no longer exists (deleted while the shell was "
         "in it): give an absolute path or change folder"], r.stderr
+
+
+# F4: svgelements' ZeroDivisionError ("float division by zero") named neither field nor reason
+WALL = '<path d="M -3 1 L -1 1 L -1 -6 L -3 -6 Z"/>'
+
+
+@pytest.mark.parametrize("svg, expected", [
+    (f'<svg xmlns="http://www.w3.org/2000/svg">{WALL}<path d="M 1 1 A 1e-300 1e-300 0 1 1 3 1 '
+     'L 3 -6 L 1 -6 Z"/></svg>', ": path d: an arc (A) whose radii are too small to compute"),
+    (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 0 0" width="1e308" height="10">'
+     f'{WALL}</svg>', ": viewBox: a zero width or height"),
+])
+def test_svg_division_by_zero_named(tmp_path: Path, svg: str, expected: str) -> None:
+    path = tmp_path / "d.svg"
+    path.write_text(svg)
+    r = run("scenario", "import", str(path), "-o", str(tmp_path / "d.yaml"))
+    lines = r.stderr.splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert lines[0].startswith(f"error: {path}{expected}"), lines

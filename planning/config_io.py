@@ -145,8 +145,15 @@ def _convert(value: Any, tp: Any, source: str, field: str, current: Any) -> Any:
 
 def checked_config(config: T, source: str = "config") -> T:
     """`config` (a configuration dataclass built in Python) held to the ranges a file's values
-    are (`config_from_dict`): rbp.plan(PipelineConfig(dt=0.0)) failed only after the search."""
-    return config_from_dict(type(config), config_to_dict(config), source)
+    are (`config_from_dict`): rbp.plan(PipelineConfig(dt=0.0)) failed only after the search;
+    a PipelineConfig's `dt` long enough for its seed's steps, as `rbp plan` checks it."""
+    from planning.config_ranges import speed_problem
+
+    checked = config_from_dict(type(config), config_to_dict(config), source)
+    if hasattr(checked, "dt") and hasattr(checked, "seed") and (
+            problem := speed_problem(checked)):
+        raise ConfigError(source, "dt", problem)
+    return checked
 
 
 def load_config(path: str | Path, cls: type[T], base: T | None = None) -> T:

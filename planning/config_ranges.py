@@ -313,6 +313,52 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
     return None
 
 
+DEFAULT_DT = 0.5  # s: planning.pipeline.PipelineConfig.dt's default (with 5 cm steps, 0.1 m/s)
+
+
+def recorded_speed_problem(config: Any) -> str | None:
+    """`speed_problem` of a configuration mapping (a plan's provenance.config), the defaults
+    for the keys it leaves out, without the planner's imports (rbp check does without them).
+    Call it once `range_problem` found nothing."""
+    from types import SimpleNamespace
+
+    from planning.seed_common import SeedConfig
+
+    if not isinstance(config, dict):
+        return None
+    seed = config.get("seed")
+    seed = seed if isinstance(seed, dict) else {}
+    default = SeedConfig()
+    return speed_problem(SimpleNamespace(
+        dt=config.get("dt", DEFAULT_DT),
+        seed=SimpleNamespace(step=seed.get("step", default.step),
+                             turn_step=seed.get("turn_step", default.turn_step))))
+
+
+def speed_problem(config: Any) -> str | None:
+    """Why a PipelineConfig's `dt` is too short for its `seed.step`/`seed.turn_step`, or None:
+    the planner's steps, up to STEP_STRETCH times them every `dt`, must keep within rule
+    `speed` (planning.verify_climb) for its plans to pass `rbp check`. One check for `rbp
+    plan`, the API's `rbp.plan` and `rbp check` of a plan's provenance.config (the API
+    skipped it and returned plans that failed `rbp check`)."""
+    from planning.verify_climb import (
+        BODY_SPEED_MAX,
+        GRIPPER_SPEED_MAX,
+        STEP_STRETCH,
+        TURN_SPEED_MAX,
+    )
+
+    dt, step, turn = config.dt, config.seed.step, config.seed.turn_step
+    # a free gripper's steps are held to seed.step too (`limits.step`)
+    need = STEP_STRETCH * max(step / min(BODY_SPEED_MAX, GRIPPER_SPEED_MAX),
+                              turn / TURN_SPEED_MAX)
+    if dt >= need * (1 - 1e-9):
+        return None
+    return (f"steps of up to {STEP_STRETCH:g} x seed.step {step:g} m and seed.turn_step "
+            f"{turn:g} rad every {dt:g} s exceed rule speed ({BODY_SPEED_MAX:g} m/s, "
+            f"{TURN_SPEED_MAX:g} rad/s); give dt at least {need:.6g}")
+
+
 def _as_number(value: Any) -> tuple[float, str]:
     """`value` as a float field reads it (planning.config_io), or the reader's reason not."""
     if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):

@@ -22,6 +22,7 @@ import numpy as np
 
 from planning.baseline import plan_naive
 from planning.between import between_steps
+from planning.config_ranges import DEFAULT_DT
 from planning.footsteps import FootstepConfig, FootstepMemo, FootstepPlan, plan_footsteps
 from planning.plan import build_motion_plan, build_plan, step_limits
 from planning.plan_model import PhaseKind, Plan
@@ -41,7 +42,7 @@ class PipelineConfig:
     seed: SeedConfig = dataclasses.field(
         default_factory=lambda: SeedConfig(step=0.05, turn_step=0.05))
     scp: ScpConfig = dataclasses.field(default_factory=ScpConfig)
-    dt: float = 0.5        # s between trajectory steps: with 5 cm steps, 0.1 m/s
+    dt: float = DEFAULT_DT  # s between trajectory steps: with 5 cm steps, 0.1 m/s
     optimise: bool = True  # False: the seeds are the plan (no SCP)
     motion_retries: int = 10  # footstep searches again, each without a move whose motion failed
 

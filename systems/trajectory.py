@@ -27,6 +27,7 @@ from planning.smooth_motion import (
 )
 from planning.smooth_motion import rest_to_rest as rest_to_rest  # re-exported
 from planning.verify_between import smooth_departure, step_motion
+from planning.verify_climb import MIN_STEP_GAP, TIME_TOL
 from rb_drake.errors import RbpInputError
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
@@ -108,6 +109,30 @@ def _ramp_grid(times: np.ndarray, tensions: np.ndarray, shares: np.ndarray,
         f_out.append(tensions[n] + prog[1:, None] * (tensions[n + 1] - tensions[n]))
         s_out.append(shares[n] + prog[1:, None] * (shares[n + 1] - shares[n]))
     return np.concatenate(t_out), np.vstack(f_out), np.vstack(s_out)
+
+
+def check_phase_form(k: int, phase: Phase) -> None:
+    """Refuse (PlanError naming the step) phase k if it cannot become a trajectory: steps less
+    than rule time-order's MIN_STEP_GAP apart (the splines need increasing knots: 1e-30 s apart
+    raised Drake's RuntimeError) or ramp steps only (rule attach: a ramp ends on a step
+    without a ramp). The verifier refuses both; this guards --no-verify and the API."""
+    where = f"phases[{k}]"
+    times = np.array([s.t for s in phase.steps], dtype=float)
+    close = np.flatnonzero(~(np.diff(times) >= MIN_STEP_GAP - TIME_TOL))
+    if close.size:  # name the first step out of order, never all times
+        n = int(close[0]) + 1
+        raise PlanError(f"{where}.steps[{n}].t", f"times must increase from step to step by "
+                        f"at least {MIN_STEP_GAP:g} s (got {float(times[n]):g} after "
+                        f"{float(times[n - 1]):g})")
+    if ramp_count(phase.steps, reverse=False) >= len(phase.steps):
+        raise PlanError(f"{where}.steps", f"{len(phase.steps)} ramp step(s) only: a ramp ends "
+                        "on a step without a ramp in its phase")
+
+
+def check_flyable(plan: Plan | dict[str, Any]) -> None:
+    """`check_phase_form` for every phase (rbp simulate/rig-run --no-verify, before the run)."""
+    for k, phase in enumerate(plan_of(plan).phases):
+        check_phase_form(k, phase)
 
 
 class PlanTrajectory:
@@ -218,10 +243,7 @@ class PlanTrajectory:
         stance = scn.stance(ids)
         steps = phase.steps
         times = np.array([s.t for s in steps], dtype=float)
-        if np.any(np.diff(times) <= 0):  # name the first step out of order, never all times
-            n = int(np.flatnonzero(np.diff(times) <= 0)[0]) + 1
-            raise PlanError(f"{where}.steps[{n}].t", f"times must increase from step to step "
-                            f"(got {float(times[n]):g} after {float(times[n - 1]):g})")
+        check_phase_form(k, phase)
         if previous_end is not None and abs(times[0] - previous_end) > 1e-6:
             raise PlanError(f"{where}.steps[0].t",
                             f"starts at {times[0]} but the phase before ends at {previous_end}")

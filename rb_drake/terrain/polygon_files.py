@@ -290,12 +290,21 @@ def _svg(text: str, factor: float) -> tuple[list[Polygon], bool]:
     with warnings.catch_warnings():  # svgelements warns on stderr of what it skips
         warnings.simplefilter("ignore")
         try:
-            svg = se.SVG.parse(_Whole(text))
+            try:
+                svg = se.SVG.parse(_Whole(text))
+            except ZeroDivisionError:  # svgelements squares an arc's radii: 1e-300 gives 0
+                raise _ReadError("path d", "an arc (A) whose radii are too small to compute "
+                                 "(their squares are 0): give radii of 0 (a straight line, as "
+                                 "SVG draws it) or of at least 1e-150") from None
             if not isinstance(svg, se.SVG):
                 raise _ReadError(None, "not an SVG drawing: no <svg> element")
             # svgelements maps the viewBox to pixels; undo it, so that --unit names user units
-            viewport = (se.Matrix(svg.viewbox_transform) if svg.viewbox_transform
-                        else se.Matrix())
+            try:
+                transform = svg.viewbox_transform
+            except ZeroDivisionError:  # SVG: a zero width or height disables rendering
+                raise _ReadError("viewBox", "a zero width or height: nothing is drawn (SVG "
+                                 "disables the rendering): give a positive size") from None
+            viewport = se.Matrix(transform) if transform else se.Matrix()
             to_user = ~viewport
             shapes = [e for e in svg.elements() if isinstance(e, se.Shape)]
         except _ReadError:

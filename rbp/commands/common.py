@@ -185,21 +185,43 @@ def forget_outputs() -> None:
 NOT_PATHS = {"name", "lcm_url"}  # the string arguments that do not name a file
 
 
-def refuse_empty_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Refuse an empty path argument ('') of the command `args.func` (UserError naming the
-    option): '' was read as `.` ("is a directory") and `--config ''` was silently ignored."""
+def _path_options(parser: argparse.ArgumentParser, args: argparse.Namespace
+                  ) -> Iterator[tuple[str, Any, bool]]:
+    """(option name, value, whether an option) of each path argument of the command
+    `args.func`."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for sub in action.choices.values():
                 if sub.get_default("func") is getattr(args, "func", None) or any(
                         isinstance(a, argparse._SubParsersAction) for a in sub._actions):
-                    refuse_empty_paths(sub, args)
+                    yield from _path_options(sub, args)
         elif (parser.get_default("func") is getattr(args, "func", None)
-              and action.dest not in NOT_PATHS and action.choices is None
-              and getattr(args, action.dest, None) == ""):
+              and action.dest not in NOT_PATHS and action.choices is None):
             name = (action.option_strings[0] if action.option_strings
                     else f"{action.dest}: (argument)")
+            yield name, getattr(args, action.dest, None), bool(action.option_strings)
+
+
+def refuse_empty_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse an empty path argument ('') of the command `args.func` (UserError naming the
+    option): '' was read as `.` ("is a directory") and `--config ''` was silently ignored.
+    With the current folder deleted, refuse its first relative path (an option's, or an
+    argument that looks like a path, not a bundled cave's name) naming file and option: the
+    OSError of os.getcwd() named neither."""
+    paths = list(_path_options(parser, args))
+    for name, value, _ in paths:
+        if value == "":
             raise UserError(f"{name}: an empty path (''): give a file name")
+    try:
+        os.getcwd()
+        return
+    except OSError:
+        pass
+    for name, value, option in sorted(paths, key=lambda p: not p[2]):
+        if isinstance(value, str | Path) and not os.path.isabs(value) and (
+                option or os.sep in str(value) or "." in str(value)):
+            raise UserError(f"{value}: {name}: the current folder no longer exists (deleted "
+                            "while the shell was in it): give an absolute path or change folder")
 
 
 def load_scenario_spec(spec: str, check_start: bool = True):
@@ -240,6 +262,12 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
     from planning.plan_file import has_valid_stamp
 
     if not verify:
+        from systems.trajectory import PlanError, check_flyable
+
+        try:  # a plan that cannot become a trajectory, refused in one line even so
+            check_flyable(plan)
+        except PlanError as e:
+            raise UserError(f"{path}: {e}") from None
         return False
     from rbp.progress import CheckProgress
     from systems.plan_check import executed_motion_problems, plan_problems

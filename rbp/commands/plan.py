@@ -249,6 +249,10 @@ def check_recorded_config(config: Any, path: str | Path) -> None:
 
     if found := unknown_key(config) or range_problem(config):
         raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
+    from planning.config_ranges import recorded_speed_problem
+
+    if problem := recorded_speed_problem(config):
+        raise ConfigError(str(path), "provenance.config.dt", problem)
 
 
 def recorded_config(config: Any, path: Path) -> PipelineConfig:
@@ -375,23 +379,11 @@ def check_animation(path: str, inputs: dict[str, str | None] | None = None) -> N
 
 
 def _check_speed(cfg: Any, args: argparse.Namespace) -> None:
-    """The planner's steps, up to STEP_STRETCH times the seeds' `step` and `turn_step` every
-    `dt`, within rule `speed` (planning.verify_climb), so that its plans pass `rbp check`."""
-    from planning.verify_climb import (
-        BODY_SPEED_MAX,
-        GRIPPER_SPEED_MAX,
-        STEP_STRETCH,
-        TURN_SPEED_MAX,
-    )
+    """`dt` long enough for the seeds' steps (planning.config_ranges.speed_problem)."""
+    from planning.config_ranges import speed_problem
     from rbp.commands.common import UserError
 
-    # a free gripper's steps are held to seed.step too (`limits.step`)
-    need = STEP_STRETCH * max(cfg.seed.step / min(BODY_SPEED_MAX, GRIPPER_SPEED_MAX),
-                              cfg.seed.turn_step / TURN_SPEED_MAX)
-    if cfg.dt < need * (1 - 1e-9):
+    if problem := speed_problem(cfg):
         source = "--dt" if args.dt is not None else (
             f"{args.config or args.from_plan or '(configuration)'}: dt")
-        raise UserError(f"{source}: steps of up to {STEP_STRETCH:g} x seed.step "
-                        f"{cfg.seed.step:g} m and seed.turn_step {cfg.seed.turn_step:g} rad "
-                        f"every {cfg.dt:g} s exceed rule speed ({BODY_SPEED_MAX:g} m/s, "
-                        f"{TURN_SPEED_MAX:g} rad/s); give dt at least {need:.6g}")
+        raise UserError(f"{source}: {problem}")

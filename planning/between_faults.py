@@ -23,6 +23,7 @@ import numpy as np
 
 from planning.plan_model import Plan, plan_scenario
 from planning.verify_between import subdivisions, verification_world
+from planning.verify_climb import TURN_SPEED_MAX
 from rb_drake.feasibility import check_poses
 
 PlanFile = dict[str, Any]
@@ -161,6 +162,12 @@ def between_excursion(plan: PlanFile, rng: np.random.Generator
         for _ in range(40):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if holds(mid) else (lo, mid)
+        # a turn within rule `speed`, so that only `between` can refuse the fault
+        t = [float(phase["steps"][m]["t"]) for m in range(n, n + 4)]
+        turns = [abs(lo), abs(lo) * (1.0 - back), abs(lo) * back]
+        if any(d > TURN_SPEED_MAX * (t1 - t0) for d, t0, t1 in zip(turns, t[:-1], t[1:],
+                                                                    strict=True)):
+            continue
         out = copy.deepcopy(plan)
         out.setdefault("start", copy.deepcopy(plan["scenario"]["start"]))
         damaged = out["phases"][k]

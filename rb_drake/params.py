@@ -112,7 +112,10 @@ class ParamError(RbpInputError):
 # Physically meaningful magnitudes of robot parameters (docs/formats.md): beyond them a value is
 # a typo, and refusing it at reading keeps overflow out of the statics.
 MAX_SIZE = 100.0      # m: body sides, shoulder offsets
-MAX_BOOM = 20.0       # m: boom length (ReachBot's are a few metres; the lattice grows with it)
+# m: boom length. ReachBot's are a few metres; the search's cost grows with the area in reach
+# (demo-shaft: 2 m 2.7 s and 0.3 GB, 5 m 15 s and 0.36 GB, 10 m 32 s and 0.5 GB, 20 m past
+# 60 s and 1 GB), so a longer boom is refused rather than left to run for minutes.
+MAX_BOOM = 5.0
 MAX_FORCE = 1e6       # N: boom tension; N m: shoulder torque
 MAX_MASS = 1e6        # kg: body and gripper; kg/m: boom density
 # kg: the simulator's four shoulder links (0.01 kg each) ride on the body, whose own mass is

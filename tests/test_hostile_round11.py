@@ -172,3 +172,14 @@ def test_svg_division_by_zero_named(tmp_path: Path, svg: str, expected: str) -> 
     lines = r.stderr.splitlines()
     assert r.returncode == 2 and len(lines) == 1, r.stderr
     assert lines[0].startswith(f"error: {path}{expected}"), lines
+
+
+def test_a_boom_longer_than_the_search_can_afford_is_refused() -> None:
+    """robot.boom_length [0, 20] ran demo-shaft's search past 60 s and 1 GB: refused at
+    reading, in one line, up to MAX_BOOM (5 m) accepted."""
+    from rb_drake.params import MAX_BOOM, ParamError, robot_from_dict
+
+    with pytest.raises(ParamError) as err:
+        robot_from_dict({"boom_length": [0, 20]})
+    assert err.value.field == "boom_length[1]", err.value.field
+    assert robot_from_dict({"boom_length": [0, MAX_BOOM]}).boom_length == (0.0, MAX_BOOM)

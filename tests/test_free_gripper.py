@@ -15,17 +15,14 @@ from typing import Any
 import numpy as np
 import pytest
 from cli_helpers import run_rbp
+from golden_reach import GOLDEN, LAST, MID, REACH
+from golden_reach import plan_scenario as _scenario
+from golden_reach import reach_step as _step
 
 from rb_drake import geometry
 from rb_drake.collision import ANCHOR_CLEARANCE, boom_clearances, free_clearance
 from rb_drake.feasibility import Reason, check_poses
 from rb_drake.kernel.scoring import score_poses
-from rb_drake.scenario import Scenario, scenario_from_dict
-
-GOLDEN = Path(__file__).resolve().parent / "data" / "golden" / "demo-shaft-current.json"
-REACH = 1  # the golden plan's first reach phase: boom 2 from anchor a1 to a3
-MID = 25   # a step in the middle of it, its gripper 7 cm from every anchor
-LAST = 49  # a step with the gripper at the new anchor, which sits in its rock
 
 
 @pytest.fixture(scope="module")
@@ -44,13 +41,6 @@ def _with_rock(plan: dict[str, Any], polygon: list[list[float]]) -> dict[str, An
     return out
 
 
-def _scenario(plan: dict[str, Any]) -> Scenario:
-    return scenario_from_dict(plan["scenario"], check_start=False)
-
-
-def _step(plan: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
-    step = plan["phases"][REACH]["steps"][n]
-    return np.array(step["pose"], dtype=float), np.array(step["free_tip"], dtype=float)
 
 
 def test_free_clearance_shrinks_with_the_distance_to_the_nearest_anchor() -> None:

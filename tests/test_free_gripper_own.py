@@ -17,6 +17,9 @@ from typing import Any
 import numpy as np
 import pytest
 from cli_helpers import run_rbp
+from golden_reach import GOLDEN, LAST, MID, REACH
+from golden_reach import plan_scenario as _scenario
+from golden_reach import reach_step as _step
 
 from planning.between import dense_problem
 from planning.plan_model import Plan
@@ -24,12 +27,7 @@ from planning.reach_seeds import reach_seed
 from planning.verify_between import phase_world
 from rb_drake.feasibility import ReachWorld, Reason, check_poses, reach_world
 from rb_drake.kernel.scoring import score_poses
-from rb_drake.scenario import Scenario, scenario_from_dict
-
-GOLDEN = Path(__file__).resolve().parent / "data" / "golden" / "demo-shaft-current.json"
-REACH = 1  # the golden plan's first reach phase: boom 2 from anchor a1 to a3
-MID = 25   # a step in the middle of it, its gripper 7 cm from every anchor
-LAST = 49  # a step with the gripper at the new anchor, which sits in its rock
+from rb_drake.scenario import Scenario
 
 
 @pytest.fixture(scope="module")
@@ -50,13 +48,6 @@ def _nub(plan: dict[str, Any], centre: np.ndarray, half: float) -> dict[str, Any
     return out
 
 
-def _scenario(plan: dict[str, Any]) -> Scenario:
-    return scenario_from_dict(plan["scenario"], check_start=False)
-
-
-def _step(plan: dict[str, Any], n: int) -> tuple[np.ndarray, np.ndarray]:
-    step = plan["phases"][REACH]["steps"][n]
-    return np.array(step["pose"], dtype=float), np.array(step["free_tip"], dtype=float)
 
 
 def _own(plan: dict[str, Any], scn: Scenario) -> np.ndarray:

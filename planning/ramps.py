@@ -53,6 +53,10 @@ RELEASE_TENSION = 0.05  # N: a gripper opens (or closes) only with its boom's te
 # floor"). Twice RELEASE_TENSION, so that a held boom never looks released.
 CONTROL_TENSION_FLOOR = 0.1
 RAMP_STEPS = 2          # steps of a ramp in a plan without a time step (end poses only)
+# N/s: the fastest a boom's tension may change between successive steps (rule `tension-rate`),
+# the rig's winch bound (`RigLcmConfig.max_tension_rate`), twice the bundled plans' fastest
+# (about 15 N/s, in ramps): a ramp lasts longer than RAMP_DURATION where its load needs it.
+TENSION_RATE_MAX = 25.0
 
 
 def ramp_statics(scn: Scenario, pose: np.ndarray, stance: Stance, boom: int,
@@ -134,11 +138,10 @@ def add_ramps(plan: Plan, scn: Scenario, duration: float = RAMP_DURATION) -> Pla
     """The plan with a release ramp at the end of every body phase that a reach phase follows
     and an attach ramp at the start of every body phase that follows a reach phase, where they
     are missing; later steps are shifted in time. Ramp steps come every `time_step` in a plan
-    with one (at least `duration` in all), else RAMP_STEPS of them over `duration`. The plan's
+    with one (at least `duration` in all), else RAMP_STEPS of them over `duration`; either
+    lasts longer where a boom's tension would change faster than TENSION_RATE_MAX. The plan's
     scores are left to the caller (`plan.score_plan`): a ramp's P never falls below its ends'."""
     dt = plan.time_step
-    n = max(1, math.ceil(duration / dt - 1e-9)) if dt else RAMP_STEPS
-    step_dt = dt if dt else duration / RAMP_STEPS
     phases = list(plan.phases)
     for k in range(len(phases)):
         if phases[k].kind != "body":
@@ -149,6 +152,7 @@ def add_ramps(plan: Plan, scn: Scenario, duration: float = RAMP_DURATION) -> Pla
             j, end = _free_boom(before), before.steps[-1]
             first = phases[k].steps[0]
             t0 = float(first.t)
+            n, step_dt = ramp_timing(first, end, dt, duration)
             ramp = [_blend(first, end, (n - m) / n, j, t0 + m * step_dt, scn, phases[k].stance)
                     for m in range(n)]
             _shift(phases, k, n * step_dt)
@@ -161,6 +165,7 @@ def add_ramps(plan: Plan, scn: Scenario, duration: float = RAMP_DURATION) -> Pla
             j, start = _free_boom(after), after.steps[0]
             last = phases[k].steps[-1]
             t0 = float(last.t)
+            n, step_dt = ramp_timing(last, start, dt, duration)
             ramp = [_blend(last, start, m / n, j, t0 + m * step_dt, scn, phases[k].stance)
                     for m in range(1, n + 1)]
             _shift(phases, k + 1, n * step_dt)
@@ -168,6 +173,18 @@ def add_ramps(plan: Plan, scn: Scenario, duration: float = RAMP_DURATION) -> Pla
             phases[k] = _extend_motion(dataclasses.replace(phase, steps=(*phase.steps, *ramp)),
                                        ramp, at_start=False)
     return dataclasses.replace(plan, phases=tuple(phases))
+
+
+def ramp_timing(a: Step, b: Step, dt: float | None, duration: float) -> tuple[int, float]:
+    """(steps, seconds between them) of a ramp from configuration a to b: every `dt` over at
+    least `duration` (RAMP_STEPS over `duration` without one), stretched so that no boom's
+    tension changes faster than TENSION_RATE_MAX (the blend is linear in the tensions)."""
+    fa = np.array([0.0 if v is None else v for v in a.tension], dtype=float)
+    fb = np.array([0.0 if v is None else v for v in b.tension], dtype=float)
+    least = max(duration, float(np.abs(fb - fa).max()) / TENSION_RATE_MAX)  # s
+    if dt:
+        return max(1, math.ceil(least / dt - 1e-9)), dt
+    return RAMP_STEPS, least / RAMP_STEPS
 
 
 def _free_boom(reach: Phase) -> int:

@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from planning.ramps import TENSION_RATE_MAX
 from rb_drake import geometry, grasp
 from rb_drake.errors import RbpInputError, one_line
 from rb_drake.input_files import InputFileError, load_json, max_input_values
@@ -51,9 +52,9 @@ class RigLcmConfig:
     period: float = 0.1  # s between commands
     status_timeout: float = 0.5  # s without a good status before the command holds still
     # The largest change of a command per second: the simulated winch's speed, 4x the boom
-    # rates of the bundled plans (about 0.13 m/s); twice their tension rates (about 13 N/s).
+    # rates of the bundled plans (about 0.13 m/s); the plans' tension bound (rule `tension-rate`).
     max_length_rate: float = 0.5    # m/s per boom
-    max_tension_rate: float = 25.0  # N/s per boom
+    max_tension_rate: float = TENSION_RATE_MAX  # N/s per boom (rule `tension-rate`)
 
 
 class RigInputError(RbpInputError):

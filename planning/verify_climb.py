@@ -328,7 +328,8 @@ def _tension_rates(plan: Plan, fail) -> None:
                 n = int(over[np.argmax(change[over] / np.maximum(gap[over], 1e-300))])
                 more = f" (and {len(over) - 1} more steps)" if len(over) > 1 else ""
                 fail("tension-rate", f"a boom's tension changes {change[n]:.4g} N in "
-                     f"{gap[n]:.3g} s, over {TENSION_RATE_MAX:g} N/s{more}", k,
+                     f"{gap[n]:.3g} s ({change[n] / gap[n]:.4g} N/s), over "
+                     f"{TENSION_RATE_MAX:g} N/s{more}", k,
                      n + 1 - len(joined))
 
 

@@ -72,6 +72,9 @@ class BodyPhase(NamedTuple):
     tension: PiecewisePolynomial  # (4,) N
     start_time: float
     end_time: float
+    # booms released or attached in the phase (ramp steps): the rig may command them to 0 N,
+    # where their gripper lets go or takes hold (rules `release`, `attach`)
+    ramped: tuple[int, ...] = ()
 
     @property
     def stance(self) -> Stance:
@@ -117,8 +120,9 @@ def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
     # the motion between steps that `rbp check` verifies (rule `between`); one step holds
     # still for a second
     pose, tension = step_motion(times, poses.T), step_motion(times, tensions.T)
+    ramped = tuple(sorted({s.ramp.boom for s in steps if s.ramp is not None}))
     return BodyPhase(scn, tuple(str(a) for a in phase.stance),  # each checked above
-                     pose, tension, float(pose.start_time()), float(pose.end_time()))
+                     pose, tension, float(pose.start_time()), float(pose.end_time()), ramped)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -172,7 +176,8 @@ def build_rig_diagram(phase: BodyPhase, bus: DrakeLcm, config: RigLcmConfig) -> 
     scn = phase.scenario
     source = builder.AddNamedSystem("command_source", RigCommandSource(
         scn.robot, phase.stance.positions, phase.pose, phase.tension, phase.start_time,
-        config.period, config.status_timeout, config.max_length_rate, config.max_tension_rate))
+        config.period, config.status_timeout, config.max_length_rate, config.max_tension_rate,
+        phase.ramped))
     publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
         channel=config.command_channel, lcm_type=rig_command_t, lcm=bus,
         publish_period=config.period))

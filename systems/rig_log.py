@@ -163,12 +163,18 @@ def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
     return status
 
 
+def command_tension_bounds(robot: RobotParams) -> tuple[float, float]:
+    """The tension setpoints rbp may send: down to 0 N, where a released boom's gripper lets
+    go (`RigCommandSource` holds the other booms to boom_tension's minimum)."""
+    return 0.0, robot.boom_tension[1]
+
+
 def command_problem(command: rig_command_t, robot: RobotParams) -> str | None:
     """None if `command` is one rbp could have sent to `robot` (finite, within its boom-length
-    and tension limits, as `RigCommandSource` clamps them), else what is wrong with it."""
+    and tension limits, as `RigCommandSource` clamps them; 0 N for a released boom), else what is wrong with it."""
     for name, values, (low, high) in (("boom_length", command.boom_length, robot.boom_length),
                                       ("tension_setpoint", command.tension_setpoint,
-                                       robot.boom_tension)):
+                                       command_tension_bounds(robot))):
         array = np.asarray(values, dtype=float)
         slack = 1e-6 * high  # rounding, never a different command
         if not np.all(np.isfinite(array)) or np.any(array < low - slack) or np.any(
@@ -206,7 +212,7 @@ def first_bad_command(rows: np.ndarray, robot: RobotParams) -> tuple[int, str] |
     have sent to `robot`, or None: checked as arrays."""
     bad = np.zeros(len(rows), dtype=bool)
     for name, (low, high) in (("boom_length", robot.boom_length),
-                              ("tension_setpoint", robot.boom_tension)):
+                              ("tension_setpoint", command_tension_bounds(robot))):
         values, slack = rows[name], 1e-6 * high
         with np.errstate(invalid="ignore"):
             bad |= ~np.all(np.isfinite(values) & (values >= low - slack)

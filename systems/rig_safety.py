@@ -7,6 +7,7 @@ command (the last safe one is repeated) and holds still when no status has come 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -39,7 +40,8 @@ class RigCommandSource(LeafSystem):
 
     Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
     are the plan's tensions, both interpolated linearly in time and clamped to the robot's
-    `boom_length` and `boom_tension` limits; each then moves from the last command sent by at
+    `boom_length` and `boom_tension` limits (down to 0 N for the `ramped` booms, which a
+    release or attach ramp takes to 0 N as verified); each then moves from the last command sent by at
     most `max_length_rate` x `period` (m) and `max_tension_rate` x `period` (N), so a jump
     in the plan becomes a ramp. A command with a NaN or inf is refused and the
     last one sent is repeated; so is the last one when no status came back for
@@ -50,7 +52,7 @@ class RigCommandSource(LeafSystem):
     def __init__(self, robot: RobotParams, anchors: np.ndarray, pose: PiecewisePolynomial,
                  tension: PiecewisePolynomial, time_offset: float = 0.0, period: float = 0.1,
                  status_timeout: float = float("inf"), max_length_rate: float = float("inf"),
-                 max_tension_rate: float = float("inf")):
+                 max_tension_rate: float = float("inf"), ramped: Sequence[int] = ()):
         if not (np.all(np.isfinite(pose.value(time_offset)))
                 and np.all(np.isfinite(tension.value(time_offset)))):
             raise ValueError("the first command must be finite: nothing safe comes before it")
@@ -62,6 +64,9 @@ class RigCommandSource(LeafSystem):
         self._time_offset = time_offset
         self._status_timeout = status_timeout
         self._max_step = (max_length_rate * period, max_tension_rate * period)  # m, N
+        lo, hi = robot.boom_tension
+        self._tension_low = np.array([0.0 if i in ramped else lo for i in range(4)])  # N
+        self._tension_high = hi
         self._memory = self.DeclareAbstractState(AbstractValue.Make(CommandMemory(None, None)))
         self.last_status_time_port = self.DeclareVectorInputPort("last_status_time", 1)
         self.command_port = self.DeclareAbstractOutputPort(
@@ -92,7 +97,7 @@ class RigCommandSource(LeafSystem):
             assert memory.boom_length is not None and memory.tension is not None
             return memory.boom_length, memory.tension, "refused"
         safe_length = np.clip(length, *self._robot.boom_length)
-        safe_tension = np.clip(tension, *self._robot.boom_tension)
+        safe_tension = np.clip(tension, self._tension_low, self._tension_high)
         # A plan on a limit may miss it by round-off: that is not worth reporting.
         clamped = max(np.abs(safe_length - length).max(),
                       np.abs(safe_tension - tension).max()) > CLAMP_REPORT_TOL

@@ -171,7 +171,8 @@ def command_tension_bounds(robot: RobotParams) -> tuple[float, float]:
 
 def command_problem(command: rig_command_t, robot: RobotParams) -> str | None:
     """None if `command` is one rbp could have sent to `robot` (finite, within its boom-length
-    and tension limits, as `RigCommandSource` clamps them; 0 N for a released boom), else what is wrong with it."""
+    and tension limits as `RigCommandSource` clamps them, 0 N for a released boom), else what
+    is wrong with it."""
     for name, values, (low, high) in (("boom_length", command.boom_length, robot.boom_length),
                                       ("tension_setpoint", command.tension_setpoint,
                                        command_tension_bounds(robot))):

@@ -41,9 +41,9 @@ class RigCommandSource(LeafSystem):
     Boom lengths are the shoulder-anchor distances at the planned pose; the tension setpoints
     are the plan's tensions, both interpolated linearly in time and clamped to the robot's
     `boom_length` and `boom_tension` limits (down to 0 N for the `ramped` booms, which a
-    release or attach ramp takes to 0 N as verified); each then moves from the last command sent by at
-    most `max_length_rate` x `period` (m) and `max_tension_rate` x `period` (N), so a jump
-    in the plan becomes a ramp. A command with a NaN or inf is refused and the
+    release or attach ramp takes to 0 N as verified); each then moves from the last command
+    sent by at most `max_length_rate` x `period` (m) and `max_tension_rate` x `period` (N),
+    so a jump in the plan becomes a ramp. A command with a NaN or inf is refused and the
     last one sent is repeated; so is the last one when no status came back for
     `status_timeout` (the rig holds still). The state (`CommandMemory`) changes only in the
     periodic update, which stores the command the publisher just sent.

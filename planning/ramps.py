@@ -53,9 +53,9 @@ RELEASE_TENSION = 0.05  # N: a gripper opens (or closes) only with its boom's te
 # floor"). Twice RELEASE_TENSION, so that a held boom never looks released.
 CONTROL_TENSION_FLOOR = 0.1
 RAMP_STEPS = 2          # steps of a ramp in a plan without a time step (end poses only)
-# N/s: the fastest a boom's tension may change between successive steps (rule `tension-rate`),
-# the rig's winch bound (`RigLcmConfig.max_tension_rate`), twice the bundled plans' fastest
-# (about 15 N/s, in ramps): a ramp lasts longer than RAMP_DURATION where its load needs it.
+# N/s: the rig's winch bound (`RigLcmConfig.max_tension_rate`), which `rbp rig-run` holds a
+# phase to before flying it: a ramp lasts longer than RAMP_DURATION where its load needs it,
+# so that a ramp never needs a faster winch (the bundled plans' fastest change: about 15 N/s).
 TENSION_RATE_MAX = 25.0
 
 

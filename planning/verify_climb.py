@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from planning.plan_model import Phase, Plan, Step, scenario_robot_problem
-from planning.ramps import RAMP_DURATION, RELEASE_TENSION, TENSION_RATE_MAX
+from planning.ramps import RAMP_DURATION, RELEASE_TENSION
 from rb_drake.scenario import Scenario
 
 RULES = {
@@ -40,9 +40,6 @@ RULES = {
              "continuations' spliced phases and footstep plans too) the body moves at most "
              "BODY_SPEED_MAX, turns at most TURN_SPEED_MAX and the free gripper moves at most "
              "GRIPPER_SPEED_MAX",
-    "tension-rate": "between every two successive steps of the plan (within and across "
-                    "phases) no boom's tension (a free boom's: 0) changes faster than "
-                    "TENSION_RATE_MAX, the rig's winch bound",
     "release": "a body phase that a reach phase follows ends with a release ramp at the "
                "transition pose: the freed boom's tension falls (its shoulder taking up its "
                "limb) over at least RAMP_DURATION to at most RELEASE_TENSION when its "
@@ -140,7 +137,6 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     _joins(plan, fail)
     _times(plan, fail)
     _speeds(plan, fail)
-    _tension_rates(plan, fail)
     _continuity(plan, fail)
     _ramps(plan, fail)
     _goal(plan, scn, fail)
@@ -310,27 +306,6 @@ def _speeds(plan: Plan, fail) -> None:
                 more = f" (and {len(over) - 1} more steps)" if len(over) > 1 else ""
                 fail("speed", f"{what} {size[n]:.4g} {unit} in {gap[n]:.3g} s, over "
                      f"{limit:g} {unit}/s{more}", k, n + 1 - len(joined))
-
-
-def _tension_rates(plan: Plan, fail) -> None:
-    """Rule `tension-rate`: per phase, the fastest change of a boom's tension over the limit
-    (the interval into a phase's first step from the phase before's last included)."""
-    for k, phase in enumerate(plan.phases):
-        joined = (plan.phases[k - 1].steps[-1],) if k > 0 else ()
-        steps = joined + phase.steps
-        t = np.array([s.t for s in steps], dtype=float)
-        f = np.array([[0.0 if v is None else v for v in s.tension] for s in steps], dtype=float)
-        with np.errstate(all="ignore"):  # absurd numbers fail the rule, not numpy
-            gap = np.maximum(np.diff(t), 0.0)
-            change = np.abs(np.diff(f, axis=0)).max(axis=1, initial=0.0)
-            over = np.flatnonzero(~(change <= TENSION_RATE_MAX * (gap + TIME_TOL) + LIMIT_TOL))
-            if len(over):
-                n = int(over[np.argmax(change[over] / np.maximum(gap[over], 1e-300))])
-                more = f" (and {len(over) - 1} more steps)" if len(over) > 1 else ""
-                fail("tension-rate", f"a boom's tension changes {change[n]:.4g} N in "
-                     f"{gap[n]:.3g} s ({change[n] / gap[n]:.4g} N/s), over "
-                     f"{TENSION_RATE_MAX:g} N/s{more}", k,
-                     n + 1 - len(joined))
 
 
 def _continuity(plan: Plan, fail) -> None:

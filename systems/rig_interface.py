@@ -125,6 +125,50 @@ def body_phase(plan: Plan | dict[str, Any], index: int) -> BodyPhase:
                      pose, tension, float(pose.start_time()), float(pose.end_time()), ramped)
 
 
+def rate_problem(phase: BodyPhase, config: RigLcmConfig, index: int) -> RigInputError | None:
+    """None if every command of the phase's motion (linear between steps, as `RigCommandSource`
+    interpolates it) changes within the rig's `max_tension_rate` and `max_length_rate`, else
+    the fastest step. Past them the rig's guard slows the commands, and the rig would fly a
+    motion other than the one `rbp check` verified, so `rbp rig-run` refuses such a phase."""
+    times = np.asarray(phase.tension.get_segment_times(), dtype=float)
+    gaps = np.diff(times)
+    if not len(gaps):
+        return None
+    tensions = np.array([phase.tension.value(t).ravel() for t in times])  # (K, 4)
+    # a released or attached boom's command is clamped as the rig clamps it (down to 0 N)
+    low = np.array([0.0 if i in phase.ramped else phase.scenario.robot.boom_tension[0]
+                    for i in range(4)])
+    tensions = np.clip(tensions, low, phase.scenario.robot.boom_tension[1])
+    tension_rate = np.abs(np.diff(tensions, axis=0)) / gaps[:, None]  # (K-1, 4) N/s
+    # lengths are nonlinear in the pose: each interval sampled (a command every `period` at
+    # most; 16 samples bound a boom's rate to well within 1 % at the planner's steps)
+    sub = max(2, min(16, math.ceil(float(gaps.max()) / config.period)))
+    u = np.linspace(0.0, 1.0, sub + 1)
+    t = (times[:-1, None] + gaps[:, None] * u[None, :]).ravel()
+    poses = np.array([phase.pose.value(x).ravel() for x in t])
+    length = geometry.boom_geometry(phase.scenario.robot, poses,
+                                    phase.stance.positions).length.reshape(len(gaps), sub + 1, 4)
+    length = np.clip(length, *phase.scenario.robot.boom_length)
+    length_rate = (np.abs(np.diff(length, axis=1)).max(axis=1)
+                   / (gaps[:, None] / sub))  # (K-1, 4) m/s
+    slack = 1.0 + 1e-6  # round-off, never a slowed command
+    for rate, limit, what, unit, name in (
+            (tension_rate, config.max_tension_rate, "tension", "N/s", "max_tension_rate"),
+            (length_rate, config.max_length_rate, "length", "m/s", "max_length_rate")):
+        over = rate > limit * slack
+        if over.any():
+            k, boom = np.unravel_index(int(np.argmax(np.where(over, rate, -1.0))), rate.shape)
+            more = int(over.any(axis=1).sum()) - 1
+            also = f" (and {more} more steps)" if more else ""
+            return RigInputError(
+                f"phases[{index}].steps[{k + 1}]",
+                f"boom {boom}'s {what} changes at {rate[k, boom]:.4g} {unit} from the step "
+                f"before{also}, faster than the rig's {name} of {limit:g} {unit}: the rig "
+                "would slow its commands and fly a motion rbp check did not verify (a lighter "
+                "robot, weaker gravity or a slower plan, --dt, keeps within it)")
+    return None
+
+
 # ---------------------------------------------------------------------------------------------
 # The grasp monitor and the diagram
 
@@ -207,15 +251,19 @@ class RigRun(NamedTuple):
 
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
             sim_rig: RigSimConfig | None = None, plan_source: str = "",
-            accepted: Callable[[], None] | None = None) -> RigRun:
+            accepted: Callable[[], None] | None = None, check_rates: bool = True) -> RigRun:
     """Execute body phase `phase_index` of `plan` against the rig on `config.url`.
 
     With `sim_rig`, the rig simulator answers on the same in-process bus and the run goes as
     fast as it can; otherwise the run keeps to real time for the hardware. The log (written
     atomically when the run ends) starts with a `rig_setup_t` naming the scenario and stance.
     `accepted` is called once the plan and options are accepted, before any command is sent.
+    With `check_rates`, a phase the rig's rate bounds would slow is refused (`rate_problem`).
     """
     phase = body_phase(plan, phase_index)
+    too_fast = rate_problem(phase, config, phase_index) if check_rates else None
+    if too_fast is not None:
+        raise too_fast
     check_log_size(phase, config.period)
     if sim_rig is not None and not config.url.startswith(MEMQ):
         raise RigInputError("--lcm-url", f"the simulated rig runs in-process on {MEMQ}, "

@@ -52,9 +52,10 @@ class RigLcmConfig:
     period: float = 0.1  # s between commands
     status_timeout: float = 0.5  # s without a good status before the command holds still
     # The largest change of a command per second: the simulated winch's speed, 4x the boom
-    # rates of the bundled plans (about 0.13 m/s); the plans' tension bound (rule `tension-rate`).
+    # rates of the bundled plans (about 0.13 m/s); the ramps' bound (`ramps.TENSION_RATE_MAX`).
+    # `rbp rig-run` refuses a phase whose motion would need faster commands (`rate_problem`).
     max_length_rate: float = 0.5    # m/s per boom
-    max_tension_rate: float = TENSION_RATE_MAX  # N/s per boom (rule `tension-rate`)
+    max_tension_rate: float = TENSION_RATE_MAX  # N/s per boom
 
 
 class RigInputError(RbpInputError):

@@ -85,11 +85,12 @@ def fake_rig(misbehave: Misbehaviour, sent: Sent) -> type:
 
 
 def run_with(plan: dict[str, Any], misbehave: Misbehaviour, log: Path,
-             config: RigLcmConfig = CONFIG) -> tuple[RigRun, Sent]:
+             config: RigLcmConfig = CONFIG, check_rates: bool = True) -> tuple[RigRun, Sent]:
     sent = Sent()
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(rig_interface, "RigSimulatorLcm", fake_rig(misbehave, sent))
-        run = run_rig(plan, 0, config, log, sim_rig=RigSimConfig(seed=3))
+        run = run_rig(plan, 0, config, log, sim_rig=RigSimConfig(seed=3),
+                      check_rates=check_rates)
     return run, sent
 
 
@@ -166,7 +167,10 @@ def test_commands_change_at_most_the_rate_bounds(scn: Scenario, plan: dict[str, 
     steps[6]["t"] = steps[5]["t"] + 0.05  # 0.05 s after the step before
     steps[6]["tension"] = [20.0, 0.5, 20.0, 0.5]
     steps[6]["pose"][0] += 0.3
-    run, _ = run_with(bad, honest, tmp_path / "rate.lcm")
+    with pytest.raises(RigInputError, match="faster than the rig's max_"):  # rbp rig-run
+        run_with(bad, honest, tmp_path / "refused.lcm")
+    # `rbp rig-run --no-verify`: flown, the guard slowing it
+    run, _ = run_with(bad, honest, tmp_path / "rate.lcm", check_rates=False)
     times, lengths, tensions = command_arrays(logged(tmp_path / "rate.lcm")[0])
     raw_len, raw_ten = planned(bad, times)
     step_len = CONFIG.max_length_rate * CONFIG.period  # m per command

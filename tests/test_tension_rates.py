@@ -1,5 +1,6 @@
-"""How fast a plan's tensions may change (rule `tension-rate`, the rig's winch bound), the
-ramps stretched to it, and the rig commanding a released boom's 0 N as verified."""
+"""How fast the rig's commands may change (its winch bounds, `max_tension_rate` and
+`max_length_rate`): `rbp rig-run` refuses a phase they would slow, the planner's ramps are
+stretched to them, and the rig commands a released boom's 0 N as verified."""
 
 from __future__ import annotations
 
@@ -13,13 +14,12 @@ import lcm
 import numpy as np
 import pytest
 
-from planning.plan_model import Step, plan_of, plan_scenario
+from planning.plan_model import Step
 from planning.ramps import RAMP_DURATION, RAMP_STEPS, TENSION_RATE_MAX, ramp_timing
-from planning.verify_climb import RULES, climb_problems
 from systems.reachbot_lcm import rig_command_t
 from systems.rig import RigSimConfig
-from systems.rig_interface import body_phase, run_rig
-from systems.rig_log import RigLcmConfig
+from systems.rig_interface import body_phase, rate_problem, run_rig
+from systems.rig_log import RigInputError, RigLcmConfig
 
 GOLDEN = Path(__file__).parent / "data" / "golden" / "demo-shaft-current.json"
 
@@ -36,33 +36,50 @@ def no_network_lcm() -> Iterator[None]:
         yield
 
 
-def rate_problems(plan: dict[str, Any]) -> list[str]:
-    p = plan_of(plan)
-    return [str(q) for q in climb_problems(p, plan_scenario(p, "test"))
-            if q.rule == "tension-rate"]
+def too_fast(plan: dict[str, Any], index: int) -> str:
+    problem = rate_problem(body_phase(plan, index), RigLcmConfig(), index)
+    return "" if problem is None else str(problem)
 
 
 def step(tension: list[float | None]) -> Step:
     return Step(t=0.0, pose=(0.0, 0.0, 0.0), tension=tuple(tension), p_grasp=(), p_success=1.0)
 
 
-def test_the_rig_bound_is_the_rule() -> None:
+def test_the_ramps_keep_to_the_rig_bound() -> None:
     assert RigLcmConfig().max_tension_rate == TENSION_RATE_MAX
-    assert "tension-rate" in RULES
 
 
-def test_the_default_plan_keeps_to_the_rate(plan: dict[str, Any]) -> None:
-    assert rate_problems(plan) == []
+def test_the_default_plan_keeps_to_the_rig_rates(plan: dict[str, Any]) -> None:
+    body = [k for k, p in enumerate(plan["phases"]) if p["kind"] == "body"]
+    assert len(body) >= 3, body
+    for k in body:
+        assert too_fast(plan, k) == "", (k, too_fast(plan, k))
 
 
-def test_a_tension_jump_is_refused(plan: dict[str, Any]) -> None:
+def test_a_tension_jump_is_refused_by_the_rig(plan: dict[str, Any], tmp_path: Path) -> None:
     bad = copy.deepcopy(plan)
     steps = bad["phases"][0]["steps"]
     steps[3]["tension"] = [f + 30.0 for f in steps[3]["tension"]]  # 60 N/s at dt 0.5 s
-    found = rate_problems(bad)
-    # up into step 3 and down into step 4: one problem, at the faster
-    assert len(found) == 1 and "phases[0] (body) step " in found[0], found
-    assert "over 25 N/s (and 1 more steps)" in found[0], found
+    found = too_fast(bad, 0)
+    # up into step 3 and down into step 4: one problem, at the faster of the two
+    assert found.startswith(("phases[0].steps[3]: boom ", "phases[0].steps[4]: boom ")), found
+    assert "(and 1 more steps)" in found and "max_tension_rate of 25 N/s" in found, found
+    log = tmp_path / "rig.lcm"
+    with pytest.raises(RigInputError, match="max_tension_rate"):
+        run_rig(bad, 0, RigLcmConfig(), log, sim_rig=RigSimConfig(seed=3))
+    assert not log.exists(), "nothing is flown, no log written"
+    # --no-verify flies it: the guard slows the commands and says so
+    run = run_rig(bad, 0, RigLcmConfig(), log, sim_rig=RigSimConfig(seed=3), check_rates=False)
+    assert run.safety.rate_limited > 0, run.safety
+
+
+def test_a_boom_length_jump_is_refused_by_the_rig(plan: dict[str, Any]) -> None:
+    bad = copy.deepcopy(plan)
+    steps = bad["phases"][0]["steps"]
+    x, y, phi = steps[3]["pose"]
+    steps[3]["pose"] = [x + 0.4, y, phi]  # 0.8 m/s at dt 0.5 s
+    found = too_fast(bad, 0)
+    assert found.startswith("phases[0].steps[") and "max_length_rate of 0.5 m/s" in found, found
 
 
 def test_a_small_ramp_lasts_its_duration() -> None:

@@ -130,7 +130,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         run = run_rig(plan, args.phase, config, args.log, sim_rig=sim,
                       plan_source=f"{path.name} phase {args.phase}",
                       accepted=None if getattr(args, "verify", True)
-                      else lambda: warn_unverified(path))
+                      else lambda: warn_unverified(path),
+                      check_rates=getattr(args, "verify", True))
     except RigInputError as e:
         where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None

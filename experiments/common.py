@@ -341,7 +341,8 @@ def planner_summary(records: list[dict[str, Any]], planner: str) -> dict[str, An
 # The named footstep-search variants of experiments.route_quality and experiments.long_climbs.
 ROUTE_VARIANTS = ("default", "first", "before", "ara", "sampled", "w30", "w3", "anytime-f1",
             "anytime-f4", "oracle", "oracle-a*", "repair", "default-repair", "default-quarter",
-            "segments", "travel7", "dt7", "corridorR-fF", "x-wW-fF-cR")
+            "segments", "travel7", "dt7", "lattice", "oracle-lattice", "corridorR-fF",
+            "x-wW-fF-cR")
 
 
 def variant_config(variant: str, time_limit: float | None):
@@ -359,7 +360,9 @@ def variant_config(variant: str, time_limit: float | None):
     (`route_variants`: run "default" first); "segments" is today's default with climbs
     over 7 m searched in segments (planning.segmented); "travel7" orders the first route by the
     travel bound (weight 7, no anytime passes) and "dt7" the anytime passes after today's first
-    route (weights 7, 4, 2, 1: `ordering: distance+travel`)."""
+    route (weights 7, 4, 2, 1: `ordering: distance+travel`); "lattice" and "oracle-lattice" are
+    "default" and "oracle" on the lattice alone, without refinement (planning.refinement: the
+    default before session 25), as "first" and "before" are."""
     from planning.complete_config import AnytimeConfig
     from planning.footsteps import FootstepConfig
     from planning.route_repair import RepairConfig
@@ -369,12 +372,15 @@ def variant_config(variant: str, time_limit: float | None):
     exhaustive = AnytimeConfig(improve_factor=None)
     table: dict[str, dict[str, Any]] = {
         "default": {},
-        "first": {"anytime": None, "heuristic_weight": 300.0},
+        "first": {"anytime": None, "heuristic_weight": 300.0, "refine": 0},
         "sampled": {"search": "sampled", "heuristic_weight": 300.0},
         "w30": {"heuristic_weight": 30.0, "anytime": None},
         "w3": {"heuristic_weight": 3.0, "anytime": None},
         "before": {"anytime": AnytimeConfig(weights=(10.0, 3.0, 1.0), restart=False),
-                   "expansions_per_metre": 0.0, "heuristic_weight": 300.0},
+                   "expansions_per_metre": 0.0, "heuristic_weight": 300.0, "refine": 0},
+        "lattice": {"refine": 0},
+        "oracle-lattice": {"max_expansions": None, "time_limit": limit, "anytime": exhaustive,
+                           "refine": 0},
         "ara": {"anytime": AnytimeConfig(restart=False)},
         "anytime-f1": {"anytime": AnytimeConfig(improve_factor=1.0)},
         "anytime-f4": {"anytime": AnytimeConfig(improve_factor=4.0)},
@@ -445,7 +451,8 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
                         "kept_memory_mb": fp.kept_memory_mb,
                         "history": search.get("history"),
                         "memo": fp.memo.lattice.stats() if fp.memo is not None else None,
-                        "stances": [list(s) for s in fp.stances] if fp.success else None}
+                        "stances": [list(s) for s in fp.stances] if fp.success else None,
+                        "refined": [[c.position_step, c.angle_step_deg] for c in fp.refined]}
     return out
 
 

@@ -114,6 +114,7 @@ FIELDS: dict[str, dict[str, Range | Choice]] = {
         "min_success": Range(0.0, 1.0, open_lo=True, open_hi=True),
         "candidates_per_boom": count(1, 1000),
         "max_expansions": count(1, 1_000_000_000),
+        "refine": count(0, 4),  # each level 8x the poses of the one before
         "search_memory_mb": Range(1.0, 10_000_000.0, "MiB"),
         "expansions_per_metre": Range(0.0, 1_000_000.0),
         "time_limit": Range(0.0, 1_000_000.0, "s", open_lo=True),

@@ -38,12 +38,20 @@ from planning.constrained import constrained_search
 from planning.lattice import LatticeConfig
 from planning.lattice_search import (
     DEFAULT_MEMORY_MB,
+    CompleteResult,
     LatticeMemo,
     Stance4,
     search_result,
     stance4,
 )
 from planning.ramps import ramp_ends_hold
+from planning.refinement import (
+    RefinementState,
+    Refuted,
+    finer_lattices,
+    fresh_memo,
+    refined_result,
+)
 from planning.route_repair import RepairConfig, repair_route
 from planning.search_cost import (
     DistanceHeuristic,
@@ -113,6 +121,9 @@ class FootstepConfig:
     segments: SegmentConfig | None = None
     candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
     max_expansions: int | None = 1000  # None: no budget (the oracle)
+    # complete search: where it finds no route on `lattice`, it searches again on lattices of
+    # half the steps, at most this many times (planning.refinement; 0: the lattice's answer)
+    refine: int = 1
     # complete search: at most this many MiB of lattice work kept for reuse (components and
     # transitions; past it the least recently used are decided again when needed, with the same
     # answers: planning.bounded_cache); None: no cap
@@ -199,6 +210,9 @@ class FootstepPlan(NamedTuple):
     # goal), for `rbp plan --partial`
     partial: FootstepPlan | None = None
     goal_distance: float = math.nan
+    # the lattices searched after `FootstepConfig.lattice` found no route, coarse to fine (the
+    # last one answered: planning.refinement); () when the first lattice answered
+    refined: tuple[LatticeConfig, ...] = ()
 
 
 class Explored(NamedTuple):
@@ -258,6 +272,8 @@ class FootstepMemo:
     transitions: dict[tuple, Transition] = dataclasses.field(default_factory=dict)
     releases: dict[tuple, ReleaseSet] = dataclasses.field(default_factory=dict)
     lattice: LatticeMemo = dataclasses.field(default_factory=LatticeMemo)
+    # the lattices refuted so far (planning.refinement); `lattice` serves the first one not
+    refinement: RefinementState = dataclasses.field(default_factory=RefinementState)
 
 
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
@@ -420,17 +436,30 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     asked = cfg
     cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
     memo.lattice.set_memory(cfg.search_memory_mb)
-    if cfg.min_success is not None:
-        result = constrained_search(scn, cfg.min_success, cfg.complete_config(),
-                                    exclude=exclude, memo=memo.lattice, progress=progress)
-    elif segmented(asked):
-        assert asked.segments is not None
-        result = segmented_search(scn, asked.complete_config(), asked.segments,
-                                  lambda part: expansion_budget(part, asked), exclude=exclude,
-                                  memo=memo.lattice, progress=progress, partial=partial)
-    else:
-        result = complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
-                                 progress=progress, partial=partial)
+    # --min-success answers for its P on the lattice asked (no refinement)
+    lattices = finer_lattices(scn, cfg.lattice, cfg.refine if cfg.min_success is None else 0)
+    excluded = frozenset((tuple(st), int(j), a) for st, j, a in exclude)
+    level = memo.refinement.first_open(lattices, excluded)
+    refuted = [r for r in memo.refinement.refuted if r.lattice in lattices[:level]]
+    while True:
+        # a time limit holds for all the lattices together
+        left = None if cfg.time_limit is None else max(
+            1e-3, cfg.time_limit - (time.perf_counter() - t0))
+        result = _search_lattice(
+            scn, dataclasses.replace(asked, lattice=lattices[level], time_limit=left),
+            dataclasses.replace(cfg, lattice=lattices[level], time_limit=left), progress,
+            exclude, memo, partial)
+        if result.stop not in (Stop.NOROUTE, Stop.EXHAUSTED) or level == len(lattices) - 1:
+            break
+        refuted.append(Refuted(lattices[level], excluded, result.expansions,
+                               result.transitions_tested))
+        memo.refinement.refuted.append(refuted[-1])
+        memo.lattice = fresh_memo(memo.lattice)  # the next lattice's; this one is refuted
+        level += 1
+    if refuted:
+        result = refined_result(result, refuted, lattices[level])
+    cfg = dataclasses.replace(cfg, lattice=lattices[level])
+    refined = tuple(lattices[1:level + 1])
     if cfg.min_success is None and cfg.repair is not None and result.success:
         result = repair_route(scn, result, memo.lattice, cfg.repair,
                               cfg.transition.ignore_grasps, exclude)
@@ -451,7 +480,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                               result.transitions_tested, time.perf_counter() - t0, search, None,
                               result.stop, explored, frontier, memo,
                               min_success=cfg.min_success, peak_memory_mb=peak,
-                              kept_memory_mb=kept)
+                              kept_memory_mb=kept, refined=refined)
         near = result.partial
         if near is None:
             return failed
@@ -470,7 +499,25 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                         time.perf_counter() - t0, search, None, Stop.ROUTE, explored, frontier,
                         memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
-                        result.quality, cfg.min_success, peak, kept)
+                        result.quality, cfg.min_success, peak, kept, refined=refined)
+
+
+def _search_lattice(scn: Scenario, asked: FootstepConfig, cfg: FootstepConfig,
+                    progress: Callable[..., None] | None,
+                    exclude: Collection[tuple[tuple[str, ...], int, str]],
+                    memo: FootstepMemo, partial: bool) -> CompleteResult:
+    """One complete (or constrained, or segmented) search on `cfg.lattice` (`asked`: the
+    configuration as given, `cfg` with its budget for this climb)."""
+    if cfg.min_success is not None:
+        return constrained_search(scn, cfg.min_success, cfg.complete_config(),
+                                  exclude=exclude, memo=memo.lattice, progress=progress)
+    if segmented(asked):
+        assert asked.segments is not None
+        return segmented_search(scn, asked.complete_config(), asked.segments,
+                                lambda part: expansion_budget(part, asked), exclude=exclude,
+                                memo=memo.lattice, progress=progress, partial=partial)
+    return complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
+                           progress=progress, partial=partial)
 
 
 def _route_steps(scn: Scenario, cfg: FootstepConfig, stances: list[Stance4],

@@ -78,7 +78,9 @@ def search_record(fp: FootstepPlan) -> SearchRecord:
         history=(tuple(SearchPoint(seconds=float(t), cost=float(c), lower_bound=float(lo),
                                    expansions=int(n)) for t, c, lo, n in fp.history or [])
                  if anytime else None),
-        peak_memory_mb=_finite(fp.peak_memory_mb), kept_memory_mb=_finite(fp.kept_memory_mb))
+        peak_memory_mb=_finite(fp.peak_memory_mb), kept_memory_mb=_finite(fp.kept_memory_mb),
+        refined=tuple((float(c.position_step), float(c.angle_step_deg)) for c in fp.refined)
+        or None)
 
 
 def _finite(value: float) -> float | None:

@@ -246,6 +246,13 @@ class SearchRecord(Part):
     kept_memory_mb: float | None = spec(None, minimum=0, description="the most lattice work the "
                                         "search kept at once, MiB (capped by "
                                         "footstep.search_memory_mb)")
+    refined: tuple[tuple[float, ...], ...] | None = spec(
+        None, items={"type": "array", "items": {"type": "number", "exclusiveMinimum": 0,
+                                                "maximum": 360}, "minItems": 2, "maxItems": 2},
+        maxItems=8,
+        description="the lattices [position step m, angle step deg] searched after "
+                    "footstep.lattice found no route, coarse to fine; the last one answered "
+                    "(planning.refinement)")
     NESTED: ClassVar[dict[str, type[Part]]] = {"history": SearchPoint}
     DESCRIPTION: ClassVar[str] = "how the footstep search ended (optional)"
 

@@ -202,7 +202,17 @@ def _summary(plan: Plan) -> str:
 
 
 def _route_quality(search: dict) -> str:
-    """How far the route is from the best one, as the anytime search proved it."""
+    """How far the route is from the best one, as the anytime search proved it, and the
+    refined lattice it was found on (planning.refinement)."""
+    refined = search.get("refined")
+    if refined:
+        step, angle = refined[-1]
+        return (_bound_text(search) + f"; on the refined lattice {step * 100:g} cm / "
+                f"{angle:g} deg, the coarser having no route")
+    return _bound_text(search)
+
+
+def _bound_text(search: dict) -> str:
     if search.get("min_success") is not None:
         return (f"; the fewest regrasps with predicted success >= {search['min_success']:g} "
                 f"(search cost {search['cost']:.4f}, exp(-cost) {math.exp(-search['cost']):.4f})")

@@ -1,0 +1,115 @@
+"""Refinement (planning.refinement): a complete search that finds no route on its lattice
+searches again on the lattice of half the steps. Benchmark shaft 71 has no route through the
+points of the 2 cm / 2.5 deg lattice and one through those of 1 cm / 1.25 deg."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import rbp
+from planning.footsteps import FootstepConfig, FootstepMemo, plan_footsteps
+from planning.lattice import LatticeConfig, pack, poses_of, unpack
+from planning.refinement import RefinementState, Refuted, finer_lattices
+from planning.search_outcome import Stop
+from rb_drake.scenario import Scenario
+
+BASE = LatticeConfig()
+FINE = LatticeConfig(position_step=0.01, angle_step_deg=1.25)
+
+
+@pytest.fixture(scope="module")
+def shaft71() -> Scenario:
+    return rbp.generate_scenario("shaft", seed=71, length=(4.5, 5.0))
+
+
+@pytest.fixture(scope="module")
+def refined(shaft71: Scenario):
+    memo = FootstepMemo()
+    return plan_footsteps(shaft71, FootstepConfig(), memo=memo), memo
+
+
+def test_finer_lattices_halve_both_steps_within_their_ranges(shaft71: Scenario) -> None:
+    assert finer_lattices(shaft71, BASE, 0) == [BASE]
+    assert finer_lattices(shaft71, BASE, 1) == [BASE, FINE]
+    # 2 cm -> 1 cm -> 5 mm, and no further: 2.5 mm is below the least position step
+    chain = finer_lattices(shaft71, BASE, 4)
+    assert [c.position_step for c in chain] == [0.02, 0.01, 0.005], chain
+    assert [c.angle_step_deg for c in chain] == [2.5, 1.25, 0.625], chain
+
+
+def test_every_coarse_point_is_a_point_of_the_finer_lattice() -> None:
+    rng = np.random.default_rng(5)
+    idx = np.column_stack([rng.integers(-500, 500, 200), rng.integers(-500, 500, 200),
+                           rng.integers(-BASE.angle_count // 2, BASE.angle_count // 2, 200)])
+    coarse = poses_of(unpack(pack(idx, BASE.angle_count), BASE.angle_count), BASE)
+    fine = poses_of(unpack(pack(2 * idx, FINE.angle_count), FINE.angle_count), FINE)
+    np.testing.assert_allclose(fine, coarse, atol=1e-12,
+                               err_msg="a coarse pose is not a point of the finer lattice")
+
+
+def test_a_refuted_lattice_is_skipped_only_under_more_exclusions() -> None:
+    state = RefinementState([Refuted(BASE, frozenset({("s", 0, "a")}), 10, 20)])
+    lattices = [BASE, FINE]
+    assert state.first_open(lattices, frozenset({("s", 0, "a"), ("t", 1, "b")})) == 1
+    assert state.first_open(lattices, frozenset()) == 0, "fewer exclusions: search it again"
+    assert state.first_open(lattices, frozenset({("t", 1, "b")})) == 0
+    assert RefinementState().first_open(lattices, frozenset()) == 0
+    # the finest lattice is always searched, so that an answer comes back
+    both = RefinementState([Refuted(BASE, frozenset(), 1, 1), Refuted(FINE, frozenset(), 1, 1)])
+    assert both.first_open(lattices, frozenset()) == 1
+
+
+def test_the_lattice_alone_has_no_route_on_shaft_71(shaft71: Scenario) -> None:
+    fp = plan_footsteps(shaft71, FootstepConfig(refine=0))
+    assert not fp.success and fp.stop == Stop.NOROUTE, (fp.stop, fp.reason)
+    assert fp.reason.startswith("no route at resolution 2 cm / 2.5 deg"), fp.reason
+    assert fp.refined == ()
+
+
+def test_refinement_finds_the_route_between_the_points(refined, shaft71: Scenario) -> None:
+    fp, memo = refined
+    assert fp.success and fp.stop == Stop.ROUTE, (fp.stop, fp.reason)
+    assert fp.refined == (FINE,), fp.refined
+    assert memo.lattice.config == FINE, "the memo serves the lattice that answered"
+    assert [r.lattice for r in memo.refinement.refuted] == [BASE]
+    # the route holds: every transition's four configurations at least p_min
+    p_min = shaft71.robot.p_min
+    for step in fp.steps:
+        assert np.all(step.probabilities >= p_min - 1e-12), (step, p_min)
+    assert len(fp.steps) >= 1 and fp.expansions > memo.refinement.refuted[0].expansions
+
+
+def test_a_search_again_starts_on_the_refined_lattice(refined, shaft71: Scenario) -> None:
+    """The pipeline excludes a move whose motion fails and searches again: the coarse lattice,
+    refuted with fewer exclusions, is not searched again."""
+    fp, memo = refined
+    first = fp.steps[0]
+    move = (tuple(fp.stances[0]), first.boom, first.to_anchor)
+    again = plan_footsteps(shaft71, FootstepConfig(), exclude=[move], memo=memo)
+    assert len(memo.refinement.refuted) == 1, memo.refinement.refuted
+    assert again.refined == (FINE,), again.refined
+    if again.success:
+        taken = {(tuple(a), s.boom, s.to_anchor) for a, s in zip(again.stances, again.steps,
+                                                                  strict=False)}
+        assert move not in taken, "the excluded move was taken"
+    else:
+        assert again.stop == Stop.EXHAUSTED, (again.stop, again.reason)
+
+
+def test_no_route_on_either_lattice_says_both() -> None:
+    scn = rbp.generate_scenario("shaft", seed=51, length=(4.5, 5.0))
+    fp = plan_footsteps(scn, FootstepConfig())
+    assert not fp.success and fp.stop == Stop.NOROUTE, (fp.stop, fp.reason)
+    assert fp.reason.startswith("no route at resolution 2 cm / 2.5 deg ("), fp.reason
+    assert "nor, refined, at 1 cm / 1.25 deg: all " in fp.reason, fp.reason
+    assert fp.refined == (FINE,)
+    coarse = plan_footsteps(scn, dataclasses.replace(FootstepConfig(), refine=0))
+    assert fp.expansions > coarse.expansions, "the work of both lattices is counted"
+
+
+def test_min_success_answers_on_the_lattice_asked(shaft71: Scenario) -> None:
+    fp = plan_footsteps(shaft71, FootstepConfig(min_success=0.5))
+    assert fp.refined == () and fp.stop == Stop.NOROUTE, (fp.stop, fp.reason)

@@ -93,15 +93,26 @@ def run_cave(job: tuple[str, int, tuple[float, float], list[str], int]) -> dict[
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
+    """Per variant: caves whose copies all got the same answer (a route or none), and those
+    that did not: where a copy's answer was a proof against another's route (`noroute`, the
+    lattice's doing) and where it was a budget stop (the search's effort)."""
     out: dict[str, Any] = {}
     for v in variants:
-        changed = [f"{c['kind']} {c['seed']}" for c in caves
-                   if len({r["success"] for r in c[v]}) > 1]
-        stops = [f"{c['kind']} {c['seed']}" for c in caves if len({r["stop"] for r in c[v]}) > 1]
+        changed = [c for c in caves if len({r["success"] for r in c[v]}) > 1]
+
+        def name(c: dict[str, Any]) -> str:
+            return f"{c['kind']} {c['seed']}"
+
+        proofs = [name(c) for c in changed if any(r["stop"] == "noroute" for r in c[v])]
         out[v] = {"caves": len(caves),
                   "routes_unmoved": sum(c[v][0]["success"] for c in caves),
-                  "stable": len(caves) - len(changed), "changed": changed,
-                  "stop_changed": stops,
+                  "stable": len(caves) - len(changed),
+                  "changed": [name(c) for c in changed],
+                  "changed_against_a_proof": proofs,
+                  "changed_against_a_budget_stop": [name(c) for c in changed
+                                                    if name(c) not in proofs],
+                  "stop_changed": [name(c) for c in caves
+                                   if len({r["stop"] for r in c[v]}) > 1],
                   "runs": sum(len(c[v]) for c in caves)}
     return out
 

@@ -105,3 +105,52 @@ def test_cli_one_line_for_refused_entity(tmp_path):
     assert res.stderr.count("\n") == 1
     assert res.stderr.startswith("error: solid.dxf: entities: 1 SOLID entities not imported")
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_lines_and_arcs_joined_into_a_closed_outline_are_rock(tmp_path):
+    """A boulder drawn stroke by stroke (an exploded polyline: LINEs and an ARC, in shuffled
+    order and directions, ends off by round-off) is rock, as the polyline would be; strokes
+    that close nothing (a scale bar, a dangling line) are skipped as before."""
+    doc, msp = _doc()
+    msp.add_line((0.5, 2.0), (-0.5, 2.0))  # bottom, right to left
+    msp.add_arc((0.0, 3.0), 0.5, 0, 180)  # top: from (0.5, 3) to (-0.5, 3), counterclockwise
+    msp.add_line((-0.5, 2.0 + 1e-9), (-0.5, 3.0))  # left side, its end off by round-off
+    msp.add_line((0.5, 3.0), (0.5, 2.0))  # right side
+    msp.add_line((-2.5, 6.5), (2.5, 6.5))  # an open stroke: a scale bar
+    msp.add_line((0.0, -0.5), (0.2, -0.7))  # another
+    rock = read_rock(_save(doc, tmp_path / "strokes.dxf"))
+    assert len(rock) == 3, [p.bounds for p in rock]
+    assert _contains(rock, 0.0, 2.5) and _contains(rock, 0.0, 3.3), "the boulder is rock"
+    boulder = next(p for p in rock if _contains([p], 0.0, 2.5))
+    expected = 1.0 * 1.0 + 3.14159 * 0.25 / 2  # the square and the half disc
+    assert boulder.area == pytest.approx(expected, rel=0.01), boulder.area
+    assert not _contains(rock, 0.0, 6.5), "an open stroke is not rock"
+
+
+def test_a_branching_or_open_chain_is_not_rock(tmp_path):
+    doc, msp = _doc()
+    square = [(-0.3, 2.0), (0.3, 2.0), (0.3, 2.6), (-0.3, 2.6)]
+    for a, b in zip(square[:3], square[1:4], strict=True):  # three sides: open
+        msp.add_line(a, b)
+    rock = read_rock(_save(doc, tmp_path / "open.dxf"))
+    assert len(rock) == 2 and not _contains(rock, 0.0, 2.3)
+    msp.add_line(square[3], square[0])  # closed now, and a spur from one corner
+    msp.add_line(square[0], (-0.6, 1.5))
+    rock = read_rock(_save(doc, tmp_path / "spur.dxf"))
+    assert len(rock) == 2, "a chain with a branch is not one outline"
+    doc2, msp2 = _doc()
+    for a, b in zip(square, square[1:] + square[:1], strict=True):
+        msp2.add_line(a, b)
+    rock = read_rock(_save(doc2, tmp_path / "closed.dxf"))
+    assert len(rock) == 3 and _contains(rock, 0.0, 2.3)
+
+
+def test_lines_alone_that_close_are_rock(tmp_path):
+    doc = ezdxf.new()
+    msp = doc.modelspace()
+    for ring in WALLS:
+        for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
+            msp.add_line(a, b)
+    rock = read_rock(_save(doc, tmp_path / "walls.dxf"))
+    assert len(rock) == 2 and _contains(rock, -2, 3) and _contains(rock, 2, 3)
+    assert not _contains(rock, 0, 3)

@@ -1,9 +1,11 @@
 """Rock outlines of a DXF drawing (`polygon_files.read_rock` of a .dxf), in the drawing's x, y.
 
 Read as rock: closed LWPOLYLINE and 2D/3D POLYLINE (arcs drawn by bulges as chords), CIRCLE,
-full ELLIPSE and closed SPLINE entities of model space; block references (INSERT, MINSERT) are
-expanded, nested at most MAX_INSERT_DEPTH deep, their copies counted before any is made.
-Annotations and open strokes (IGNORED) are skipped; any other entity (HATCH, SOLID, 3DFACE,
+full ELLIPSE and closed SPLINE entities of model space, and closed chains of LINE and ARC
+entities (an outline drawn, or exploded, stroke by stroke: ends joined within JOIN_TOLERANCE);
+block references (INSERT, MINSERT) are expanded, nested at most MAX_INSERT_DEPTH deep, their
+copies counted before any is made. Annotations and open strokes (IGNORED, and LINE and ARC that
+close no chain) are skipped; any other entity (HATCH, SOLID, 3DFACE,
 MESH, REGION, ...) could be rock that rbp cannot read, so the file is refused naming them:
 drawn geometry is never dropped without a word.
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import warnings
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
@@ -22,6 +25,7 @@ from rb_drake.terrain.drawing_outline import (
     MAX_COORDINATE,
     MAX_DXF_ENTITIES,
     MAX_VERTICES,
+    Ring,
     _closed,
     _count_vertices,
     _one_line,
@@ -38,8 +42,10 @@ POLYLINES = ("LWPOLYLINE", "POLYLINE")
 CURVES = ("CIRCLE", "ELLIPSE", "SPLINE")  # closed curves, flattened within CURVE_TOLERANCE
 IGNORED = frozenset((  # annotations and open strokes: they draw no closed rock
     "TEXT", "MTEXT", "DIMENSION", "ARC_DIMENSION", "LARGE_RADIAL_DIMENSION", "LEADER",
-    "MULTILEADER", "MLEADER", "TOLERANCE", "POINT", "ATTRIB", "ATTDEF", "LINE", "ARC", "XLINE",
+    "MULTILEADER", "MLEADER", "TOLERANCE", "POINT", "ATTRIB", "ATTDEF", "XLINE",
     "RAY", "VIEWPORT", "IMAGE", "ACAD_TABLE", "SHAPE"))
+STROKES = ("LINE", "ARC")  # rock where they join end to end into closed chains
+JOIN_TOLERANCE = 1e-6  # m: stroke ends this close are one point (a drawing's round-off)
 MAX_INSERT_DEPTH = 8  # blocks inside blocks ...: a drawing's are one or two deep
 MAX_SPLINE_DEGREE = 10  # ezdxf's evaluation grows with the degree's square; drawings use 2-3
 
@@ -75,6 +81,7 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
     polygons: list[Polygon] = []
     ignored: dict[str, int] = {}
     refused: dict[str, int] = {}
+    strokes: list[tuple[str, str, Ring]] = []  # where, kind, points
     total = [0]
     for where, entity in _expanded(msp):
         kind = entity.dxftype()
@@ -82,8 +89,14 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
             ignored[kind] = ignored.get(kind, 0) + 1
         elif kind in POLYLINES or kind in CURVES:
             polygons.append(_outline(entity, where, factor, total))
+        elif kind in STROKES:
+            strokes.append((where, kind, _stroke(entity, where, factor, total)))
         else:
             refused[kind] = refused.get(kind, 0) + 1
+    chains, loose = _closed_chains(strokes)
+    polygons += [_polygon(ring, [], where) for where, ring in chains]
+    for kind in loose:
+        ignored[kind] = ignored.get(kind, 0) + 1
     if refused:
         found = ", ".join(f"{n} {kind}" for kind, n in sorted(refused.items()))
         raise _ReadError("entities", f"{found} entities not imported: rock is read from closed "
@@ -176,6 +189,71 @@ def _outline(entity: Any, where: str, factor: float, total: list[int]) -> Polygo
     if kind in CURVES and len(ring) > 2 and not _closed(ring, CURVE_TOLERANCE):
         raise _ReadError(where, "open curve (an arc of it); rock must be closed")
     return _polygon(ring, [], where)
+
+
+def _stroke(entity: Any, where: str, factor: float, total: list[int]) -> Ring:
+    """A LINE's two ends, or an ARC's chords within CURVE_TOLERANCE, in metres."""
+    if entity.dxftype() == "LINE":
+        points = [entity.dxf.start, entity.dxf.end]
+    else:
+        reach = [abs(v) + abs(entity.dxf.radius) for v in entity.dxf.center]
+        if not all(r * factor <= MAX_COORDINATE for r in reach):  # NaN fails too
+            raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m; check --unit "
+                             "and --scale")
+        from ezdxf import path as dxf_path
+
+        try:
+            points = list(itertools.islice(
+                dxf_path.make_path(entity).flattening(CURVE_TOLERANCE / factor),
+                MAX_VERTICES - total[0] + 1))
+        except Exception as e:  # a malformed entity
+            raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
+    line = _scaled(((p.x, p.y) for p in points), factor)
+    if not all(math.isfinite(v) and abs(v) <= MAX_COORDINATE for p in line for v in p):
+        raise _ReadError(where, f"a coordinate beyond {MAX_COORDINATE:g} m (or not a number); "
+                         "check --unit and --scale")
+    _count_vertices(total, line)
+    return line
+
+
+def _closed_chains(strokes: list[tuple[str, str, Ring]]
+                   ) -> tuple[list[tuple[str, Ring]], list[str]]:
+    """The closed outlines that strokes (LINE, ARC) join into, end to end (ends within
+    JOIN_TOLERANCE are one point; a chain closes where every point joins exactly two strokes),
+    each named by its first stroke; and the kinds of the strokes left over (open or branching
+    chains, which draw no closed rock)."""
+    def point(p: tuple[float, float]) -> tuple[int, int]:
+        return round(p[0] / JOIN_TOLERANCE), round(p[1] / JOIN_TOLERANCE)
+
+    at: dict[tuple[int, int], list[int]] = {}
+    ends = []
+    for k, (_, _, line) in enumerate(strokes):
+        a, b = point(line[0]), point(line[-1])
+        ends.append((a, b))
+        for p in (a, b):
+            at.setdefault(p, []).append(k)
+    used = [False] * len(strokes)
+    chains: list[tuple[str, Ring]] = []
+    for first in range(len(strokes)):
+        if used[first] or ends[first][0] == ends[first][1]:
+            continue
+        ring, order, k, joint = list(strokes[first][2]), [first], first, ends[first][1]
+        while joint != ends[first][0]:
+            nxt = [j for j in at[joint] if j != k]
+            if len(at[joint]) != 2 or not nxt or used[nxt[0]] or nxt[0] in order:
+                break  # an open end, a branch, or a stroke of another chain
+            k = nxt[0]
+            line = strokes[k][2] if ends[k][0] == joint else strokes[k][2][::-1]
+            joint = ends[k][1] if ends[k][0] == joint else ends[k][0]
+            ring += line[1:]
+            order.append(k)
+        if joint == ends[first][0] and len(at[joint]) == 2:
+            for k in order:
+                used[k] = True
+            where = strokes[first][0]
+            chains.append((f"{where} and {len(order) - 1} strokes joined to it", ring[:-1]))
+    loose = [strokes[k][1] for k in range(len(strokes)) if not used[k]]
+    return chains, loose
 
 
 def _check_curve(entity: Any, where: str, factor: float) -> None:

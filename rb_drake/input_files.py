@@ -346,7 +346,8 @@ def _check_tree(root: yaml.Node, limit: int) -> None:
                         reuses += 1
                     else:
                         scalars.add(id(child))
-                        if len(child.value) > MAX_NUMBER_CHARS:  # < MAX_SCALAR_CHARS
+                        # long values (MAX_NUMBER_CHARS < MAX_SCALAR_CHARS) and numbers
+                        if len(child.value) > MAX_NUMBER_CHARS or child.tag in _NUMBER_TAGS:
                             _check_scalar(child)
                     child_size, child_height = 1, 1
                 else:
@@ -371,12 +372,22 @@ def _check_tree(root: yaml.Node, limit: int) -> None:
 
 
 _NUMBER_TAGS = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+# A decimal integer (digits grouped by _ as PyYAML reads them: 1_000): YAML 1.1 (PyYAML's) also
+# reads 0x10, 0b10, 010 (octal: 8) and 1:30 (sexagesimal: 90) as integers, which YAML 1.2
+# reads otherwise (010 is 10, 1:30 a string), and an anchor id 0x10 became "16" without a word.
+_PLAIN_INTEGER = re.compile(r"[-+]?(0|[1-9][0-9_]*)")
 
 
 def _check_scalar(node: yaml.ScalarNode) -> None:
     if len(node.value) > MAX_SCALAR_CHARS:
         raise InputFileError(_where(node.start_mark), f"a value of {len(node.value):,} "
                              f"characters (at most {MAX_SCALAR_CHARS:,})")
+    if not node.style and (  # plain, not quoted
+            (node.tag == _NUMBER_TAGS[0] and not _PLAIN_INTEGER.fullmatch(node.value))
+            or (node.tag == _NUMBER_TAGS[1] and ":" in node.value)):
+        raise InputFileError(_where(node.start_mark), f"{node.value[:40]!r}: a number in "
+                             "hexadecimal, octal, binary or sexagesimal, which YAML 1.1 and 1.2 "
+                             "read differently; write numbers in decimal, and quote names")
     if node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
         raise InputFileError(_where(node.start_mark), f"a number of {len(node.value):,} "
                              f"characters (at most {MAX_NUMBER_CHARS}): no physical quantity "

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import time
 from pathlib import Path
@@ -20,6 +21,8 @@ import yaml
 from rb_drake.input_files import MAX_DEPTH, InputFileError, load_json, load_yaml, read_text
 from rb_drake.scenario import ScenarioError, bundled_caves, load_scenario
 from tests.cli_helpers import run_rbp
+
+DATA = Path(__file__).resolve().parents[1] / "rb_drake" / "data" / "caves"
 
 DEMO = bundled_caves()["demo-shaft"]
 
@@ -340,15 +343,21 @@ def test_long_value_and_huge_integer_refused_with_their_line():
         load_json('{"x": 1' + "2" * 6000 + "}")
 
 
+NOT_DECIMAL = "a number in hexadecimal, octal, binary or sexagesimal"
+
+
 @pytest.mark.parametrize("text, field, words", [
     # hex, octal, binary and sexagesimal integers of thousands of digits from 4,000 characters:
-    # str() of them raised ValueError (over 4,300 digits) later, a traceback
-    ("gravity: [0x" + "f" * 3572 + ", 0]\n", "line 1, column 11", "beyond a float's range"),
-    ("seed: 0b1" + "0" * 1024 + "\n", "line 1, column 7", "beyond a float's range"),
-    ("seed: -07" + "7" * 400 + "\n", "line 1, column 7", "beyond a float's range"),
-    ("seed: 1" + ":0" * 200 + "\n", "line 1, column 7", "beyond a float's range"),
-    # constructors' own errors: OverflowError, KeyError
-    ("g: [1" + ":0" * 200 + ".5]\n", "line 1, column 5", "cannot read"),
+    # str() of them raised ValueError (over 4,300 digits) later, a traceback; now refused
+    # before that as numbers that YAML 1.1 and 1.2 read differently
+    ("gravity: [0x" + "f" * 3572 + ", 0]\n", "line 1, column 11", NOT_DECIMAL),
+    ("seed: 0b1" + "0" * 1024 + "\n", "line 1, column 7", NOT_DECIMAL),
+    ("seed: -07" + "7" * 400 + "\n", "line 1, column 7", NOT_DECIMAL),
+    ("seed: 1" + ":0" * 200 + "\n", "line 1, column 7", NOT_DECIMAL),
+    ("g: [1" + ":0" * 200 + ".5]\n", "line 1, column 5", NOT_DECIMAL),
+    # a decimal integer beyond a float
+    ("seed: 1" + "0" * 400 + "\n", "line 1, column 7", "beyond a float's range"),
+    # constructors' own errors: KeyError
     ("name: !!bool maybe\n", "line 1, column 7", "cannot read 'maybe' as bool"),
     # merge keys can give a key twice, the merged one silently dropped
     ("a: &a {x: 1}\nb: {<<: *a, x: 2}\n", "line 2, column 5", "merge key"),
@@ -357,7 +366,25 @@ def test_yaml_values_the_constructor_cannot_build_refused_with_their_line(text, 
     with pytest.raises(InputFileError, match=words) as caught:
         load_yaml(text)
     assert caught.value.field == field, caught.value.field
-    assert load_yaml("x: 0xff\ny: 0b1" + "0" * 1020 + "\n")["x"] == 255  # within range: read
+    assert load_yaml("x: 255\ny: '0xff'\n") == {"x": 255, "y": "0xff"}  # decimal; a name
+
+
+@pytest.mark.parametrize("written", ["0x10", "010", "0o10", "0b10", "1:30", "00"])
+def test_an_anchor_id_read_as_a_number_otherwise_is_refused(written, tmp_path):
+    """YAML 1.1 read `id: 0x10` as 16, so the anchor was called "16" in every plan; 010 is 8
+    there and 10 in YAML 1.2. Such numbers are refused where written; quoted, they are names."""
+    text = (DATA / "demo-shaft.yaml").read_text()
+    first = re.search(r"id: (\w+)", text)
+    assert first is not None
+    name = first.group(1)
+    bad = re.sub(rf"\b{name}\b", written, text)
+    if written == "0o10":  # YAML 1.1 has no 0o: a plain string, read as the name it is
+        assert load_yaml(bad)["anchors"][0]["id"] == "0o10"
+        return
+    with pytest.raises(InputFileError, match="write numbers in decimal, and quote names"):
+        load_yaml(bad)
+    quoted = re.sub(rf"\b{name}\b", f"'{written}'", text)
+    assert load_yaml(quoted)["anchors"][0]["id"] == written
 
 
 def test_json_integers_beyond_a_float_refused_with_their_line(tmp_path):

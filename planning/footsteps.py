@@ -1,9 +1,11 @@
-"""Footstep planning: A* over the graph of 4-stances linked by feasible transitions.
+"""Footstep planning: a route of 4-stances from the start to the goal (`plan_footsteps`).
 
 A vertex is a 4-stance (an anchor id per boom); an edge moves one boom to another anchor and
-exists when `find_transition` finds a pose holding all four configurations of the move. The
-graph is explored lazily (`planning.astar`): candidate anchors come from reach alone, and a
-transition is searched only when A* pops it.
+exists when a pose holds all four configurations of the move. The default search is the
+complete one on the pose lattice (`planning.complete`), searched again on finer lattices where
+its lattice has no route (`planning.refinement`); `search: sampled` is the sampled search of
+commit 36a65ef (`planning.sampled_search`) and "hybrid" that, then the complete one. What a
+search is asked and answers (`FootstepConfig`, `FootstepPlan`) is `planning.footstep_plan`'s.
 
 Cost and heuristic are `planning.search_cost`'s: an edge costs the regrasp's attach cost plus
 each boom's worst -log P over the move's configurations, and the goal-distance heuristic is
@@ -24,256 +26,47 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import zlib
 from collections.abc import Callable, Collection
-from typing import Any, NamedTuple
 
 import numpy as np
 
-from planning.astar import Edge, SearchResult, lazy_astar
 from planning.bounded_cache import peak_memory_mb
 from planning.complete import complete_search
-from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.constrained import constrained_search
-from planning.lattice import LatticeConfig
+from planning.footstep_plan import (
+    ORDERINGS,
+    SEARCHES,
+    Explored,
+    FootstepConfig,
+    FootstepMemo,
+    FootstepPlan,
+    Step,
+    edge_rng,
+    polished_step,
+)
 from planning.lattice_search import (
-    DEFAULT_MEMORY_MB,
     CompleteResult,
-    LatticeMemo,
     Stance4,
     search_result,
     stance4,
 )
-from planning.ramps import ramp_ends_hold
 from planning.refinement import (
-    RefinementState,
     Refuted,
     finer_lattices,
     fresh_memo,
     refined_result,
 )
-from planning.route_repair import RepairConfig, repair_route
+from planning.route_repair import repair_route
+from planning.sampled_search import candidate_moves, explored_stances, goal_pose_in, plan_sampled
 from planning.search_cost import (
-    DistanceHeuristic,
-    attach_cost,
     centroid_distance,
-    edge_cost,
     goal_distance,
 )
-from planning.search_outcome import Quality, Stop
-from planning.segmented import SegmentConfig, segmented_search
-from planning.transition import (
-    ReleaseSet,
-    Transition,
-    TransitionConfig,
-    find_transition,
-    polish_transition,
-    reachable_anchors,
-    release_poses,
-)
+from planning.search_outcome import Stop
+from planning.segmented import segmented_search
 from rb_drake.errors import RbpInputError
-from rb_drake.kernel.scoring import score_poses
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
-
-SEARCHES = ("hybrid", "complete", "sampled")
-ORDERINGS = ("distance", "travel", "distance+travel")  # the complete search's weighted estimates
-
-
-@dataclasses.dataclass(frozen=True)
-class FootstepConfig:
-    # "complete" (the default): resolution-complete on the pose lattice (planning.complete):
-    # finds a route whenever one exists at its resolution and proves it when none does;
-    # "sampled": the sampling search of commit 36a65ef (no proof either way); "hybrid": the
-    # sampled search for at most `sampled_expansions`, then the complete one. Since the
-    # complete search grows components by flood fill it is as fast as the sampled one where
-    # both succeed, with fewer regrasps (docs/benchmarks.md), so it is the default.
-    search: str = "complete"
-    sampled_expansions: int = 150
-    lattice: LatticeConfig = dataclasses.field(default_factory=LatticeConfig)
-    # The first route's weight (<= 1: A* on the admissible bound, optimal routes); without a
-    # route after `fallback_after` of the expansion budget, the search starts again at
-    # `fallback_weight` (None: never), greedy: it finds a route in few expansions where it
-    # finds one. On the 69 benchmark routes a weight of 10 found routes with 27 % fewer
-    # regrasps than 300 in about the same time, and 300 found the one route that 10 missed
-    # within the budget (docs/benchmarks.md, "Session 24")
-    heuristic_weight: float = 10.0
-    fallback_weight: float | None = 300.0
-    fallback_after: float = 0.75
-    # complete search: what the weight multiplies (planning.complete_config.CompleteConfig)
-    ordering: str = "distance"
-    # complete search only: after the first route, better ones for twice its expansions, with
-    # a proven bound on how far the best is from the optimum
-    # (planning.complete_config.AnytimeConfig; None: the first route, as before)
-    anytime: AnytimeConfig | None = dataclasses.field(default_factory=AnytimeConfig)
-    # complete search only: the route with the fewest regrasps whose predicted success
-    # exp(-cost) is at least this (planning.constrained), or the proof that none reaches it;
-    # None: the anytime search
-    min_success: float | None = None
-    # complete search only: the route improved window by window, each window searched to its
-    # optimum (planning.route_repair); None: the route as the search found it
-    repair: RepairConfig | None = None
-    # complete search with a budget (not --thorough, not min_success): a long climb searched in
-    # segments a few metres ahead (planning.segmented; `segments: {}` in a --config file for
-    # the defaults of SegmentConfig); None, the default: every climb searched whole (on the
-    # long-climb benchmark, segments changed regrasps by -10 % to +7 % and took up to 2x the
-    # time: docs/benchmarks.md)
-    segments: SegmentConfig | None = None
-    candidates_per_boom: int = 8   # sampled search only: anchors tried per boom
-    max_expansions: int | None = 1000  # None: no budget (the oracle)
-    # complete search: where it finds no route on `lattice`, it searches again on lattices of
-    # half the steps, at most this many times (planning.refinement; 0: the lattice's answer)
-    refine: int = 1
-    # complete search: at most this many MiB of lattice work kept for reuse (components and
-    # transitions; past it the least recently used are decided again when needed, with the same
-    # answers: planning.bounded_cache); None: no cap
-    search_memory_mb: float | None = DEFAULT_MEMORY_MB
-    # complete search: the budget grows with the climb, to at least this many expansions per
-    # metre from the start pose to the goal (a 20 m climb needs about ten times a 2 m one's
-    # search, not the same); 0: max_expansions as given
-    expansions_per_metre: float = 300.0
-    time_limit: float | None = None    # s; None: no limit
-    goal_samples: int = 96
-    polish_rounds: int = 8   # local search rounds per transition pose of the found path
-    seed: int = 0
-    transition: TransitionConfig = dataclasses.field(default_factory=TransitionConfig)
-
-    def __post_init__(self) -> None:
-        if self.ordering not in ORDERINGS:
-            raise RbpInputError(f"must be one of {', '.join(ORDERINGS)}, got {self.ordering!r}",
-                                field="footstep.ordering")
-        mb = self.search_memory_mb
-        if mb is not None and not (isinstance(mb, int | float) and 1.0 <= mb < math.inf):
-            raise RbpInputError(f"must be a number of MiB of at least 1 (or null: no cap), "
-                                f"got {mb!r}", field="footstep.search_memory_mb")
-
-    def complete_config(self) -> CompleteConfig:
-        """The complete (or constrained) search's part of this configuration."""
-        return CompleteConfig(lattice=self.lattice, heuristic_weight=self.heuristic_weight,
-                              ordering=self.ordering, fallback_weight=self.fallback_weight,
-                              fallback_after=self.fallback_after,
-                              max_expansions=self.max_expansions, time_limit=self.time_limit,
-                              ignore_grasps=self.transition.ignore_grasps, anytime=self.anytime)
-
-
-class Step(NamedTuple):
-    """One regrasp: boom `boom` moves `from_anchor` -> `to_anchor`, holding `pose` throughout."""
-
-    boom: int
-    from_anchor: str
-    to_anchor: str
-    pose: np.ndarray
-    probabilities: np.ndarray  # the four configurations' P (transition.CONFIG_NAMES order)
-    found_pose: np.ndarray | None = None  # the search's pose, when polishing moved it
-    # (K, 3) other poses that hold the move (and join the same body motions), best first: the
-    # complete search's, for the pipeline to try where the gripper's path fails at `pose`
-    alternatives: np.ndarray | None = None
-
-
-class FootstepPlan(NamedTuple):
-    success: bool
-    reason: str
-    stances: list[Stance4]       # S_0 .. S_n
-    steps: list[Step]            # n regrasps
-    start_pose: np.ndarray
-    goal_pose: np.ndarray | None  # a feasible pose in S_n within the goal tolerance
-    expansions: int
-    transitions_tested: int
-    seconds: float
-    search: SearchResult[Stance4] | None = None
-    transitions: dict | None = None   # every transition tested: (stance, boom, anchor) -> result
-    # Why the search stopped (planning.search_outcome.Stop): a route was found, the budget was
-    # reached, every stance it could reach was expanded (no proof unless the search is
-    # complete), or a complete search proved that no route exists at its resolution.
-    stop: Stop = Stop.ROUTE
-    explored: list[Explored] | None = None  # expanded stances, in expansion order
-    frontier: list[Explored] | None = None  # stances reached but never expanded
-    memo: FootstepMemo | None = None  # what the search decided, for a search again
-    # The route's search cost (planning.search_cost), and with an anytime search: the proven
-    # lower bound on the optimal cost, the first route's cost, (s, cost, lower bound,
-    # expansions) at each improvement, and "optimal" or "bounded".
-    cost: float = math.nan
-    lower_bound: float = math.nan
-    first_cost: float = math.nan
-    history: list[tuple[float, float, float, int]] | None = None
-    quality: Quality = Quality.FIRST
-    # --min-success P: the route has the fewest regrasps of those with exp(-cost) >= P (or,
-    # with stop "noroute", none reaches P)
-    min_success: float | None = None
-    # MiB: the process's peak resident memory when the search ended, and the most lattice work
-    # its memo kept at once (planning.bounded_cache; at most FootstepConfig.search_memory_mb)
-    peak_memory_mb: float = math.nan
-    kept_memory_mb: float = math.nan
-    # a failed complete search asked for it (`plan_footsteps(partial=True)`): the route to the
-    # expanded stance nearest the goal, as a footstep plan (success False, `goal_pose` where the
-    # body ends in its last stance, `goal_distance` that stance's centroid distance from the
-    # goal), for `rbp plan --partial`
-    partial: FootstepPlan | None = None
-    goal_distance: float = math.nan
-    # the lattices searched after `FootstepConfig.lattice` found no route, coarse to fine (the
-    # last one answered: planning.refinement); () when the first lattice answered
-    refined: tuple[LatticeConfig, ...] = ()
-
-
-class Explored(NamedTuple):
-    """A stance the search reached, for pictures of where it went."""
-
-    stance: tuple[str, ...]
-    pose: np.ndarray       # the body pose it was reached at (the start pose for the start)
-    order: int             # expansion order (0 = the start); -1 for the frontier
-    goal_distance: float   # footsteps.goal_distance of the stance (m)
-
-
-def edge_rng(seed: int, stance: tuple[str, ...], boom: int, anchor: str) -> np.random.Generator:
-    """A generator that depends only on the edge, so results do not depend on search order."""
-    key = zlib.crc32(f"{stance}|{boom}|{anchor}".encode())
-    return np.random.default_rng([seed, key])
-
-
-def goal_pose_in(scn: Scenario, stance: tuple[str, ...], rng: np.random.Generator,
-                 samples: int, ignore_grasps: bool = False) -> np.ndarray | None:
-    """The most robust sampled pose within the goal tolerance that is feasible in `stance`."""
-    robot = scn.robot
-    goal = np.asarray(scn.goal_position)
-    reach = robot.max_reach
-    pts = scn.anchor_positions[[scn.anchor_index[a] for a in stance]]
-    if np.any(np.linalg.norm(pts - goal, axis=1) > reach + scn.goal_tolerance):
-        return None
-    radius = scn.goal_tolerance * np.sqrt(rng.uniform(0.0, 1.0, samples))
-    ang = rng.uniform(0.0, 2 * math.pi, samples)
-    poses = np.column_stack([goal[0] + radius * np.cos(ang), goal[1] + radius * np.sin(ang),
-                             rng.normal(0.0, 0.3, samples)])
-    check = score_poses(scn, scn.stance(stance), poses, ignore_grasps=ignore_grasps)
-    if not check.feasible.any():
-        return None
-    # Among feasible poses the most robust; the naive planner's may all have r = -inf.
-    score = np.where(check.feasible, np.maximum(check.robustness, -1e300), -np.inf)
-    return poses[int(np.argmax(score))]
-
-
-def candidate_moves(scn: Scenario, stance: tuple[str, ...], pose: np.ndarray,
-                    per_boom: int, seed: int = 0) -> list[tuple[int, str]]:
-    """(boom, anchor) moves worth testing: reachable, nearest the goal first, per boom."""
-    goal = np.asarray(scn.goal_position)
-    moves = []
-    rng = np.random.default_rng([seed, zlib.crc32(str(stance).encode())])
-    for j in range(NUM_BOOMS):
-        idx = reachable_anchors(scn, stance, j, pose, rng)
-        order = np.argsort(np.linalg.norm(scn.anchor_positions[idx] - goal, axis=1))
-        moves += [(j, scn.anchors[k].id) for k in idx[order][:per_boom]]
-    return moves
-
-
-@dataclasses.dataclass
-class FootstepMemo:
-    """Transitions and release sets already searched on a scenario (same config and seed), so
-    that a search repeated with some moves excluded costs only what is new."""
-
-    transitions: dict[tuple, Transition] = dataclasses.field(default_factory=dict)
-    releases: dict[tuple, ReleaseSet] = dataclasses.field(default_factory=dict)
-    lattice: LatticeMemo = dataclasses.field(default_factory=LatticeMemo)
-    # the lattices refuted so far (planning.refinement); `lattice` serves the first one not
-    refinement: RefinementState = dataclasses.field(default_factory=RefinementState)
 
 
 def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
@@ -310,103 +103,7 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
                                expansions=first.expansions + second.expansions,
                                transitions_tested=first.transitions_tested
                                + second.transitions_tested)
-    t0 = time.perf_counter()
-    c_attach = attach_cost(scn.robot)
-    distance_heuristic = DistanceHeuristic(scn)
-    start = stance4(scn.start_stance)
-    start_pose = np.asarray(scn.start_pose, dtype=float)
-    cache, releases = memo.transitions, memo.releases
-    excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
-    goal_rng = np.random.default_rng([cfg.seed, 1])
-    tested = 0
-
-    def successors(node: Stance4, pose: np.ndarray):
-        for j, anchor in candidate_moves(scn, node, pose, cfg.candidates_per_boom, cfg.seed):
-            child = stance4(anchor if i == j else a for i, a in enumerate(node))
-            yield child, (j, anchor), c_attach
-
-    def evaluate(node: Stance4, child: Stance4, key: tuple[int, str], pose: np.ndarray):
-        nonlocal tested
-        j, anchor = key
-        ck = (node, j, anchor)
-        if ck in excluded:
-            return None
-        if ck not in cache:
-            tested += 1
-            if (node, j) not in releases:  # shared by every move of boom j from this stance
-                releases[node, j] = release_poses(scn, node, j,
-                                                  edge_rng(cfg.seed, node, j, "release"),
-                                                  guess=pose, config=cfg.transition)
-            cache[ck] = find_transition(scn, node, j, anchor, edge_rng(cfg.seed, node, j, anchor),
-                                        guess=pose, config=cfg.transition,
-                                        release=releases[node, j])
-        tr = cache[ck]
-        if not tr.feasible:
-            return None
-        assert tr.pose is not None  # a feasible transition's
-        return Edge(edge_cost(scn, node, j, anchor, tr.pose), tr.pose)
-
-    def heuristic(node: Stance4) -> float:
-        return distance_heuristic(node)
-
-    def is_goal(node: Stance4, pose: np.ndarray):
-        return goal_pose_in(scn, node, goal_rng, cfg.goal_samples)
-
-    nearest = [math.inf]
-
-    def on_expand(n: int, node: Stance4) -> None:
-        if progress is not None:
-            nearest[0] = min(nearest[0], goal_distance(scn, node))
-            progress(n, tested, nearest[0])
-
-    result = lazy_astar(start, successors, evaluate, heuristic,
-                        is_goal=lambda n, d: _as_goal(is_goal(n, d)),
-                        weight=cfg.heuristic_weight,
-                        max_expansions=cfg.max_expansions or 10**9,
-                        start_data=start_pose, on_expand=on_expand)
-    seconds = time.perf_counter() - t0
-    if not result.success:
-        explored, frontier = explored_stances(scn, result, start_pose)
-        # the expanded stances, as the complete search measures them (and the search picture)
-        closest = min((centroid_distance(scn, e.stance) for e in explored),
-                      default=centroid_distance(scn, start))
-        reason = (f"{result.reason}; the nearest stance reached is {closest:.2f} m from the "
-                  f"goal (the start is {centroid_distance(scn, start):.2f} m)")
-        budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
-        if budget:
-            reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
-        stop = Stop.BUDGET if budget else Stop.EXHAUSTED
-        return FootstepPlan(False, reason, [start], [], start_pose, None,
-                            result.expansions, tested, seconds, result, cache, stop, explored,
-                            frontier, memo)
-    steps = []
-    for a, b, pose in zip(result.path[:-1], result.path[1:], result.edges, strict=True):
-        j = next(i for i in range(NUM_BOOMS) if a[i] != b[i])
-        probabilities = cache[(a, j, b[j])].probabilities
-        assert probabilities is not None  # the path's transitions are feasible
-        steps.append(polished_step(scn, cfg, a, j, b[j], pose, probabilities))
-    seconds = time.perf_counter() - t0
-    explored, frontier = explored_stances(scn, result, start_pose)
-    return FootstepPlan(True, "", list(result.path), steps, start_pose, result.goal_data.pose,
-                        result.expansions, tested, seconds, result, cache, Stop.ROUTE, explored,
-                        frontier, memo)
-
-
-def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], boom: int,
-                  anchor: str, pose: np.ndarray, probabilities: np.ndarray,
-                  alternatives: np.ndarray | None = None) -> Step:
-    """A step of the found path. The search accepts a transition at the first pose it finds
-    (sampled) or its most robust lattice pose (complete); the few on the chosen path get a
-    local search for robustness (p_path rises by 0.03-0.08), keeping the found pose."""
-    found = pose
-    if cfg.polish_rounds > 0:
-        polished, p4 = polish_transition(scn, stance, boom, anchor, found,
-                                         edge_rng(cfg.seed, stance, boom, "polish"),
-                                         cfg.polish_rounds)
-        if cfg.transition.ignore_grasps or ramp_ends_hold(scn, stance, boom, anchor, polished,
-                                                          p4):
-            pose, probabilities = polished, p4
-    return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)
+    return plan_sampled(scn, cfg, progress, exclude, memo)
 
 
 def segmented(cfg: FootstepConfig) -> bool:
@@ -541,27 +238,8 @@ def _memory(memo: FootstepMemo) -> tuple[float, float]:
     return peak_memory_mb(), kept / 2.0 ** 20
 
 
-def explored_stances(scn: Scenario, result: SearchResult[Stance4],
-                     start_pose: np.ndarray) -> tuple[list[Explored], list[Explored]]:
-    """The expanded stances in order, and the frontier (reached by a feasible transition but
-    never expanded), each with the pose it was reached at."""
-    expanded = {node: k for k, node in enumerate(result.expanded)}
-    explored, frontier = [], []
-    for node, k in expanded.items():
-        pose = start_pose if k == 0 else (result.node_data or {}).get(node, start_pose)
-        explored.append(Explored(node, np.asarray(pose, dtype=float), k,
-                                 goal_distance(scn, node)))
-    for _parent, node, data in result.graph.edges(data="data"):
-        if node not in expanded and data is not None:
-            frontier.append(Explored(node, np.asarray(data, dtype=float), -1,
-                                     goal_distance(scn, node)))
-            expanded[node] = -1
-    return explored, frontier
-
-
-class _Goal(NamedTuple):
-    pose: np.ndarray
-
-
-def _as_goal(pose: np.ndarray | None) -> Any:
-    return _Goal(pose) if pose is not None else None
+# What the footstep stage exports: the configuration and the plan types (planning.footstep_plan),
+# the searches, and the sampled search's helpers the pipeline and the tests use.
+__all__ = ["ORDERINGS", "SEARCHES", "Explored", "FootstepConfig", "FootstepMemo", "FootstepPlan",
+           "Step", "candidate_moves", "edge_rng", "expansion_budget", "explored_stances",
+           "goal_pose_in", "plan_footsteps", "plan_sampled", "polished_step", "segmented"]

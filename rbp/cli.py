@@ -443,14 +443,16 @@ def build_parser() -> argparse.ArgumentParser:
                            "per metre from the start to the goal if more)")
     plan.add_argument("--search", choices=("complete", "hybrid", "sampled"),
                       help="footstep search: complete (default; on the 2 cm x 2.5 deg pose "
-                           "lattice: finds a route whenever one exists there, and proves it "
-                           "when none does), sampled (the search before the complete one) or "
+                           "lattice: finds a route whenever one passes through its points, "
+                           "and where none does, searches the 1 cm x 1.25 deg lattice too "
+                           "(footstep.refine)), sampled (the search before the complete one) or "
                            "hybrid (sampling for 150 expansions, then the complete search)")
     plan.add_argument("--thorough", action="store_true",
                       help="the oracle: the complete search without an expansion budget, on "
                            "to the optimal route (the lowest search cost, proved) or a proof "
-                           "that none exists; with --time-limit, the best route found and how "
-                           "far from the optimum it is proved to be")
+                           "that none passes through the lattices' points; with --time-limit, "
+                           "the best route found and how far from the optimum it is proved "
+                           "to be")
     plan.add_argument("--min-success", type=float, metavar="P",
                       help="the route with the fewest regrasps whose predicted success (the "
                            "search's, exp(-cost)) is at least P, or the proof that none "

@@ -223,7 +223,7 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
 STOP_REASONS: dict[str, str] = {
     Stop.BUDGET: "stopped on its budget (max_expansions or time_limit reached): no claim",
     Stop.EXHAUSTED: "exhausted: every stance it could reach was expanded (not a proof)",
-    Stop.NOROUTE: "proved no route at the lattice's resolution",
+    Stop.NOROUTE: "proved no route through the lattice's points",
     Stop.NOSTART: "the start pose joins no lattice pose of its stance",
 }
 
@@ -290,9 +290,14 @@ def search_figure(scn: Scenario, fp):
                 label=f"partial route (rbp plan --partial): {n} regrasp{'' if n == 1 else 's'} "
                       "to the nearest stance, through its transition poses")
     why = STOP_REASONS.get(getattr(fp, "stop", "") or "", "stopped")
+    refined = getattr(fp, "refined", ())
     if getattr(fp, "stop", "") == Stop.NOROUTE:
         lattice = _lattice_of(fp)
-        why += f" ({lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg)"
+        why += f" ({lattice.position_step * 100:g} cm / {lattice.angle_step_deg:g} deg"
+        why += ", nor the coarser before it)" if refined else ")"
+    elif refined:  # the coarse lattice had no route; the finer one stopped
+        why += (f" (on the refined lattice {refined[-1].position_step * 100:g} cm / "
+                f"{refined[-1].angle_step_deg:g} deg; no route on the coarser)")
     ax.plot([], [], ls="none", label=f"search {why}")
     draw.frame_axes(ax, scn)
     handles, labels = ax.get_legend_handles_labels()

@@ -27,6 +27,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Collection
+from typing import Any
 
 import numpy as np
 
@@ -144,8 +145,8 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
             1e-3, cfg.time_limit - (time.perf_counter() - t0))
         result = _search_lattice(
             scn, dataclasses.replace(asked, lattice=lattices[level], time_limit=left),
-            dataclasses.replace(cfg, lattice=lattices[level], time_limit=left), progress,
-            exclude, memo, partial)
+            dataclasses.replace(cfg, lattice=lattices[level], time_limit=left),
+            _counted_on(progress, refuted), exclude, memo, partial)
         if result.stop not in (Stop.NOROUTE, Stop.EXHAUSTED) or level == len(lattices) - 1:
             break
         refuted.append(Refuted(lattices[level], excluded, result.expansions,
@@ -197,6 +198,20 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                         memo,
                         result.cost, result.lower_bound, result.first_cost, result.history,
                         result.quality, cfg.min_success, peak, kept, refined=refined)
+
+
+def _counted_on(progress: Callable[..., None] | None,
+                refuted: list[Refuted]) -> Callable[..., None] | None:
+    """`progress`, its expansions and transitions counted on from the lattices refuted before
+    (as the plan's search record counts them)."""
+    if progress is None or not refuted:
+        return progress
+    done = sum(r.expansions for r in refuted), sum(r.transitions_tested for r in refuted)
+
+    def counted(expansions: int, tested: int, *args: Any, **kwargs: Any) -> None:
+        progress(expansions + done[0], tested + done[1], *args, **kwargs)
+
+    return counted
 
 
 def _search_lattice(scn: Scenario, asked: FootstepConfig, cfg: FootstepConfig,

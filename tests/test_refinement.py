@@ -113,3 +113,13 @@ def test_no_route_on_either_lattice_says_both() -> None:
 def test_min_success_answers_on_the_lattice_asked(shaft71: Scenario) -> None:
     fp = plan_footsteps(shaft71, FootstepConfig(min_success=0.5))
     assert fp.refined == () and fp.stop == Stop.NOROUTE, (fp.stop, fp.reason)
+
+
+def test_progress_counts_on_across_the_lattices(shaft71: Scenario) -> None:
+    seen: list[tuple[int, int]] = []
+    fp = plan_footsteps(shaft71, FootstepConfig(anytime=None),
+                        progress=lambda n, t, *_, **__: seen.append((n, t)))
+    assert fp.success and fp.refined == (FINE,)
+    expansions = [n for n, _ in seen]
+    assert expansions == sorted(expansions), "the count went back at the refined lattice"
+    assert max(expansions) <= fp.expansions, (max(expansions), fp.expansions)

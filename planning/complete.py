@@ -125,7 +125,7 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
     excluded = {(tuple(st), int(j), a) for st, j, a in exclude}
     start: Stance4 = tuple(scn.start_stance)  # type: ignore[assignment]
     start_lat = stance_components(scn, memo, start, cfg, ignore_grasps)
-    joined = start_components(scn, start_lat, cfg)
+    joined = start_components(scn, start_lat, cfg, cell_steps=config.start_cell_steps)
     graph = SearchGraph()
     tested = 0
 

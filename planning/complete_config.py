@@ -73,4 +73,7 @@ class CompleteConfig:
     max_expansions: int | None = None  # stop with Stop.BUDGET after this many; None: no limit
     time_limit: float | None = None    # s: stop with Stop.BUDGET after it; None: no limit
     ignore_grasps: bool = False        # decide poses without the grasps' probabilities
+    # the start joins the lattice poses at the corners of its cell, and of the cells of 2, 4,
+    # ... this many steps (a refined lattice: those of the coarser, planning.refinement)
+    start_cell_steps: int = 1
     anytime: AnytimeConfig | None = None  # after the first route, better ones; None: first

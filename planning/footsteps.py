@@ -52,6 +52,7 @@ from planning.lattice_search import (
     stance4,
 )
 from planning.refinement import (
+    REFINED_STOPS,
     Refuted,
     finer_lattices,
     fresh_memo,
@@ -146,11 +147,11 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
         result = _search_lattice(
             scn, dataclasses.replace(asked, lattice=lattices[level], time_limit=left),
             dataclasses.replace(cfg, lattice=lattices[level], time_limit=left),
-            _counted_on(progress, refuted), exclude, memo, partial)
-        if result.stop not in (Stop.NOROUTE, Stop.EXHAUSTED) or level == len(lattices) - 1:
+            _counted_on(progress, refuted), exclude, memo, partial, 2 ** level)
+        if result.stop not in REFINED_STOPS or level == len(lattices) - 1:
             break
         refuted.append(Refuted(lattices[level], excluded, result.expansions,
-                               result.transitions_tested))
+                               result.transitions_tested, result.stop))
         memo.refinement.refuted.append(refuted[-1])
         memo.lattice = fresh_memo(memo.lattice)  # the next lattice's; this one is refuted
         level += 1
@@ -217,19 +218,23 @@ def _counted_on(progress: Callable[..., None] | None,
 def _search_lattice(scn: Scenario, asked: FootstepConfig, cfg: FootstepConfig,
                     progress: Callable[..., None] | None,
                     exclude: Collection[tuple[tuple[str, ...], int, str]],
-                    memo: FootstepMemo, partial: bool) -> CompleteResult:
+                    memo: FootstepMemo, partial: bool, start_cell_steps: int = 1
+                    ) -> CompleteResult:
     """One complete (or constrained, or segmented) search on `cfg.lattice` (`asked`: the
-    configuration as given, `cfg` with its budget for this climb)."""
+    configuration as given, `cfg` with its budget for this climb); the start joins the poses
+    of its cell of `start_cell_steps` steps too (the base lattice's, once refined)."""
     if cfg.min_success is not None:
         return constrained_search(scn, cfg.min_success, cfg.complete_config(),
                                   exclude=exclude, memo=memo.lattice, progress=progress)
     if segmented(asked):
         assert asked.segments is not None
-        return segmented_search(scn, asked.complete_config(), asked.segments,
-                                lambda part: expansion_budget(part, asked), exclude=exclude,
-                                memo=memo.lattice, progress=progress, partial=partial)
-    return complete_search(scn, cfg.complete_config(), exclude=exclude, memo=memo.lattice,
-                           progress=progress, partial=partial)
+        return segmented_search(
+            scn, dataclasses.replace(asked.complete_config(), start_cell_steps=start_cell_steps),
+            asked.segments, lambda part: expansion_budget(part, asked), exclude=exclude,
+            memo=memo.lattice, progress=progress, partial=partial)
+    return complete_search(
+        scn, dataclasses.replace(cfg.complete_config(), start_cell_steps=start_cell_steps),
+        exclude=exclude, memo=memo.lattice, progress=progress, partial=partial)
 
 
 def _route_steps(scn: Scenario, cfg: FootstepConfig, stances: list[Stance4],

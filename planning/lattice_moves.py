@@ -219,16 +219,23 @@ def vertex_moves(scn: Scenario, lat: Component, stance: tuple,
 
 
 def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
-                     link_step: float = 0.005) -> dict[int, np.ndarray]:
+                     link_step: float = 0.005, cell_steps: int = 1) -> dict[int, np.ndarray]:
     """The components the start pose is joined to, each with the lattice pose it joins: a
     feasible lattice pose of a neighbouring cell (within one step in x, y and phi) whose
-    straight segment from the start pose is feasible every `link_step` m or rad."""
+    straight segment from the start pose is feasible every `link_step` m or rad. With
+    `cell_steps` 2^k, the corners of the cells of 2, 4, ... 2^k steps about it too (those of a
+    lattice 2^k times coarser, `planning.refinement`: a finer lattice joins the start wherever
+    the coarser did)."""
     start = np.asarray(scn.start_pose, dtype=float)
     out: dict[int, np.ndarray] = {}
-    base = np.floor(start / np.array([cfg.position_step, cfg.position_step,
-                                      cfg.angle_step])).astype(np.int64)
-    corners = np.array(list(itertools.product((0, 1), repeat=3))) + base
-    keys = pack(corners, cfg.angle_count)
+    step = np.array([cfg.position_step, cfg.position_step, cfg.angle_step])
+    unit = np.array(list(itertools.product((0, 1), repeat=3)))
+    corners = []
+    size = 1
+    while size <= max(1, cell_steps):
+        corners.append(unit * size + np.floor(start / (step * size)).astype(np.int64) * size)
+        size *= 2
+    keys = np.unique(pack(np.vstack(corners), cfg.angle_count))
     held = []  # (robustness, component, pose) of each feasible corner
     for key, comp in zip(keys, lat.component_of(keys), strict=True):
         if comp >= 0:

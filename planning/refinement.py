@@ -4,7 +4,8 @@ The complete search decides reachability over the points of one world-fixed pose
 "no route at 2 cm / 2.5 deg" says only that no route passes through those points: a move that
 holds in a sliver of poses thinner than a cell (a shoulder limit on one side, P < p_min on the
 other) can fall between them, and the same cave moved by a fraction of a cell can then plan.
-So where the search exhausts its lattice without a route, it is searched again on the lattice
+So where the search exhausts its lattice without a route (or finds the start pose joined to none
+of its points), it is searched again on the lattice
 of half the steps (position and angle; every coarse point is a point of the finer lattice),
 `FootstepConfig.refine` times at most, coarse to fine. The answer is a route from the finest
 lattice searched, or "no route" at every lattice tried, or a budget stop on a finer one
@@ -24,6 +25,10 @@ from planning.lattice import ANGLE_STEP_RANGE, POSITION_STEP_RANGE, LatticeConfi
 from planning.lattice_search import CompleteResult, LatticeMemo
 from planning.search_outcome import Stop
 from rb_drake.scenario import Scenario
+
+# the answers a finer lattice may change: no route through the points, with or without moves
+# excluded, and a start pose joined to none of them (the start's cell holds no pose it reaches)
+REFINED_STOPS = (Stop.NOROUTE, Stop.EXHAUSTED, Stop.NOSTART)
 
 
 def finer_lattices(scn: Scenario, base: LatticeConfig, levels: int) -> list[LatticeConfig]:
@@ -48,12 +53,20 @@ def resolution_text(cfg: LatticeConfig) -> str:
 
 @dataclasses.dataclass(frozen=True)
 class Refuted:
-    """A lattice searched without a route: under `excluded` moves, in `expansions`."""
+    """A lattice searched without a route: under `excluded` moves, in `expansions`; `stop`
+    says how (no route through its points, or a start joined to none of them)."""
 
     lattice: LatticeConfig
     excluded: frozenset
     expansions: int
     transitions_tested: int
+    stop: Stop = Stop.NOROUTE
+
+    def text(self) -> str:
+        if self.stop == Stop.NOSTART:
+            return f"{resolution_text(self.lattice)} (the start joined to none of its poses)"
+        n = self.expansions
+        return f"{resolution_text(self.lattice)} ({n} {'vertex' if n == 1 else 'vertices'})"
 
 
 @dataclasses.dataclass
@@ -83,15 +96,17 @@ def refined_result(result: CompleteResult, refuted: list[Refuted],
                     lattice: LatticeConfig) -> CompleteResult:
     """The result on `lattice`, its work counting the coarser lattices' and its reason
     saying where they found no route."""
-    where = ", ".join(f"{resolution_text(r.lattice)} ({r.expansions} "
-                      f"{'vertex' if r.expansions == 1 else 'vertices'})" for r in refuted)
+    where = ", ".join(r.text() for r in refuted)
     reason = result.reason
+    head = "no route at resolution "
     if result.stop in (Stop.NOROUTE, Stop.EXHAUSTED):
-        reason = (f"no route at resolution {where} nor, refined, at "
-                  + reason.removeprefix("no route at resolution "))
+        reason = (f"{head}{where} nor, refined, at " + reason.removeprefix(head)
+                  if reason.startswith(head)
+                  else f"{head}{where} nor, refined, at {resolution_text(lattice)}: {reason}")
+    elif result.stop == Stop.BUDGET:
+        reason = f"{head}{where}; refined to {resolution_text(lattice)}, the search {reason}"
     elif not result.success:
-        reason = (f"no route at resolution {where}; refined to {resolution_text(lattice)}, "
-                  f"the search {reason}")
+        reason = f"{head}{where}; refined to {resolution_text(lattice)}: {reason}"
     return result._replace(
         reason=reason,
         expansions=result.expansions + sum(r.expansions for r in refuted),
@@ -99,5 +114,5 @@ def refined_result(result: CompleteResult, refuted: list[Refuted],
                                                            for r in refuted))
 
 
-__all__ = ["RefinementState", "Refuted", "finer_lattices", "fresh_memo", "refined_result",
-           "resolution_text"]
+__all__ = ["REFINED_STOPS", "RefinementState", "Refuted", "finer_lattices", "fresh_memo",
+           "refined_result", "resolution_text"]

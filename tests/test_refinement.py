@@ -123,3 +123,45 @@ def test_progress_counts_on_across_the_lattices(shaft71: Scenario) -> None:
     expansions = [n for n, _ in seen]
     assert expansions == sorted(expansions), "the count went back at the refined lattice"
     assert max(expansions) <= fp.expansions, (max(expansions), fp.expansions)
+
+
+def test_a_start_joined_to_no_lattice_pose_is_refined_too() -> None:
+    """Benchmark crevasse 78 moved by less than a cell (the rigid-motion run's second copy):
+    its start pose joins no pose of the 2 cm / 2.5 deg lattice, and the 1 cm / 1.25 deg one
+    climbs it, as the unmoved cave climbs on the coarse lattice."""
+    import math
+
+    from experiments.common import make_cave
+    from experiments.rigid_motion import moved_scenario, rigid_motion
+
+    rng = np.random.default_rng([78, 30])
+    motion = [rigid_motion(rng) for _ in range(2)][-1]
+    scn = moved_scenario(make_cave("crevasse", 78, (4.5, 5.0)), *motion)
+    assert abs(math.degrees(motion[0])) < 2.5
+    lattice = plan_footsteps(scn, FootstepConfig(refine=0, anytime=None))
+    assert lattice.stop == Stop.NOSTART, (lattice.stop, lattice.reason)
+    fp = plan_footsteps(scn, FootstepConfig(anytime=None))
+    assert fp.success and fp.refined == (FINE,), (fp.stop, fp.reason)
+
+
+def test_a_refined_start_joins_wherever_the_coarse_one_did(shaft71: Scenario) -> None:
+    """The start joins the corners of the coarse cell too (`start_cell_steps`): every
+    component the coarse lattice joins holds a pose the fine lattice joins."""
+    from planning.lattice_moves import start_components
+    from planning.lattice_search import LatticeMemo, stance_components
+
+    coarse_memo, fine_memo = LatticeMemo(), LatticeMemo()
+    coarse_memo.bind(shaft71, BASE, False)
+    fine_memo.bind(shaft71, FINE, False)
+    stance = tuple(shaft71.start_stance)
+    coarse = start_components(shaft71, stance_components(shaft71, coarse_memo, stance, BASE,
+                                                         False), BASE)
+    fine_lat = stance_components(shaft71, fine_memo, stance, FINE, False)
+    fine = start_components(shaft71, fine_lat, FINE, cell_steps=2)
+    assert coarse, "the start joins the coarse lattice"
+    joined = {tuple(np.round(p, 9)) for p in fine.values()}
+    for pose in coarse.values():
+        comp = int(fine_lat.component_of(pack(np.round(np.asarray(pose) / np.array(
+            [FINE.position_step, FINE.position_step, FINE.angle_step])).astype(np.int64),
+            FINE.angle_count))[0])
+        assert comp in fine, (pose, comp, joined)

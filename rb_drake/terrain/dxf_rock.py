@@ -232,17 +232,22 @@ def _closed_chains(strokes: list[tuple[str, str, Ring]]
         ends.append((a, b))
         for p in (a, b):
             at.setdefault(p, []).append(k)
-    used = [False] * len(strokes)
+    used = [False] * len(strokes)  # in a closed chain: rock
+    # walked once: a walk that does not close met a joint of other than two strokes, so none
+    # of the strokes it passed closes either (each stroke is walked once: linear in strokes)
+    walked = [False] * len(strokes)
     chains: list[tuple[str, Ring]] = []
     for first in range(len(strokes)):
-        if used[first] or ends[first][0] == ends[first][1]:
+        if walked[first] or ends[first][0] == ends[first][1]:
             continue
         ring, order, k, joint = list(strokes[first][2]), [first], first, ends[first][1]
+        walked[first] = True
         while joint != ends[first][0]:
             nxt = [j for j in at[joint] if j != k]
-            if len(at[joint]) != 2 or not nxt or used[nxt[0]] or nxt[0] in order:
-                break  # an open end, a branch, or a stroke of another chain
+            if len(at[joint]) != 2 or not nxt or walked[nxt[0]]:
+                break  # an open end, a branch, or a stroke walked before
             k = nxt[0]
+            walked[k] = True
             line = strokes[k][2] if ends[k][0] == joint else strokes[k][2][::-1]
             joint = ends[k][1] if ends[k][0] == joint else ends[k][0]
             ring += line[1:]

@@ -20,7 +20,6 @@ import multiprocessing
 import os
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +28,7 @@ from experiments.arguments import MAX_TRIALS, MAX_WORKERS, OneLineParser, whole
 from experiments.common import ROUTE_VARIANTS, cave_kind, make_cave, variant_config
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
+from rb_drake.files import atomic_write_text
 
 MAX_MOTIONS = 100
 CELL = (0.02, 2.5)  # the default lattice's steps: m, deg
@@ -96,13 +96,12 @@ def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
     """Per variant: caves whose copies all got the same answer (a route or none), and those
     that did not: where a copy's answer was a proof against another's route (`noroute`, the
     lattice's doing) and where it was a budget stop (the search's effort)."""
+    def name(c: dict[str, Any]) -> str:
+        return f"{c['kind']} {c['seed']}"
+
     out: dict[str, Any] = {}
     for v in variants:
         changed = [c for c in caves if len({r["success"] for r in c[v]}) > 1]
-
-        def name(c: dict[str, Any]) -> str:
-            return f"{c['kind']} {c['seed']}"
-
         proofs = [name(c) for c in changed if any(r["stop"] == "noroute" for r in c[v])]
         out[v] = {"caves": len(caves),
                   "routes_unmoved": sum(c[v][0]["success"] for c in caves),
@@ -156,11 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {"variants": variants, "machine": machine_info(), "args": vars(args),
               "wall_seconds": time.perf_counter() - t0, "summary": summary(caves, variants),
               "caves": caves}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    tmp.replace(out)
+    out = atomic_write_text(args.out, json.dumps(result, indent=1) + "\n")
     print(json.dumps(result["summary"], indent=1))
     print(f"wrote {out}")
     return EXIT_OK

@@ -134,7 +134,7 @@ def rate_problem(phase: BodyPhase, config: RigLcmConfig, index: int) -> RigInput
     gaps = np.diff(times)
     if not len(gaps):
         return None
-    tensions = np.array([phase.tension.value(t).ravel() for t in times])  # (K, 4)
+    tensions = phase.tension.vector_values(times).T  # (K, 4)
     # a released or attached boom's command is clamped as the rig clamps it (down to 0 N)
     low = np.array([0.0 if i in phase.ramped else phase.scenario.robot.boom_tension[0]
                     for i in range(4)])
@@ -145,7 +145,7 @@ def rate_problem(phase: BodyPhase, config: RigLcmConfig, index: int) -> RigInput
     sub = max(2, min(16, math.ceil(float(gaps.max()) / config.period)))
     u = np.linspace(0.0, 1.0, sub + 1)
     t = (times[:-1, None] + gaps[:, None] * u[None, :]).ravel()
-    poses = np.array([phase.pose.value(x).ravel() for x in t])
+    poses = phase.pose.vector_values(t).T  # (samples, 3), in one call
     length = geometry.boom_geometry(phase.scenario.robot, poses,
                                     phase.stance.positions).length.reshape(len(gaps), sub + 1, 4)
     length = np.clip(length, *phase.scenario.robot.boom_length)

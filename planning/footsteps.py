@@ -139,7 +139,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     lattices = finer_lattices(scn, cfg.lattice, cfg.refine if cfg.min_success is None else 0)
     excluded = frozenset((tuple(st), int(j), a) for st, j, a in exclude)
     level = memo.refinement.first_open(lattices, excluded)
-    refuted = [r for r in memo.refinement.refuted if r.lattice in lattices[:level]]
+    refuted = memo.refinement.refutations(lattices, level, excluded)
     while True:
         # a time limit holds for all the lattices together
         left = None if cfg.time_limit is None else max(

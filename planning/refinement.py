@@ -85,6 +85,15 @@ class RefinementState:
         return level
 
 
+    def refutations(self, lattices: list[LatticeConfig], level: int,
+                    excluded: frozenset) -> list[Refuted]:
+        """For each of `lattices[:level]` (`first_open`'s level), the refutation it skips on:
+        one per lattice, though a lattice searched again under other exclusions has two."""
+        return [next(r for r in reversed(self.refuted)
+                     if r.lattice == lattice and r.excluded <= excluded)
+                for lattice in lattices[:level]]
+
+
 def fresh_memo(like: LatticeMemo) -> LatticeMemo:
     """An empty memo with `like`'s memory cap, for the next lattice (a memo serves one)."""
     memo = LatticeMemo()

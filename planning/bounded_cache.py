@@ -9,7 +9,10 @@ entries once its values exceed `cap_bytes`, and rebuilds a dropped entry when it
 again. What it keeps of a dropped entry (its *tombstone*, from `tombstone(value)`) is what the
 rebuild needs to give back the same value: for a stance's components, the lattice poses its
 components were grown from, in order, so that they are numbered as before (a search's vertex
-names its component by number).
+names its component by number). The keys and tombstones of dropped entries count against the
+cap too (`kept_bytes`): a cache given a `KeyCodec` keeps its dropped keys (whose tombstones are
+None) as exact integer codes in about 16 bytes each (`planning.compact_keys`), the others as
+they are, counted at `DROPPED_KEY_BYTES` a key plus their tombstone's `tombstone_size`.
 
 A cache that can pack its values (`pack`, `unpack`: the search's components, move tables and
 transitions, by `planning.packing`; a stance's components to about a fifth) keeps the entries
@@ -42,6 +45,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
+from planning.compact_keys import CompactKeys, KeyCodec
+
 K = TypeVar("K", bound=Hashable)
 V = TypeVar("V")
 
@@ -73,6 +78,10 @@ def array_bytes(value: Any) -> int:
     return sum(v.nbytes for v in value if isinstance(v, np.ndarray))
 
 
+# what a dropped entry's key holds in the dict of dropped keys (a tuple of a few fields and its
+# dict slot), counted with its tombstone's `tombstone_size`
+DROPPED_KEY_BYTES = 160
+
 PACKED_SHARE = 2.0 / 3.0  # of the cap, the most that packed entries may hold
 # what a packed entry holds besides its bytes (its slots in the cache's and the pool's dicts,
 # its tuples, the bytes object's header; measured by tracemalloc: about 350), counted with them
@@ -99,6 +108,7 @@ class MemoryPool:
         self._packed: OrderedDict[tuple[str, Hashable], BoundedCache[Any, Any]] = OrderedDict()
         self.total_bytes = 0   # live entries
         self.packed_bytes = 0  # packed entries
+        self.kept_bytes = 0    # dropped entries' keys and tombstones (never dropped themselves)
         self.peak_bytes = 0
         # resident bytes the whole process should keep within (None: not watched), and the
         # cap lowered to keep it there (module doc)
@@ -117,17 +127,21 @@ class MemoryPool:
         if self.process_budget is not None and self._uses % GOVERNOR_EVERY == 0:
             self._watch_process(self.process_budget)
         cap = self.cap_bytes if self.lowered_cap is None else self.lowered_cap
-        if cap is not None and self.total_bytes + self.packed_bytes > cap:
+        if cap is not None and self.held_bytes > cap:
             self._shrink(cap)
-        self.peak_bytes = max(self.peak_bytes, self.total_bytes + self.packed_bytes)
+        self.peak_bytes = max(self.peak_bytes, self.held_bytes)
+
+    @property
+    def held_bytes(self) -> int:
+        """Everything counted against the cap: live and packed entries, dropped keys."""
+        return self.total_bytes + self.packed_bytes + self.kept_bytes
 
     def _watch_process(self, budget: float) -> None:
         """Lower the cap by the process's excess over `budget`, or raise it by its room."""
         resident = resident_memory_bytes()
         if resident is None:
             return
-        held = self.total_bytes + self.packed_bytes
-        cap = held + budget - resident
+        cap = self.held_bytes + budget - resident
         if self.cap_bytes is not None and cap >= self.cap_bytes:
             self.lowered_cap = None
             return
@@ -143,7 +157,7 @@ class MemoryPool:
         self.packed_bytes -= nbytes
 
     def _shrink(self, cap: float) -> None:
-        while self.total_bytes + self.packed_bytes > cap:
+        while self.held_bytes > cap:
             if self._packed and (self.packed_bytes > PACKED_SHARE * cap
                                  or len(self._order) <= self.protected):
                 (_, key), owner = self._packed.popitem(last=False)
@@ -159,9 +173,9 @@ class MemoryPool:
                 return
 
     def stats(self) -> dict[str, float]:
-        return {"bytes": self.total_bytes + self.packed_bytes, "peak_bytes": self.peak_bytes,
+        return {"bytes": self.held_bytes, "peak_bytes": self.peak_bytes,
                 "live": len(self._order), "packed": len(self._packed),
-                "packed_bytes": self.packed_bytes} | (
+                "packed_bytes": self.packed_bytes, "kept_bytes": self.kept_bytes} | (
                     {} if self.lowest_cap is None else {"lowest_cap": self.lowest_cap})
 
 
@@ -173,7 +187,9 @@ class BoundedCache(Generic[K, V]):
     `unpack(key, bytes)`, if given, keep an entry packed before it is dropped (`MemoryPool`);
     `unpack` must give back a value equal to the one packed. An unpacked entry keeps its
     packed bytes (counted as its own), so that packing it again costs nothing while
-    `version(value)` is unchanged (a value that grows must change its version)."""
+    `version(value)` is unchanged (a value that grows must change its version). `codec`: the
+    keys' exact integer codes, to keep dropped keys compact (its tombstones must be None);
+    `tombstone_size(tombstone)`: the bytes a kept tombstone holds (module doc)."""
 
     def __init__(self, size: Callable[[V], int], rebuild: Callable[[K, Any], V],
                  tombstone: Callable[[V], Any] = lambda value: None,
@@ -181,7 +197,9 @@ class BoundedCache(Generic[K, V]):
                  name: str = "", grows: bool = False,
                  pack: Callable[[V], bytes] | None = None,
                  unpack: Callable[[K, bytes], V] | None = None,
-                 version: Callable[[V], Hashable] = lambda value: None) -> None:
+                 version: Callable[[V], Hashable] = lambda value: None,
+                 codec: KeyCodec | None = None,
+                 tombstone_size: Callable[[Any], int] = lambda tombstone: 0) -> None:
         self._size, self._rebuild, self._tombstone = size, rebuild, tombstone
         if (pack is None) != (unpack is None):
             raise ValueError("a cache that packs its entries must unpack them too")
@@ -193,6 +211,11 @@ class BoundedCache(Generic[K, V]):
         self._packed: dict[K, tuple[bytes, Any]] = {}  # key -> (packed value, tombstone)
         self._kept: dict[K, tuple[bytes, Hashable]] = {}  # unpacked: (its bytes, version)
         self._dropped: dict[K, Any] = {}
+        self._codec, self._tombstone_size = codec, tombstone_size
+        self._codes = CompactKeys()  # dropped keys, with a codec
+        self._codes_bytes = 0  # what they held when last counted
+        self._known = 0  # keys ever stored
+        self.kept_bytes = 0  # what the dropped keys and tombstones hold
         self.total_bytes = 0
         self.peak_bytes = 0
         self.drops = 0
@@ -205,15 +228,28 @@ class BoundedCache(Generic[K, V]):
         return self.pool.cap_bytes
 
     def __len__(self) -> int:
-        return len(self._live) + len(self._packed) + len(self._dropped)
+        return self._known
 
     def __contains__(self, key: object) -> bool:
-        return key in self._live or key in self._packed or key in self._dropped
+        return key in self._live or key in self._packed or key in self._dropped or \
+            self._coded(key)
+
+    def _coded(self, key: object) -> bool:
+        """Whether `key` is among the compact dropped keys (and not live or packed again)."""
+        return bool(self._codes) and self._codec is not None and \
+            self._codec.encode(key) in self._codes
 
     def __iter__(self) -> Iterator[K]:
         yield from list(self._live)
         yield from list(self._packed)
         yield from list(self._dropped)
+        if self._codec is not None:
+            codes = list(self._codes)
+            self._sync_codes()
+            for code in codes:
+                key = self._codec.decode(code)
+                if key not in self._live and key not in self._packed:
+                    yield key
 
     def items(self) -> Iterator[tuple[K, V]]:
         for key in list(self):
@@ -236,11 +272,15 @@ class BoundedCache(Generic[K, V]):
             return value
         if key in self._dropped:
             tomb = self._dropped.pop(key)
-            value = self._rebuild(key, tomb)
-            self.rebuilds += 1
-            self._store(key, value)
-            return value
-        return default
+            self._kept_change(-(DROPPED_KEY_BYTES + self._tombstone_size(tomb)))
+        elif self._coded(key):
+            tomb = None  # the code stays: this cache looks in its live entries first
+        else:
+            return default
+        value = self._rebuild(key, tomb)
+        self.rebuilds += 1
+        self._store(key, value)
+        return value
 
     def __getitem__(self, key: K) -> V:
         value = self.get(key, _MISSING)
@@ -249,7 +289,11 @@ class BoundedCache(Generic[K, V]):
         return value
 
     def __setitem__(self, key: K, value: V) -> None:
-        self._dropped.pop(key, None)
+        if key not in self:
+            self._known += 1
+        if key in self._dropped:
+            tomb = self._dropped.pop(key)
+            self._kept_change(-(DROPPED_KEY_BYTES + self._tombstone_size(tomb)))
         if key in self._packed:
             blob, _ = self._packed.pop(key)
             self.pool.unpacked(self, key, packed_size(blob))
@@ -288,20 +332,44 @@ class BoundedCache(Generic[K, V]):
                 self.packs += 1
             self._packed[key] = (blob, self._tombstone(value))
             return size, packed_size(blob)
-        self._dropped[key] = self._tombstone(value)
-        self.drops += 1
+        self._forget(key, self._tombstone(value))
         return size, None
 
     def drop_packed(self, key: K) -> int:
         """Drop packed `key`, keeping its tombstone: the bytes it held."""
         blob, tomb = self._packed.pop(key)
-        self._dropped[key] = tomb
-        self.drops += 1
+        self._forget(key, tomb)
         return packed_size(blob)
+
+    def _forget(self, key: K, tomb: Any) -> None:
+        """Keep only `key` (compact, with a codec) and its tombstone."""
+        self.drops += 1
+        if self._codec is not None:
+            if tomb is not None:
+                raise ValueError(f"cache {self.name!r} keeps compact keys: its tombstones "
+                                 "must be None")
+            self._codes.add(self._codec.encode(key))
+            self._sync_codes()
+            return
+        self._dropped[key] = tomb
+        self._kept_change(DROPPED_KEY_BYTES + self._tombstone_size(tomb))
+
+    def _sync_codes(self) -> None:
+        """Count what the compact keys hold now (merging pending codes shrinks them)."""
+        now = self._codes.nbytes
+        self._kept_change(now - self._codes_bytes)
+        self._codes_bytes = now
+
+    def _kept_change(self, grew: int) -> None:
+        self.kept_bytes += grew
+        self.pool.kept_bytes += grew
 
     def stats(self) -> dict[str, float]:
         """Bytes held now and at most, entries held and dropped, drops and rebuilds."""
+        dropped = len(self._dropped) + len(self._codes)
+        self._sync_codes()
         return {"bytes": self.total_bytes, "peak_bytes": self.peak_bytes,
                 "live": len(self._live), "packed": len(self._packed),
-                "dropped": len(self._dropped), "drops": self.drops, "rebuilds": self.rebuilds,
+                "dropped": dropped, "kept_bytes": self.kept_bytes,
+                "drops": self.drops, "rebuilds": self.rebuilds,
                 "packs": self.packs, "unpacks": self.unpacks}

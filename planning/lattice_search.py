@@ -23,6 +23,7 @@ import numpy as np
 
 from planning.astar import SearchResult
 from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes
+from planning.compact_keys import KeyCodec, mixed_radix, split_radix
 from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, span_problem, unpack
 from planning.lattice_moves import (
@@ -38,6 +39,7 @@ from planning.lattice_moves import (
 from planning.search_outcome import Quality, Stop
 from rb_drake.errors import RbpInputError
 from rb_drake.kernel.threads import held_kernel_threads
+from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 
 Stance4 = tuple[str, str, str, str]
@@ -90,17 +92,22 @@ class LatticeMemo:
         self._scn: Scenario | None = None
         self._ignore_grasps = False
         self.pool = MemoryPool()
+        # a stance's dropped components keep their seeds: a list of ints, 36 bytes each
         self.components: BoundedCache[tuple, StanceComponents] = BoundedCache(
             lambda sc: sc.nbytes + COMPONENTS_BYTES, self._components_again, lambda sc: sc.seeds,
             pool=self.pool, name="components", grows=True, pack=StanceComponents.packed,
-            unpack=self._components_unpacked, version=lambda sc: len(sc.seeds))
+            unpack=self._components_unpacked, version=lambda sc: len(sc.seeds),
+            tombstone_size=lambda seeds: 56 + 36 * len(seeds))
+        # transitions and move tables are dropped to their keys alone, kept compact
         self.transitions: BoundedCache[tuple, LatticeTransition] = BoundedCache(
             _transition_bytes, self._transition_again, pool=self.pool, name="transitions",
-            pack=pack_transition, unpack=lambda _key, blob: unpack_transition(blob))
+            pack=pack_transition, unpack=lambda _key, blob: unpack_transition(blob),
+            codec=KeyCodec(self._transition_code, self._transition_key))
         self.moves: BoundedCache[Vertex, MoveTable] = BoundedCache(
             _moves_bytes, self._moves_again,
             pool=self.pool, name="moves", pack=pack_moves,
-            unpack=lambda _vertex, blob: unpack_moves(blob))
+            unpack=lambda _vertex, blob: unpack_moves(blob),
+            codec=KeyCodec(self._vertex_code, self._vertex_key))
         self.set_memory(memory_mb)
 
     def set_memory(self, memory_mb: float | None) -> None:
@@ -142,6 +149,35 @@ class LatticeMemo:
         if self._scn is None or self.config is None:
             raise RuntimeError("a memo drops entries only once bound to a scenario")
         return self._scn, self.config
+
+    def _rows(self) -> tuple[dict[str, int], int]:
+        scn, _cfg = self._bound()
+        return scn.anchor_index, len(scn.anchors)
+
+    def _vertex_code(self, vertex: Vertex) -> int:
+        """(stance, component) as an exact integer: the component, then the anchors' rows."""
+        rows, n = self._rows()
+        stance, comp = vertex
+        return mixed_radix([comp] + [rows[a] for a in stance], [n] * len(stance))
+
+    def _vertex_key(self, code: int) -> Vertex:
+        scn, _cfg = self._bound()
+        comp, a, b, c, d = split_radix(code, [len(scn.anchors)] * NUM_BOOMS)
+        ids = [anchor.id for anchor in (scn.anchors[r] for r in (a, b, c, d))]
+        return (ids[0], ids[1], ids[2], ids[3]), comp
+
+    def _transition_code(self, key: tuple) -> int:
+        """(stance, component, boom, anchor) as an exact integer."""
+        rows, n = self._rows()
+        stance, comp, boom, anchor = key
+        return mixed_radix([self._vertex_code((stance, comp)), boom, rows[anchor]],
+                           [NUM_BOOMS, n])
+
+    def _transition_key(self, code: int) -> tuple:
+        scn, _cfg = self._bound()
+        vertex, boom, row = split_radix(code, [NUM_BOOMS, len(scn.anchors)])
+        stance, comp = self._vertex_key(vertex)
+        return stance, comp, boom, scn.anchors[row].id
 
     def _components_again(self, stance: tuple, seeds: list[int]) -> StanceComponents:
         scn, cfg = self._bound()

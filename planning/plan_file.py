@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from planning.plan_model import BODY_SPEED, MAX_STEP_GAP, TURN_SPEED, Plan
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, field_path
 from rb_drake.input_files import InputFileError, load_json, read_text
 
 # bump when the rules change: older stamps then no longer count (3: rule between; 4: rule
@@ -157,12 +157,12 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
         _check_format(plan["format"])
     error = schema_error(plan, quick)
     if error is not None:
-        field = "/".join(str(p) for p in error.absolute_path) or "(top level)"
+        field = field_path(error.absolute_path) or "(top level)"
         raise PlanFileError(field, error.message)
     found = float_integer(plan)  # the schema's "integer" accepts 2.0
     if found is not None:
         path, value = found
-        raise PlanFileError("/".join(map(str, path)), f"expected an integer, got {value!r}")
+        raise PlanFileError(field_path(path), f"expected an integer, got {value!r}")
     check_times(plan)
     return plan
 
@@ -186,7 +186,7 @@ def check_times(plan: dict[str, Any]) -> None:
                 # the simulator and the rig start at 0 s: a plan shifted by 1e7 s simulated
                 # its first 1e7 s of nothing (rbp simulate --no-verify ran for hours)
                 raise PlanFileError(
-                    f"phases/{k}/steps/{n}/t", f"the plan's first step is at {step['t']:.6g} "
+                    f"phases[{k}].steps[{n}].t", f"the plan's first step is at {step['t']:.6g} "
                     f"s: a plan starts within {MAX_STEP_GAP:g} s of 0 s (the planner's at 0)")
             if before is not None:
                 gap = step["t"] - before["t"]
@@ -195,7 +195,7 @@ def check_times(plan: dict[str, Any]) -> None:
                               abs(b[2] - a[2]) / TURN_SPEED)
                 if gap > allowed + GAP_TOL:
                     raise PlanFileError(
-                        f"phases/{k}/steps/{n}/t", f"{gap:.6g} s after the step before: steps "
+                        f"phases[{k}].steps[{n}].t", f"{gap:.6g} s after the step before: steps "
                         f"are at most {MAX_STEP_GAP:g} s apart (longer only for a body move "
                         f"at {BODY_SPEED:g} m/s, {TURN_SPEED:g} rad/s)")
             before = step

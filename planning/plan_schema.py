@@ -67,7 +67,8 @@ def schema_error(plan: Any, quick: bool = False) -> Any:
         return None
     except fastjsonschema.JsonSchemaValueException as e:
         if quick:
-            return QuickError(e.message.removeprefix(e.name or "").strip(), list(e.path[1:]))
+            return QuickError(e.message.removeprefix(e.name or "").strip(),
+                              [int(p) if p.isdigit() else p for p in e.path[1:]])
     import jsonschema
 
     try:

@@ -14,6 +14,7 @@ numbers. Only the standard library is imported: `rbp --help` stays instant.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Final
 
 
@@ -63,3 +64,15 @@ EXIT_INTERRUPTED: Final = 3  # Ctrl-C (or a closed output pipe): no traceback, n
 # The largest seed any reader takes (--seed, a plan's provenance, a configuration, the
 # experiments): numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
 MAX_SEED: Final = 2**63 - 1
+
+
+def field_path(parts: Iterable[str | int]) -> str:
+    """A field's path as every reader names it: names joined by dots, list indices in brackets
+    (`phases[1].steps[0].pose[2]`, `anchors[3].id`)."""
+    out = ""
+    for part in parts:
+        if isinstance(part, int) and not isinstance(part, bool):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out

@@ -348,9 +348,13 @@ def _parse_anchor(rd: _Reader, field: str, raw: Any,
                   ids: tuple[set[str], dict[str, str]], rock: Rock) -> Anchor:
     raw = rd.closed(field, raw, {"id", "position", "normal", "limit", "sigma"})
     aid = rd.require(field, raw, "id")
-    if not isinstance(aid, str | int) or isinstance(aid, bool):
+    if isinstance(aid, int) and not isinstance(aid, bool):
+        # an id read as a number is no longer as written (1_000 is 1000, +5 is 5), and the
+        # start stance and plans name anchors by text: a number is refused, not renamed
+        raise rd.fail(f"{field}.id", f"expected a name, got the number {aid}: quote it "
+                      f"(id: \"...\") so that it is read as written")
+    if not isinstance(aid, str):
         raise rd.fail(f"{field}.id", f"expected a string, got {_describe(aid)}")
-    aid = str(aid)
     _check_id(rd, f"{field}.id", aid, *ids)
     pos = rd.vector(f"{field}.position", rd.require(field, raw, "position"), 2)
     normal_raw = rd.require(field, raw, "normal")

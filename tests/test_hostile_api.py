@@ -44,7 +44,7 @@ POSE_X = ["phases", 0, "steps", 1, "pose", 0]
     (POSE_X, float("nan"), "phases[0].steps[1].pose[0]", "finite"),
     (POSE_X, float("inf"), "phases[0].steps[1].pose[0]", "finite"),
     (STEP_T, 10**400, "phases[0].steps[1].t", "beyond a float's range"),
-    (STEP_T, True, "phases/0/steps/1/t", "not of type 'number'"),
+    (STEP_T, True, "phases[0].steps[1].t", "not of type 'number'"),
     (["phases"], "x", "phases", "not of type 'array'"),
 ])
 def test_plan_dicts_are_read_as_plan_files(plan_dict: dict[str, Any], path: list[Any],
@@ -170,12 +170,12 @@ def plan_obj(plan_dict: dict[str, Any]) -> rbp.Plan:
 
 @pytest.mark.parametrize(("edit", "field"), [
     (lambda p: _step(p, pose=(float("nan"), 1.0, 0.0)), "phases[0].steps[1].pose[0]"),
-    (lambda p: _step(p, pose=(1.0,)), "phases/0/steps/1/pose"),
-    (lambda p: _step(p, pose=None), "phases/0/steps/1/pose"),
-    (lambda p: _step(p, t="x"), "phases/0/steps/1/t"),
-    (lambda p: _step(p, tension=(1e308,) * 4), "phases/0/steps/1/tension/"),
-    (lambda p: _phase(p, steps=()), "phases/0/steps"),
-    (lambda p: _phase(p, kind="zzz"), "phases/0/kind"),
+    (lambda p: _step(p, pose=(1.0,)), "phases[0].steps[1].pose"),
+    (lambda p: _step(p, pose=None), "phases[0].steps[1].pose"),
+    (lambda p: _step(p, t="x"), "phases[0].steps[1].t"),
+    (lambda p: _step(p, tension=(1e308,) * 4), "phases[0].steps[1].tension["),
+    (lambda p: _phase(p, steps=()), "phases[0].steps"),
+    (lambda p: _phase(p, kind="zzz"), "phases[0].kind"),
     (lambda p: p.replace(phases=None), "phases"),
     (lambda p: p.replace(scenario=None), "scenario"),
     (lambda p: p.replace(scenario="x"), "scenario"),

@@ -412,8 +412,8 @@ def test_json_integers_beyond_a_float_refused_with_their_line(tmp_path):
 
 
 @pytest.mark.parametrize("where, value, field", [
-    (("pose", 0), 1e300, "pose/0"), (("pose", 2), -1e5, "pose/2"), (("t",), 1e300, "t"),
-    (("tension", 0), 1e300, "tension/0"), (("tension", 1), -2e6, "tension/1"),
+    (("pose", 0), 1e300, "pose[0]"), (("pose", 2), -1e5, "pose[2]"), (("t",), 1e300, "t"),
+    (("tension", 0), 1e300, "tension[0]"), (("tension", 1), -2e6, "tension[1]"),
 ])
 def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, value, field):
     """A pose of 1e300 was read, and `rbp simulate` printed hundreds of overflow warnings."""
@@ -435,7 +435,7 @@ def test_plan_steps_outside_physical_ranges_refused_at_reading(tmp_path, where, 
     path.write_text(json.dumps(plan))
     with pytest.raises(PlanFileError, match="than the m") as caught:
         read_plan_file(path)
-    assert caught.value.field == f"phases/0/steps/1/{field}", caught.value.field
+    assert caught.value.field == f"phases[0].steps[1].{field}", caught.value.field
 
 
 def test_plans_stretched_in_time_refused_at_reading(tmp_path):
@@ -454,7 +454,7 @@ def test_plans_stretched_in_time_refused_at_reading(tmp_path):
     path.write_text(json.dumps(plan))
     with pytest.raises(PlanFileError, match="at most 60 s apart") as caught:
         read_plan_file(path)
-    assert caught.value.field == "phases/0/steps/1/t", caught.value.field
+    assert caught.value.field == "phases[0].steps[1].t", caught.value.field
     for time_step in (500.0, 0.001):
         path.write_text(json.dumps(plan | {"time_step": time_step}))
         with pytest.raises(PlanFileError, match="than the m") as caught:
@@ -465,7 +465,7 @@ def test_plans_stretched_in_time_refused_at_reading(tmp_path):
     path.write_text(json.dumps(plan))
     with pytest.raises(PlanFileError, match="61 s after") as caught:
         read_plan_file(path)
-    assert caught.value.field == "phases/3/steps/0/t", caught.value.field
+    assert caught.value.field == "phases[3].steps[0].t", caught.value.field
     # the rig's straight move: 10 m at 0.1 m/s, 100 s between its steps, is accepted
     plan = json.loads((golden / "rig.json").read_text())
     steps = plan["phases"][0]["steps"]
@@ -479,7 +479,7 @@ def test_plans_stretched_in_time_refused_at_reading(tmp_path):
     for command in (("check",), ("simulate", "--trials", "0")):
         done = run_rbp(*command, str(path), cwd=tmp_path)
         assert done.returncode == 2, done
-        assert done.stderr == (f"error: {path}: phases/0/steps/1/t: 100 s after the step before: "
+        assert done.stderr == (f"error: {path}: phases[0].steps[1].t: 100 s after the step before: "
                                "steps are at most 60 s apart (longer only for a body move at "
                                "0.1 m/s, 0.2 rad/s)\n"), done.stderr
 
@@ -576,7 +576,7 @@ def test_large_plan_with_an_error_at_its_end_named_by_the_compiled_validator(tmp
     path = tmp_path / "big.json"
     path.write_text(json.dumps(plan))
     result = run_rbp("check", "-q", str(path), cwd=tmp_path)
-    _refused_in_one_line(result, path, "phases/0/steps/19999/pose: must contain at least 3")
+    _refused_in_one_line(result, path, "phases[0].steps[19999].pose: must contain at least 3")
 
 
 def test_json_with_millions_of_values_refused_before_parsing():
@@ -881,7 +881,7 @@ def test_plan_provenance_outside_its_range_refused(tmp_path):
         path.write_text(json.dumps(forged))
         result = run_rbp("plan", "--from-plan", str(path), "-o", str(tmp_path / "b.json"),
                          "--footsteps-only", "--no-pictures", cwd=tmp_path)
-        _refused_in_one_line(result, path, f"provenance/seed: {seed} is {words}")
+        _refused_in_one_line(result, path, f"provenance.seed: {seed} is {words}")
         assert not (tmp_path / "b.json").exists()
 
 
@@ -1108,7 +1108,7 @@ def test_near_limit_plan_with_an_error_at_its_end_read_in_bounded_memory(tmp_pat
     assert 7.0 < size_mb < 8.0, f"the plan should sit just under the limit, is {size_mb:.1f} MiB"
     tracemalloc.start()
     try:
-        with pytest.raises(PlanFileError, match=r"phases/0/steps/30999/t"):
+        with pytest.raises(PlanFileError, match=r"phases\[0\]\.steps\[30999\]\.t"):
             read_plan_file(path)
         peak_mb = tracemalloc.get_traced_memory()[1] / 2**20
     finally:
@@ -1150,7 +1150,26 @@ def test_plan_shifted_far_in_time_refused_at_reading(tmp_path):
             step["t"] += 9.99e6
     path = tmp_path / "late.json"
     path.write_text(json.dumps(plan))
-    with pytest.raises(PlanFileError, match=r"phases/0/steps/0/t: .*first step is at 9\.99e\+06"):
+    with pytest.raises(PlanFileError,
+                       match=r"phases\[0\]\.steps\[0\]\.t: .*first step is at 9\.99e\+06"):
         read_plan_file(path)
     result = run_rbp("simulate", "--trials", "0", "--no-verify", str(path), cwd=tmp_path)
     _refused_in_one_line(result, path, "a plan starts within")
+
+
+@pytest.mark.parametrize("written", ["1_000", "+5", "-0", "7"])
+def test_an_anchor_id_that_is_a_number_is_refused_not_renamed(written, tmp_path):
+    """`id: 1_000` was read as the number 1000 and the anchor called "1000" in every plan (and
+    no start stance could name it: stances name anchors by text). A number is refused where
+    written, with the way to write it as a name."""
+    text = (DATA / "demo-shaft.yaml").read_text()
+    first = re.search(r"id: (\w[\w-]*)", text)
+    assert first is not None
+    name = first.group(1)
+    path = tmp_path / "numbered.yaml"
+    path.write_text(text.replace(f"id: {name}", f"id: {written}", 1))
+    with pytest.raises(ScenarioError, match=r"anchors\[0\]\.id.*expected a name, got the number"):
+        load_scenario(path)
+    quoted = tmp_path / "quoted.yaml"
+    quoted.write_text(text.replace(name, f'"{written}"'))
+    assert load_scenario(quoted).anchors[0].id == written, "a quoted id is not read as written"

@@ -119,7 +119,7 @@ def test_an_unknown_field_is_refused(tmp_path: Path) -> None:
     path.write_text(json.dumps(data))
     with pytest.raises(PlanFileError) as e:
         read_plan(path)
-    assert e.value.field == "phases/0/steps/0" and "speed" in e.value.reason, str(e.value)
+    assert e.value.field == "phases[0].steps[0]" and "speed" in e.value.reason, str(e.value)
 
 
 def _comparable(plan: Plan) -> dict[str, Any]:

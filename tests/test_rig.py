@@ -354,7 +354,7 @@ def with_reach_phase(plan: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize(("case", "field"), [
     ("missing", "(file)"),
     ("not json", "line 1, column 2"),  # a syntax error names its place
-    ("schema", "phases/0/steps/0/pose"),
+    ("schema", "phases[0].steps[0].pose"),
     ("phase out of range", "phases[5]"),
     ("negative phase", "phases[-1]"),
     ("reach phase", "phases[1].kind"),

@@ -41,7 +41,7 @@ class QuickError(NamedTuple):
     """The compiled validator's first error, in ValidationError's two attributes rbp uses."""
 
     message: str
-    absolute_path: list[str]
+    absolute_path: list[str | int]
 
 
 def fast_verdict(plan: Any) -> bool:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from rb_drake.errors import RbpInputError
 
@@ -98,4 +98,17 @@ def _one_line(error: Exception) -> str:
     """A parser's message on one line (ezdxf quotes the offending line, newline and all)."""
     return " ".join(str(error).split())[:200]
 
+
+def even_odd(polygons: Sequence[Polygon]) -> Any:
+    """The region the polygons fill by the even-odd rule (an outline inside another is a hole),
+    as one shapely geometry: their symmetric difference, taken pairwise in a balanced tree
+    (associative, so the same region; one outline at a time was quadratic: 3,000 small outlines
+    took 27 s, now 0.02 s)."""
+    import shapely
+
+    layer = list(polygons)
+    while len(layer) > 1:
+        layer = [shapely.symmetric_difference(layer[i], layer[i + 1]) if i + 1 < len(layer)
+                 else layer[i] for i in range(0, len(layer), 2)]
+    return layer[0]
 

@@ -1,13 +1,15 @@
 """Rock outlines of a DXF drawing (`polygon_files.read_rock` of a .dxf), in the drawing's x, y.
 
 Read as rock: closed LWPOLYLINE and 2D/3D POLYLINE (arcs drawn by bulges as chords), CIRCLE,
-full ELLIPSE and closed SPLINE entities of model space, and closed chains of LINE and ARC
-entities (an outline drawn, or exploded, stroke by stroke: ends joined within JOIN_TOLERANCE);
-block references (INSERT, MINSERT) are expanded, nested at most MAX_INSERT_DEPTH deep, their
-copies counted before any is made. Annotations and open strokes (IGNORED, and LINE and ARC that
-close no chain) are skipped; any other entity (HATCH, SOLID, 3DFACE,
-MESH, REGION, ...) could be rock that rbp cannot read, so the file is refused naming them:
-drawn geometry is never dropped without a word.
+full ELLIPSE and closed SPLINE entities of model space, closed chains of LINE and ARC entities
+(an outline drawn, or exploded, stroke by stroke: ends joined within JOIN_TOLERANCE), and the
+filled area of HATCH and MPOLYGON entities (rock drawn as a fill: their boundary paths, lines,
+arcs, ellipses and splines flattened, filled by the even-odd rule, so that a path inside another
+is a hole, whatever the hatch's pattern or style); block references (INSERT, MINSERT) are
+expanded, nested at most MAX_INSERT_DEPTH deep, their copies counted before any is made.
+Annotations and open strokes (IGNORED, and LINE and ARC that close no chain) are skipped; any
+other entity (SOLID, 3DFACE, MESH, REGION, ...) could be rock that rbp cannot read, so the file
+is refused naming them: drawn geometry is never dropped without a word.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from rb_drake.terrain.drawing_outline import (
     _polygon,
     _ReadError,
     _scaled,
+    even_odd,
     missing_extra,
 )
 
@@ -40,6 +43,7 @@ if TYPE_CHECKING:
 
 POLYLINES = ("LWPOLYLINE", "POLYLINE")
 CURVES = ("CIRCLE", "ELLIPSE", "SPLINE")  # closed curves, flattened within CURVE_TOLERANCE
+FILLS = ("HATCH", "MPOLYGON")  # filled areas: the even-odd region of their boundary paths
 IGNORED = frozenset((  # annotations and open strokes: they draw no closed rock
     "TEXT", "MTEXT", "DIMENSION", "ARC_DIMENSION", "LARGE_RADIAL_DIMENSION", "LEADER",
     "MULTILEADER", "MLEADER", "TOLERANCE", "POINT", "ATTRIB", "ATTDEF", "XLINE",
@@ -51,10 +55,12 @@ MAX_SPLINE_DEGREE = 10  # ezdxf's evaluation grows with the degree's square; dra
 
 
 def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
+    """The drawing's rock (module doc), as polygons to union (False: no even-odd rule left)."""
     try:
         import ezdxf
     except ImportError:
         raise missing_extra("ezdxf") from None
+    import shapely
     if dxf_entities(text, MAX_DXF_ENTITIES) > MAX_DXF_ENTITIES:
         raise _ReadError(None, f"holds more than {MAX_DXF_ENTITIES:,} entities (each VERTEX of a "
                          "POLYLINE is one); simplify the drawing first")
@@ -79,6 +85,7 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
         raise _ReadError("entities", f"more than {MAX_DXF_ENTITIES:,} once block references "
                          "(INSERT, MINSERT) are expanded; simplify the drawing first")
     polygons: list[Polygon] = []
+    fills: list[Polygon] = []  # solid whatever the outlines around them: unioned at the end
     ignored: dict[str, int] = {}
     refused: dict[str, int] = {}
     strokes: list[tuple[str, str, Ring]] = []  # where, kind, points
@@ -91,6 +98,8 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
             polygons.append(_outline(entity, where, factor, total))
         elif kind in STROKES:
             strokes.append((where, kind, _stroke(entity, where, factor, total)))
+        elif kind in FILLS:
+            fills += _filled(entity, where, factor, total)
         else:
             refused[kind] = refused.get(kind, 0) + 1
     chains, loose = _closed_chains(strokes)
@@ -100,13 +109,17 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
     if refused:
         found = ", ".join(f"{n} {kind}" for kind, n in sorted(refused.items()))
         raise _ReadError("entities", f"{found} entities not imported: rock is read from closed "
-                         "LWPOLYLINE, POLYLINE, CIRCLE, ELLIPSE and SPLINE (and blocks of them); "
-                         "redraw it as closed polylines")
-    if not polygons and ignored:
+                         "LWPOLYLINE, POLYLINE, CIRCLE, ELLIPSE and SPLINE, closed chains of LINE "
+                         "and ARC, HATCH and MPOLYGON (and blocks of them); redraw it as closed "
+                         "polylines")
+    if not polygons and not fills and ignored:
         found = ", ".join(f"{n} {kind}" for kind, n in sorted(ignored.items()))
         raise _ReadError(None, f"no closed outline (found {found}); rock must be closed "
                          "polylines, circles, ellipses or splines")
-    return polygons, True
+    # outlines nest by the even-odd rule; a fill is rock where it lies (a hatch drawn over its
+    # own boundary polyline must not cancel it), so the two are unioned (read_rock's union)
+    nested = shapely.get_parts(even_odd(polygons)).tolist() if polygons else []
+    return [g for g in nested if g.geom_type == "Polygon" and g.area > 0] + fills, False
 
 
 def _entities(doc: Any, entities: Any, depth: int) -> int:
@@ -189,6 +202,52 @@ def _outline(entity: Any, where: str, factor: float, total: list[int]) -> Polygo
     if kind in CURVES and len(ring) > 2 and not _closed(ring, CURVE_TOLERANCE):
         raise _ReadError(where, "open curve (an arc of it); rock must be closed")
     return _polygon(ring, [], where)
+
+
+def _filled(entity: Any, where: str, factor: float, total: list[int]) -> list[Polygon]:
+    """A HATCH's or MPOLYGON's filled area, in metres: its boundary paths flattened within
+    CURVE_TOLERANCE (counted against MAX_VERTICES as they are made), filled by the even-odd
+    rule (a path inside another is a hole)."""
+    import shapely
+    from ezdxf import path as dxf_path
+
+    for k, boundary in enumerate(entity.paths, start=1):
+        for edge in getattr(boundary, "edges", ()):  # an edge path's splines and arcs
+            degree = getattr(edge, "degree", 1)
+            if not 1 <= degree <= MAX_SPLINE_DEGREE:
+                raise _ReadError(f"{where} boundary path {k}", f"a spline edge of degree "
+                                 f"{degree}: rbp reads splines of degree 1 to "
+                                 f"{MAX_SPLINE_DEGREE}")
+            radius = getattr(edge, "radius", 0.0)
+            centre = getattr(edge, "center", (0.0, 0.0))
+            if not all(abs(float(v)) * factor + abs(float(radius)) * factor <= MAX_COORDINATE
+                       for v in tuple(centre)[:2]):  # NaN fails too
+                raise _ReadError(f"{where} boundary path {k}", f"a coordinate beyond "
+                                 f"{MAX_COORDINATE:g} m; check --unit and --scale")
+    loops = []
+    try:
+        with warnings.catch_warnings():  # ezdxf's overflow warnings: the error says it
+            warnings.simplefilter("ignore")
+            paths = list(dxf_path.from_hatch(entity))
+            for k, path in enumerate(paths, start=1):
+                points = list(itertools.islice(path.flattening(CURVE_TOLERANCE / factor),
+                                               MAX_VERTICES - total[0] + 1))
+                ring = _scaled(((p.x, p.y) for p in points), factor)
+                _count_vertices(total, ring)
+                if _closed(ring, 1e-12):
+                    ring = ring[:-1]
+                loops.append(_polygon(ring, [], f"{where} boundary path {k}"))
+    except _ReadError:
+        raise
+    except Exception as e:  # a malformed boundary path
+        raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
+    if not loops:
+        raise _ReadError(where, "a fill with no boundary path; rock must enclose an area")
+    parts = [g for g in shapely.get_parts(even_odd(loops))
+             if g.geom_type == "Polygon" and g.area > 0]
+    if not parts:
+        raise _ReadError(where, "its boundary paths enclose no area")
+    return parts
 
 
 def _stroke(entity: Any, where: str, factor: float, total: list[int]) -> Ring:

@@ -32,6 +32,7 @@ from rb_drake.terrain.drawing_outline import (
     _polygon,
     _ReadError,
     _scaled,
+    even_odd,
     missing_extra,
     validity_reason,
 )
@@ -91,12 +92,12 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
                             f"{MAX_NUMBERS:,}); simplify the drawing first", file=name)
     factor = UNITS[unit] * scale
     try:
-        polygons, even_odd = readers[suffix](text, factor)
+        polygons, nested = readers[suffix](text, factor)
     except _ReadError as e:
         raise RbpInputError(e.reason, file=name, field=e.where) from None
     if not polygons:
         raise RbpInputError("no rock: the file holds no closed outline", file=name)
-    rock = _combine(polygons, even_odd)
+    rock = _combine(polygons, nested)
     return _finish(rock, name, simplify)
 
 
@@ -111,16 +112,13 @@ def _number_bound(text: str) -> int:
     return runs.count(b" 0") + runs.startswith(b"0")
 
 
-def _combine(polygons: list[Polygon], even_odd: bool) -> list[Polygon]:
+def _combine(polygons: list[Polygon], nested: bool) -> list[Polygon]:
     """Overlapping rock merged (GeoJSON), or outlines nested by the even-odd rule (DXF, SVG)."""
     from shapely import union_all
 
-    if not even_odd:
+    if not nested:
         return _parts(union_all(polygons))
-    merged = polygons[0]  # shapely's symmetric_difference_all is deprecated as wrong
-    for poly in polygons[1:]:
-        merged = merged.symmetric_difference(poly)
-    return _parts(merged)
+    return _parts(even_odd(polygons))  # shapely's symmetric_difference_all is deprecated
 
 
 def _parts(geometry: Any) -> list[Polygon]:

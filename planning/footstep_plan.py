@@ -210,11 +210,13 @@ def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], b
     (sampled) or its most robust lattice pose (complete); the few on the chosen path get a
     local search for robustness (p_path rises by 0.03-0.08), keeping the found pose."""
     found = pose
-    if cfg.polish_rounds > 0:
+    # polishing raises the grasps' probabilities: a search that ignores them (the naive
+    # baseline's transitions) may have found a pose where they fall below p_min, which
+    # polishing cannot start from, and has nothing to raise
+    if cfg.polish_rounds > 0 and not cfg.transition.ignore_grasps:
         polished, p4 = polish_transition(scn, stance, boom, anchor, found,
                                          edge_rng(cfg.seed, stance, boom, "polish"),
                                          cfg.polish_rounds)
-        if cfg.transition.ignore_grasps or ramp_ends_hold(scn, stance, boom, anchor, polished,
-                                                          p4):
+        if ramp_ends_hold(scn, stance, boom, anchor, polished, p4):
             pose, probabilities = polished, p4
     return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)

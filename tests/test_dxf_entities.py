@@ -201,7 +201,7 @@ def test_a_hatch_of_a_hopeless_spline_is_refused(tmp_path):
     edges.add_spline(control_points=[(0, 2), (1, 2), (1, 3), (0, 3)], degree=3)
     edges.edges[0].degree = 40  # ezdxf's evaluation grows with the degree's square
     edges.add_line((0, 3), (0, 2))
-    with pytest.raises(RbpInputError, match="boundary path 1.*spline edge of degree 40"):
+    with pytest.raises(RbpInputError, match=r"boundary path 1.*spline edge of degree 40"):
         read_rock(_save(doc, tmp_path / "spline.dxf"))
 
 

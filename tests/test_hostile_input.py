@@ -1173,3 +1173,18 @@ def test_an_anchor_id_that_is_a_number_is_refused_not_renamed(written, tmp_path)
     quoted = tmp_path / "quoted.yaml"
     quoted.write_text(text.replace(name, f'"{written}"'))
     assert load_scenario(quoted).anchors[0].id == written, "a quoted id is not read as written"
+
+
+def test_a_search_that_ignores_the_grasps_plans_without_a_traceback(tmp_path):
+    """`footstep.transition.ignore_grasps: true` (a switch of the configuration file) ended in
+    a traceback: the found route's steps were polished for robustness from poses whose grasps
+    the search had not scored. Such a search's steps are taken as found."""
+    (tmp_path / "naive.yaml").write_text("footstep: {transition: {ignore_grasps: true}}\n")
+    done = run_rbp("plan", "demo-shaft", "--config", "naive.yaml", "--footsteps-only", "-q",
+                   "-o", "p.json", cwd=tmp_path)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "success: true" in done.stdout, done.stdout
+    # its grasps were not scored, so the verifier may refuse them (a pull angle past the limit):
+    # by name, never with a traceback
+    checked = run_rbp("check", "p.json", cwd=tmp_path)
+    assert checked.returncode in (0, 1) and "Traceback" not in checked.stderr, checked.stderr

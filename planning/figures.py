@@ -311,6 +311,8 @@ def search_figure(scn: Scenario, fp):
     name = draw.title_name(scn.name)
     title = (f"{name}: footstep search failed after {fp.expansions} expansions, "
              f"{fp.transitions_tested} transitions tested")
-    ax.set_title("\n".join(textwrap.wrap(title, max(40, wrap - 10))), fontsize=9,
-                 parse_math=False)
+    # over the figure, not the axes: a tall cave's axes are narrow, and a title centred on them
+    # ran past the figure's edge (a 30 m shaft's was cut off)
+    chars = max(40, int((max(width, 6.0) - 0.4) * 13))  # at fontsize 9
+    fig.suptitle("\n".join(textwrap.wrap(title, chars)), fontsize=9, parse_math=False)
     return fig

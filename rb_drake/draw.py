@@ -205,6 +205,34 @@ def frame_axes(ax, scn: Scenario, margin: float = 0.3) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
+    _even_ticks(ax, hi - lo)
+
+
+def _nice_step(span: float, below: bool = False) -> float:
+    """The least of 1, 2, 5 x 10^k at or above `span` (`below`: the most at or below it)."""
+    base = 10.0 ** math.floor(math.log10(span))
+    if below:
+        return max(f * base for f in (1.0, 2.0, 5.0) if f * base <= span * (1 + 1e-9))
+    return next(f * base for f in (1.0, 2.0, 5.0, 10.0) if f * base >= span * (1 - 1e-9))
+
+
+def _even_ticks(ax, extent: np.ndarray) -> None:
+    """Ticks at most about eight along the longer axis and as far apart on paper along the
+    shorter (the aspect is equal): matplotlib's own spaced a tall cave's few metres of width as
+    finely as its height, and the labels ran into one another ("-10 1" for -1, 0, 1)."""
+    from matplotlib.ticker import MultipleLocator
+
+    long, short = float(max(extent)), float(min(extent))
+    if not (math.isfinite(long) and long > 0):
+        return
+    step = _nice_step(long / 8.0)
+    # the shorter axis: closer ticks where it is narrow, but not closer than 0.4 of the longer
+    # axis's on paper, where labels of a few characters would touch
+    short_step = step if short >= 2.5 * step else max(_nice_step(short / 2.5, below=True),
+                                                       _nice_step(0.4 * step))
+    x_step, y_step = (step, short_step) if extent[0] >= extent[1] else (short_step, step)
+    ax.xaxis.set_major_locator(MultipleLocator(x_step))
+    ax.yaxis.set_major_locator(MultipleLocator(y_step))
 
 
 def scenario_figure(scn: Scenario):

@@ -105,6 +105,15 @@ def problems(fig: Figure) -> list[str]:
         for t in labels + ticks:
             if _overlap(extent, t.get_window_extent(renderer)):
                 found.append(f"a legend covers {t.get_text()!r}")
+    for ax in fig.axes:  # an axis's tick labels apart from one another
+        for axis in (ax.xaxis, ax.yaxis):
+            mine = {id(lb) for tick in axis._update_ticks() for lb in (tick.label1, tick.label2)}
+            boxes = [(t.get_window_extent(renderer), t.get_text()) for t in ticks
+                     if id(t) in mine]
+            for i, (a, text_a) in enumerate(boxes):
+                for b, text_b in boxes[i + 1:]:
+                    if _overlap(a, b):
+                        found.append(f"tick labels {text_a!r} and {text_b!r} overlap")
     titles = [t for t in labels if t.get_text() and not _in_data(t)]
     for i, a in enumerate(titles):
         for b in titles[i + 1:]:
@@ -154,6 +163,17 @@ def test_success_pictures(capture, tmp_path: Path) -> None:
     start = re.search(r"start pose: P\(all grasps hold\) = (.+?)  ", cave)
     assert start, cave
     assert f"P {start.group(1)} → " in snapshots, (start.group(1), snapshots)
+
+
+def test_a_tall_cave_fits_its_pictures(capture, tmp_path: Path) -> None:
+    """A 30 m shaft's search picture had its title cut off at the figure's edge (centred on the
+    narrow axes), and its plan picture's x tick labels ran together ("-10 1")."""
+    assert run("scenario", "generate", "--kind", "shaft", "--seed", "7", "--length", "30",
+               "30", "-o", str(tmp_path / "tall.yaml")) == 0
+    assert run("plan", str(tmp_path / "tall.yaml"), "--footsteps-only", "-q",
+               "--max-expansions", "3", "-o", str(tmp_path / "plan.json")) == 1
+    assert [Path(p).name for p, _ in capture] == ["plan.png", "plan-search.png"]
+    check_all(capture)
 
 
 @pytest.mark.parametrize("flags", [["--max-expansions", "3"], []],

@@ -236,8 +236,13 @@ class BoundedCache(Generic[K, V]):
 
     def _coded(self, key: object) -> bool:
         """Whether `key` is among the compact dropped keys (and not live or packed again)."""
-        return bool(self._codes) and self._codec is not None and \
-            self._codec.encode(key) in self._codes
+        if not self._codes or self._codec is None:
+            return False
+        try:
+            code = self._codec.encode(key)
+        except (KeyError, ValueError, TypeError):  # not a key of this cache's form
+            return False
+        return code in self._codes
 
     def __iter__(self) -> Iterator[K]:
         yield from list(self._live)

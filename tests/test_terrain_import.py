@@ -456,3 +456,25 @@ def test_cave_too_large_to_read_back_refused(tmp_path, monkeypatch):
     assert result.returncode == 2 and len(lines) == 1, result.stderr
     assert "--simplify/--anchor-density" in lines[0] and "RBP_MAX_INPUT_VALUES" in lines[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("crs", ["urn:ogc:def:crs:OGC:1.3:CRS84", "EPSG:4326",
+                                 "urn:ogc:def:crs:EPSG::4326"])
+def test_a_geojson_in_longitude_and_latitude_is_refused(tmp_path: Path, crs: str) -> None:
+    """A GIS export naming a longitude-latitude CRS holds degrees: read as metres, it made a
+    cave of a few hundredths of a millimetre (or a degree a metre). Refused, naming `crs`; a
+    projected CRS is the user's to scale and is read as before."""
+    from rb_drake.terrain.polygon_files import read_rock
+
+    walls = [[[-3, -1], [-1, -1], [-1, 6], [-3, 6], [-3, -1]],
+             [[1, -1], [3, -1], [3, 6], [1, 6], [1, -1]]]
+    doc = {"type": "FeatureCollection", "crs": {"type": "name", "properties": {"name": crs}},
+           "features": [{"type": "Feature", "properties": {},
+                         "geometry": {"type": "Polygon", "coordinates": [w]}} for w in walls]}
+    path = tmp_path / "gis.geojson"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(RbpInputError, match=r"crs: .* longitude and latitude in degrees"):
+        read_rock(path)
+    doc["crs"]["properties"]["name"] = "EPSG:32633"  # UTM: metres
+    path.write_text(json.dumps(doc))
+    assert len(read_rock(path)) == 2, "a projected CRS is refused"

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -162,11 +163,30 @@ def _geojson(text: str, factor: float) -> tuple[list[Polygon], bool]:
         raise _ReadError(None, "nested too deeply to be GeoJSON") from None
     except InputFileError as e:
         raise _ReadError(e.field, e.reason) from None
+    _refuse_geographic(data)
     polygons: list[Polygon] = []
     total = [0]
     for where, geometry in _geometries(data, "(top level)"):
         polygons += _geojson_geometry(geometry, where, factor, total)
     return polygons, False
+
+
+# CRS names of longitude and latitude in degrees (GIS exports name them in the old `crs` member)
+_GEOGRAPHIC = re.compile(r"(EPSG:+4326|EPSG:+4269|EPSG:+4258|CRS:*84|CRS:*83|WGS ?84)$",
+                         re.IGNORECASE)
+
+
+def _refuse_geographic(data: Any) -> None:
+    """A file that names a longitude-latitude CRS holds degrees, not the metres of a cave's
+    section: read as metres, a cave became a few hundredths of a millimetre across, or a
+    degree a metre. Other CRS names are the user's to scale (--unit, --scale)."""
+    crs = data.get("crs") if isinstance(data, dict) else None
+    props = crs.get("properties") if isinstance(crs, dict) else None
+    name = props.get("name") if isinstance(props, dict) else None
+    if isinstance(name, str) and _GEOGRAPHIC.search(name.strip()):
+        raise _ReadError("crs", f"{name[:80]!r} is longitude and latitude in degrees; rbp reads "
+                         "a cave's section in metres (or --unit): project it to a local "
+                         "metric plane first")
 
 
 def _geometries(data: Any, where: str, depth: int = 0) -> Iterator[tuple[str, Any]]:

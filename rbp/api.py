@@ -178,7 +178,7 @@ def generate_scenario(kind: str = "shaft", seed: int = 0,
     return generate_cave(kind, seed, cfg)
 
 
-def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
+def import_scenario(path: str | Path, *, unit: str | None = None, scale: float = 1.0,
                     simplify: float = 0.0, anchor_density: float = 3.0, seed: int = 0,
                     start: tuple[float, float] | None = None,
                     goal: tuple[float, float] | None = None, name: str | None = None,
@@ -189,9 +189,10 @@ def import_scenario(path: str | Path, *, unit: str = "m", scale: float = 1.0,
     (GeoJSON .geojson/.json, DXF .dxf, SVG .svg) or a mesh or point cloud (.stl, .obj, .ply)
     cut by the plane through `plane_origin` with normal `plane_normal` (a point cloud's points
     within `resolution` m of it outlined, bridging gaps up to twice that; None: from the
-    cloud's density). Coordinates are in `unit` (m, cm, mm, in, ft) times `scale`; outlines are
-    simplified to `simplify` m. Anchors are placed as `generate_scenario` places them
-    (`anchor_density` per metre, from `seed`: the same file and seed, the same cave); `start`
+    cloud's density). Coordinates are in `unit` (m, cm, mm, in, ft; None: the unit a DXF
+    declares in $INSUNITS, else m) times `scale`; outlines are simplified to `simplify` m.
+    Anchors are placed as `generate_scenario` places them (`anchor_density` per metre, from
+    `seed`: the same file and seed, the same cave); `start`
     and `goal` (x, y in m) are chosen when None: the lowest place with a feasible stance and
     the highest free place above it. Needs the extra `rbp[import]`. Raises `RbpInputError`
     (file and reason) for a file that is not closed, simple rock or makes no cave."""

@@ -113,7 +113,8 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
                           start=_pair(args.start), goal=_pair(args.goal), name=args.name,
                           plane_origin=_triple(args.plane_origin),
                           plane_normal=_triple(args.plane_normal), resolution=args.resolution)
-    words = ["rbp", "scenario", "import", args.file, "--unit", args.unit,
+    words = ["rbp", "scenario", "import", args.file,
+             *(["--unit", args.unit] if args.unit is not None else []),
              "--scale", f"{args.scale:g}", "--simplify", f"{args.simplify:g}",
              "--anchor-density", f"{args.anchor_density:g}", "--seed", str(args.seed)]
     for flag, value in (("--start", args.start), ("--goal", args.goal),
@@ -518,8 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
                                   ".dxf, .svg; x to the side, y up), or a 3D scan cut by a "
                                   "plane (.stl/.obj/.ply mesh, .ply point cloud; z up)")
     imp.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
-    imp.add_argument("--unit", choices=("m", "cm", "mm", "in", "ft"), default="m",
-                     help="the unit of the file's coordinates (default m)")
+    imp.add_argument("--unit", choices=("m", "cm", "mm", "in", "ft"), default=None,
+                     help="the unit of the file's coordinates (default: the unit a DXF "
+                          "declares in $INSUNITS, else m)")
     imp.add_argument("--scale", type=float, default=1.0,
                      help="a factor on the coordinates besides the unit (default 1)")
     imp.add_argument("--simplify", type=float, default=0.0, metavar="TOL",

@@ -228,3 +228,37 @@ def test_many_outlines_nest_in_near_linear_time(tmp_path):
     rock = read_rock(_save(doc, tmp_path / "many.dxf"))
     assert len(rock) == 2 + 3000 + 1, f"{len(rock)} pieces of rock"
     assert _contains(rock, 0, 7.1) and not _contains(rock, 0, 7.5), "the hole is lost"
+
+
+@pytest.mark.parametrize(("code", "metres"), [(4, 1e-3), (5, 1e-2), (1, 0.0254), (6, 1.0)])
+def test_a_drawing_is_read_in_the_unit_it_declares(tmp_path, code, metres):
+    """CAD drawings are mostly in millimetres and say so in $INSUNITS; read as metres, a 5 m
+    cave was 5 km. Without --unit the declared unit is used; --unit still overrides it."""
+    doc = ezdxf.new(units=code)
+    msp = doc.modelspace()
+    for ring in WALLS:
+        msp.add_lwpolyline([(x / metres, y / metres) for x, y in ring], close=True)
+    path = _save(doc, tmp_path / "cad.dxf")
+    rock = read_rock(path)
+    assert _contains(rock, -2, 3) and _contains(rock, 2, 3) and not _contains(rock, 0, 3), \
+        f"$INSUNITS {code} not read as {metres} m a unit: {[p.bounds for p in rock]}"
+    forced = read_rock(path, unit="m", scale=metres / 2)  # the user's unit wins
+    assert sum(p.area for p in forced) == pytest.approx(sum(p.area for p in rock) / 4), \
+        "--unit did not override the declared unit"
+
+
+def test_scenario_import_reads_the_declared_unit(tmp_path):
+    doc = ezdxf.new(units=4)  # millimetres
+    msp = doc.modelspace()
+    for ring in WALLS:
+        msp.add_lwpolyline([(x * 1000, y * 1000) for x, y in ring], close=True)
+    _save(doc, tmp_path / "mm.dxf")
+    done = run_rbp("scenario", "import", "mm.dxf", "-o", "cave.yaml", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    text = (tmp_path / "cave.yaml").read_text()
+    assert "--unit" not in text.splitlines()[0], "the command line names a unit not given"
+    from rb_drake.scenario import load_scenario
+
+    scn = load_scenario(tmp_path / "cave.yaml")
+    assert 2.0 <= scn.goal_position[1] - scn.start_pose[1] <= 7.0, \
+        "a millimetre drawing of a 7 m shaft did not make a shaft of metres"

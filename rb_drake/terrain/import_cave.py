@@ -23,7 +23,8 @@ MESH_SIMPLIFY = 0.01      # m: a mesh section's outline simplified this far unle
 class ImportOptions:
     """How a file of rock becomes a cave (`rbp scenario import`'s options)."""
 
-    unit: str = "m"                  # the file's unit: m, cm, mm, in or ft
+    unit: str | None = None          # the file's unit: m, cm, mm, in or ft (None: the unit
+    #                                  a DXF declares, else m)
     scale: float = 1.0               # and a factor on top of it (a drawing's scale)
     simplify: float = 0.0            # m: outlines simplified to this tolerance (0: as drawn)
     anchor_density: float = 3.0      # anchors per metre of rock surface
@@ -83,7 +84,7 @@ def _check_readable(path: Path, scn: Scenario) -> None:
 def _check(opts: ImportOptions) -> None:
     from rb_drake.generate import density_problem  # the generator's range; it loads the kernel
 
-    if opts.unit not in UNITS:
+    if opts.unit is not None and opts.unit not in UNITS:
         raise RbpInputError(f"must be one of {sorted(UNITS)}, got {opts.unit!r}", field="--unit")
     if (problem := density_problem(opts.anchor_density)) is not None:
         raise RbpInputError(problem, field="--anchor-density")
@@ -113,7 +114,7 @@ def _mesh_rock(path: Path, opts: ImportOptions) -> list[Polygon]:
         raise missing_extra(e.name or "trimesh") from None
     from shapely.affinity import scale as scaled
 
-    factor = UNITS[opts.unit] * opts.scale
+    factor = UNITS[opts.unit or "m"] * opts.scale
     if not (math.isfinite(opts.scale) and opts.scale > 0):
         raise RbpInputError(f"must be a positive number, got {opts.scale:g}", field="--scale")
     if not (math.isfinite(opts.simplify) and opts.simplify >= 0):

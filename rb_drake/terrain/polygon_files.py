@@ -56,15 +56,16 @@ MAX_NUMBERS = 8 * MAX_VERTICES  # digit runs in a drawing: a vertex's two number
 #                                 a DXF's header a few thousand
 
 
-def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
+def read_rock(path: str | Path, unit: str | None = None, scale: float = 1.0,
               simplify: float = 0.0) -> list[Polygon]:
     """The rock of a GeoJSON (.geojson, .json), DXF (.dxf) or SVG (.svg) file as valid shapely
     Polygons in metres: file coordinates times UNITS[unit] times `scale`, then simplified to
-    `simplify` m (shapely's `simplify`, topology kept; 0: as drawn). Raises RbpInputError
-    naming the file for anything that is not closed, simple rock."""
+    `simplify` m (shapely's `simplify`, topology kept; 0: as drawn). `unit` None: the unit a
+    DXF declares (`declared_unit`), else metres. Raises RbpInputError naming the file for
+    anything that is not closed, simple rock."""
     path = Path(path)
     name = str(path)
-    if unit not in UNITS:
+    if unit is not None and unit not in UNITS:
         raise RbpInputError(f"must be one of {sorted(UNITS)}, got {unit!r}", field="--unit")
     if not (math.isfinite(scale) and scale > 0):
         raise RbpInputError(f"must be a positive number, got {scale:g}", field="--scale")
@@ -91,6 +92,8 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
         raise RbpInputError(f"holds up to {numbers:,} numbers, more than a drawing of "
                             f"{MAX_VERTICES:,} outline vertices needs (at most "
                             f"{MAX_NUMBERS:,}); simplify the drawing first", file=name)
+    if unit is None:
+        unit = (declared_unit(text) if suffix == ".dxf" else None) or "m"
     factor = UNITS[unit] * scale
     try:
         polygons, nested = readers[suffix](text, factor)
@@ -103,6 +106,19 @@ def read_rock(path: str | Path, unit: str = "m", scale: float = 1.0,
 
 
 _DIGITS = bytes(48 if chr(b).isdigit() else 32 for b in range(256))  # digit -> "0", else " "
+
+
+# A DXF's $INSUNITS codes for the units rbp reads (AutoCAD's table; 0 is "unitless")
+INSUNITS = {1: "in", 2: "ft", 4: "mm", 5: "cm", 6: "m"}
+_INSUNITS = re.compile(r"^\s*\$INSUNITS\s*\r?\n\s*70\s*\r?\n\s*(-?\d+)\s*$", re.MULTILINE)
+
+
+def declared_unit(text: str) -> str | None:
+    """The unit a DXF drawing declares in its header ($INSUNITS), if rbp reads it (None:
+    none, unitless, or one rbp has no name for)."""
+    head = text[:200_000]  # the header comes first
+    match = _INSUNITS.search(head)
+    return INSUNITS.get(int(match.group(1))) if match else None
 
 
 def _number_bound(text: str) -> int:

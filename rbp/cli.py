@@ -108,11 +108,25 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
 
     check_seed(args.seed)
     check_output(args.output, inputs={"the imported file": args.file})
-    scn = import_scenario(args.file, unit=args.unit, scale=args.scale, simplify=args.simplify,
-                          anchor_density=args.anchor_density, seed=args.seed,
-                          start=_pair(args.start), goal=_pair(args.goal), name=args.name,
-                          plane_origin=_triple(args.plane_origin),
-                          plane_normal=_triple(args.plane_normal), resolution=args.resolution)
+    from rb_drake.errors import RbpInputError
+    from rb_drake.terrain.polygon_files import declared_unit_of
+
+    # a drawing read in the unit it declares: said on success, and on a refusal (a drawing in
+    # metres that declares millimetres is a cave a thousand times too small)
+    declared = declared_unit_of(args.file) if args.unit is None else None
+    unit_note = (f"read in {declared}, the unit its $INSUNITS declares; --unit if it is not"
+                 if declared is not None else "")
+    try:
+        scn = import_scenario(args.file, unit=args.unit, scale=args.scale,
+                              simplify=args.simplify, anchor_density=args.anchor_density,
+                              seed=args.seed, start=_pair(args.start), goal=_pair(args.goal),
+                              name=args.name, plane_origin=_triple(args.plane_origin),
+                              plane_normal=_triple(args.plane_normal),
+                              resolution=args.resolution)
+    except RbpInputError as e:
+        if not unit_note or declared == "m":
+            raise
+        raise RbpInputError(f"{e.reason} ({unit_note})", file=e.file, field=e.field) from None
     words = ["rbp", "scenario", "import", args.file,
              *(["--unit", args.unit] if args.unit is not None else []),
              "--scale", f"{args.scale:g}", "--simplify", f"{args.simplify:g}",
@@ -131,7 +145,8 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
                    f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "
-                   f"{list(scn.start_stance)}, goal {list(scn.goal_position)}"))
+                   f"{list(scn.start_stance)}, goal {list(scn.goal_position)}"
+                   + (f" ({unit_note})" if unit_note else "")))
     return EXIT_OK
 
 

@@ -262,3 +262,20 @@ def test_scenario_import_reads_the_declared_unit(tmp_path):
     scn = load_scenario(tmp_path / "cave.yaml")
     assert 2.0 <= scn.goal_position[1] - scn.start_pose[1] <= 7.0, \
         "a millimetre drawing of a 7 m shaft did not make a shaft of metres"
+
+
+def test_a_declared_unit_is_named_when_the_cave_fails(tmp_path):
+    """A drawing in metres whose header declares millimetres (an exporter's default) makes a
+    cave a thousand times too small: the refusal says which unit was read, and how to change
+    it; --unit m reads it as drawn."""
+    doc = ezdxf.new(units=4)
+    msp = doc.modelspace()
+    for ring in WALLS:
+        msp.add_lwpolyline(ring, close=True)
+    _save(doc, tmp_path / "mislabelled.dxf")
+    done = run_rbp("scenario", "import", "mislabelled.dxf", "-o", "cave.yaml", cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert "(read in mm, the unit its $INSUNITS declares; --unit if it is not)" in done.stderr
+    forced = run_rbp("scenario", "import", "mislabelled.dxf", "-o", "cave.yaml", "--unit", "m",
+                     cwd=tmp_path)
+    assert forced.returncode == 0 and "INSUNITS" not in forced.stdout, forced.stderr

@@ -235,7 +235,8 @@ class BoundedCache(Generic[K, V]):
             self._coded(key)
 
     def _coded(self, key: object) -> bool:
-        """Whether `key` is among the compact dropped keys (and not live or packed again)."""
+        """Whether `key` is among the compact dropped keys (a key rebuilt since stays there:
+        callers look among the live and packed entries first)."""
         if not self._codes or self._codec is None:
             return False
         try:

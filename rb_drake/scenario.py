@@ -102,6 +102,15 @@ class Scenario:
     source: str = "<scenario>"
     robot_overrides: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        # the start's angle within [-pi, pi], as the lattice and the body's paths measure it:
+        # a start at 2 pi (the same pose as 0) joined no lattice pose, its straight path to
+        # one turning the body a full circle
+        x, y, phi = self.start_pose
+        wrapped = math.remainder(float(phi), 2.0 * math.pi) if math.isfinite(phi) else phi
+        if wrapped != phi:
+            object.__setattr__(self, "start_pose", (x, y, wrapped))
+
     @cached_property
     def rock(self) -> Rock:
         return Rock(self.walls)

@@ -488,3 +488,21 @@ def test_atomic_write_respects_umask(tmp_path):
         os.umask(old)
     mode = stat.S_IMODE(target.stat().st_mode)
     assert mode == 0o644, f"mode {oct(mode)}, expected 0o644 under umask 022"
+
+
+def test_a_start_angle_a_full_turn_away_is_the_same_start() -> None:
+    """A start at phi + 2 pi is the same pose as at phi, but the lattice joined it to none of
+    its poses (their straight paths from it turned the body a full circle): "no route". The
+    start's angle is kept within [-pi, pi], so both plan the same route."""
+    import dataclasses
+
+    from planning.footsteps import FootstepConfig, plan_footsteps
+
+    scn = load_scenario(bundled_caves()["demo-shaft"])
+    x, y, phi = scn.start_pose
+    turned = dataclasses.replace(scn, start_pose=(x, y, phi + 2.0 * math.pi))
+    assert abs(turned.start_pose[2] - phi) < 1e-12, turned.start_pose
+    config = FootstepConfig(max_expansions=40, anytime=None)
+    a, b = plan_footsteps(scn, config), plan_footsteps(turned, config)
+    assert a.success and b.success, (a.reason, b.reason)
+    assert a.stances == b.stances, "a start a full turn away planned another route"

@@ -106,9 +106,13 @@ class Scenario:
         # the start's angle within [-pi, pi], as the lattice and the body's paths measure it:
         # a start at 2 pi (the same pose as 0) joined no lattice pose, its straight path to
         # one turning the body a full circle
-        x, y, phi = self.start_pose
-        wrapped = math.remainder(float(phi), 2.0 * math.pi) if math.isfinite(phi) else phi
-        if wrapped != phi:
+        # (a Scenario built by hand may hold anything here: its reader says what is wrong)
+        try:
+            x, y, phi = self.start_pose
+            wrapped = math.remainder(float(phi), 2.0 * math.pi)
+        except (TypeError, ValueError, OverflowError):
+            return
+        if math.isfinite(wrapped) and wrapped != phi:
             object.__setattr__(self, "start_pose", (x, y, wrapped))
 
     @cached_property

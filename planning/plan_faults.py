@@ -25,6 +25,7 @@ from planning import between_faults
 from planning.plan import score_plan
 from planning.plan_model import Plan
 from planning.verify_climb import step_limits
+from rb_drake.errors import field_path
 
 # The faults damage plan files (NaN in a number, a robot under `scenario`, steps out of
 # order), much of which the typed model (planning.plan_model) cannot hold: they work on the
@@ -315,7 +316,7 @@ def bad_number(plan: PlanFile, rng: Rng) -> Fault | None:
     for key in path[:-1]:
         holder = holder[key]
     holder[path[-1]] = float(rng.choice([math.nan, math.inf, -math.inf]))
-    field = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    field = field_path(path)
     return Fault("bad-number", out, frozenset({"number"}), None, f"{field} = "
                  f"{holder[path[-1]]}", bad_number=True)
 

@@ -99,6 +99,18 @@ def _one_line(error: Exception) -> str:
     return " ".join(str(error).split())[:200]
 
 
+def polygon_parts(geometry: Any) -> list[Polygon]:
+    """The non-empty polygons of a shapely geometry, largest first (a stable order)."""
+    from shapely.geometry import Polygon
+
+    if isinstance(geometry, Polygon):
+        found = [geometry]
+    else:
+        found = [g for g in getattr(geometry, "geoms", ()) if isinstance(g, Polygon)]
+    found = [g for g in found if not g.is_empty and g.area > 0]
+    return sorted(found, key=lambda g: (-g.area, g.bounds))
+
+
 def even_odd(polygons: Sequence[Polygon]) -> Any:
     """The region the polygons fill by the even-odd rule (an outline inside another is a hole),
     as one shapely geometry: their symmetric difference, taken pairwise in a balanced tree

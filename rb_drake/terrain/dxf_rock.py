@@ -36,6 +36,7 @@ from rb_drake.terrain.drawing_outline import (
     _scaled,
     even_odd,
     missing_extra,
+    polygon_parts,
 )
 
 if TYPE_CHECKING:
@@ -60,7 +61,6 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
         import ezdxf
     except ImportError:
         raise missing_extra("ezdxf") from None
-    import shapely
     if dxf_entities(text, MAX_DXF_ENTITIES) > MAX_DXF_ENTITIES:
         raise _ReadError(None, f"holds more than {MAX_DXF_ENTITIES:,} entities (each VERTEX of a "
                          "POLYLINE is one); simplify the drawing first")
@@ -118,8 +118,7 @@ def read_dxf(text: str, factor: float) -> tuple[list[Polygon], bool]:
                          "polylines, circles, ellipses or splines")
     # outlines nest by the even-odd rule; a fill is rock where it lies (a hatch drawn over its
     # own boundary polyline must not cancel it), so the two are unioned (read_rock's union)
-    nested = shapely.get_parts(even_odd(polygons)).tolist() if polygons else []
-    return [g for g in nested if g.geom_type == "Polygon" and g.area > 0] + fills, False
+    return (polygon_parts(even_odd(polygons)) if polygons else []) + fills, False
 
 
 def _entities(doc: Any, entities: Any, depth: int) -> int:
@@ -208,7 +207,6 @@ def _filled(entity: Any, where: str, factor: float, total: list[int]) -> list[Po
     """A HATCH's or MPOLYGON's filled area, in metres: its boundary paths flattened within
     CURVE_TOLERANCE (counted against MAX_VERTICES as they are made), filled by the even-odd
     rule (a path inside another is a hole)."""
-    import shapely
     from ezdxf import path as dxf_path
 
     for k, boundary in enumerate(entity.paths, start=1):
@@ -243,8 +241,7 @@ def _filled(entity: Any, where: str, factor: float, total: list[int]) -> list[Po
         raise _ReadError(where, f"cannot be read: {_one_line(e)}") from None
     if not loops:
         raise _ReadError(where, "a fill with no boundary path; rock must enclose an area")
-    parts = [g for g in shapely.get_parts(even_odd(loops))
-             if g.geom_type == "Polygon" and g.area > 0]
+    parts = polygon_parts(even_odd(loops))
     if not parts:
         raise _ReadError(where, "its boundary paths enclose no area")
     return parts

@@ -35,6 +35,7 @@ from rb_drake.terrain.drawing_outline import (
     _scaled,
     even_odd,
     missing_extra,
+    polygon_parts,
     validity_reason,
 )
 from rb_drake.terrain.drawing_outline import (
@@ -93,7 +94,7 @@ def read_rock(path: str | Path, unit: str | None = None, scale: float = 1.0,
                             f"{MAX_VERTICES:,} outline vertices needs (at most "
                             f"{MAX_NUMBERS:,}); simplify the drawing first", file=name)
     if unit is None:
-        unit = (declared_unit(text) if suffix == ".dxf" else None) or "m"
+        unit = declared_unit_of(path, text) or "m"
     factor = UNITS[unit] * scale
     try:
         polygons, nested = readers[suffix](text, factor)
@@ -121,12 +122,15 @@ def declared_unit(text: str) -> str | None:
     return INSUNITS.get(int(match.group(1))) if match else None
 
 
-def declared_unit_of(path: str | Path) -> str | None:
-    """The unit a DXF file declares (`declared_unit`), read from its first 200,000 characters;
-    None for other files, and for anything not a regular readable file (its reader says why)."""
+def declared_unit_of(path: str | Path, text: str | None = None) -> str | None:
+    """The unit a DXF file declares (`declared_unit`), from `text` or else its first 200,000
+    characters; None for other files, and for anything not a regular readable file (its reader
+    says why). The one rule `read_rock` and the command line's note both follow."""
     path = Path(path)
     if path.suffix.lower() != ".dxf":
         return None
+    if text is not None:
+        return declared_unit(text)
     try:
         if not path.is_file():
             return None
@@ -149,26 +153,14 @@ def _combine(polygons: list[Polygon], nested: bool) -> list[Polygon]:
     from shapely import union_all
 
     if not nested:
-        return _parts(union_all(polygons))
-    return _parts(even_odd(polygons))  # shapely's symmetric_difference_all is deprecated
-
-
-def _parts(geometry: Any) -> list[Polygon]:
-    """The non-empty polygons of a shapely geometry, largest first (a stable order)."""
-    from shapely.geometry import Polygon
-
-    if isinstance(geometry, Polygon):
-        found = [geometry]
-    else:
-        found = [g for g in getattr(geometry, "geoms", ()) if isinstance(g, Polygon)]
-    found = [g for g in found if not g.is_empty and g.area > 0]
-    return sorted(found, key=lambda g: (-g.area, g.bounds))
+        return polygon_parts(union_all(polygons))
+    return polygon_parts(even_odd(polygons))  # shapely's symmetric_difference_all is deprecated
 
 
 def _finish(rock: list[Polygon], name: str, simplify: float) -> list[Polygon]:
     """The rock simplified to `simplify` m, refused if that leaves nothing or breaks it."""
     if simplify > 0:
-        rock = [p for poly in rock for p in _parts(poly.simplify(simplify,
+        rock = [p for poly in rock for p in polygon_parts(poly.simplify(simplify,
                                                                  preserve_topology=True))]
         if not rock:
             raise RbpInputError(f"nothing is left after simplifying to {simplify:g} m; give a "

@@ -84,7 +84,6 @@ class RefinementState:
             level += 1
         return level
 
-
     def refutations(self, lattices: list[LatticeConfig], level: int,
                     excluded: frozenset) -> list[Refuted]:
         """For each of `lattices[:level]` (`first_open`'s level), the refutation it skips on:

@@ -45,13 +45,16 @@ def _set(tree: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
     return tree
 
 
-def _refused(out: Path, trial: Trial, record: dict[str, Any], field: str) -> None:
+def _refused(out: Path, trial: Trial, record: dict[str, Any], field: str) -> str:
+    """Store `record` for `trial`, check that resuming refuses it in one line naming the file
+    and `field`, and return the message."""
     _store(out, trial, record["result"], record["timing"])
     with pytest.raises(SweepError) as info:
         finished_record(out, trial)
     message = str(info.value)
     assert message.startswith(f"{trial_path(out, trial.name)}: {field}"), message
     assert "\n" not in message and "delete the file" in message
+    return message
 
 
 SIMULATED = {"runs": 10, "successes": 9, "rate": 0.9, "ci95": [0.6, 0.98], "p_sim": 0.91,
@@ -139,8 +142,9 @@ def test_a_record_holding_nan_is_refused(tmp_path: Path) -> None:
     from experiments.common import CLIMB_TRIAL
 
     trial = Trial("c", CLIMB_TRIAL, {"kind": "shaft", "seed": 1, "planners": ["naive"]})
-    _refused(tmp_path, trial, _set(CLIMB, "result.naive.extra", float("nan")),
-             r"(file): holds NaN")
+    message = _refused(tmp_path, trial, _set(CLIMB, "result.naive.extra", float("nan")),
+                       r"(file): holds NaN")
+    assert "NaN" in message, message
 
 
 def test_monte_carlo_resume_refuses_a_bad_record_in_one_line(tmp_path: Path) -> None:
@@ -361,7 +365,8 @@ def test_calibration_errors_are_bounded(tmp_path: Path, field: str) -> None:
                          "simulated": {**SIMULATED, "max_heading_error": 0.01,
                                        "climb_seconds": 60.0, field: 1e308}},
               "timing": {"trial": 1.0}}
-    _refused(tmp_path, cal, record, f"result.simulated.{field}")
+    message = _refused(tmp_path, cal, record, f"result.simulated.{field}")
+    assert "1e+308" in message, f"the refusal does not show the value: {message}"
 
 
 def test_calibration_figure_draws_a_rate_off_by_the_tolerance() -> None:

@@ -255,11 +255,14 @@ def test_rig_log_readers_refuse_hostile_files_in_one_line(tmp_path, monkeypatch)
             assert time.perf_counter() - start < 30, f"{command} {path} took too long"
 
 
-def _refused_in_one_line(result, path: Path, words: str) -> None:
+def _refused_in_one_line(result, path: Path, words: str) -> str:
+    """Check that a command refused its input with exit 2 and one line naming `path` and
+    holding `words`; return that line."""
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2, (path, result.returncode, result.stderr[-2000:])
     assert len(lines) == 1 and str(path) in lines[0] and words in lines[0], \
         (path, words, result.stderr[-2000:])
+    return lines[0]
 
 
 def _refusal_growth_mb(load, text: str, match: str) -> float:
@@ -306,7 +309,8 @@ def test_reading_limit_variables_malformed_refused(tmp_path, monkeypatch, variab
     """A malformed limit silently fell back to the default; refused as RBP_THREADS is."""
     monkeypatch.setenv(variable, value)
     result = run_rbp("scenario", "check", "demo-shaft", cwd=tmp_path)
-    _refused_in_one_line(result, Path(variable), f"{variable} (environment): must be")
+    line = _refused_in_one_line(result, Path(variable), f"{variable} (environment): must be")
+    assert line.startswith("error: ") and "Traceback" not in result.stderr, line
 
 
 def test_largest_byte_limit_reads_files(tmp_path, monkeypatch):
@@ -576,7 +580,9 @@ def test_large_plan_with_an_error_at_its_end_named_by_the_compiled_validator(tmp
     path = tmp_path / "big.json"
     path.write_text(json.dumps(plan))
     result = run_rbp("check", "-q", str(path), cwd=tmp_path)
-    _refused_in_one_line(result, path, "phases[0].steps[19999].pose: must contain at least 3")
+    line = _refused_in_one_line(result, path,
+                                "phases[0].steps[19999].pose: must contain at least 3")
+    assert line.startswith(f"error: {path}: "), line
 
 
 def test_json_with_millions_of_values_refused_before_parsing():
@@ -636,7 +642,9 @@ def test_damaged_rig_logs_refused_in_one_line(tmp_path):
         for channel, data in events:
             log.write_event(0, channel, data)
         log.close()
-        _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path, words)
+        line = _refused_in_one_line(run_rbp("rig-replay", str(path), cwd=tmp_path), path,
+                                    words)
+        assert line.startswith(f"error: {path}"), line
 
 
 def test_rig_log_setup_printed_escaped_and_its_stance_checked(tmp_path):
@@ -896,7 +904,8 @@ def test_boom_and_goal_tolerance_beyond_a_cave_refused(tmp_path, text, field):
     path.write_text(text)
     result = run_rbp("plan", str(path), "--footsteps-only", "-o", str(tmp_path / "p.json"),
                      "--no-pictures", cwd=tmp_path)
-    _refused_in_one_line(result, path, f"{field}: must be")
+    line = _refused_in_one_line(result, path, f"{field}: must be")
+    assert not (tmp_path / "p.json").exists(), f"a refused plan was written: {line}"
 
 
 def test_goal_cells_and_body_cache_follow_the_cave_not_the_reach():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import gc
 import math
 import os
 import time
@@ -453,6 +454,10 @@ def route_variants(job: tuple[str, int, tuple[float, float], list[str], float | 
                         "memo": fp.memo.lattice.stats() if fp.memo is not None else None,
                         "stances": [list(s) for s in fp.stances] if fp.success else None,
                         "refined": [[c.position_step, c.angle_step_deg] for c in fp.refined]}
+        # The next variant must not run beside this one's memo (up to its cap, kept alive by
+        # the result): a capped search watches the process's memory and would give way to it.
+        del fp, plan
+        gc.collect()
     return out
 
 

@@ -22,7 +22,7 @@ import networkx as nx
 import numpy as np
 
 from planning.astar import SearchResult
-from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes
+from planning.bounded_cache import BoundedCache, MemoryPool, array_bytes, release_free_heap
 from planning.compact_keys import KeyCodec, mixed_radix, split_radix
 from planning.components import Component, StanceComponents
 from planning.lattice import LatticeConfig, poses_of, span_problem, unpack
@@ -118,6 +118,8 @@ class LatticeMemo:
         self.pool.cap_bytes = None if memory_mb is None else float(memory_mb) * 2.0 ** 20
         self.pool.process_budget = (None if memory_mb is None
                                     else (float(memory_mb) + PROCESS_HEADROOM_MB) * 2.0 ** 20)
+        if memory_mb is not None:
+            release_free_heap()  # what earlier work freed is not this search's to count
 
     def move_table(self, vertex: Vertex) -> MoveTable:
         """Vertex (stance, component)'s moves: (boom, anchor index) -> its `move_rows`."""

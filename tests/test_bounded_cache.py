@@ -4,10 +4,18 @@ all the time, decides exactly as one with no cap."""
 
 from __future__ import annotations
 
+import ctypes.util
+import zlib
+
 import numpy as np
 import pytest
 
-from planning.bounded_cache import PROTECTED, BoundedCache
+from planning.bounded_cache import (
+    PROTECTED,
+    BoundedCache,
+    release_free_heap,
+    resident_memory_bytes,
+)
 from planning.complete import complete_search
 from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.components import StanceComponents
@@ -270,3 +278,47 @@ def test_a_search_squeezed_by_the_process_decides_as_an_uncapped_one() -> None:
     assert (squeezed.path, squeezed.expansions, squeezed.transitions_tested, squeezed.cost) == \
         (free.path, free.expansions, free.transitions_tested, free.cost), \
         "a search whose memo gave way to the process decided otherwise"
+
+
+@pytest.mark.skipif(resident_memory_bytes() is None or ctypes.util.find_library("c") is None,
+                    reason="needs /proc and the C library")
+def test_freed_heap_is_given_back_before_a_search_counts_the_process() -> None:
+    """A pool watching the process (issue 31) must not count memory an earlier search freed:
+    blocks freed behind small live ones stay resident until the heap is trimmed."""
+    blocks, pins = [], []
+    for _ in range(2000):
+        blocks.append(bytearray(100_000))
+        pins.append(bytearray(1000))  # live, small: the heap's top cannot shrink past them
+    del blocks
+    before = resident_memory_bytes()
+    release_free_heap()
+    after = resident_memory_bytes()
+    assert before is not None and after is not None
+    assert after < before - 100 * 2 ** 20, (
+        f"resident {before / 2**20:.0f} MiB before releasing ~190 MiB of freed blocks, "
+        f"{after / 2**20:.0f} MiB after")
+    assert len(pins) == 2000
+
+
+def test_packed_entries_stay_when_the_most_recent_alone_pass_the_cap() -> None:
+    """A cap smaller than the protected entries' bytes (a quarter cap of a small search, whose
+    stances hold a MiB each) packs the older entries and keeps them within their share: dropping
+    them could not bring the memo under the cap, and rebuilt them at every other use."""
+    built: list[int] = []
+
+    def rebuild(key: int, _tomb: object) -> np.ndarray:
+        built.append(key)
+        return np.full(1000, key, dtype=np.int64)
+
+    cache: BoundedCache[int, np.ndarray] = BoundedCache(
+        lambda v: v.nbytes, rebuild, cap_bytes=8000 * PROTECTED // 2,
+        pack=lambda v: zlib.compress(v.tobytes()),
+        unpack=lambda _key, blob: np.frombuffer(zlib.decompress(blob), dtype=np.int64).copy())
+    for key in range(3 * PROTECTED):
+        cache[key] = np.full(1000, key, dtype=np.int64)
+    stats = cache.stats()
+    assert stats["packed"] == 2 * PROTECTED and stats["drops"] == 0, (
+        f"{stats['packed']} packed and {stats['drops']} dropped of {2 * PROTECTED} entries "
+        f"older than the {PROTECTED} most recent, whose packed bytes fit their share")
+    assert np.array_equal(cache[0], np.full(1000, 0)) and built == [], \
+        f"an old entry came back by a rebuild ({built}), not unpacked"

@@ -32,6 +32,14 @@ TRIES = 8         # (phase, kept steps) tried per call
 MAX_KEPT = 3      # intermediate motion steps kept at most
 
 
+def splice_through(plan: dict, k: int) -> None:
+    """Make `plan` (a continuation: its `start` set) hold phases 0 to k as a continuation's
+    spliced-in first phases do: without their motion record, so that a damaged phase k
+    needs no trajectory at `time_step` (a phase without one is allowed only among the first)."""
+    for phase in plan["phases"][:k + 1]:
+        phase.pop("motion", None)
+
+
 def _motion_span(steps: list[dict]) -> tuple[int, int]:
     """The first and last step of a phase that are not ramp steps."""
     n = len(steps)
@@ -91,7 +99,7 @@ def between_cut(plan: PlanFile, rng: np.random.Generator
                 cut = out["phases"][k]
                 removed = [i for i in range(a + 1, b) if i not in remain]
                 cut["steps"] = [s for i, s in enumerate(cut["steps"]) if i not in removed]
-                cut.pop("motion", None)
+                splice_through(out, k)
                 n = remain[m] - sum(i < remain[m] for i in removed)  # its index now
                 return out, k, n, (f"phases[{k}]: steps {a + 1} to {b - 1} removed but "
                                 f"{[int(i) for i in kept]}; the straight motion from step "
@@ -171,7 +179,7 @@ def between_excursion(plan: PlanFile, rng: np.random.Generator
         out = copy.deepcopy(plan)
         out.setdefault("start", copy.deepcopy(plan["scenario"]["start"]))
         damaged = out["phases"][k]
-        damaged.pop("motion", None)
+        splice_through(out, k)
         for m, share in ((n + 1, 1.0), (n + 2, back)):
             old = damaged["steps"][m]
             pose = base + np.array([0.0, 0.0, share * lo])

@@ -155,6 +155,7 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
         raise PlanFileError("(top level)", f"must be a JSON object, got {_kind(plan)}")
     if "format" in plan:  # before the schema, which walks the whole plan to refuse it
         _check_format(plan["format"])
+    _check_scenario_size(plan.get("scenario"))
     error = schema_error(plan, quick)
     if error is not None:
         field = field_path(error.absolute_path) or "(top level)"
@@ -199,6 +200,29 @@ def check_times(plan: dict[str, Any]) -> None:
                         f"are at most {MAX_STEP_GAP:g} s apart (longer only for a body move "
                         f"at {BODY_SPEED:g} m/s, {TURN_SPEED:g} rad/s)")
             before = step
+
+
+def _check_scenario_size(scenario: Any) -> None:
+    """Refuse (PlanFileError on "scenario") an embedded scenario of more values than a
+    scenario file may hold (`max_input_values`): the plan's own limits are a plan's, and a
+    cave of 480,000 wall vertices inside a plan took seconds to refuse and half a minute to
+    plan again from (`--from-plan`), where its scenario file is refused at once."""
+    from rb_drake.input_files import max_input_values
+
+    limit = max_input_values()
+    count, stack = 0, [scenario]
+    while stack:
+        value = stack.pop()
+        count += 1
+        if count > limit:
+            raise PlanFileError("scenario", f"the embedded scenario holds more than {limit:,} "
+                                "values, the most a scenario file may (RBP_MAX_INPUT_VALUES "
+                                "raises the limit)")
+        if isinstance(value, dict):
+            count += len(value)  # its keys, counted as a scenario file's are
+            stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
 
 
 def _check_format(value: Any) -> None:

@@ -30,6 +30,7 @@ from planning.plan_model import Plan, Step
 from planning.verify_between import (
     MAX_PARTS,
     MAX_PHASE_SAMPLES,
+    MAX_PLAN_SAMPLES,
     Samples,
     failing_intervals,
     first_failure,
@@ -367,6 +368,11 @@ def smooth_path_problems(plan: Plan, world: World, stance_of, fail) -> int:
     vworld = verification_world(world)
     for k, path in plan_paths(plan):
         s, too_long = path_samples(world.robot, path)
+        if checked + len(s.t) > MAX_PLAN_SAMPLES:
+            fail(k, path.first_step, f"rbp simulate's smooth path is too long to verify: with "
+                 f"this phase it needs over {MAX_PLAN_SAMPLES} samples at the resolution "
+                 "(phases after it are not verified on it)")
+            break
         if too_long:
             fail(k, path.first_step, f"{too_long} interval(s) of rbp simulate's smooth path too "
                  f"long to verify (over {MAX_PARTS} samples an interval, or "

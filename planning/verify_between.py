@@ -61,6 +61,10 @@ CHUNK = 20_000
 # hostile file of many long intervals, each under MAX_PARTS, must not allocate without bound
 # either (400,000 steps 40 m apart fit in a 64 MiB file).
 MAX_PHASE_SAMPLES = 1_000_000
+# And a plan needing more than this in all (10 km of travel; a 20 m climb needs about 10^5) is
+# reported from the phase that passes it: many phases each under MAX_PHASE_SAMPLES made an
+# 8 MiB file take minutes to verify.
+MAX_PLAN_SAMPLES = 2_000_000
 
 
 def step_motion(times: np.ndarray, values: np.ndarray) -> PiecewisePolynomial:
@@ -266,10 +270,16 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
         for long in np.flatnonzero(parts > MAX_PARTS):
             fail(k, int(long), f"between steps {long} and {long + 1}: the motion is too long to "
                  f"verify (over {MAX_PARTS} samples at the resolution)")
-        if np.sum(np.where(parts > MAX_PARTS, 0, parts - 1)) > MAX_PHASE_SAMPLES:
+        needed = int(np.sum(np.where(parts > MAX_PARTS, 0, parts - 1)))
+        if needed > MAX_PHASE_SAMPLES:
             fail(k, 0, f"the phase's motion is too long to verify (over {MAX_PHASE_SAMPLES} "
                  f"samples at the resolution)")
             continue
+        if checked + needed > MAX_PLAN_SAMPLES:
+            fail(k, 0, f"the plan's motion is too long to verify: with this phase it needs "
+                 f"over {MAX_PLAN_SAMPLES} samples at the resolution (phases after it are "
+                 "not verified between steps)")
+            break
         s = phase_samples(robot, phase)
         checked += len(s.t)
         for n, text in failing_intervals(world, stance, phase, s):

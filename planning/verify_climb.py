@@ -19,12 +19,14 @@ import numpy as np
 
 from planning.plan_model import Phase, Plan, Step, scenario_robot_problem
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION
+from planning.search_outcome import Stop
 from rb_drake.scenario import Scenario
 
 RULES = {
     "robot": "the robot under `scenario` is the robot at the top level",
     "start": "the climb starts at t = 0 at the start pose, in the start stance",
-    "goal": "a plan that claims success ends inside the goal disc; a partial plan (`partial`) "
+    "goal": "a plan that claims success ends inside the goal disc (and its search record, if "
+            "any, says a route was found); a partial plan (`partial`) "
             "does not claim success and ends in the stance it names, as far from the goal as "
             "it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
@@ -262,12 +264,18 @@ def is_trajectory(plan: Plan, phase: Phase) -> bool:
 
 def _times(plan: Plan, fail) -> None:
     dt = plan.time_step
+    moved = False  # a phase with its trajectory came before
     for k, phase in enumerate(plan.phases):
         steps = phase.steps
         regular = is_trajectory(plan, phase)
         if dt is not None and not regular and plan.start is None:
             # Only a continuation (`start`) splices in phases that hold end poses only.
             fail("phase-form", "a phase of a full plan without its trajectory (motion)", k)
+        elif dt is not None and not regular and moved:
+            # ... and only as its first phases, before the replanned ones
+            fail("phase-form", "a phase without its trajectory (motion) after one with it (a "
+                 "continuation's spliced phases without motion come first)", k)
+        moved = moved or regular
         if phase.motion is not None and dt is None:
             fail("phase-form", "a trajectory (motion) in a plan without time_step", k)
         for n in range(1, len(steps)):
@@ -332,6 +340,10 @@ def _goal(plan: Plan, scn: Scenario, fail) -> None:
         _partial(plan, scn, fail)
     if not plan.success:
         return
+    stop = plan.search.stop if plan.search is not None else Stop.ROUTE
+    if stop != Stop.ROUTE:
+        fail("goal", f"the plan claims success but its search record says it stopped with "
+             f"{str(stop)!r} (no route found)")
     k = len(plan.phases) - 1
     n = len(plan.phases[k].steps) - 1
     end = plan.phases[k].steps[n].pose
@@ -367,12 +379,26 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
 
 
 def partial_note(plan: Plan) -> str:
-    """What `rbp check` says of a partial plan that verifies ('' for another plan)."""
+    """What `rbp check` says of a partial plan or a continuation that verifies ('' for
+    another plan)."""
+    notes = []
+    if plan.start is not None:
+        # the verifier trusts a continuation's `start`: say where it starts, so that a climb
+        # cut from the middle of another does not read as a climb from the cave's start
+        start = plan.scenario.get("start", {})
+        notes.append(f"a continuation: starts at pose {_rounded(plan.start.pose)} in stance "
+                     f"{list(plan.start.stance)} (the cave's start: pose "
+                     f"{_rounded(start.get('pose', []))} in stance {start.get('stance')}); how "
+                     "the robot got there is not verified")
     part = plan.partial
-    if part is None:
-        return ""
-    return (f"partial: ends {part.goal_distance_m:.2f} m from the goal in stance "
-            f"{list(part.reached_stance)} (the start is {part.start_distance_m:.2f} m)")
+    if part is not None:
+        notes.append(f"partial: ends {part.goal_distance_m:.2f} m from the goal in stance "
+                     f"{list(part.reached_stance)} (the start is {part.start_distance_m:.2f} m)")
+    return "; ".join(notes)
+
+
+def _rounded(values: Any) -> list[float]:
+    return [round(float(v), 4) for v in values]
 
 
 SHARE_TOL = 1e-9  # a ramp's share reaches 1 exactly (plans write the value 1.0)

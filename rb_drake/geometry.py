@@ -86,6 +86,11 @@ def boom_geometry(robot: RobotParams, poses: np.ndarray, targets: np.ndarray) ->
     with np.errstate(invalid="ignore", divide="ignore"):
         u = d / length[..., None]
     beta = np.arctan2(d[..., 1], d[..., 0])
+    retracted = length == 0.0  # the shoulder on its target: the boom points along its shoulder
+    if retracted.any():
+        axis = np.broadcast_to(poses[:, 2, None] + robot.shoulder_directions, length.shape)
+        beta = np.where(retracted, axis, beta)
+        u = np.where(retracted[..., None], np.stack([np.cos(axis), np.sin(axis)], axis=-1), u)
     theta = wrap_angle(beta - poses[:, 2, None] - robot.shoulder_directions)
     return BoomGeometry(p, d, length, u, theta)
 

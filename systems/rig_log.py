@@ -146,6 +146,12 @@ def read_log(path: Path, channels: Collection[str], fixed: Mapping[str, FixedMes
 # Its messages, decoded and range-checked
 
 
+# A message's utime (us): rbp stamps the plan's time (from about 0 s); a rig's own clock may
+# stamp the epoch (1.7e15 in 2026). Outside these it is no time a rig sends.
+UTIME_RANGE = (-100_000_000, 10**16)
+MAX_HINGE = 4.0 * np.pi  # rad: a hinge angle beyond two turns is no angle a hinge reads
+
+
 def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
     """The status in `data`, or None if it does not decode (another message type, garbage)
     or is out of range: not finite, a negative winch length, or a force beyond ten times the
@@ -160,6 +166,9 @@ def decode_status(data: bytes, robot: RobotParams) -> rig_status_t | None:
     if np.any(np.asarray(status.winch_length) < 0.0):
         return None
     if np.any(np.abs(status.load_cell_force) > 10.0 * robot.boom_tension[1]):
+        return None
+    if np.any(np.abs(status.hinge_angle) > MAX_HINGE) or not (
+            UTIME_RANGE[0] <= status.utime <= UTIME_RANGE[1]):
         return None
     return status
 
@@ -205,7 +214,9 @@ def good_statuses(raw: list[bytes], robot: RobotParams) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         good = (np.all(np.isfinite(values), axis=1) & np.all(rows["winch_length"] >= 0.0, axis=1)
                 & np.all(np.abs(rows["load_cell_force"]) <= 10.0 * robot.boom_tension[1],
-                         axis=1))
+                         axis=1)
+                & np.all(np.abs(rows["hinge_angle"]) <= MAX_HINGE, axis=1)
+                & (rows["utime"] >= UTIME_RANGE[0]) & (rows["utime"] <= UTIME_RANGE[1]))
     return rows[good]
 
 
@@ -219,6 +230,11 @@ def first_bad_command(rows: np.ndarray, robot: RobotParams) -> tuple[int, str] |
         with np.errstate(invalid="ignore"):
             bad |= ~np.all(np.isfinite(values) & (values >= low - slack)
                            & (values <= high + slack), axis=1)
+    late = (rows["utime"] < UTIME_RANGE[0]) | (rows["utime"] > UTIME_RANGE[1])
+    if late[:np.argmax(bad) if bad.any() else len(rows)].any():
+        k = int(np.argmax(late))
+        return k, (f"utime {int(rows['utime'][k])} us is no time a rig sends (from "
+                   f"{UTIME_RANGE[0]:g} to {UTIME_RANGE[1]:g} us)")
     if not bad.any():
         return None
     k = int(np.argmax(bad))

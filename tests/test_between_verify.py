@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from conftest import build_shaft
 
+from planning.between_faults import splice_through
 from planning.check import verify_plan
 from planning.plan import score_plan
 from planning.plan_model import Phase, Plan, plan_scenario
@@ -102,14 +103,15 @@ def _straight_crosses_rock(plan: PlanFile, k: int) -> bool:
 def test_a_phase_cut_to_its_ends_whose_straight_motion_crosses_rock(
         cave_plans: dict[str, PlanFile]) -> None:
     """A hand-made fault in the demo plan: a phase whose straight motion from its first to its
-    last motion step crosses rock keeps those two steps only (a continuation may hold end
-    configurations only). Every other rule accepts it; `between` names phase and step."""
+    last motion step crosses rock keeps those two steps only (a continuation's first phases,
+    spliced in, may hold end configurations only: so do the phases before it). Every other
+    rule accepts it; `between` names phase and step."""
     plan = copy.deepcopy(cave_plans["demo-shaft"])
     k = next(k for k in range(len(plan["phases"])) if _straight_crosses_rock(plan, k))
     phase = plan["phases"][k]
     a, b = _motion_span(phase["steps"])
     phase["steps"] = phase["steps"][:a + 1] + phase["steps"][b:]
-    phase.pop("motion")
+    splice_through(plan, k)
     plan["start"] = copy.deepcopy(plan["scenario"]["start"])
     scored = score_plan(Plan.from_dict(plan), plan["robot"]["attach_failure"])
     plan.update(p_path=scored.p_path, p_grasps=scored.p_grasps, p_min=scored.p_min)
@@ -299,7 +301,7 @@ def test_a_plan_whose_smooth_path_strays_is_refused_though_its_straight_motion_h
         cut.setdefault("start", copy.deepcopy(plan["scenario"]["start"]))
         keep = set(range(a + 1)) | set(range(b, len(phase["steps"]))) | set(range(a, b, 8))
         cut["phases"][k]["steps"] = [s for i, s in enumerate(phase["steps"]) if i in keep]
-        cut["phases"][k].pop("motion", None)
+        splice_through(cut, k)
         traj = PlanTrajectory(cut, scn)
         if (traj.departure > DEPARTURE_LIMIT and traj.departure_phase == k
                 and check_plan(cut) == []):

@@ -399,9 +399,10 @@ def variant_config(variant: str, time_limit: float | None):
         radius, _, factor = variant.removeprefix("corridor").partition("-f")
         return FootstepConfig(anytime=AnytimeConfig(corridor=float(radius),
                                                     improve_factor=float(factor or 2.0)))
-    if variant.startswith("x-"):  # x-wW-fF-cR-bB-sA_B: today's default, any of its first
-        # route's weight W (default 300, the default before session 24), improvement budget F,
-        # corridor R, fallback point B and passes' weights A, B, ... changed
+    if variant.startswith("x-"):  # x-wW-fF-cR-bB-mM-eE-sA_B: today's default, any of its
+        # first route's weight W (default 300, the default before session 24), improvement
+        # budget F, corridor R, fallback point B, expansion budget M (at least; default 1000)
+        # and per metre E (default 300) and passes' weights A, B, ... changed
         parts = variant.split("-")[1:]
         settings = {p[0]: float(p[1:]) for p in parts if p[0] != "s"}
         # sA_B_C: the passes' weights A, B, C (default today's)
@@ -410,7 +411,9 @@ def variant_config(variant: str, time_limit: float | None):
                                 improve_factor=settings.get("f", 2.0),
                                 corridor=settings.get("c"))
         return FootstepConfig(heuristic_weight=settings.get("w", 300.0), anytime=anytime,
-                              fallback_after=settings.get("b", 0.75))
+                              fallback_after=settings.get("b", 0.75),
+                              max_expansions=int(settings.get("m", 1000)),
+                              expansions_per_metre=settings.get("e", 300.0))
     return FootstepConfig(**table[variant])
 
 

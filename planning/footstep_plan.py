@@ -203,6 +203,28 @@ class FootstepMemo:
     refinement: RefinementState = dataclasses.field(default_factory=RefinementState)
 
 
+def holds_as_built(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: str,
+                   pose: np.ndarray) -> bool:
+    """Whether the transition's four configurations hold at `pose` as the plan will be built
+    and verified (`check_poses` and its robust allocation: finite tensions on every attached
+    boom). The polish scores poses with the search's compiled tests; pushed to the edge of
+    feasibility (300 rounds), it found poses where the allocation failed and the plan's ramps
+    lost their tensions, so `rbp check` refused a plan that `rbp plan` called a success."""
+    from rb_drake.feasibility import check_poses
+
+    new = tuple(anchor if i == boom else a for i, a in enumerate(stance))
+    free = tuple(None if i == boom else a for i, a in enumerate(stance))
+    positions = scn.anchor_positions
+    tips = (positions[scn.anchor_index[stance[boom]]], positions[scn.anchor_index[anchor]])
+    for ids, tip in ((stance, None), (free, tips[0]), (free, tips[1]), (new, None)):
+        st = scn.stance(ids)
+        check = check_poses(scn, st, np.asarray(pose, dtype=float)[None], tip, full=True)
+        tensions = check.allocation.tensions[0][st.attached]
+        if not (bool(check.feasible[0]) and np.all(np.isfinite(tensions))):
+            return False
+    return True
+
+
 def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], boom: int,
                   anchor: str, pose: np.ndarray, probabilities: np.ndarray,
                   alternatives: np.ndarray | None = None) -> Step:
@@ -217,6 +239,7 @@ def polished_step(scn: Scenario, cfg: FootstepConfig, stance: tuple[str, ...], b
         polished, p4 = polish_transition(scn, stance, boom, anchor, found,
                                          edge_rng(cfg.seed, stance, boom, "polish"),
                                          cfg.polish_rounds)
-        if ramp_ends_hold(scn, stance, boom, anchor, polished, p4):
+        if ramp_ends_hold(scn, stance, boom, anchor, polished, p4) and \
+                holds_as_built(scn, stance, boom, anchor, polished):
             pose, probabilities = polished, p4
     return Step(boom, stance[boom], anchor, pose, probabilities, found, alternatives)

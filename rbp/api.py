@@ -21,6 +21,7 @@ a `PlanFileError` for a plan file), whose message names the file, the field and 
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -79,6 +80,22 @@ def _number(value: Any, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise RbpInputError(f"must be a number, got {value!r:.60}", field=field)
     return float(value)
+
+
+def _point(value: Any, field: str, size: int) -> Any:
+    """`value` as a tuple of `size` numbers (None stays None); else RbpInputError on `field`
+    (a third coordinate of a 2-D start was dropped silently, strings ended in TypeError)."""
+    from rb_drake.errors import RbpInputError
+
+    if value is None:
+        return None
+    try:
+        items = list(value)
+    except TypeError:
+        items = []
+    if isinstance(value, str | bytes) or len(items) != size:
+        raise RbpInputError(f"expected {size} numbers, got {value!r:.60}", field=field)
+    return tuple(_number(v, f"{field}[{i}]") for i, v in enumerate(items))
 
 
 def _path(value: Any, field: str, what: str = "a file path") -> str | Path:
@@ -196,12 +213,20 @@ def import_scenario(path: str | Path, *, unit: str | None = None, scale: float =
     and `goal` (x, y in m) are chosen when None: the lowest place with a feasible stance and
     the highest free place above it. Needs the extra `rbp[import]`. Raises `RbpInputError`
     (file and reason) for a file that is not closed, simple rock or makes no cave."""
+    from rb_drake.errors import MAX_SEED, RbpInputError
     from rb_drake.terrain.import_cave import ImportOptions, import_cave
 
+    for text, field in ((unit, "unit"), (name, "name")):
+        if text is not None and not isinstance(text, str):
+            raise RbpInputError(f"must be a string or None, got {text!r:.60}", field=field)
     return import_cave(_path(path, "path"), ImportOptions(
-        unit=unit, scale=scale, simplify=simplify, anchor_density=anchor_density, seed=seed,
-        start=start, goal=goal, name=name, plane_origin=plane_origin,
-        plane_normal=plane_normal, resolution=resolution))
+        unit=unit, scale=_number(scale, "scale"), simplify=_number(simplify, "simplify"),
+        anchor_density=_number(anchor_density, "anchor_density"),
+        seed=_whole(seed, "seed", 0, MAX_SEED), start=_point(start, "start", 2),
+        goal=_point(goal, "goal", 2), name=name,
+        plane_origin=_point(plane_origin, "plane_origin", 3),
+        plane_normal=_point(plane_normal, "plane_normal", 3),
+        resolution=None if resolution is None else _number(resolution, "resolution")))
 
 
 def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, *,
@@ -492,8 +517,9 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
     from rb_drake.scenario import Scenario
     from systems.meshcat_view import show_climb, show_scenario, start_meshcat
 
-    if not speedup > 0:
-        raise RbpInputError(f"must be above 0, got {speedup:g}", field="speedup")
+    speedup = _number(speedup, "speedup")
+    if not 0 < speedup < math.inf:
+        raise RbpInputError(f"must be above 0 and finite, got {speedup:g}", field="speedup")
     if isinstance(what, Scenario):
         scn = _scenario(what, "what")
         server = start_meshcat()

@@ -100,6 +100,7 @@ def cmd_scenario_generate(args: argparse.Namespace) -> int:
 
 
 def cmd_scenario_import(args: argparse.Namespace) -> int:
+    import re
     import shlex
 
     from rb_drake.files import atomic_write_text
@@ -140,8 +141,9 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
         words += ["--resolution", f"{args.resolution:g}"]
     if args.name is not None:
         words += ["--name", args.name]
-    # one line: a newline in a file name or --name would end the comment
-    command = shlex.join(words).replace("\n", " ").replace("\r", " ")
+    # one line: a line break in a file name or --name would end the comment (YAML breaks
+    # lines at NEL, LS and PS too)
+    command = re.sub("[\n\r\x85\u2028\u2029]", " ", shlex.join(words))
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
                    f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "

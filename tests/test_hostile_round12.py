@@ -112,3 +112,43 @@ def test_rig_messages_out_of_any_rigs_range() -> None:
     done = run("rig-replay", str(DATA / "hostile" / "log-hinge-1e300.lcm"))
     assert done.returncode == 0 and "0 statuses" in done.stdout, \
         f"exit {done.returncode}: {done.stdout[-300:]} {done.stderr[-300:]}"
+
+
+def test_a_long_polish_keeps_the_plan_verifiable(tmp_path: Path) -> None:
+    """`footstep.polish_rounds: 300` (in range) pushed transition poses to where the plan's
+    allocation failed: `rbp plan` said success with p_min 0 and `rbp check` refused the plan.
+    A polished pose is now kept only where the plan will hold as built."""
+    config = tmp_path / "polish.yaml"
+    config.write_text("footstep: {polish_rounds: 300}\n")
+    out = tmp_path / "plan.json"
+    done = run("plan", "demo-shaft", "--config", str(config), "--footsteps-only", "-o", str(out),
+               "--quiet", "--no-pictures")
+    assert done.returncode == 0, done.stderr[-400:]
+    problems = verify_plan(json.loads(out.read_text()))
+    assert problems == [], "\n".join(map(str, problems[:5]))
+
+
+def test_an_imported_name_with_a_unicode_line_break_stays_one_comment(tmp_path: Path) -> None:
+    """YAML ends lines at NEL, LS and PS too: a --name holding one wrote a scenario file whose
+    command comment spilled into keys, which rbp then refused to read."""
+    out = tmp_path / "cave.yaml"
+    done = run("scenario", "import", str(ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson"),
+               "-o", str(out), "--name", "lava\u2028format: evil\u0085x")
+    assert done.returncode == 0, done.stderr[-400:]
+    checked = run("scenario", "check", str(out))
+    assert checked.returncode == 0, checked.stdout[-300:] + checked.stderr[-300:]
+
+
+@pytest.mark.parametrize("options", [{"start": ("0", "1.2")}, {"start": 5},
+                                     {"start": (0, 1.2, 5)}, {"scale": "1"}, {"scale": True},
+                                     {"simplify": None}, {"seed": 3.0},
+                                     {"plane_normal": ("1", "0", "0")}, {"name": 5}],
+                         ids=lambda o: next(iter(o)))
+def test_import_scenario_refuses_arguments_of_the_wrong_kind(options: dict[str, Any]) -> None:
+    import rbp
+    from rb_drake.errors import RbpInputError
+
+    field = next(iter(options))
+    with pytest.raises(RbpInputError) as refused:
+        rbp.import_scenario(ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson", **options)
+    assert (refused.value.field or "").startswith(field), str(refused.value)

@@ -45,6 +45,8 @@ def _plain(value: Any) -> Any:
         return [_plain(v) for v in value]
     if isinstance(value, float) and math.isinf(value):
         return "inf" if value > 0 else "-inf"
+    if getattr(value, "ndim", 0) and hasattr(value, "tolist"):  # a numpy array, as a list
+        return _plain(value.tolist())
     if hasattr(value, "item") and not isinstance(value, str):  # numpy scalars
         return _plain(value.item())
     return value

@@ -348,15 +348,21 @@ def read_plan(path: str | Path) -> Plan:
 
 
 def write_plan(plan: Plan | dict[str, Any], path: str | Path) -> Path:
-    """Write `plan` to `path` as a plan file (JSON, checked against the schema first; written
-    to a temporary file and renamed, so never half-written); returns the path. A plan dict is
-    checked as a plan file is read (PlanFileError naming the field), and a path that cannot be
-    written (a folder, an unwritable place) raises RbpInputError naming it, before writing."""
+    """Write `plan` to `path` (a .json name) as a plan file (JSON, checked against the schema
+    first; written to a temporary file and renamed, so never half-written); returns the path. A
+    plan dict is checked as a plan file is read (PlanFileError naming the field), and a path
+    that cannot be written (a folder, an unwritable place, another suffix than .json) raises
+    RbpInputError naming it, before writing."""
     from planning.plan import write_plan as write
     from planning.plan_file import plan_from
+    from rb_drake.errors import RbpInputError
 
+    out = _output(path)
+    if out.suffix.lower() != ".json":  # as `rbp plan -o`: a plan under cave.yaml or a .png
+        raise RbpInputError("a plan file is JSON: give a name ending in .json, got "
+                            f"{out.suffix or 'no suffix'}", file=str(path))
     model = plan_from(plan)
-    return write(model, _output(path))
+    return write(model, out)
 
 
 @dataclasses.dataclass(frozen=True)

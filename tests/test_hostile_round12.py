@@ -152,3 +152,30 @@ def test_import_scenario_refuses_arguments_of_the_wrong_kind(options: dict[str, 
     with pytest.raises(RbpInputError) as refused:
         rbp.import_scenario(ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson", **options)
     assert (refused.value.field or "").startswith(field), str(refused.value)
+
+
+def test_write_plan_wants_a_json_name(golden: PlanFile, tmp_path: Path) -> None:
+    import rbp
+    from rb_drake.errors import RbpInputError
+
+    with pytest.raises(RbpInputError, match="a plan file is JSON"):
+        rbp.write_plan(golden, tmp_path / "plan.png")
+    assert not (tmp_path / "plan.png").exists()
+
+
+def test_a_config_object_may_hold_numpy_arrays() -> None:
+    """`anytime.weights` set to a numpy array ended in numpy's ValueError (an array has no
+    single item); it is read as the list it holds, then checked as a file's values are."""
+    import dataclasses
+
+    import numpy as np
+
+    import rbp
+    from planning.complete_config import AnytimeConfig
+    from planning.pipeline import PipelineConfig
+
+    config = PipelineConfig()
+    config = dataclasses.replace(config, footstep=dataclasses.replace(
+        config.footstep, anytime=AnytimeConfig(weights=np.array([5.0, 3.0, 2.0, 1.0]))))
+    plan = rbp.plan("rig", config, footsteps_only=True)
+    assert plan.success, plan.reason

@@ -23,7 +23,7 @@ import numpy as np
 
 from planning.plan_model import Plan, plan_scenario
 from planning.verify_between import subdivisions, verification_world
-from planning.verify_climb import TURN_SPEED_MAX, _speeds
+from planning.verify_climb import TURN_SPEED_MAX, speed_problems
 from rb_drake.feasibility import check_poses
 
 PlanFile = dict[str, Any]
@@ -216,7 +216,7 @@ def between_excursion(plan: PlanFile, rng: np.random.Generator
             # position, so the body's own travel and turn into step n + 3 count too (a test
             # of the injected turn alone let 5 of 1000 faults through that `speed` refused)
             over: list[Any] = []
-            _speeds(Plan.from_dict(out), lambda *problem, found=over: found.append(problem))
+            speed_problems(Plan.from_dict(out), lambda *problem, found=over: found.append(problem))
             if over:
                 continue
             step = a + first[0]

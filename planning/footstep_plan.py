@@ -33,6 +33,7 @@ from planning.transition import (
     Transition,
     TransitionConfig,
     polish_transition,
+    transition_stances,
 )
 from rb_drake.errors import RbpInputError
 from rb_drake.scenario import Scenario
@@ -212,12 +213,10 @@ def holds_as_built(scn: Scenario, stance: tuple[str, ...], boom: int, anchor: st
     lost their tensions, so `rbp check` refused a plan that `rbp plan` called a success."""
     from rb_drake.feasibility import check_poses
 
-    new = tuple(anchor if i == boom else a for i, a in enumerate(stance))
-    free = tuple(None if i == boom else a for i, a in enumerate(stance))
-    positions = scn.anchor_positions
-    tips = (positions[scn.anchor_index[stance[boom]]], positions[scn.anchor_index[anchor]])
-    for ids, tip in ((stance, None), (free, tips[0]), (free, tips[1]), (new, None)):
-        st = scn.stance(ids)
+    s_old, s_three, s_new = transition_stances(scn, stance, boom, anchor)
+    assert s_new is not None  # a new anchor is given
+    tips = (s_old.positions[boom], s_new.positions[boom])
+    for st, tip in ((s_old, None), (s_three, tips[0]), (s_three, tips[1]), (s_new, None)):
         check = check_poses(scn, st, np.asarray(pose, dtype=float)[None], tip, full=True)
         tensions = check.allocation.tensions[0][st.attached]
         if not (bool(check.feasible[0]) and np.all(np.isfinite(tensions))):

@@ -207,22 +207,13 @@ def _check_scenario_size(scenario: Any) -> None:
     scenario file may hold (`max_input_values`): the plan's own limits are a plan's, and a
     cave of 480,000 wall vertices inside a plan took seconds to refuse and half a minute to
     plan again from (`--from-plan`), where its scenario file is refused at once."""
-    from rb_drake.input_files import max_input_values
+    from rb_drake.input_files import count_values, max_input_values
 
     limit = max_input_values()
-    count, stack = 0, [scenario]
-    while stack:
-        value = stack.pop()
-        count += 1
-        if count > limit:
-            raise PlanFileError("scenario", f"the embedded scenario holds more than {limit:,} "
-                                "values, the most a scenario file may (RBP_MAX_INPUT_VALUES "
-                                "raises the limit)")
-        if isinstance(value, dict):
-            count += len(value)  # its keys, counted as a scenario file's are
-            stack.extend(value.values())
-        elif isinstance(value, list):
-            stack.extend(value)
+    if count_values(scenario, stop_after=limit) > limit:
+        raise PlanFileError("scenario", f"the embedded scenario holds more than {limit:,} "
+                            "values, the most a scenario file may (RBP_MAX_INPUT_VALUES "
+                            "raises the limit)")
 
 
 def _check_format(value: Any) -> None:

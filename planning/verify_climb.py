@@ -138,7 +138,7 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     _stances(plan, scn, fail)
     _joins(plan, fail)
     _times(plan, fail)
-    _speeds(plan, fail)
+    speed_problems(plan, fail)
     _continuity(plan, fail)
     _ramps(plan, fail)
     _goal(plan, scn, fail)
@@ -288,7 +288,7 @@ def _times(plan: Plan, fail) -> None:
                      k, n)
 
 
-def _speeds(plan: Plan, fail) -> None:
+def speed_problems(plan: Plan, fail) -> None:
     """Rule `speed`: per phase and quantity, the fastest of its step intervals over the limit
     (the interval into a phase's first step from the phase before's last included)."""
     for k, phase in enumerate(plan.phases):
@@ -378,7 +378,7 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
 
 
-def partial_note(plan: Plan) -> str:
+def check_note(plan: Plan) -> str:
     """What `rbp check` says of a partial plan or a continuation that verifies ('' for
     another plan)."""
     notes = []

@@ -157,14 +157,23 @@ def max_input_values() -> int:
     return int(number)
 
 
-def count_values(data: Any) -> int:
+def count_values(data: Any, stop_after: int | None = None) -> int:
     """The values (YAML nodes: keys, values and collections) `data` would be written as, as
-    `load_yaml` counts them, for a writer to refuse a file rbp could not read back."""
-    if isinstance(data, dict):
-        return 1 + sum(1 + count_values(v) for v in data.values())
-    if isinstance(data, list | tuple):
-        return 1 + sum(count_values(v) for v in data)
-    return 1
+    `load_yaml` counts them, for a writer to refuse a file rbp could not read back, or a reader
+    a document already parsed; with `stop_after`, counting stops once past it (the count is
+    then above it, not the whole)."""
+    count, stack = 0, [data]
+    while stack:
+        value = stack.pop()
+        count += 1
+        if isinstance(value, dict):
+            count += len(value)  # its keys
+            stack.extend(value.values())
+        elif isinstance(value, list | tuple):
+            stack.extend(value)
+        if stop_after is not None and count > stop_after:
+            break
+    return count
 
 
 def _too_many(limit: int) -> str:

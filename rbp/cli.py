@@ -342,7 +342,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(f"{path}: {plural(len(problems), 'problem')}")
         return EXIT_FAILED
     from planning.plan_model import Plan
-    from planning.verify_climb import partial_note
+    from planning.verify_climb import check_note
 
     model = Plan.from_dict(plan)
     n = sum(len(p.steps) for p in model.phases)
@@ -353,7 +353,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if departure is not None:
         between += (f" (rbp simulate's smooth path through the steps within {departure:.2f} "
                     f"of that resolution of the straight line)")
-    note = partial_note(model)
+    note = check_note(model)
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
           f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")
           + _summary(model))

@@ -231,13 +231,12 @@ def first_bad_command(rows: np.ndarray, robot: RobotParams) -> tuple[int, str] |
             bad |= ~np.all(np.isfinite(values) & (values >= low - slack)
                            & (values <= high + slack), axis=1)
     late = (rows["utime"] < UTIME_RANGE[0]) | (rows["utime"] > UTIME_RANGE[1])
-    if late[:np.argmax(bad) if bad.any() else len(rows)].any():
-        k = int(np.argmax(late))
+    if not (bad | late).any():
+        return None
+    k = int(np.argmax(bad | late))
+    if late[k] and not bad[k]:  # a command past both: its values named, as before
         return k, (f"utime {int(rows['utime'][k])} us is no time a rig sends (from "
                    f"{UTIME_RANGE[0]:g} to {UTIME_RANGE[1]:g} us)")
-    if not bad.any():
-        return None
-    k = int(np.argmax(bad))
     return k, str(command_problem(rig_command_t.decode(rows[k].tobytes()), robot))
 
 

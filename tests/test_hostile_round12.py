@@ -20,7 +20,7 @@ import planning.verify_between as verify_between
 from planning.check import verify_plan
 from planning.plan_file import PlanFileError, validated
 from planning.plan_model import Plan
-from planning.verify_climb import partial_note
+from planning.verify_climb import check_note
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,9 +74,9 @@ def test_only_a_continuations_first_phases_may_lack_motion(golden: PlanFile) -> 
 
 def test_a_continuation_says_where_it_starts(golden: PlanFile) -> None:
     plan = copy.deepcopy(golden)
-    assert partial_note(Plan.from_dict(plan)) == "", "a plain plan got a note"
+    assert check_note(Plan.from_dict(plan)) == "", "a plain plan got a note"
     plan["start"] = copy.deepcopy(plan["scenario"]["start"])
-    note = partial_note(Plan.from_dict(plan))
+    note = check_note(Plan.from_dict(plan))
     assert note.startswith("a continuation: starts at pose") and "not verified" in note, note
 
 

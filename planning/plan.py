@@ -24,6 +24,7 @@ from planning.easing import ease_motions
 from planning.plan_model import (
     BODY_SPEED,
     FORMAT,
+    GRIPPER_SPEED,
     STAGES,
     TURN_SPEED,
     Limits,
@@ -49,7 +50,16 @@ if TYPE_CHECKING:  # the footstep planner is not needed to read, check or write 
     from planning.footsteps import FootstepPlan
     from planning.pipeline import PhaseMotion
 
-REACH_DURATION = 5.0  # s for the free gripper to travel between anchors
+REACH_DURATION = 5.0  # s: the shortest time for the free gripper to travel between anchors
+
+
+def reach_duration(tips: Sequence[np.ndarray] | np.ndarray) -> float:
+    """The time of a reach whose free gripper passes `tips` in order: REACH_DURATION, or longer
+    where the path is longer than GRIPPER_SPEED allows in it (rule speed: a 2 m reach in 5 s
+    is over the free gripper's limit)."""
+    path = np.asarray(tips, dtype=float)
+    length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()) if len(path) > 1 else 0.0
+    return max(REACH_DURATION, length / GRIPPER_SPEED)
 
 
 def _configuration(scn: Scenario, stance_ids: tuple[str | None, ...], pose: np.ndarray,
@@ -110,12 +120,13 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
             three = tuple(None if i == step.boom else x for i, x in enumerate(stance))
             old = np.array(scn.anchors[scn.anchor_index[step.from_anchor]].position)
             new = np.array(scn.anchors[scn.anchor_index[step.to_anchor]].position)
+            duration = reach_duration((old, new))
             phases.append(Phase(
                 kind="reach", stance=three, free_boom=step.boom,
                 from_anchor=step.from_anchor, to_anchor=step.to_anchor,
                 steps=(_configuration(scn, three, step.pose, old, t),
-                       _configuration(scn, three, step.pose, new, t + REACH_DURATION))))
-            t += REACH_DURATION
+                       _configuration(scn, three, step.pose, new, t + duration))))
+            t += duration
     plan = add_ramps(plan.replace(regrasps=len(fp.steps), phases=tuple(phases)), scn)
     if fp.success:
         plan = score_plan(plan, scn.robot.attach_failure)

@@ -64,6 +64,9 @@ MAX_STEP_GAP = MAX_TIME_STEP
 # which may take longer than MAX_STEP_GAP for a long move
 BODY_SPEED = 0.1
 TURN_SPEED = 0.2
+# m/s: the free gripper's nominal speed in a footstep plan's reach (planning.plan.reach_duration),
+# half of rule speed's limit so that a long reach still passes `rbp check`
+GRIPPER_SPEED = 0.2
 COORDINATE = {"type": "number", "minimum": -MAX_COORDINATE, "maximum": MAX_COORDINATE}
 
 

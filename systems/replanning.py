@@ -142,7 +142,7 @@ class FootstepReplanner:
     def __call__(self, request: ReplanRequest) -> Plan | None:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig, plan_climb
-        from planning.plan import REACH_DURATION
+        from planning.plan import reach_duration
         from planning.transition import reachable_anchors
 
         scn, j = request.scenario, request.boom
@@ -159,10 +159,11 @@ class FootstepReplanner:
                 break
             new = scn.anchors[k]
             four = tuple(new.id if i == j else a for i, a in enumerate(request.stance))
+            duration = reach_duration((old_tip, np.array(new.position)))
             a, ok_a = configuration(scn, request.stance, pose, old_tip, 0.0)
             b, ok_b = configuration(scn, request.stance, pose, np.array(new.position),
-                                    REACH_DURATION)
-            _, ok_c = configuration(scn, four, pose, None, REACH_DURATION)
+                                    duration)
+            _, ok_c = configuration(scn, four, pose, None, duration)
             if not (ok_a and ok_b and ok_c):
                 continue
             reach = Phase(kind="reach", stance=tuple(request.stance), free_boom=j,
@@ -182,7 +183,7 @@ class FootstepReplanner:
             plan = plan_climb(start, "rbp", config)
             if not plan.success:
                 continue
-            rest = shifted_phases(plan.phases, REACH_DURATION)
+            rest = shifted_phases(plan.phases, reach.steps[-1].t)
             return _finish_plan(request, [reach, *rest], plan)
         return None
 
@@ -200,15 +201,19 @@ def _crosses(scn: Scenario, reach: Phase) -> bool:
 def _arc_reach(scn: Scenario, held: tuple[str, ...], j: int, to_anchor: str, pose: np.ndarray,
                straight: Phase) -> Phase | None:
     """The reach along the planner's collision-free tip arc (`planning.reach_seeds`), one step
-    per arc point over REACH_DURATION, where the straight line from anchor to anchor crosses
-    rock; None where no arc holds."""
-    from planning.plan import REACH_DURATION
+    per arc point over the arc's `reach_duration`, where the straight line from anchor to anchor
+    crosses rock; None where no arc holds."""
+    from planning.plan import reach_duration
     from planning.reach_seeds import reach_seed
 
     seed = reach_seed(scn, held, j, to_anchor, pose)
     if not seed.success or seed.tips is None:
         return None
-    times = np.linspace(0.0, REACH_DURATION, len(seed.tips))
+    tips = np.asarray(seed.tips, dtype=float)
+    along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(tips, axis=0), axis=1))]
+    # half evenly, half by the tip's travel: no arc segment over twice the nominal speed
+    share = 0.5 * np.linspace(0.0, 1.0, len(tips)) + 0.5 * along / max(along[-1], 1e-12)
+    times = reach_duration(tips) * share
     steps: list[Step] = []
     for q, tip, t in zip(seed.poses, seed.tips, times, strict=True):
         step, ok = configuration(scn, straight.stance, q, tip, float(t))

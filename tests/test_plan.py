@@ -512,3 +512,28 @@ def test_validate_names_the_field_of_a_refused_plan(fresh: dict[str, Any]) -> No
     with pytest.raises(jsonschema.ValidationError, match=r"1\.5") as e:
         validate(fresh)
     assert list(e.value.absolute_path) == ["phases", 1, "steps", 0, "p_success"], e.value.path
+
+
+def test_a_long_reach_takes_long_enough_for_rule_speed() -> None:
+    """Benchmark rockfall 28's footstep plan reaches 2.02 m once: in the nominal 5 s that is
+    over rule speed's free-gripper limit (0.4 m/s), so the reach must take longer."""
+    from planning.plan import REACH_DURATION, reach_duration
+    from planning.plan_model import GRIPPER_SPEED
+
+    assert reach_duration(([0.0, 0.0], [0.3, 0.4])) == REACH_DURATION
+    assert math.isclose(reach_duration(([0.0, 0.0], [3.0, 4.0])), 5.0 / GRIPPER_SPEED)
+    scn = generate_cave("rockfall", 28, CaveConfig(length=(4.5, 5.0)))
+    fp = plan_footsteps(scn, FootstepConfig())
+    assert fp.success, f"rockfall 28 (a benchmark cave with a route) did not plan: {fp.reason}"
+    built = plan_dict(build_plan(scn, fp, "rbp"))
+    longest = 0.0
+    for phase in built["phases"]:
+        if phase["kind"] == "reach":
+            first, last = phase["steps"][0], phase["steps"][-1]
+            travel = math.dist(first["free_tip"], last["free_tip"])
+            longest = max(longest, travel)
+            assert travel <= GRIPPER_SPEED * (last["t"] - first["t"]) + 1e-5, (  # t to 1 us
+                f"a reach of {travel:.3f} m in {last['t'] - first['t']:.3f} s")
+    assert longest > 5.0 * 0.4, f"the longest reach is {longest:.3f} m: the test needs one > 2 m"
+    problems = check_plan(built)
+    assert problems == [], "rbp check refuses the footstep plan:\n" + "\n".join(problems)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import math
+import os
 import re
 import sys
 from collections.abc import Callable
@@ -64,11 +65,42 @@ class OneLineParser(argparse.ArgumentParser):
         return unknown
 
 
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(nan|inf|infinity)",
+                      re.IGNORECASE | re.ASCII)
+
+
+def decimal(text: str) -> float:
+    """A number as a person writes it: Python's float() also reads "2_0" as 20 and
+    full-width digits, which on a command line are typos, not numbers."""
+    if not _DECIMAL.fullmatch(text.strip()):
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}")
+    return float(text)
+
+
+decimal.__name__ = "number"
+
+
+def input_file(text: str) -> str:
+    """A file's name as given; a name that ends with "/" after a file ("plan.json/") is refused
+    here, since pathlib drops the slash and would read the file."""
+    if text.endswith(("/", os.sep)) and os.path.exists(text.rstrip("/" + os.sep)) \
+            and not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"{text!r} ends with '/' but "
+                                         f"{text.rstrip('/' + os.sep)!r} is a file, not a "
+                                         "directory")
+    return text
+
+
+input_file.__name__ = "file name"
+
+
 def whole(lo: int, hi: int) -> Callable[[str], int]:
     """A whole number from `lo` to `hi`."""
     def parse(text: str) -> int:
         try:
             value = int(text.strip())
+            if not re.fullmatch(r"[+-]?\d+", text.strip(), re.ASCII):
+                raise ValueError(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
         if not lo <= value <= hi:
@@ -82,10 +114,7 @@ def whole(lo: int, hi: int) -> Callable[[str], int]:
 def number(lo: float, hi: float) -> Callable[[str], float]:
     """A finite number from `lo` to `hi`."""
     def parse(text: str) -> float:
-        try:
-            value = float(text.strip())
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+        value = decimal(text)
         if not (math.isfinite(value) and lo <= value <= hi):
             raise argparse.ArgumentTypeError(f"must be a number from {lo:g} to {hi:g}, "
                                              f"got {text!r}")

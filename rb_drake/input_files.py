@@ -185,9 +185,9 @@ def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
     known to be a regular file within it; raises InputFileError("(file)", reason) otherwise
     (for readers that open the file themselves, such as an LCM log's)."""
     limit = max_input_bytes() if max_bytes is None else max_bytes
-    path = Path(path)
     try:
-        info = path.stat()  # follows symlinks; never blocks, unlike opening a FIFO
+        # os.stat of the name as given: Path drops a trailing slash ("plan.json/" is no file)
+        info = os.stat(path)  # follows symlinks; never blocks, unlike opening a FIFO
     except FileNotFoundError:
         raise InputFileError("(file)", "no such file") from None
     except (OSError, ValueError) as e:  # a loop, a name too long or with a NUL byte, no access
@@ -220,7 +220,6 @@ def read_bytes(path: str | Path, max_bytes: int | None = None) -> bytes:
     """The bytes of a regular file of at most `max_bytes` (default `max_input_bytes()`);
     raises InputFileError("(file)", reason) for anything else."""
     limit = check_input_file(path, max_bytes)
-    path = Path(path)
     try:
         # O_NONBLOCK: should the path become a FIFO after the check, open returns at once
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))

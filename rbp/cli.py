@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
-from experiments.arguments import OneLineParser
+from experiments.arguments import OneLineParser, decimal, input_file
 from rb_drake.errors import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -444,14 +444,14 @@ def build_parser() -> argparse.ArgumentParser:
     plan = sub.add_parser("plan", help="plan a climb and write a plan file and its picture",
                           epilog=EXIT_STATUSES,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
-    plan.add_argument("scenario", nargs="?",
+    plan.add_argument("scenario", nargs="?", type=input_file,
                       help="scenario file or bundled cave name (not with --from-plan)")
     plan.add_argument("-o", "--output", required=True, help="plan file to write (.json)")
     plan.add_argument("--planner", choices=("rbp", "naive"), help="default rbp")
-    plan.add_argument("--config", metavar="FILE",
+    plan.add_argument("--config", metavar="FILE", type=input_file,
                       help="planner configuration (YAML: footstep, seed, scp, dt, optimise, "
                            "motion_retries; see docs/formats.md); flags given override it")
-    plan.add_argument("--from-plan", metavar="PLAN",
+    plan.add_argument("--from-plan", metavar="PLAN", type=input_file,
                       help="repeat the plan PLAN was made with: its scenario, planner, "
                            "configuration and seed (flags given override them)")
     plan.add_argument("--seed", type=int,
@@ -471,7 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "that none passes through the lattices' points; with --time-limit, "
                            "the best route found and how far from the optimum it is proved "
                            "to be")
-    plan.add_argument("--min-success", type=float, metavar="P",
+    plan.add_argument("--min-success", type=decimal, metavar="P",
                       help="the route with the fewest regrasps whose predicted success (the "
                            "search's, exp(-cost)) is at least P, or the proof that none "
                            "reaches P (complete search, no expansion budget unless given)")
@@ -482,9 +482,9 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--partial", action="store_true",
                       help="when no route reaches the goal, climb to the expanded stance "
                            "nearest it (the plan still says success: false, exit status 1)")
-    plan.add_argument("--time-limit", type=float, metavar="SECONDS",
+    plan.add_argument("--time-limit", type=decimal, metavar="SECONDS",
                       help="give up after this many seconds of footstep search (default none)")
-    plan.add_argument("--dt", type=float,
+    plan.add_argument("--dt", type=decimal,
                       help="seconds between trajectory steps, 0.25 to 60 (default 0.5; steps "
                            "are 5 cm apart)")
     plan.add_argument("--no-scp", action="store_true",
@@ -503,7 +503,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.set_defaults(func=cmd_plan)
 
     check = sub.add_parser("check", help="re-verify a plan file from scratch")
-    check.add_argument("plan")
+    check.add_argument("plan", type=input_file)
     check.add_argument("--stamp", action="store_true",
                        help="when the plan verifies, write into it a stamp (a hash of its "
                             "content) so simulate and rig-run need not verify it again")
@@ -520,10 +520,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "or a rockfall to cross (default shaft)")
     gen.add_argument("--seed", type=int, default=0,
                      help="random seed, 0 or more: the same seed gives the same cave (default 0)")
-    gen.add_argument("--anchor-density", type=float, default=3.0,
+    gen.add_argument("--anchor-density", type=decimal, default=3.0,
                      help="anchors per metre of rock surface, above 0 and at most "
                           "20 (default 3.0)")
-    gen.add_argument("--length", type=float, nargs=2, default=(7.0, 9.0), metavar=("MIN", "MAX"),
+    gen.add_argument("--length", type=decimal, nargs=2, default=(7.0, 9.0), metavar=("MIN", "MAX"),
                      help="shaft height or passage length, drawn in this range in m (default "
                           "7 9; the experiments use 4.5 5)")
     gen.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
@@ -532,50 +532,51 @@ def build_parser() -> argparse.ArgumentParser:
         "import", help="a cave from a file of rock: a polygon drawing (GeoJSON, DXF, SVG) or "
                        "a mesh or point cloud cut by a plane (STL, OBJ, PLY); needs the extra "
                        "rbp[import]")
-    imp.add_argument("file", help="the rock: a 2D section of closed outlines (.geojson/.json, "
-                                  ".dxf, .svg; x to the side, y up), or a 3D scan cut by a "
-                                  "plane (.stl/.obj/.ply mesh, .ply point cloud; z up)")
+    imp.add_argument("file", type=input_file,
+                     help="the rock: a 2D section of closed outlines (.geojson/.json, .dxf, "
+                          ".svg; x to the side, y up), or a 3D scan cut by a plane (.stl/.obj/"
+                          ".ply mesh, .ply point cloud; z up)")
     imp.add_argument("-o", "--output", required=True, help="scenario file to write (.yaml)")
     imp.add_argument("--unit", choices=("m", "cm", "mm", "in", "ft"), default=None,
                      help="the unit of the file's coordinates (default: the unit a DXF "
                           "declares in $INSUNITS, else m)")
-    imp.add_argument("--scale", type=float, default=1.0,
+    imp.add_argument("--scale", type=decimal, default=1.0,
                      help="a factor on the coordinates besides the unit (default 1)")
-    imp.add_argument("--simplify", type=float, default=0.0, metavar="TOL",
+    imp.add_argument("--simplify", type=decimal, default=0.0, metavar="TOL",
                      help="simplify outlines to TOL metres (default 0: as drawn; a scan's "
                           "section: 0.01)")
-    imp.add_argument("--anchor-density", type=float, default=3.0,
+    imp.add_argument("--anchor-density", type=decimal, default=3.0,
                      help="anchors per metre of rock surface, above 0 and at most 20 "
                           "(default 3.0)")
     imp.add_argument("--seed", type=int, default=0,
                      help="seed of the anchors, 0 or more: the same seed, the same cave "
                           "(default 0)")
-    imp.add_argument("--start", type=float, nargs=2, metavar=("X", "Y"),
+    imp.add_argument("--start", type=decimal, nargs=2, metavar=("X", "Y"),
                      help="the body's start position in m, in the section's frame (default: "
                           "the lowest free position with a feasible stance, 1.5 m above the "
                           "bottom if one there has)")
-    imp.add_argument("--goal", type=float, nargs=2, metavar=("X", "Y"),
+    imp.add_argument("--goal", type=decimal, nargs=2, metavar=("X", "Y"),
                      help="the goal in m, in the section's frame (default: the highest free "
                           "position reached from the start with an anchor in reach of each "
                           "boom, the upper booms' 0.5 m above it)")
     imp.add_argument("--name", help="the scenario's name (default: the file's name)")
-    imp.add_argument("--plane-origin", type=float, nargs=3, metavar=("X", "Y", "Z"),
+    imp.add_argument("--plane-origin", type=decimal, nargs=3, metavar=("X", "Y", "Z"),
                      help="scans: a point of the cutting plane, in the scan's coordinates, "
                           "and the section's 2D origin (default: the scan's bounding-box "
                           "centre)")
-    imp.add_argument("--plane-normal", type=float, nargs=3, metavar=("X", "Y", "Z"),
+    imp.add_argument("--plane-normal", type=decimal, nargs=3, metavar=("X", "Y", "Z"),
                      help="scans: the cutting plane's normal (default 1 0 0: a vertical "
                           "plane; the section's x is world y, its y world z, up)")
-    imp.add_argument("--resolution", type=float, metavar="R",
+    imp.add_argument("--resolution", type=decimal, metavar="R",
                      help="point clouds: outline the points within R metres of the plane, "
                           "bridging gaps up to 2R (default: about 4 point spacings, from the "
                           "cloud's density); a mesh's section is exact")
     imp.set_defaults(func=cmd_scenario_import)
     chk = ssub.add_parser("check", help="validate a scenario and summarise it")
-    chk.add_argument("scenario")
+    chk.add_argument("scenario", type=input_file)
     chk.set_defaults(func=cmd_scenario_check)
     show = ssub.add_parser("show", help="draw a scenario with the robot in its start stance")
-    show.add_argument("scenario")
+    show.add_argument("scenario", type=input_file)
     show.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf, .svg)")
     show.add_argument("--dpi", type=int, default=120,
                       help="the picture's resolution, 20 to 600 dots per inch (default 120)")

@@ -92,7 +92,8 @@ def scenario_from_rock(rock: list[Polygon], *, seed: int = 0, config: CaveConfig
     anchors = place_anchors(rng, cfg, surfaces, Rock(walls))
     if len(anchors) < NUM_BOOMS:
         raise RbpInputError(f"only {len(anchors)} anchors on {perimeter:.2f} m of rock surface "
-                            f"(the robot needs {NUM_BOOMS}); raise --anchor-density", file=source)
+                            f"(the robot needs {NUM_BOOMS}); raise it", file=source,
+                            field="--anchor-density")
     scn = Scenario(name=name, gravity=cfg.gravity, robot=robot, walls=tuple(walls),
                    anchors=tuple(anchors), start_pose=(0.0, 0.0, 0.0), start_stance=("",) * 4,
                    goal_position=(0.0, 0.0), goal_tolerance=GOAL_TOLERANCE, source=source,
@@ -323,7 +324,7 @@ def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
         raise RbpInputError(f"no free position has anchors in reach of all four booms "
                             f"({len(scn.anchors)} anchors): the cave is too small, too wide or "
                             "too sparse for the robot; give --start X Y or raise "
-                            "--anchor-density", file=scn.source)
+                            "--anchor-density", file=scn.source, field="start")
     centre = float(np.mean(grid.points[idx, 0]))
     rise = grid.points[idx, 1] >= scn.anchor_positions[:, 1].min() + START_RISE
     tried = np.concatenate([_by_rows(grid.points, idx[rise], centre, upward=True),
@@ -335,7 +336,7 @@ def _lowest_start(scn: Scenario, grid: _Grid) -> Scenario:
                 return started
     raise RbpInputError(f"no feasible start stance at the {min(len(tried), START_TRIES)} lowest "
                         "free positions with anchors in reach; give --start X Y, or raise "
-                        "--anchor-density", file=scn.source)
+                        "--anchor-density", file=scn.source, field="start")
 
 
 def _highest_goal(scn: Scenario, grid: _Grid, source: str) -> tuple[float, float]:

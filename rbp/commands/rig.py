@@ -11,6 +11,7 @@ import math
 import sys
 from pathlib import Path
 
+from experiments.arguments import decimal, input_file
 from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
 
 MIN_PERIOD, MAX_PERIOD = 0.01, 1.0  # s between rig commands: 100 a second to one a second
@@ -33,7 +34,7 @@ def check_lcm_url(url: str) -> None:
 def add_rig_commands(subparsers) -> None:
     """Declare the three rig subcommands on `rbp`'s subparsers."""
     run = subparsers.add_parser("rig-run", help="run a body phase of a plan on the rig over LCM")
-    run.add_argument("plan", help="plan file (reachbot-plan/1, .json)")
+    run.add_argument("plan", type=input_file, help="plan file (reachbot-plan/1, .json)")
     run.add_argument("--phase", type=int, default=0,
                      help="index of the body phase to run (default 0)")
     run.add_argument("--lcm-url", default="memq://",
@@ -42,7 +43,7 @@ def add_rig_commands(subparsers) -> None:
     run.add_argument("--sim-rig", action="store_true",
                      help="answer with the simulated rig, in this process on memq://")
     run.add_argument("--seed", type=int, default=0, help="seed of the simulated rig's noise")
-    run.add_argument("--period", type=float, default=0.1,
+    run.add_argument("--period", type=decimal, default=0.1,
                      help="seconds between commands, 0.01 to 1 (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
@@ -53,12 +54,12 @@ def add_rig_commands(subparsers) -> None:
 
     replay = subparsers.add_parser("rig-replay",
                                    help="replay a rig log through the grasp monitor")
-    replay.add_argument("log", help="LCM log written by rbp rig-run")
+    replay.add_argument("log", type=input_file, help="LCM log written by rbp rig-run")
     replay.set_defaults(func=cmd_rig_replay)
 
     report = subparsers.add_parser("rig-report",
                                    help="plot a rig log: grasp probabilities and tensions")
-    report.add_argument("log", help="LCM log written by rbp rig-run")
+    report.add_argument("log", type=input_file, help="LCM log written by rbp rig-run")
     report.add_argument("-o", "--output", required=True, help="picture to write (.png, .pdf)")
     report.add_argument("--dpi", type=int, default=120,
                         help="the picture's resolution, 20 to 600 dots per inch (default 120)")

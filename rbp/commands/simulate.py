@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from experiments.arguments import input_file
 from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
 from rbp.api import MAX_TRIALS
 
@@ -28,7 +29,7 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "simulate", help="execute a plan in a Drake simulation with stochastic grasps",
         description=__doc__.split("\n\n")[0])
-    p.add_argument("plan", help="plan file (.json, from rbp plan)")
+    p.add_argument("plan", type=input_file, help="plan file (.json, from rbp plan)")
     p.add_argument("--trials", type=int, default=1000,
                    help="Monte Carlo trials (default 1000; 0: the deterministic run only)")
     p.add_argument("--seed", type=int, default=0,

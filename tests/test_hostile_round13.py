@@ -1,0 +1,65 @@
+"""Probe 13 (session 28): command-line numbers and file names as a person types them, and an
+import refusal that names its option."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DEMO = ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml"
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, LCM_DEFAULT_URL="memq://", RBP_THREADS="1")
+    return subprocess.run([sys.executable, "-m", "rbp", *args], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=120)
+
+
+def one_error_line(result: subprocess.CompletedProcess[str], *needles: str) -> str:
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, f"exit {result.returncode}, stderr {result.stderr[-400:]!r}"
+    assert len(lines) == 1 and lines[0].startswith("error: "), f"not one line: {lines!r}"
+    for needle in needles:
+        assert needle in lines[0], f"{needle!r} not in {lines[0]!r}"
+    return lines[0]
+
+
+@pytest.mark.parametrize("text", ["2_0", "４.5", "0x10", "5.", "1e"])
+def test_a_number_with_underscores_or_other_digits_is_refused(tmp_path, text):
+    """float() reads "2_0" as 20 and full-width digits as digits; "5." is a plain number."""
+    out = tmp_path / "c.yaml"
+    result = run("scenario", "generate", "--kind", "shaft", "--length", text, "21", "-o", str(out))
+    if text == "5.":
+        assert result.returncode == 0, f"'5.' refused: {result.stderr[-300:]}"
+        return
+    one_error_line(result, "--length", repr(text))
+    assert not out.exists(), "a refused command wrote its output"
+
+
+def test_a_file_name_with_a_trailing_slash_is_refused(tmp_path):
+    """pathlib.Path("plan.json/") is Path("plan.json"): the slash must not be dropped."""
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps({"format": "reachbot-plan/1"}))
+    one_error_line(run("check", f"{plan}/"), "plan", "ends with '/'", "not a directory")
+    one_error_line(run("scenario", "check", f"{DEMO}/"), "scenario", "ends with '/'")
+    # a directory given with its slash is still a directory, refused by the reader
+    one_error_line(run("check", f"{tmp_path}/"), "is a directory")
+
+
+def test_an_import_with_too_few_anchors_names_the_option(tmp_path):
+    pytest.importorskip("shapely")
+    rock = tmp_path / "rock.geojson"
+    ring = [[-3, -1], [3, -1], [3, 6], [-3, 6], [-3, -1]]
+    hole = [[-1, 0], [1, 0], [1, 5], [-1, 5], [-1, 0]]
+    rock.write_text(json.dumps({"type": "Polygon", "coordinates": [ring, hole]}))
+    out = tmp_path / "cave.yaml"
+    line = one_error_line(run("scenario", "import", str(rock), "--anchor-density", "0.1",
+                              "-o", str(out)), "--anchor-density", "anchors")
+    assert line.startswith(f"error: {rock}: --anchor-density: "), line
+    assert not out.exists(), "a refused import wrote its output"

@@ -265,8 +265,11 @@ def test_an_interrupt_during_an_import_lands_after_it(tmp_path: Path, name: str)
     ImportError, once a segfault, and an optional import's `except ImportError` swallowed it:
     the interrupt is held until the import is done, then raised."""
     (tmp_path / "slow_library.py").write_text(_SLOW_LIBRARY.format(signal=name))
+    # SIGINT restored in the child: a shell that started this run in the background ignores
+    # it, children inherit that, and clean_interrupts rightly leaves an ignored SIGINT ignored
     done = subprocess.run([sys.executable, "-c", _DURING_IMPORT, str(tmp_path)], cwd=ROOT,
-                          env=_env(), capture_output=True, text=True, timeout=120)
+                          env=_env(), capture_output=True, text=True, timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines = done.stdout.strip().splitlines()
     assert lines == ["interrupted once imported: True"], (lines, done.stderr[-2000:])
 

@@ -31,7 +31,7 @@ RULES = {
             "it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
                    "on a body phase",
-    "phase-form": "a phase's stance, free boom and steps fit its kind",
+    "phase-form": "a phase's stance, free boom, anchors and steps fit its kind",
     "stance": "each phase's anchors follow from the phase before (a reach frees one boom, the "
               "next body phase holds it on to_anchor)",
     "reach-ends": "the free gripper starts on from_anchor and ends on to_anchor",
@@ -42,7 +42,8 @@ RULES = {
              "continuations' spliced phases and footstep plans too) the body moves at most "
              "BODY_SPEED_MAX, turns at most TURN_SPEED_MAX and the free gripper moves at most "
              "GRIPPER_SPEED_MAX",
-    "release": "a body phase that a reach phase follows ends with a release ramp at the "
+    "release": "a climb from the scenario's start begins with a body phase, and a body "
+               "phase that a reach phase follows ends with a release ramp at the "
                "transition pose: the freed boom's tension falls (its shoulder taking up its "
                "limb) over at least RAMP_DURATION to at most RELEASE_TENSION when its "
                "gripper opens",
@@ -65,7 +66,8 @@ RULES = {
                "(linear, as rbp rig-run executes it) passes the checks of a step at every "
                "sample of a resolution of 5 mm, 0.5 deg and 5 mm of boom or gripper travel "
                "(planning.verify_between)",
-    "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation",
+    "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation (null but "
+               "regrasps in a failed plan)",
 }
 
 POSE_TOL = 1e-9   # m, rad: phases join and the climb starts exactly (plans copy these values)
@@ -201,6 +203,14 @@ def _phase_order(plan: Plan, fail) -> None:
         if any(tips) != (phase.kind == "reach") or (any(tips) and not all(tips)):
             fail("phase-form", "free_tip is given on every step of a reach phase and only there",
                  k)
+        if phase.kind == "body":  # what only a reach has: its anchors, its free boom's torque
+            ends = [a for a in (phase.from_anchor, phase.to_anchor) if a is not None]
+            if ends:
+                fail("phase-form", f"from_anchor and to_anchor belong to a reach phase, not a "
+                     f"body phase (it gives {ends})", k)
+            if any(s.shoulder_torque is not None for s in phase.steps):
+                fail("phase-form", "shoulder_torque (the free boom's) is given on reach steps "
+                     "only", k)
 
 
 def _stances(plan: Plan, scn: Scenario, fail) -> None:
@@ -420,6 +430,14 @@ def _ramps(plan: Plan, fail) -> None:
     """Every release and attach is ramped (RULES "release", "attach"); ramp steps appear only
     there."""
     phases = plan.phases
+    first = phases[0]
+    if plan.start is None and first.kind == "reach":
+        # the climb starts on the four anchors of the start stance (rule start): a reach first
+        # opens a gripper under load at t = 0, with no release ramp and its 4-stance unverified;
+        # only a continuation (`start`, after a failed grasp) starts with the boom free
+        fail("release", f"the climb starts with a reach phase: boom {first.free_boom}'s gripper "
+             f"opens on {first.from_anchor} at the start without a release ramp (a climb "
+             "from the scenario's start begins with a body phase)", 0, 0)
     for k, phase in enumerate(phases):
         steps = phase.steps
         marked = [n for n, s in enumerate(steps) if s.ramp is not None]

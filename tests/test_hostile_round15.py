@@ -1,0 +1,108 @@
+"""Probe 15: plans that `rbp check` accepted while claiming something false or skipping a
+release: a failed plan stating a success probability, a body phase carrying a reach's anchors
+or a free boom's shoulder torque, and a climb from the scenario's start that opens a gripper
+at t = 0 (a first reach phase, no release ramp)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from planning.check import verify_plan
+from planning.plan_file import validated
+from planning.plan_model import Plan
+from planning.probability import Configuration, path_probability
+
+DATA = Path(__file__).parent / "data"
+PlanFile = dict[str, Any]
+
+
+@pytest.fixture(scope="module")
+def golden() -> PlanFile:
+    return json.loads((DATA / "golden" / "demo-shaft-current.json").read_text())
+
+
+def problems_of(plan: PlanFile) -> list[Any]:
+    """The verifier's problems with a plan read as a file is (schema, times) first."""
+    return verify_plan(validated(json.loads(json.dumps(plan))))
+
+
+def rules(plan: PlanFile) -> set[str]:
+    return {p.rule for p in problems_of(plan)}
+
+
+def rescored(plan: PlanFile) -> PlanFile:
+    """The plan's summary recomputed from its own steps (so that only the fault shows)."""
+    model = Plan.from_dict(plan)
+    configs = [(phase.stance, step.p_grasp, step.p_success)
+               for phase in model.phases for step in phase.steps]
+    score = path_probability([Configuration(*c) for c in configs],
+                             model.robot["attach_failure"])
+    plan["p_path"], plan["p_grasps"], plan["p_min"] = score.p_path, score.p_grasps, score.p_min
+    plan["regrasps"] = sum(phase["kind"] == "reach" for phase in plan["phases"])
+    return plan
+
+
+def test_the_golden_plan_verifies(golden: PlanFile) -> None:
+    assert problems_of(copy.deepcopy(golden)) == []
+
+
+def test_a_failed_plan_states_no_probabilities(golden: PlanFile) -> None:
+    """`success: false` without `partial` kept p_path 0.92, p_min and p_grasps: accepted, a
+    failed plan claiming how likely its climb is (the planner writes null there)."""
+    plan = copy.deepcopy(golden)
+    plan["success"], plan["reason"] = False, "no route"
+    problems = problems_of(plan)
+    assert {p.rule for p in problems} == {"summary"}, "\n".join(map(str, problems))
+    assert {p.text.split(":")[0] for p in problems} == {"p_path", "p_min", "p_grasps"}
+    for name in ("p_path", "p_min", "p_grasps"):
+        plan[name] = None
+    assert problems_of(plan) == [], "a failed plan with null probabilities was refused"
+
+
+def test_a_body_phase_holds_no_reach_anchors(golden: PlanFile) -> None:
+    """A body phase with `from_anchor`/`to_anchor` (even anchors the cave lacks) passed."""
+    plan = copy.deepcopy(golden)
+    plan["phases"][2]["from_anchor"], plan["phases"][2]["to_anchor"] = "a1", "nowhere"
+    problems = problems_of(plan)
+    assert any(p.rule == "phase-form" and p.phase == 2 and "from_anchor" in p.text
+               for p in problems), "\n".join(map(str, problems))
+
+
+def test_a_body_step_has_no_free_booms_torque(golden: PlanFile) -> None:
+    """A body step recording a shoulder torque of 999 N m (no boom is free) passed."""
+    plan = copy.deepcopy(golden)
+    plan["phases"][0]["steps"][2]["shoulder_torque"] = 999.0
+    problems = problems_of(plan)
+    assert any(p.rule == "phase-form" and p.phase == 0 and "shoulder_torque" in p.text
+               for p in problems), "\n".join(map(str, problems))
+
+
+def test_a_climb_from_the_start_does_not_open_a_gripper_at_once(golden: PlanFile) -> None:
+    """The first body phase cut and the cave's start moved to the first reach's pose (times
+    from 0, summary rescored): the climb began with boom 2 free at t = 0, its gripper opened
+    under load with no release ramp and the start 4-stance never verified; it passed."""
+    plan = copy.deepcopy(golden)
+    phases = plan["phases"][1:]
+    t0 = phases[0]["steps"][0]["t"]
+    for phase in phases:
+        for step in phase["steps"]:
+            step["t"] = round(step["t"] - t0, 6)
+    first = phases[0]
+    held = list(first["stance"])
+    held[first["free_boom"]] = first["from_anchor"]
+    plan["phases"] = phases
+    plan["scenario"]["start"] = {"pose": list(first["steps"][0]["pose"]), "stance": held}
+    rescored(plan)
+    problems = problems_of(plan)
+    assert [(p.rule, p.phase, p.step) for p in problems] == [("release", 0, 0)], \
+        "\n".join(map(str, problems))
+    # a continuation (after a failed grasp) may start with the boom free
+    plan["start"] = copy.deepcopy(plan["scenario"]["start"])
+    for phase in plan["phases"][:1]:
+        phase.pop("motion", None)
+    assert problems_of(plan) == [], "a continuation starting mid-reach was refused"

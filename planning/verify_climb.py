@@ -11,6 +11,7 @@ successive configurations within the plan's own step and turn limits. Each rule 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from collections.abc import Mapping
 from typing import Any, NamedTuple
@@ -68,6 +69,8 @@ RULES = {
                "(planning.verify_between)",
     "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation (null but "
                "regrasps in a failed plan)",
+    "scenario": "with rbp check --scenario CAVE: the plan's embedded cave and robot are "
+                "CAVE's (the plan is verified against what it embeds)",
 }
 
 POSE_TOL = 1e-9   # m, rad: phases join and the climb starts exactly (plans copy these values)
@@ -386,6 +389,42 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
         mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
         if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
+
+
+def scenario_problems(plan: Plan, scn: Scenario) -> list[Problem]:
+    """Rule `scenario` (`rbp check --scenario CAVE`): the cave and robot the plan embeds, which
+    every other rule verifies it against, are those of `scn` (its name aside). A plan verifies
+    against what it embeds, so an edit of it passes: a robot with a smaller body, longer booms
+    or a lower p_min, an anchor's limit raised with the steps' P rescored, the goal moved to
+    where the climb ends. Names what differs: top-level fields, anchors by id, robot
+    parameters."""
+    from rb_drake.params import ParamError, robot_from_dict
+
+    out: list[Problem] = []
+    where = f"{scn.name} ({scn.source})" if scn.source else scn.name
+    cave = scn.to_dict(resolved=True)
+    del cave["robot"]
+    mine = json.loads(json.dumps(plan.scenario))  # its arrays as lists, as the cave's
+    fields = [k for k in sorted(set(cave) | set(mine))
+              if k not in ("name", "anchors") and mine.get(k) != cave.get(k)]
+    ours = {a.get("id"): a for a in mine.get("anchors") or [] if isinstance(a, Mapping)}
+    theirs = {a["id"]: a for a in cave["anchors"]}
+    anchors = [f"anchors[{i}]" for i in sorted(set(ours) | set(theirs), key=str)
+               if ours.get(i) != theirs.get(i)]
+    if fields or anchors:
+        out.append(Problem("scenario", f"the plan's cave differs from {where} in "
+                           f"{', '.join(fields + anchors[:8])}"
+                           + (f" and {len(anchors) - 8} more anchors" if len(anchors) > 8
+                              else "")))
+    try:
+        robot = robot_from_dict(plan.robot).to_dict()
+    except ParamError as e:  # plan_scenario refuses it first
+        robot = {str(e.field): None}
+    expected = scn.robot.to_dict()
+    names = [k for k in expected if robot.get(k) != expected[k]]
+    if names:
+        out.append(Problem("scenario", f"the plan's robot differs from {where}'s in {names}"))
+    return out
 
 
 def check_note(plan: Plan) -> str:

@@ -1,12 +1,16 @@
 """Probe 15: plans that `rbp check` accepted while claiming something false or skipping a
 release: a failed plan stating a success probability, a body phase carrying a reach's anchors
 or a free boom's shoulder torque, and a climb from the scenario's start that opens a gripper
-at t = 0 (a first reach phase, no release ramp)."""
+at t = 0 (a first reach phase, no release ramp); and `rbp check --scenario CAVE`, which holds
+a plan to the cave and robot it was made for (the verifier alone trusts the ones it embeds)."""
 
 from __future__ import annotations
 
 import copy
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -106,3 +110,43 @@ def test_a_climb_from_the_start_does_not_open_a_gripper_at_once(golden: PlanFile
     for phase in plan["phases"][:1]:
         phase.pop("motion", None)
     assert problems_of(plan) == [], "a continuation starting mid-reach was refused"
+
+
+def test_a_plan_is_held_to_the_cave_it_names(golden: PlanFile, tmp_path: Path) -> None:
+    """The verifier checks a plan against the cave and robot it embeds: the robot's body
+    shrunk (only rule collision reads body_size), its p_min lowered, an anchor's limit raised
+    or the goal moved all pass `rbp check`, as an edit that makes a plan 'pass' would.
+    `rbp check --scenario CAVE` holds the plan to CAVE's cave and robot (rule scenario)."""
+    import rbp
+    from planning.verify_climb import scenario_problems
+
+    cave = rbp.load_scenario("demo-shaft")
+    assert scenario_problems(Plan.from_dict(golden), cave) == []
+    edits = {"robot.body_size": ("robot", "body_size", [0.2, 0.2]),
+             "robot.p_min": ("robot", "p_min", 0.5)}
+    for what, (block, name, value) in edits.items():
+        plan = copy.deepcopy(golden)
+        plan[block][name] = value
+        assert problems_of(plan) == [], f"{what}: the verifier alone saw it"
+        found = scenario_problems(Plan.from_dict(plan), cave)
+        assert [p.rule for p in found] == ["scenario"] and name in found[0].text, found
+    plan = copy.deepcopy(golden)
+    plan["scenario"]["anchors"][3]["limit"]["normal"] *= 2
+    plan["scenario"]["goal"]["tolerance"] = 5.0
+    found = scenario_problems(Plan.from_dict(plan), cave)
+    assert len(found) == 1 and "goal" in found[0].text and "anchors[a3]" in found[0].text, found
+    # the command line: exit 1 with the rule named, and ok with the cave it names
+    path = tmp_path / "edited.json"
+    plan = copy.deepcopy(golden)
+    plan["robot"]["body_size"] = [0.2, 0.2]
+    path.write_text(json.dumps(plan))
+    env = dict(os.environ, LCM_DEFAULT_URL="memq://", RBP_THREADS="1")
+    done = subprocess.run([sys.executable, "-m", "rbp", "check", "-q", str(path), "--scenario",
+                           "demo-shaft"], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 1 and "plan: scenario: the plan's robot differs" in done.stdout, \
+        done.stdout[-400:] + done.stderr[-400:]
+    path.write_text(json.dumps(golden))
+    done = subprocess.run([sys.executable, "-m", "rbp", "check", "-q", str(path), "--scenario",
+                           "demo-shaft"], capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == 0 and "made for the cave and robot of demo-shaft" in done.stdout, \
+        done.stdout[-400:] + done.stderr[-400:]

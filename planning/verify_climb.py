@@ -137,6 +137,9 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
             fail("phase-order", "the plan claims success but has no phases")
         if plan.partial is not None:
             fail("phase-order", "a partial plan without phases (no climb)")
+        if plan.regrasps != 0:
+            fail("summary", f"regrasps: the plan says {plan.regrasps}, its phases hold no reach "
+                 "phase")
         return out
     _start(plan, scn, fail)
     _phase_order(plan, fail)

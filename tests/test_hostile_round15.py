@@ -150,3 +150,16 @@ def test_a_plan_is_held_to_the_cave_it_names(golden: PlanFile, tmp_path: Path) -
                            "demo-shaft"], capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0 and "made for the cave and robot of demo-shaft" in done.stdout, \
         done.stdout[-400:] + done.stderr[-400:]
+
+
+def test_a_plan_without_phases_makes_no_regrasps(golden: PlanFile) -> None:
+    """A failed plan of no phases said `regrasps: 5` and passed (the count was checked only
+    against the phases of a plan that has some)."""
+    plan = copy.deepcopy(golden)
+    plan.update(phases=[], success=False, reason="no route", p_path=None, p_min=None,
+                p_grasps=None, regrasps=5)
+    problems = problems_of(plan)
+    assert [p.rule for p in problems] == ["summary"] and "regrasps" in problems[0].text, \
+        "\n".join(map(str, problems))
+    plan["regrasps"] = 0
+    assert problems_of(plan) == []

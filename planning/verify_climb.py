@@ -20,7 +20,7 @@ import numpy as np
 
 from planning.plan_model import Phase, Plan, Step, scenario_robot_problem
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION
-from planning.search_outcome import Stop
+from planning.search_outcome import Quality, Stop
 from rb_drake.scenario import Scenario
 
 RULES = {
@@ -91,6 +91,9 @@ GRIPPER_SPEED_MAX = 0.4  # m/s
 # PipelineConfig's seed step and turn step (0.05 m, 0.05 rad) stretched by STEP_STRETCH.
 STEP_STRETCH = 2.0  # SCP may lengthen a seed's step up to this factor (planning.plan)
 DEFAULT_LIMITS = {"step": 0.1, "turn_step": 0.1}
+# relative: a search record's cost / lower_bound is its bound, and an optimal route's cost
+# its lower bound (planning.complete decides "optimal" at 1e-12)
+SEARCH_REL = 1e-9
 
 
 class Problem(NamedTuple):
@@ -150,6 +153,7 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     _continuity(plan, fail)
     _ramps(plan, fail)
     _goal(plan, scn, fail)
+    _search(plan, fail)
     return out
 
 
@@ -367,6 +371,25 @@ def _goal(plan: Plan, scn: Scenario, fail) -> None:
     if not gap <= scn.goal_tolerance + POSE_TOL:
         fail("goal", f"the plan claims success but ends {gap:.3f} m from the goal "
              f"{list(scn.goal_position)} (tolerance {scn.goal_tolerance} m)", k, n)
+
+
+def _search(plan: Plan, fail) -> None:
+    """The search record's cost, lower bound, bound and quality agree with one another (what
+    `rbp check` prints of them: "route optimal", "within 2.03x of the optimum"). The lower
+    bound is the search's proof, which the plan does not hold: not verified."""
+    rec = plan.search
+    if rec is None or rec.cost is None or rec.lower_bound is None:
+        return
+    cost, lower = rec.cost, rec.lower_bound
+    if not lower <= cost * (1.0 + SEARCH_REL):
+        fail("summary", f"search.lower_bound {lower} is above the route's cost {cost}")
+    if rec.bound is not None and not (lower > 0 and math.isclose(rec.bound, cost / lower,
+                                                                  rel_tol=SEARCH_REL)):
+        fail("summary", f"search.bound {rec.bound} is not cost / lower_bound "
+             f"({cost} / {lower})")
+    if rec.quality == Quality.OPTIMAL and not cost <= lower * (1.0 + SEARCH_REL):
+        fail("summary", f"search.quality 'optimal' but the route's cost {cost} is above the "
+             f"lower bound {lower}")
 
 
 def _partial(plan: Plan, scn: Scenario, fail) -> None:

@@ -163,3 +163,18 @@ def test_a_plan_without_phases_makes_no_regrasps(golden: PlanFile) -> None:
         "\n".join(map(str, problems))
     plan["regrasps"] = 0
     assert problems_of(plan) == []
+
+
+@pytest.mark.parametrize("edit", [{"quality": "optimal"}, {"bound": 1.0},
+                                  {"lower_bound": 0.2}], ids=str)
+def test_the_search_record_agrees_with_itself(golden: PlanFile, edit: dict[str, Any]) -> None:
+    """`rbp check` prints the search record's claims on its ok line ("route optimal", "within
+    2.03x of the optimum"): a plan edited to say optimal (cost twice its lower bound), or a
+    bound that is not cost / lower_bound, passed. The lower bound itself (the search's proof)
+    is not in the plan, so not verified."""
+    plan = copy.deepcopy(golden)
+    plan["search"].update(edit)
+    problems = problems_of(plan)
+    assert problems and {p.rule for p in problems} == {"summary"}, \
+        "\n".join(map(str, problems))
+    assert all(p.text.startswith("search.") for p in problems), problems

@@ -444,8 +444,9 @@ def scenario_problems(plan: Plan, scn: Scenario) -> list[Problem]:
                               else "")))
     try:
         robot = robot_from_dict(plan.robot).to_dict()
-    except ParamError as e:  # plan_scenario refuses it first
-        robot = {str(e.field): None}
+    except ParamError as e:  # the verifier refuses it too (bad input)
+        return [*out, Problem("scenario", f"the plan's robot is malformed: {e.field}: "
+                              f"{e.reason}")]
     expected = scn.robot.to_dict()
     names = [k for k in expected if robot.get(k) != expected[k]]
     if names:

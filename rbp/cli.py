@@ -336,11 +336,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         check_recorded_config(plan["provenance"]["config"], path)
     cave: list[str] = []
     if getattr(args, "scenario", None) is not None:  # rule scenario: the cave it is for
-        from planning.plan_model import Plan
-        from planning.verify_climb import scenario_problems
+        from rbp.commands.common import cave_problems
 
-        scn = load_scenario_spec(args.scenario, check_start=False)
-        cave = [str(p) for p in scenario_problems(Plan.from_dict(plan), scn)]
+        cave = cave_problems(plan, args.scenario)
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
     problems = cave + problems

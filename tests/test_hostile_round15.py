@@ -178,3 +178,26 @@ def test_the_search_record_agrees_with_itself(golden: PlanFile, edit: dict[str, 
     assert problems and {p.rule for p in problems} == {"summary"}, \
         "\n".join(map(str, problems))
     assert all(p.text.startswith("search.") for p in problems), problems
+
+
+def test_the_executors_hold_a_plan_to_its_cave(tmp_path: Path, capsys) -> None:
+    """rig-run clamps its commands to the embedded robot's boom_length and boom_tension: a
+    rig plan with both copies of its robot widened (to 4 m and 5000 N) verified and flew.
+    `--scenario CAVE` of simulate and rig-run refuses it, before any simulation or LCM
+    traffic (exit 1, rule scenario named)."""
+    from rbp.cli import main
+
+    plan = json.loads((DATA / "golden" / "rig.json").read_text())
+    for robot in (plan["robot"], plan["scenario"]["robot"]):
+        robot["boom_length"], robot["boom_tension"] = [0.01, 4.0], [0.5, 5000.0]
+    assert problems_of(plan) == [], "the verifier alone saw the widened robot"
+    path = tmp_path / "wide.json"
+    path.write_text(json.dumps(plan))
+    for command in (["rig-run", str(path), "--sim-rig", "--log", str(tmp_path / "r.lcm")],
+                    ["simulate", str(path), "--trials", "0"]):
+        capsys.readouterr()
+        assert main([*command, "--scenario", "rig"]) == 1, command
+        err = capsys.readouterr().err
+        assert "plan: scenario: the plan's robot differs from rig" in err, err[-400:]
+        assert "['boom_length', 'boom_tension']" in err and "refused" in err, err[-400:]
+    assert not (tmp_path / "r.lcm").exists(), "rig-run logged a refused plan"

@@ -113,6 +113,11 @@ def verify_plan(plan: Plan | dict[str, Any], source: str = "<plan>",
                            ("p_path from the file's own p_grasp", theirs.p_path, plan.p_path)):
             if not _same(a, b):
                 problems.append(Problem("summary", f"{name}: the plan says {b}, recomputed {a}"))
+    elif not plan.success and plan.partial is None:  # a failed plan is not climbed
+        for name in ("p_path", "p_min", "p_grasps"):
+            if (value := getattr(plan, name)) is not None:
+                problems.append(Problem("summary", f"{name}: the plan says {value}, but a plan "
+                                        "that found no route (not partial) has none (null)"))
     return problems
 
 

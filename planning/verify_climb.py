@@ -11,6 +11,7 @@ successive configurations within the plan's own step and turn limits. Each rule 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from collections.abc import Mapping
 from typing import Any, NamedTuple
@@ -19,7 +20,7 @@ import numpy as np
 
 from planning.plan_model import Phase, Plan, Step, scenario_robot_problem
 from planning.ramps import RAMP_DURATION, RELEASE_TENSION
-from planning.search_outcome import Stop
+from planning.search_outcome import Quality, Stop
 from rb_drake.scenario import Scenario
 
 RULES = {
@@ -31,7 +32,7 @@ RULES = {
             "it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
                    "on a body phase",
-    "phase-form": "a phase's stance, free boom and steps fit its kind",
+    "phase-form": "a phase's stance, free boom, anchors and steps fit its kind",
     "stance": "each phase's anchors follow from the phase before (a reach frees one boom, the "
               "next body phase holds it on to_anchor)",
     "reach-ends": "the free gripper starts on from_anchor and ends on to_anchor",
@@ -42,7 +43,8 @@ RULES = {
              "continuations' spliced phases and footstep plans too) the body moves at most "
              "BODY_SPEED_MAX, turns at most TURN_SPEED_MAX and the free gripper moves at most "
              "GRIPPER_SPEED_MAX",
-    "release": "a body phase that a reach phase follows ends with a release ramp at the "
+    "release": "a climb from the scenario's start begins with a body phase, and a body "
+               "phase that a reach phase follows ends with a release ramp at the "
                "transition pose: the freed boom's tension falls (its shoulder taking up its "
                "limb) over at least RAMP_DURATION to at most RELEASE_TENSION when its "
                "gripper opens",
@@ -65,7 +67,10 @@ RULES = {
                "(linear, as rbp rig-run executes it) passes the checks of a step at every "
                "sample of a resolution of 5 mm, 0.5 deg and 5 mm of boom or gripper travel "
                "(planning.verify_between)",
-    "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation",
+    "summary": "p_path, p_min, p_grasps and regrasps equal their recomputation (null but "
+               "regrasps in a failed plan)",
+    "scenario": "with rbp check --scenario CAVE: the plan's embedded cave and robot are "
+                "CAVE's (the plan is verified against what it embeds)",
 }
 
 POSE_TOL = 1e-9   # m, rad: phases join and the climb starts exactly (plans copy these values)
@@ -86,6 +91,9 @@ GRIPPER_SPEED_MAX = 0.4  # m/s
 # PipelineConfig's seed step and turn step (0.05 m, 0.05 rad) stretched by STEP_STRETCH.
 STEP_STRETCH = 2.0  # SCP may lengthen a seed's step up to this factor (planning.plan)
 DEFAULT_LIMITS = {"step": 0.1, "turn_step": 0.1}
+# relative: a search record's cost / lower_bound is its bound, and an optimal route's cost
+# its lower bound (planning.complete decides "optimal" at 1e-12)
+SEARCH_REL = 1e-9
 
 
 class Problem(NamedTuple):
@@ -132,6 +140,9 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
             fail("phase-order", "the plan claims success but has no phases")
         if plan.partial is not None:
             fail("phase-order", "a partial plan without phases (no climb)")
+        if plan.regrasps != 0:
+            fail("summary", f"regrasps: the plan says {plan.regrasps}, its phases hold no reach "
+                 "phase")
         return out
     _start(plan, scn, fail)
     _phase_order(plan, fail)
@@ -142,6 +153,7 @@ def climb_problems(plan: Plan, scn: Scenario) -> list[Problem]:
     _continuity(plan, fail)
     _ramps(plan, fail)
     _goal(plan, scn, fail)
+    _search(plan, fail)
     return out
 
 
@@ -201,6 +213,14 @@ def _phase_order(plan: Plan, fail) -> None:
         if any(tips) != (phase.kind == "reach") or (any(tips) and not all(tips)):
             fail("phase-form", "free_tip is given on every step of a reach phase and only there",
                  k)
+        if phase.kind == "body":  # what only a reach has: its anchors, its free boom's torque
+            ends = [a for a in (phase.from_anchor, phase.to_anchor) if a is not None]
+            if ends:
+                fail("phase-form", f"from_anchor and to_anchor belong to a reach phase, not a "
+                     f"body phase (it gives {ends})", k)
+            if any(s.shoulder_torque is not None for s in phase.steps):
+                fail("phase-form", "shoulder_torque (the free boom's) is given on reach steps "
+                     "only", k)
 
 
 def _stances(plan: Plan, scn: Scenario, fail) -> None:
@@ -353,6 +373,25 @@ def _goal(plan: Plan, scn: Scenario, fail) -> None:
              f"{list(scn.goal_position)} (tolerance {scn.goal_tolerance} m)", k, n)
 
 
+def _search(plan: Plan, fail) -> None:
+    """The search record's cost, lower bound, bound and quality agree with one another (what
+    `rbp check` prints of them: "route optimal", "within 2.03x of the optimum"). The lower
+    bound is the search's proof, which the plan does not hold: not verified."""
+    rec = plan.search
+    if rec is None or rec.cost is None or rec.lower_bound is None:
+        return
+    cost, lower = rec.cost, rec.lower_bound
+    if not lower <= cost * (1.0 + SEARCH_REL):
+        fail("summary", f"search.lower_bound {lower} is above the route's cost {cost}")
+    if rec.bound is not None and not (lower > 0 and math.isclose(rec.bound, cost / lower,
+                                                                  rel_tol=SEARCH_REL)):
+        fail("summary", f"search.bound {rec.bound} is not cost / lower_bound "
+             f"({cost} / {lower})")
+    if rec.quality == Quality.OPTIMAL and not cost <= lower * (1.0 + SEARCH_REL):
+        fail("summary", f"search.quality 'optimal' but the route's cost {cost} is above the "
+             f"lower bound {lower}")
+
+
 def _partial(plan: Plan, scn: Scenario, fail) -> None:
     """A partial plan's record: not a success, and its stance and distances are the climb's."""
     part = plan.partial
@@ -376,6 +415,43 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
         mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
         if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
+
+
+def scenario_problems(plan: Plan, scn: Scenario) -> list[Problem]:
+    """Rule `scenario` (`rbp check --scenario CAVE`): the cave and robot the plan embeds, which
+    every other rule verifies it against, are those of `scn` (its name aside). A plan verifies
+    against what it embeds, so an edit of it passes: a robot with a smaller body, longer booms
+    or a lower p_min, an anchor's limit raised with the steps' P rescored, the goal moved to
+    where the climb ends. Names what differs: top-level fields, anchors by id, robot
+    parameters."""
+    from rb_drake.params import ParamError, robot_from_dict
+
+    out: list[Problem] = []
+    where = f"{scn.name} ({scn.source})" if scn.source else scn.name
+    cave = scn.to_dict(resolved=True)
+    del cave["robot"]
+    mine = json.loads(json.dumps(plan.scenario))  # its arrays as lists, as the cave's
+    fields = [k for k in sorted(set(cave) | set(mine))
+              if k not in ("name", "anchors") and mine.get(k) != cave.get(k)]
+    ours = {a.get("id"): a for a in mine.get("anchors") or [] if isinstance(a, Mapping)}
+    theirs = {a["id"]: a for a in cave["anchors"]}
+    anchors = [f"anchors[{i}]" for i in sorted(set(ours) | set(theirs), key=str)
+               if ours.get(i) != theirs.get(i)]
+    if fields or anchors:
+        out.append(Problem("scenario", f"the plan's cave differs from {where} in "
+                           f"{', '.join(fields + anchors[:8])}"
+                           + (f" and {len(anchors) - 8} more anchors" if len(anchors) > 8
+                              else "")))
+    try:
+        robot = robot_from_dict(plan.robot).to_dict()
+    except ParamError as e:  # the verifier refuses it too (bad input)
+        return [*out, Problem("scenario", f"the plan's robot is malformed: {e.field}: "
+                              f"{e.reason}")]
+    expected = scn.robot.to_dict()
+    names = [k for k in expected if robot.get(k) != expected[k]]
+    if names:
+        out.append(Problem("scenario", f"the plan's robot differs from {where}'s in {names}"))
+    return out
 
 
 def check_note(plan: Plan) -> str:
@@ -420,6 +496,14 @@ def _ramps(plan: Plan, fail) -> None:
     """Every release and attach is ramped (RULES "release", "attach"); ramp steps appear only
     there."""
     phases = plan.phases
+    first = phases[0]
+    if plan.start is None and first.kind == "reach":
+        # the climb starts on the four anchors of the start stance (rule start): a reach first
+        # opens a gripper under load at t = 0, with no release ramp and its 4-stance unverified;
+        # only a continuation (`start`, after a failed grasp) starts with the boom free
+        fail("release", f"the climb starts with a reach phase: boom {first.free_boom}'s gripper "
+             f"opens on {first.from_anchor} at the start without a release ramp (a climb "
+             "from the scenario's start begins with a body phase)", 0, 0)
     for k, phase in enumerate(phases):
         steps = phase.steps
         marked = [n for n, s in enumerate(steps) if s.ramp is not None]

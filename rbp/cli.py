@@ -334,8 +334,14 @@ def cmd_check(args: argparse.Namespace) -> int:
         from rbp.commands.plan import check_recorded_config
 
         check_recorded_config(plan["provenance"]["config"], path)
+    cave: list[str] = []
+    if getattr(args, "scenario", None) is not None:  # rule scenario: the cave it is for
+        from rbp.commands.common import cave_problems
+
+        cave = cave_problems(plan, args.scenario)
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
+    problems = cave + problems
     for p in problems:
         print(f"{path}: {p}")
     if problems:
@@ -354,6 +360,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         between += (f" (rbp simulate's smooth path through the steps within {departure:.2f} "
                     f"of that resolution of the straight line)")
     note = check_note(model)
+    if getattr(args, "scenario", None) is not None:
+        note = "; ".join(filter(None, [f"made for the cave and robot of {args.scenario}", note]))
     print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
           f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")
           + _summary(model))
@@ -510,6 +518,10 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("-q", "--quiet", action="store_true",
                        help="no progress line (shown only when stderr is a terminal and the "
                             "check takes over a second)")
+    check.add_argument("--scenario", metavar="CAVE",
+                       help="a scenario file or a bundled cave's name: the plan must also "
+                            "have been made for this cave and robot (the plan is verified "
+                            "against the cave and robot it embeds, which an edit can change)")
     check.set_defaults(func=cmd_check)
 
     scn = sub.add_parser("scenario", help="generate, import, check and show caves")

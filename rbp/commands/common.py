@@ -244,6 +244,18 @@ def read_plan(path: Path) -> dict:
         raise UserError(f"{path}: {e}") from None
 
 
+def cave_problems(plan: dict, spec: str) -> list[str]:
+    """Rule `scenario` (`--scenario CAVE` of check, simulate and rig-run): what differs between
+    the cave and robot `plan` embeds, which the verifier and the executors use (rig-run's
+    clamps take the embedded robot's boom limits), and those of CAVE (a scenario file or a
+    bundled cave's name); [] when the plan was made for CAVE."""
+    from planning.plan_model import Plan
+    from planning.verify_climb import scenario_problems
+
+    scn = load_scenario_spec(spec, check_start=False)
+    return [str(p) for p in scenario_problems(Plan.from_dict(plan), scn)]
+
+
 def warn_unverified(path: Path) -> None:
     """--no-verify's warning, printed once the plan is read and accepted: a refusal stays one
     line (the warning came before the `error:` line)."""
@@ -252,15 +264,23 @@ def warn_unverified(path: Path) -> None:
 
 
 def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
-                      executes: bool = False) -> bool:
+                      executes: bool = False, scenario: str | None = None) -> bool:
     """Whether a consumer (simulate, rig-run) must refuse `plan`: it fails `rbp check`'s
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
     since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
     `warn_unverified`, once the plan is accepted). `executes` (rig-run, which commands the
     straight motion between steps): a footstep plan's motion, which `rbp check` and its stamp
-    leave unverified, must pass rule `between` too (`executed_motion_problems`)."""
+    leave unverified, must pass rule `between` too (`executed_motion_problems`). `scenario`
+    (--scenario CAVE): the plan must have been made for CAVE's cave and robot (rule
+    `scenario`, `cave_problems`), stamped, or with --no-verify, alike."""
     from planning.plan_file import has_valid_stamp
 
+    if scenario is not None and (cave := cave_problems(plan, scenario)):
+        for p in cave:
+            print(one_line(f"error: {path}: {p}"), file=sys.stderr)
+        print(one_line(f"error: {path}: the plan was not made for the cave and robot of "
+                       f"{scenario}; refused"), file=sys.stderr)
+        return True
     if not verify:
         from systems.trajectory import PlanError, check_flyable
 

@@ -47,6 +47,10 @@ def add_rig_commands(subparsers) -> None:
                      help="seconds between commands, 0.01 to 1 (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
+    run.add_argument("--scenario", metavar="CAVE",
+                     help="a scenario file or a bundled cave's name: refuse the plan unless it "
+                          "was made for this cave and robot (the rig's boom length and tension "
+                          "clamps are the plan's robot's)")
     run.add_argument("--no-verify", dest="verify", action="store_false",
                      help="run the plan without verifying it first (experiments only; warns "
                           "on stderr; the rig's own limit and rate guards stay on)")
@@ -119,7 +123,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         return EXIT_FAILED
     _check_phase(plan, args.phase, path)  # before the verifier's imports (1.4 s, 170 MB)
     # executes: a footstep plan's straight motion, which rig-run commands, is verified too
-    if refuse_wrong_plan(plan, path, getattr(args, "verify", True), executes=True):
+    if refuse_wrong_plan(plan, path, getattr(args, "verify", True), executes=True,
+                         scenario=getattr(args, "scenario", None)):
         return EXIT_FAILED  # before any LCM traffic
     # imported once the plan is read: they take 80 MB, a refused plan's reading its own
     from systems.rig import RigSimConfig

@@ -44,11 +44,16 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="simulate the plan without verifying it first (experiments only; "
                         "warns on stderr)")
+    p.add_argument("--scenario", metavar="CAVE",
+                   help="a scenario file or a bundled cave's name: refuse the plan unless it "
+                        "was made for this cave and robot (the simulation uses the ones the "
+                        "plan embeds)")
     p.set_defaults(func=cmd_simulate)
     return p
 
 
-def _load_plan(path: Path, verify: bool = True) -> dict[str, Any] | None:
+def _load_plan(path: Path, verify: bool = True,
+               scenario: str | None = None) -> dict[str, Any] | None:
     """The plan to simulate; None when it fails verification (the problems are printed)."""
     from rb_drake.errors import one_line
     from rbp.commands.common import read_plan, refuse_wrong_plan
@@ -58,7 +63,7 @@ def _load_plan(path: Path, verify: bool = True) -> dict[str, Any] | None:
         print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
                        "nothing to simulate"), file=sys.stderr)
         return None
-    return None if refuse_wrong_plan(plan, path, verify) else plan
+    return None if refuse_wrong_plan(plan, path, verify, scenario=scenario) else plan
 
 
 def _progress(label: str):
@@ -106,7 +111,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.replan and args.trials == 0:
         raise UserError("--replan: replanning continues failed trials; give --trials N > 0")
     path = Path(args.plan)
-    plan = _load_plan(path, getattr(args, "verify", True))
+    plan = _load_plan(path, getattr(args, "verify", True), getattr(args, "scenario", None))
     if plan is None:
         return EXIT_FAILED
 

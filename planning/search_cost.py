@@ -65,8 +65,13 @@ def boom_costs(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
 
 def edge_cost(scn: Scenario, old: tuple[str, ...], boom: int, new_anchor: str,
               pose: np.ndarray) -> float:
-    """An edge's cost: the regrasp's attach cost plus `boom_costs` at its transition pose."""
-    return attach_cost(scn.robot) + float(boom_costs(scn, old, boom, new_anchor, pose).sum())
+    """An edge's cost: the regrasp's attach cost plus `boom_costs` at its transition pose.
+    Without the grasps' probabilities (`ignore_grasps`) a pose's tensions may make -log P_i
+    near the largest float: their sum is infinite, as it is meant to be, without numpy's
+    overflow warning on the user's terminal."""
+    with np.errstate(over="ignore"):
+        total = float(boom_costs(scn, old, boom, new_anchor, pose).sum())
+    return attach_cost(scn.robot) + total
 
 
 def centroid_distance(scn: Scenario, stance: tuple[str, ...]) -> float:

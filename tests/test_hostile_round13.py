@@ -63,3 +63,22 @@ def test_an_import_with_too_few_anchors_names_the_option(tmp_path):
                               "-o", str(out)), "--anchor-density", "anchors")
     assert line.startswith(f"error: {rock}: --anchor-density: "), line
     assert not out.exists(), "a refused import wrote its output"
+
+
+def test_a_search_without_the_grasps_prints_no_overflow_warning():
+    """`footstep.transition.ignore_grasps: true`: benchmark crevasse 30's search met poses
+    whose -log P summed past the largest float, and numpy's "overflow encountered in reduce"
+    reached the user's terminal (the edge's cost is infinite, as meant, now silently)."""
+    import dataclasses
+    import warnings
+
+    from experiments.common import make_cave, variant_config
+    from planning.footsteps import plan_footsteps
+
+    base = variant_config("lattice", None)
+    cfg = dataclasses.replace(base, transition=dataclasses.replace(base.transition,
+                                                                   ignore_grasps=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        fp = plan_footsteps(make_cave("crevasse", 30, (4.5, 5.0)), cfg)
+    assert fp.success, f"no route without the grasps on crevasse 30: {fp.reason}"

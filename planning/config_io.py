@@ -35,7 +35,20 @@ class ConfigError(ScenarioError):
 
 def config_to_dict(config: Any) -> dict[str, Any]:
     """Every field of a configuration dataclass, nested ones as mappings, JSON-safe."""
-    return _plain(dataclasses.asdict(config))
+    return _plain(_fields(config))
+
+
+def _fields(value: Any) -> Any:
+    """`dataclasses.asdict` without its deep copy: a value no reader takes (a generator for a
+    tuple, a lock) is left for `config_from_dict` to name, where asdict's copy ended in
+    "TypeError: cannot pickle 'generator' object" (rbp.plan checks a config this way)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _fields(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {k: _fields(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_fields(v) for v in value]
+    return value
 
 
 def _plain(value: Any) -> Any:

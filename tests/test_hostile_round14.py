@@ -10,11 +10,16 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 
 import rbp
+from planning.complete_config import AnytimeConfig
+from planning.config_io import ConfigError, config_to_dict
+from planning.footsteps import FootstepConfig
+from planning.pipeline import PipelineConfig
 from rb_drake.errors import RbpInputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -132,3 +137,24 @@ def test_a_dt_just_below_its_range_shows_its_digits(tmp_path):
     line = one_error_line(run("plan", "demo-shaft", "--dt", "0.2499999", "-o",
                               str(tmp_path / "p.json")), "--dt")
     assert line.endswith("got 0.2499999"), line
+
+
+@pytest.mark.parametrize("weights", [
+    (w for w in (5.0, 1.0)), threading.Lock(), {5.0, 1.0}])
+def test_a_configuration_field_no_copy_takes_is_named(weights):
+    """rbp.plan checks a configuration through config_to_dict, whose dataclasses.asdict
+    deep-copied it: a generator or a lock ended in "TypeError: cannot pickle ..."."""
+    config = PipelineConfig(footstep=FootstepConfig(anytime=AnytimeConfig(weights=weights)))
+    with pytest.raises(ConfigError, match=r"footstep\.anytime\.weights: expected a list"):
+        rbp.plan(rbp.load_scenario("demo-shaft"), config, footsteps_only=True)
+
+
+def test_config_to_dict_is_asdict_for_a_valid_configuration():
+    import dataclasses
+
+    from planning.config_io import _plain
+
+    config = PipelineConfig(footstep=FootstepConfig(anytime=AnytimeConfig(weights=[4.0, 1.0]),
+                                                    time_limit=float("inf")))
+    assert config_to_dict(config) == _plain(dataclasses.asdict(config)), (
+        "the plan's provenance.config changed")

@@ -284,8 +284,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
 
     partial = getattr(args, "partial", False)
-    if partial and (planner != "rbp" or not motion):
-        flag = "--planner naive" if planner != "rbp" else "--footsteps-only"
+    if partial and (planner != "rbp" or not motion):  # --from-plan's, once read
+        flag = ("--planner naive" if args.planner == "naive" else "--from-plan's naive planner"
+                if planner != "rbp" else "--footsteps-only" if args.footsteps_only
+                else "--from-plan's footstep plan (made with --footsteps-only)")
         raise UserError(f"--partial: flies the partial climb through the whole pipeline of the "
                         f"rbp planner, which {flag} leaves out")
     record = SearchRecord()

@@ -158,3 +158,23 @@ def test_config_to_dict_is_asdict_for_a_valid_configuration():
                                                     time_limit=float("inf")))
     assert config_to_dict(config) == _plain(dataclasses.asdict(config)), (
         "the plan's provenance.config changed")
+
+
+def test_from_plan_conflicts_name_the_plan_not_an_option_never_given(tmp_path):
+    """--partial (or --thorough) with --from-plan of a footstep plan (or a naive plan) was
+    refused as if the user had given --footsteps-only (or --planner naive)."""
+    steps, naive = tmp_path / "steps.json", tmp_path / "naive.json"
+    made = run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "-o", str(steps))
+    assert made.returncode == 0, made.stderr[-400:]
+    made = run("plan", "demo-shaft", "--planner", "naive", "--footsteps-only", "--no-pictures",
+               "-o", str(naive))
+    assert made.returncode in (0, 1), made.stderr[-400:]
+    out = tmp_path / "again.json"
+    line = one_error_line(run("plan", "--from-plan", str(steps), "--partial", "-o", str(out)),
+                          "--partial", "--from-plan's footstep plan")
+    assert "which --footsteps-only" not in line, line
+    for flag in ("--partial", "--thorough"):
+        line = one_error_line(run("plan", "--from-plan", str(naive), flag, "-o", str(out)),
+                              flag, "--from-plan's naive planner")
+        assert "--planner naive" not in line, line
+    assert not out.exists(), "a refused run wrote a plan"

@@ -149,8 +149,9 @@ def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
         raise UserError("--max-expansions: --thorough searches without an expansion budget "
                         "(--time-limit bounds its time): give one or the other")
     partial = getattr(args, "partial", False)
+    naive = "--planner naive" if args.planner == "naive" else "--from-plan's naive planner"
     if partial and (planner == "naive" or args.footsteps_only):
-        flag = "--planner naive" if planner == "naive" else "--footsteps-only"
+        flag = naive if planner == "naive" else "--footsteps-only"
         raise UserError(f"--partial: flies the partial climb through the whole pipeline of the "
                         f"rbp planner, which {flag} leaves out")
     if partial and args.search == "sampled":
@@ -164,7 +165,7 @@ def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
             if on]
         if given:
             raise UserError(f"{given[0]}: sets the rbp planner's footstep search, which "
-                            "--planner naive does not use")
+                            f"{naive} does not use")
 
 
 def plan_setup(args: argparse.Namespace):

@@ -267,6 +267,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     )
 
     check_plan_output(args)
+    if args.animate and args.no_pictures:  # it wrote no animation, silently
+        raise UserError("--animate: draws the climb, which --no-pictures leaves out")
     if args.animate:
         from rbp.commands.plan import check_animation
 

@@ -178,3 +178,11 @@ def test_from_plan_conflicts_name_the_plan_not_an_option_never_given(tmp_path):
                               flag, "--from-plan's naive planner")
         assert "--planner naive" not in line, line
     assert not out.exists(), "a refused run wrote a plan"
+
+
+def test_animate_with_no_pictures_is_refused(tmp_path):
+    """`--animate climb.gif --no-pictures` planned, said nothing and wrote no animation."""
+    out, gif = tmp_path / "p.json", tmp_path / "climb.gif"
+    one_error_line(run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "--animate",
+                       str(gif), "-o", str(out)), "--animate", "--no-pictures")
+    assert not out.exists() and not gif.exists(), "a refused run wrote its outputs"

@@ -205,7 +205,7 @@ def _summary(plan: Plan) -> str:
     search = plan.search.to_dict() if plan.search is not None else {}
     if not plan.success:
         hint = ""
-        if search.get("stop") == "budget":
+        if search.get("stop") == "budget" and plan.planner == "rbp":  # not the naive's steps
             hint = ("; rbp plan --thorough searches on without a budget, --max-expansions N "
                     "or --time-limit S sets another")
         if plan.partial is not None and plan.p_path is not None:

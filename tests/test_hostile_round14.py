@@ -186,3 +186,15 @@ def test_animate_with_no_pictures_is_refused(tmp_path):
     one_error_line(run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "--animate",
                        str(gif), "-o", str(out)), "--animate", "--no-pictures")
     assert not out.exists() and not gif.exists(), "a refused run wrote its outputs"
+
+
+def test_a_naive_failure_does_not_suggest_the_rbp_searchs_options(tmp_path):
+    """The naive planner's "no goal after 80 steps" ended with "rbp plan --thorough searches on
+    without a budget, --max-expansions N or --time-limit S sets another": options its search
+    does not use (--thorough with --planner naive is now refused)."""
+    done = run("plan", "blocked-shaft", "--planner", "naive", "--footsteps-only",
+               "--no-pictures", "-o", str(tmp_path / "p.json"))
+    assert done.returncode == 1, f"exit {done.returncode}: {done.stderr[-400:]}"
+    summary = done.stdout.strip().splitlines()[-1]
+    assert summary.startswith("success: false"), summary
+    assert "--thorough" not in summary and "--max-expansions" not in summary, summary

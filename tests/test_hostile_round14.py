@@ -83,6 +83,8 @@ CONFLICTS = [
     (["--planner", "naive", "--min-success", "0.9"], "--min-success", "--planner naive"),
     (["--planner", "naive", "--repair"], "--repair", "--planner naive"),
     (["--planner", "naive", "--search", "complete"], "--search", "--planner naive"),
+    (["--planner", "naive", "--max-expansions", "5"], "--max-expansions", "--planner naive"),
+    (["--planner", "naive", "--time-limit", "5"], "--time-limit", "--planner naive"),
 ]
 
 

@@ -130,7 +130,8 @@ def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
     and again in `plan_setup` once --from-plan's planner is known. An option the run would
     silently ignore is refused too: --search sampled with --thorough searched completely,
     --partial with the sampled search (which gives no partial climb) wrote none, and the naive
-    planner ignored --thorough, --min-success, --repair and --search."""
+    planner ignored --thorough, --min-success, --repair, --search, --max-expansions and
+    --time-limit."""
     from rbp.commands.common import UserError
 
     if args.scenario is not None and args.from_plan:
@@ -161,7 +162,9 @@ def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
         given = [flag for flag, on in (
             ("--thorough", args.thorough),
             ("--min-success", getattr(args, "min_success", None) is not None),
-            ("--repair", getattr(args, "repair", False)), ("--search", args.search is not None))
+            ("--repair", getattr(args, "repair", False)), ("--search", args.search is not None),
+            ("--max-expansions", args.max_expansions is not None),
+            ("--time-limit", args.time_limit is not None))
             if on]
         if given:
             raise UserError(f"{given[0]}: sets the rbp planner's footstep search, which "

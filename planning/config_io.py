@@ -91,8 +91,12 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
         return dataclasses.replace(base, **changes)
     except RbpInputError as e:  # a dataclass that checks its own values (RepairConfig)
         field = e.field or where
-        if prefix and e.field and not e.field.startswith(prefix):  # LatticeConfig's own name
-            field = f"{prefix}.{e.field}"
+        if prefix and e.field:  # its field as a file gives it ("footstep.segments.commit") or
+            # its own name (LatticeConfig's "angle_step_deg"), under `prefix`: a plan's
+            # "provenance.config.footstep.segments" named "...segments.footstep.segments.commit"
+            section = SECTIONS.get(cls.__name__, "")
+            name = e.field.removeprefix(section) if section else e.field
+            field = f"{prefix}.{name}"
         raise ConfigError(source, field, e.reason) from None
 
 

@@ -31,6 +31,7 @@ import numpy as np
 
 from planning.complete import complete_search
 from planning.complete_config import CompleteConfig
+from planning.config_ranges import commit_problem
 from planning.lattice_moves import goal_is_holdable
 from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Vertex
 from planning.search_cost import RegraspHeuristic, edge_cost
@@ -59,9 +60,8 @@ class SegmentConfig:
                     0.0 < value < math.inf):
                 raise RbpInputError(f"must be a positive number of metres, got {value!r}",
                                     field=f"footstep.segments.{name}")
-        if self.commit > self.lookahead:
-            raise RbpInputError(f"must be at most lookahead ({self.lookahead:g} m), got "
-                                f"{self.commit:g}", field="footstep.segments.commit")
+        if problem := commit_problem(self.commit, self.lookahead):
+            raise RbpInputError(problem, field="footstep.segments.commit")
 
 
 def climb_distance(scn: Scenario) -> float:

@@ -200,3 +200,64 @@ def test_a_naive_failure_does_not_suggest_the_rbp_searchs_options(tmp_path):
     summary = done.stdout.strip().splitlines()[-1]
     assert summary.startswith("success: false"), summary
     assert "--thorough" not in summary and "--max-expansions" not in summary, summary
+
+
+def _plan_with(tmp_path: Path, name: str, change) -> Path:
+    """A footstep plan of demo-shaft with its provenance.config changed by `change`."""
+    import json
+
+    made = tmp_path / "made.json"
+    if not made.exists():
+        done = run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "-o", str(made))
+        assert done.returncode == 0, done.stderr[-400:]
+    plan = json.loads(made.read_text())
+    change(plan["provenance"]["config"]["footstep"])
+    path = tmp_path / name
+    path.write_text(json.dumps(plan))
+    return path
+
+
+def test_a_recorded_configuration_failing_a_joint_check_is_refused_by_check_too(tmp_path):
+    """A plan's provenance.config with segments' commit beyond their lookahead, or a lattice
+    angle step not dividing 180 deg: `rbp check` said ok and --from-plan refused it, naming
+    "provenance.config.footstep.segments.footstep.segments.commit" (the prefix twice)."""
+    cases = {
+        "segments.json": (lambda f: f.update(segments={"min_climb": 7.0, "lookahead": 1.0,
+                                                       "commit": 2.0, "tolerance": 0.6}),
+                          "provenance.config.footstep.segments.commit", "at most lookahead"),
+        "lattice.json": (lambda f: f["lattice"].update(angle_step_deg=7.0),
+                         "provenance.config.footstep.lattice.angle_step_deg", "divide 180"),
+    }
+    for name, (change, field, reason) in cases.items():
+        path = _plan_with(tmp_path, name, change)
+        for command in (["check", str(path)],
+                        ["plan", "--from-plan", str(path), "-o", str(tmp_path / "again.json")]):
+            line = one_error_line(run(*command), reason)
+            assert line.startswith(f"error: {path}: {field}: "), f"{command[0]}: {line}"
+    assert not (tmp_path / "again.json").exists(), "a refused --from-plan wrote a plan"
+
+
+@pytest.mark.parametrize("text, field", [
+    ("footstep: {lattice: {angle_step_deg: 7}}", "footstep.lattice.angle_step_deg"),
+    ("footstep: {segments: {commit: 5}}", "footstep.segments.commit"),
+])
+def test_a_joint_check_of_a_config_file_comes_before_the_imports(tmp_path, text, field):
+    config = tmp_path / "planner.yaml"
+    config.write_text(text + "\n")
+    code = ("import sys; from rbp.cli import main; "
+            f"status = main(['plan', 'demo-shaft', '--config', {str(config)!r}, '-o', "
+            f"{str(tmp_path / 'p.json')!r}]); print(status, 'numba' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env(), cwd=tmp_path, timeout=120)
+    assert done.stdout.strip().splitlines()[-1:] == ["2 False"], done.stdout + done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {config}: {field}: "), lines
+
+
+def test_the_joint_checks_defaults_are_the_dataclasses():
+    from planning.config_ranges import SEGMENT_DEFAULTS
+    from planning.segmented import SegmentConfig
+
+    default = SegmentConfig()
+    assert {"lookahead": default.lookahead, "commit": default.commit} == SEGMENT_DEFAULTS, (
+        "config_ranges.SEGMENT_DEFAULTS differs from SegmentConfig's defaults")

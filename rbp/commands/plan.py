@@ -82,7 +82,7 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     issue 28's 1 s and 200 MB; `rbp scenario check` refused the same in 0.55 s and 100 MB.
     The configurations' keys are checked in `plan_setup`, against the planner's classes."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import range_problem, unknown_key
+    from planning.config_ranges import joint_problem, range_problem, unknown_key
     from rb_drake.scenario import read_yaml_file
     from rbp.commands.common import load_scenario_spec
 
@@ -94,7 +94,8 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     if args.config:
         data = read_yaml_file(args.config, ConfigError)
         args.config_data = {} if data is None else data
-        if found := unknown_key(args.config_data) or range_problem(args.config_data):
+        if found := (unknown_key(args.config_data) or range_problem(args.config_data)
+                     or joint_problem(args.config_data)):
             raise ConfigError(args.config, *found)  # as plan_setup's classes would refuse it
         footstep = args.config_data.get("footstep")
         if args.partial and args.search is None and isinstance(footstep, dict) and \
@@ -300,9 +301,9 @@ def check_recorded_config(config: Any, path: str | Path) -> None:
     --from-plan` before them, and `rbp check` (which said ok to a dt of 1e308 that
     --from-plan refused)."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import range_problem, unknown_key
+    from planning.config_ranges import joint_problem, range_problem, unknown_key
 
-    if found := unknown_key(config) or range_problem(config):
+    if found := unknown_key(config) or range_problem(config) or joint_problem(config):
         raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
     from planning.config_ranges import recorded_speed_problem
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from planning.config_ranges import SECTIONS, describe, field_problem, unknown_key
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, key_text
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
 if TYPE_CHECKING:
@@ -82,7 +82,8 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     for key, value in data.items():
         field = f"{prefix}.{key}" if prefix else str(key)
         if key not in fields:
-            raise ConfigError(source, field, f"unknown key; expected one of {sorted(fields)}")
+            name = f"{prefix}.{key_text(key)}" if prefix else key_text(key)
+            raise ConfigError(source, name, f"unknown key; expected one of {sorted(fields)}")
         changes[key] = _convert(value, hints[key], source, field, getattr(base, key))
         problem = field_problem(cls, key, changes[key])  # planning.config_ranges
         if problem:

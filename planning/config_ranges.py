@@ -22,7 +22,7 @@ import math
 import sys
 from typing import Any
 
-from rb_drake.errors import MAX_SEED
+from rb_drake.errors import MAX_SEED, key_text
 
 INF = math.inf
 
@@ -248,7 +248,7 @@ def unknown_key(data: Any, section: str = "") -> tuple[str, str] | None:
     for key, value in data.items():
         field = f"{section}{key}"
         if key not in keys:
-            return field, f"unknown key; expected one of {keys}"
+            return f"{section}{key_text(key)}", f"unknown key; expected one of {keys}"
         if f"{field}." in SECTIONS.values() and (found := unknown_key(value, f"{field}.")):
             return found
     return None

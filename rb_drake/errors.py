@@ -66,6 +66,20 @@ EXIT_INTERRUPTED: Final = 3  # Ctrl-C (or a closed output pipe): no traceback, n
 MAX_SEED: Final = 2**63 - 1
 
 
+def key_text(key: object) -> str:
+    """A mapping's key in a field's name as the file wrote it: YAML's null and booleans as
+    `null`, `true` and `false` (they were named `None` and `True`), and an empty key or one
+    with a dot or surrounding spaces quoted (`footstep.` named the key '')."""
+    if key is None:
+        return "null"
+    if isinstance(key, bool):
+        return "true" if key else "false"
+    text = str(key)
+    if not text or "." in text or text != text.strip():
+        return repr(text)
+    return text
+
+
 def field_path(parts: Iterable[str | int]) -> str:
     """A field's path as every reader names it: names joined by dots, list indices in brackets
     (`phases[1].steps[0].pose[2]`, `anchors[3].id`)."""

@@ -261,3 +261,26 @@ def test_the_joint_checks_defaults_are_the_dataclasses():
     default = SegmentConfig()
     assert {"lookahead": default.lookahead, "commit": default.commit} == SEGMENT_DEFAULTS, (
         "config_ranges.SEGMENT_DEFAULTS differs from SegmentConfig's defaults")
+
+
+@pytest.mark.parametrize("text, field", [
+    ("~: 1", "null"),
+    ("footstep: {true: 1}", "footstep.true"),
+    ("footstep: {'': 1}", "footstep.''"),
+    ("footstep: {segments: {null: 1}}", "footstep.segments.null"),
+])
+def test_an_unknown_key_is_named_as_the_file_wrote_it(tmp_path, text, field):
+    """A null or boolean key was named "None" or "footstep.True", an empty one "footstep."."""
+    config = tmp_path / "planner.yaml"
+    config.write_text(text + "\n")
+    line = one_error_line(run("plan", "demo-shaft", "--config", str(config), "-o",
+                              str(tmp_path / "p.json")), "unknown key")
+    assert line.startswith(f"error: {config}: {field}: unknown key"), line
+
+
+def test_a_scenarios_null_key_is_named_null(tmp_path):
+    cave = tmp_path / "cave.yaml"
+    text = (ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml").read_text()
+    cave.write_text(text.replace("\ngoal:\n", "\ngoal:\n  ~: 1\n", 1))
+    line = one_error_line(run("scenario", "check", str(cave)), "unknown field")
+    assert line.startswith(f"error: {cave}: goal.null: unknown field"), line

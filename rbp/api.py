@@ -272,6 +272,10 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                             f"{type(config).__name__}", field="config")
     # held to a configuration file's ranges before any work (dt=0 failed after the search)
     cfg = PipelineConfig() if config is None else checked_config(config)
+    if partial and cfg.footstep.search == "sampled":  # it returned no partial climb, silently
+        raise RbpInputError("a partial climb is the complete search's (footstep.search "
+                            "'complete' or 'hybrid'): the sampled search gives none",
+                            field="partial")
     scn = _scenario(scenario, "scenario")
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)

@@ -284,3 +284,12 @@ def test_a_scenarios_null_key_is_named_null(tmp_path):
     cave.write_text(text.replace("\ngoal:\n", "\ngoal:\n  ~: 1\n", 1))
     line = one_error_line(run("scenario", "check", str(cave)), "unknown field")
     assert line.startswith(f"error: {cave}: goal.null: unknown field"), line
+
+
+def test_the_api_refuses_a_partial_climb_of_the_sampled_search():
+    """rbp.plan(..., partial=True) with footstep.search 'sampled' returned a plan without a
+    partial climb and said nothing (the command line refuses the same)."""
+    config = PipelineConfig(footstep=FootstepConfig(search="sampled"))
+    with pytest.raises(RbpInputError, match="sampled search gives none") as caught:
+        rbp.plan("blocked-shaft", config, partial=True)
+    assert caught.value.field == "partial", caught.value

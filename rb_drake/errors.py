@@ -53,6 +53,13 @@ def apart(value: float, limit: float, decimals: int = 3) -> str:
     return repr(value)
 
 
+def as_given(value: float) -> str:
+    """`value` as `:g` writes it when that reads back as the same number, else in full (repr):
+    a probability of 0.9999999999999999 is never printed as 1."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
+
+
 # The exit status of an rbp command or an experiment script (`rbp --help` lists them). Plain
 # ints, as `sys.exit` and the tests compare them.
 EXIT_OK: Final = 0           # done: a plan was found and written, a plan verified, ...

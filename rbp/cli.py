@@ -24,6 +24,7 @@ from rb_drake.errors import (
     EXIT_OK,
     EXIT_USAGE,
     RbpInputError,
+    as_given,
     one_line,
 )
 from rbp.commands.common import RECEIVED as INTERRUPTS_RECEIVED
@@ -232,7 +233,8 @@ def _route_quality(search: dict) -> str:
 
 def _bound_text(search: dict) -> str:
     if search.get("min_success") is not None:
-        return (f"; the fewest regrasps with predicted success >= {search['min_success']:g} "
+        wanted = as_given(search["min_success"])
+        return (f"; the fewest regrasps with predicted success >= {wanted} "
                 f"(search cost {search['cost']:.4f}, exp(-cost) {math.exp(-search['cost']):.4f})")
     if search.get("quality") == "optimal":
         return f"; route optimal (search cost {search['cost']:.4f})"

@@ -293,3 +293,22 @@ def test_the_api_refuses_a_partial_climb_of_the_sampled_search():
     with pytest.raises(RbpInputError, match="sampled search gives none") as caught:
         rbp.plan("blocked-shaft", config, partial=True)
     assert caught.value.field == "partial", caught.value
+
+
+def test_a_min_success_just_below_one_is_shown_as_given(tmp_path):
+    """--min-success 0.9999999999999999 (accepted: below 1) was reported as "no route with
+    predicted success >= 1", the value the option refuses."""
+    done = run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "--min-success",
+               "0.9999999999999999", "-o", str(tmp_path / "p.json"))
+    assert done.returncode == 1, f"exit {done.returncode}: {done.stderr[-400:]}"
+    summary = done.stdout.strip().splitlines()[-1]
+    assert "predicted success >= 0.9999999999999999 " in summary, summary
+
+
+def test_as_given_never_rounds_to_another_number():
+    from rb_drake.errors import as_given
+
+    for value, text in ((0.5, "0.5"), (0.9, "0.9"), (1e-300, "1e-300"),
+                        (0.9999999999999999, "0.9999999999999999"), (0.1234567, "0.1234567")):
+        assert as_given(value) == text, f"{value!r} shown as {as_given(value)!r}"
+        assert float(as_given(value)) == value

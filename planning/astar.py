@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import time
 from collections.abc import Callable, Hashable, Iterable, Sequence
 from typing import Any, Generic, NamedTuple, TypeVar
 
@@ -39,6 +40,7 @@ class SearchResult(NamedTuple, Generic[N]):
     reason: str
     expanded: Sequence[N] = ()     # nodes in expansion order (the start first)
     node_data: Any = None          # dict: the data each reached node was last reached with
+    timed_out: bool = False        # stopped by its time limit
 
 
 def lazy_astar(
@@ -51,13 +53,17 @@ def lazy_astar(
     max_expansions: int = 1000,
     start_data: Any = None,
     on_expand: Callable[[int, N], None] | None = None,
+    time_limit: float | None = None,
 ) -> SearchResult[N]:
     """Search from `start` to the first node for which `is_goal(node, node_data)` is truthy.
 
     successors(node, node_data) yields (child, edge_key, lower_bound_cost);
     evaluate(node, child, edge_key, node_data) returns Edge(cost, data) or None (infeasible);
     the edge's data becomes the child's node_data when it is reached through that edge.
+    `time_limit` (s, None: none): once the start is expanded, the search gives up when it has
+    run longer, checked before each expansion and each edge's evaluation.
     """
+    t0 = time.perf_counter()
     tie = itertools.count()
     graph = nx.DiGraph()
     graph.add_node(start)
@@ -71,6 +77,10 @@ def lazy_astar(
     expansions = evaluations = 0
     order: list[N] = []
     while open_list:
+        if time_limit is not None and expansions and time.perf_counter() - t0 > time_limit:
+            return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
+                                f"gave up after {time_limit:g} s ({expansions} expansions) "
+                                "without reaching the goal", order, node_data, timed_out=True)
         _, _, g, node, par, key, evaluated, data = heapq.heappop(open_list)
         if node in closed and g >= closed[node] - 1e-15:
             continue

@@ -99,8 +99,12 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         if first.success:
             return first
         rest = None if cfg.max_expansions is None else max(1, cfg.max_expansions - budget)
-        second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest), progress,
-                                exclude, memo, partial)
+        # the time limit holds for both stages together (each had all of it)
+        left = None if cfg.time_limit is None else max(
+            1e-3, cfg.time_limit - (time.perf_counter() - t0))
+        second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest,
+                                                         time_limit=left),
+                                progress, exclude, memo, partial)
         return second._replace(seconds=time.perf_counter() - t0,
                                expansions=first.expansions + second.expansions,
                                transitions_tested=first.transitions_tested

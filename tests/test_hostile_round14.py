@@ -312,3 +312,41 @@ def test_as_given_never_rounds_to_another_number():
                         (0.9999999999999999, "0.9999999999999999"), (0.1234567, "0.1234567")):
         assert as_given(value) == text, f"{value!r} shown as {as_given(value)!r}"
         assert float(as_given(value)) == value
+
+
+@pytest.mark.parametrize("search, given_up", [("sampled", "gave up after 1e-300 s"),
+                                              ("hybrid", "gave up after 0.001 s")])
+def test_the_sampled_search_keeps_to_the_time_limit(tmp_path, search, given_up):
+    """The sampled search (and the hybrid's sampled stage) ignored --time-limit: with
+    candidates_per_boom 1000 a 10 s limit ran 44 s on shaft-1, and the hybrid's complete stage
+    had the whole limit again. Here a limit no search can keep stops it after its first
+    expansion; the hybrid's complete stage gets what is left (at least 1 ms)."""
+    out = tmp_path / "p.json"
+    done = run("plan", "demo-shaft", "--footsteps-only", "--no-pictures", "--search", search,
+               "--time-limit", "1e-300", "-o", str(out))
+    assert done.returncode == 1, f"exit {done.returncode}: {done.stderr[-400:]}"
+    summary = done.stdout.strip().splitlines()[-1]
+    assert summary.startswith(f"success: false ({given_up} (1 expansions)"), summary
+    checked = run("check", str(out))
+    assert checked.returncode == 0, f"rbp check refused the plan: {checked.stdout[-400:]}"
+
+
+def test_lazy_astar_gives_up_on_its_time_limit():
+    import time
+
+    from planning.astar import Edge, lazy_astar
+
+    def slow(node, child, key, data):
+        time.sleep(0.01)
+        return Edge(1.0, None)
+
+    t0 = time.perf_counter()
+    result = lazy_astar(0, lambda n, d: [(n + 1, None, 1.0)], slow, lambda n: 0.0,
+                        is_goal=lambda n, d: False, max_expansions=10**9, time_limit=0.1)
+    took = time.perf_counter() - t0
+    assert not result.success and result.timed_out, result.reason
+    assert result.reason.startswith("gave up after 0.1 s"), result.reason
+    assert took < 1.0, f"a 0.1 s limit took {took:.2f} s"
+    plain = lazy_astar(0, lambda n, d: [(n + 1, None, 1.0)], lambda *a: Edge(1.0, None),
+                       lambda n: 0.0, is_goal=lambda n, d: n == 5)
+    assert plain.success and not plain.timed_out, "no time limit, yet timed out"

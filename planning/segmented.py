@@ -37,6 +37,7 @@ from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Ve
 from planning.search_cost import RegraspHeuristic, edge_cost
 from planning.search_outcome import Quality, Stop
 from rb_drake.errors import RbpInputError
+from rb_drake.kernel.clock import search_clock
 from rb_drake.scenario import Scenario
 
 SIDEWAYS = (0.0, 0.4, -0.4, 0.8, -0.8)  # m: where a sub-goal is tried, across the climb
@@ -110,13 +111,13 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
     if climb_distance(scn) <= segment.min_climb:
         return complete_search(scn, dataclasses.replace(config, max_expansions=budget(scn)),
                                exclude=exclude, memo=memo, progress=progress, partial=partial)
-    t0 = time.perf_counter()
+    t0, clock0 = time.perf_counter(), search_clock()
 
     def limited(scenario: Scenario) -> CompleteConfig:
         """`config` for a search of `scenario`: its budget, and the time left of the limit."""
         limit = config.time_limit
         if limit is not None:
-            limit = max(limit - (time.perf_counter() - t0), 1e-3)
+            limit = max(limit - (search_clock() - clock0), 1e-3)
         return dataclasses.replace(config, max_expansions=budget(scenario), time_limit=limit)
 
     goal = np.asarray(scn.goal_position, dtype=float)

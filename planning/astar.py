@@ -19,7 +19,7 @@ from typing import Any, Generic, NamedTuple, TypeVar
 
 import networkx as nx
 
-from rb_drake.kernel.clock import search_clock
+from planning.search_clock import search_clock
 
 N = TypeVar("N", bound=Hashable)  # a node of the searched graph
 

@@ -67,6 +67,7 @@ from planning.open_list import (
     frontier,
     rekeyed,
 )
+from planning.search_clock import search_clock
 from planning.search_cost import (
     DistanceHeuristic,
     RegraspHeuristic,
@@ -75,7 +76,6 @@ from planning.search_cost import (
     edge_cost,
 )
 from planning.search_outcome import Quality, Stop
-from rb_drake.kernel.clock import search_clock
 from rb_drake.scenario import Scenario
 
 BOUND_EVERY = 100  # expansions between two updates of the anytime search's lower bound

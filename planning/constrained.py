@@ -50,10 +50,10 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
+from planning.search_clock import search_clock
 from planning.search_cost import RegraspHeuristic, edge_cost, goal_distance
 from planning.search_outcome import Stop
 from rb_drake.errors import RbpInputError, as_given
-from rb_drake.kernel.clock import search_clock
 from rb_drake.scenario import Scenario
 
 

@@ -60,6 +60,7 @@ from planning.refinement import (
 )
 from planning.route_repair import repair_route
 from planning.sampled_search import candidate_moves, explored_stances, goal_pose_in, plan_sampled
+from planning.search_clock import search_clock
 from planning.search_cost import (
     centroid_distance,
     goal_distance,
@@ -67,7 +68,6 @@ from planning.search_cost import (
 from planning.search_outcome import Stop
 from planning.segmented import segmented_search
 from rb_drake.errors import RbpInputError
-from rb_drake.kernel.clock import search_clock
 from rb_drake.params import NUM_BOOMS
 from rb_drake.scenario import Scenario
 

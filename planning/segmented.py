@@ -34,10 +34,10 @@ from planning.complete_config import CompleteConfig
 from planning.config_ranges import commit_problem
 from planning.lattice_moves import goal_is_holdable
 from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Vertex
+from planning.search_clock import search_clock
 from planning.search_cost import RegraspHeuristic, edge_cost
 from planning.search_outcome import Quality, Stop
 from rb_drake.errors import RbpInputError
-from rb_drake.kernel.clock import search_clock
 from rb_drake.scenario import Scenario
 
 SIDEWAYS = (0.0, 0.4, -0.4, 0.8, -0.8)  # m: where a sub-goal is tried, across the climb

@@ -357,7 +357,7 @@ def test_the_search_clock_leaves_out_numbas_compiling():
 
     from numba import njit
 
-    from rb_drake.kernel.clock import compile_seconds, search_clock
+    from planning.search_clock import compile_seconds, search_clock
 
     wall0, clock0, compiled0 = time.perf_counter(), search_clock(), compile_seconds()
 

@@ -6,6 +6,7 @@ time limit, `rbp plan demo-shaft --footsteps-only --time-limit 5` gave up after 
 (and took 25 s) where a warm run found its route in 1 s: the same cave and options answered
 otherwise on a first run. The limit is on searching; compiling is not searching, and cannot be
 interrupted anyway. Times reported (a plan's `timing`, a search's `seconds`) stay wall time.
+(Not in `rb_drake.kernel`: the kernels' cache entries are stamped with every module there.)
 """
 
 from __future__ import annotations

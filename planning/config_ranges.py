@@ -359,6 +359,22 @@ def joint_problem(data: Any) -> tuple[str, str] | None:
     return None
 
 
+def search_problem(footstep: Any) -> tuple[str, str] | None:
+    """(field, reason) when a FootstepConfig asks its search for what only the complete search
+    does, or None: `min_success` with the sampled or hybrid search (whose sampled routes
+    ignore it: a plan below the probability asked for said success: true), `repair` with the
+    sampled one. Checked once the command line's flags are applied (`--search` overrides a
+    file's `footstep.search`)."""
+    if footstep.min_success is not None and footstep.search != "complete":
+        return ("footstep.min_success", f"is the complete search's (footstep.search complete): "
+                f"the {footstep.search} search's routes ignore it, and one below "
+                f"{footstep.min_success:g} would be returned as a success")
+    if footstep.repair is not None and footstep.search == "sampled":
+        return ("footstep.repair", "is the complete search's (footstep.search complete or "
+                "hybrid): the sampled search ignores it")
+    return None
+
+
 DEFAULT_DT = 0.5  # s: planning.pipeline.PipelineConfig.dt's default (with 5 cm steps, 0.1 m/s)
 
 

@@ -385,3 +385,29 @@ def test_a_time_limit_is_not_spent_compiling_the_kernels(tmp_path):
     summary = done.stdout.strip().splitlines()[-1:]
     assert done.returncode == 0, f"exit {done.returncode}: {summary} {done.stderr[-300:]}"
     assert summary[0].startswith("success: true"), summary
+
+
+@pytest.mark.parametrize("text, flags, field, source", [
+    ("footstep: {search: sampled, min_success: 0.9}", [], "footstep.min_success", "config"),
+    ("footstep: {min_success: 0.9}", ["--search", "hybrid"], "footstep.min_success",
+     "--search"),
+    ("footstep: {search: sampled, repair: {}}", [], "footstep.repair", "config"),
+])
+def test_a_complete_search_option_with_another_search_is_refused(tmp_path, text, flags, field,
+                                                                  source):
+    """`footstep: {search: sampled, min_success: 0.9}` planned demo-shaft with p_path 0.886
+    and said success: true, the probability asked for silently ignored (repair too)."""
+    config = tmp_path / "planner.yaml"
+    config.write_text(text + "\n")
+    out = tmp_path / "p.json"
+    line = one_error_line(run("plan", "demo-shaft", "--footsteps-only", "--config", str(config),
+                              *flags, "-o", str(out)), field, "complete search's")
+    named = str(config) if source == "config" else source
+    assert line.startswith(f"error: {named}: {field}: "), line
+    assert not out.exists(), "a refused run wrote a plan"
+
+
+def test_the_api_refuses_min_success_with_the_sampled_search():
+    config = PipelineConfig(footstep=FootstepConfig(search="sampled", min_success=0.9))
+    with pytest.raises(ConfigError, match=r"footstep\.min_success: is the complete search's"):
+        rbp.plan("demo-shaft", config, footsteps_only=True)

@@ -176,7 +176,7 @@ def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
     from planning.complete_config import AnytimeConfig
     from planning.config_io import config_from_dict, load_config
-    from planning.config_ranges import FIELDS
+    from planning.config_ranges import FIELDS, search_problem
     from planning.pipeline import PipelineConfig
     from rbp.commands.common import MAX_SEED, UserError, check_seed, load_scenario_spec
 
@@ -249,6 +249,10 @@ def plan_setup(args: argparse.Namespace):
         source = args.config or args.from_plan or "(configuration)"
         raise UserError(f"{source}: footstep.search: must be one of {', '.join(SEARCHES)}, "
                         f"got {cfg.footstep.search!r}")
+    if planner == "rbp" and (found := search_problem(cfg.footstep)):
+        source = ("--search" if args.search is not None
+                  else args.config or args.from_plan or "(configuration)")
+        raise UserError(f"{source}: {found[0]}: {found[1]}")
     if getattr(args, "partial", False) and planner == "rbp" and \
             cfg.footstep.search == "sampled":  # it wrote no partial climb, silently
         source = args.config or args.from_plan or "(configuration)"

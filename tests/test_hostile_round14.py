@@ -411,3 +411,18 @@ def test_the_api_refuses_min_success_with_the_sampled_search():
     config = PipelineConfig(footstep=FootstepConfig(search="sampled", min_success=0.9))
     with pytest.raises(ConfigError, match=r"footstep\.min_success: is the complete search's"):
         rbp.plan("demo-shaft", config, footsteps_only=True)
+
+
+def test_from_plan_of_a_partial_climb_names_the_option_given(tmp_path):
+    """--from-plan of a partial plan with --footsteps-only (or --planner naive) was refused
+    as "--partial: ...", an option the user never gave."""
+    partial = tmp_path / "partial.json"
+    made = run("plan", "blocked-shaft", "--partial", "--no-scp", "--no-pictures", "-q", "-o",
+               str(partial))
+    assert made.returncode == 1 and partial.exists(), made.stderr[-400:]
+    out = tmp_path / "again.json"
+    for flags in (["--footsteps-only"], ["--planner", "naive"]):
+        line = one_error_line(run("plan", "--from-plan", str(partial), *flags, "-o", str(out)),
+                              "is a partial climb")
+        assert line.startswith(f"error: {' '.join(flags)}: {partial} "), line
+    assert not out.exists(), "a refused run wrote a plan"

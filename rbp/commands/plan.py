@@ -193,6 +193,11 @@ def plan_setup(args: argparse.Namespace):
         planner = args.planner or recorded.planner
         option_conflict(args, planner)
         if partial:  # a partial plan is made again partial (the flag is not in the config)
+            if not getattr(args, "partial", False) and (args.footsteps_only or planner != "rbp"):
+                flag = "--footsteps-only" if args.footsteps_only else "--planner naive"
+                raise UserError(f"{flag}: {args.from_plan} is a partial climb, made again "
+                                "through the whole pipeline of the rbp planner, which "
+                                f"{flag} leaves out")  # it named --partial, never given
             args.partial = True
         motion = recorded.motion and not args.footsteps_only
     elif args.scenario is None:

@@ -19,6 +19,8 @@ from typing import Any, Generic, NamedTuple, TypeVar
 
 import networkx as nx
 
+from planning.search_clock import search_clock
+
 N = TypeVar("N", bound=Hashable)  # a node of the searched graph
 
 
@@ -39,6 +41,7 @@ class SearchResult(NamedTuple, Generic[N]):
     reason: str
     expanded: Sequence[N] = ()     # nodes in expansion order (the start first)
     node_data: Any = None          # dict: the data each reached node was last reached with
+    timed_out: bool = False        # stopped by its time limit
 
 
 def lazy_astar(
@@ -51,13 +54,17 @@ def lazy_astar(
     max_expansions: int = 1000,
     start_data: Any = None,
     on_expand: Callable[[int, N], None] | None = None,
+    time_limit: float | None = None,
 ) -> SearchResult[N]:
     """Search from `start` to the first node for which `is_goal(node, node_data)` is truthy.
 
     successors(node, node_data) yields (child, edge_key, lower_bound_cost);
     evaluate(node, child, edge_key, node_data) returns Edge(cost, data) or None (infeasible);
     the edge's data becomes the child's node_data when it is reached through that edge.
+    `time_limit` (s, None: none): once the start is expanded, the search gives up when it has
+    run longer, checked before each expansion and each edge's evaluation.
     """
+    t0 = search_clock()  # numba's compiling left out of the time limit
     tie = itertools.count()
     graph = nx.DiGraph()
     graph.add_node(start)
@@ -71,6 +78,10 @@ def lazy_astar(
     expansions = evaluations = 0
     order: list[N] = []
     while open_list:
+        if time_limit is not None and expansions and search_clock() - t0 > time_limit:
+            return SearchResult(False, [], [], None, float("inf"), expansions, evaluations, graph,
+                                f"gave up after {time_limit:g} s ({expansions} expansions) "
+                                "without reaching the goal", order, node_data, timed_out=True)
         _, _, g, node, par, key, evaluated, data = heapq.heappop(open_list)
         if node in closed and g >= closed[node] - 1e-15:
             continue

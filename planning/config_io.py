@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from planning.config_ranges import SECTIONS, describe, field_problem, unknown_key
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, key_text
 from rb_drake.scenario import ScenarioError, read_yaml_file
 
 if TYPE_CHECKING:
@@ -35,7 +35,20 @@ class ConfigError(ScenarioError):
 
 def config_to_dict(config: Any) -> dict[str, Any]:
     """Every field of a configuration dataclass, nested ones as mappings, JSON-safe."""
-    return _plain(dataclasses.asdict(config))
+    return _plain(_fields(config))
+
+
+def _fields(value: Any) -> Any:
+    """`dataclasses.asdict` without its deep copy: a value no reader takes (a generator for a
+    tuple, a lock) is left for `config_from_dict` to name, where asdict's copy ended in
+    "TypeError: cannot pickle 'generator' object" (rbp.plan checks a config this way)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _fields(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {k: _fields(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_fields(v) for v in value]
+    return value
 
 
 def _plain(value: Any) -> Any:
@@ -69,7 +82,8 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
     for key, value in data.items():
         field = f"{prefix}.{key}" if prefix else str(key)
         if key not in fields:
-            raise ConfigError(source, field, f"unknown key; expected one of {sorted(fields)}")
+            name = f"{prefix}.{key_text(key)}" if prefix else key_text(key)
+            raise ConfigError(source, name, f"unknown key; expected one of {sorted(fields)}")
         changes[key] = _convert(value, hints[key], source, field, getattr(base, key))
         problem = field_problem(cls, key, changes[key])  # planning.config_ranges
         if problem:
@@ -78,8 +92,12 @@ def config_from_dict(cls: type[T], data: Any, source: str, base: T | None = None
         return dataclasses.replace(base, **changes)
     except RbpInputError as e:  # a dataclass that checks its own values (RepairConfig)
         field = e.field or where
-        if prefix and e.field and not e.field.startswith(prefix):  # LatticeConfig's own name
-            field = f"{prefix}.{e.field}"
+        if prefix and e.field:  # its field as a file gives it ("footstep.segments.commit") or
+            # its own name (LatticeConfig's "angle_step_deg"), under `prefix`: a plan's
+            # "provenance.config.footstep.segments" named "...segments.footstep.segments.commit"
+            section = SECTIONS.get(cls.__name__, "")
+            name = e.field.removeprefix(section) if section else e.field
+            field = f"{prefix}.{name}"
         raise ConfigError(source, field, e.reason) from None
 
 

@@ -12,7 +12,7 @@ every field of every configuration dataclass has its entry here).
 
 The table is keyed by class name so that reading a configuration does not import the planner.
 Checks that join two fields (segments' commit <= lookahead, the lattice's angle step dividing
-180 deg) stay in the dataclasses' `__post_init__`.
+180 deg) are `joint_problem`'s, which the dataclasses' `__post_init__` call too.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import math
 import sys
 from typing import Any
 
-from rb_drake.errors import MAX_SEED
+from rb_drake.errors import MAX_SEED, key_text
 
 INF = math.inf
 
@@ -248,7 +248,7 @@ def unknown_key(data: Any, section: str = "") -> tuple[str, str] | None:
     for key, value in data.items():
         field = f"{section}{key}"
         if key not in keys:
-            return field, f"unknown key; expected one of {keys}"
+            return f"{section}{key_text(key)}", f"unknown key; expected one of {keys}"
         if f"{field}." in SECTIONS.values() and (found := unknown_key(value, f"{field}.")):
             return found
     return None
@@ -269,7 +269,7 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
     its range, in `planning.config_io`'s words, or None: checked before the planner's imports
     (`rbp plan --config`, and --from-plan's provenance.config, took 1.5-2.1 s and 170 MB a
     refusal with them), and by `rbp check` (which said ok to a null or a string that
-    --from-plan refused). A section's check of two keys together is left to the reader."""
+    --from-plan refused). A section's check of two keys together is `joint_problem`'s."""
     if not isinstance(data, dict):
         return None
     cls = next(name for name, prefix in SECTIONS.items() if prefix == section)
@@ -311,6 +311,67 @@ def range_problem(data: Any, section: str = "") -> tuple[str, str] | None:
                 return field, reason
         if spec is not None and (problem := spec.problem(value)):
             return field, problem
+    return None
+
+
+def angle_count(step_deg: float) -> int | None:
+    """Orientations of a lattice of angle step `step_deg` over the whole circle (an even
+    number), or None when the step does not divide 180 deg (`LatticeConfig.angle_count`)."""
+    n = round(360.0 / step_deg)
+    return None if n % 2 or abs(n * step_deg - 360.0) > 1e-9 else n
+
+
+def angle_step_problem(step_deg: float) -> str:
+    """Why a lattice's angle step (in its range) is refused, or ""."""
+    return "" if angle_count(step_deg) is not None else f"must divide 180 deg, got {step_deg}"
+
+
+def commit_problem(commit: float, lookahead: float) -> str:
+    """Why a segment's `commit` is refused beside its `lookahead`, or ""."""
+    return "" if commit <= lookahead else (f"must be at most lookahead ({lookahead:g} m), got "
+                                           f"{commit:g}")
+
+
+# planning.segmented.SegmentConfig's defaults (tests/test_hostile_round14.py holds them equal)
+SEGMENT_DEFAULTS = {"lookahead": 4.0, "commit": 2.0}
+
+
+def joint_problem(data: Any) -> tuple[str, str] | None:
+    """(field, reason) of the first check joining two keys that configuration `data` (a whole
+    configuration, once `range_problem` found nothing) fails, or None: the lattice's angle
+    step dividing 180 deg and segments' commit at most their lookahead, as their dataclasses
+    check them, without the planner's imports (`rbp check` said ok to a plan's
+    provenance.config that --from-plan then refused)."""
+    footstep = data.get("footstep") if isinstance(data, dict) else None
+    if not isinstance(footstep, dict):
+        return None
+    lattice = footstep.get("lattice")
+    if isinstance(lattice, dict) and "angle_step_deg" in lattice:
+        step, _ = _as_number(lattice["angle_step_deg"])
+        if problem := angle_step_problem(step):
+            return "footstep.lattice.angle_step_deg", problem
+    segments = footstep.get("segments")
+    if isinstance(segments, dict) and ("commit" in segments or "lookahead" in segments):
+        commit, lookahead = (_as_number(segments.get(key, SEGMENT_DEFAULTS[key]))[0]
+                             for key in ("commit", "lookahead"))
+        if problem := commit_problem(commit, lookahead):
+            return "footstep.segments.commit", problem
+    return None
+
+
+def search_problem(footstep: Any) -> tuple[str, str] | None:
+    """(field, reason) when a FootstepConfig asks its search for what only the complete search
+    does, or None: `min_success` with the sampled or hybrid search (whose sampled routes
+    ignore it: a plan below the probability asked for said success: true), `repair` with the
+    sampled one. Checked once the command line's flags are applied (`--search` overrides a
+    file's `footstep.search`)."""
+    if footstep.min_success is not None and footstep.search != "complete":
+        return ("footstep.min_success", f"is the complete search's (footstep.search complete): "
+                f"the {footstep.search} search's routes ignore it, and one below "
+                f"{footstep.min_success:g} would be returned as a success")
+    if footstep.repair is not None and footstep.search == "sampled":
+        return ("footstep.repair", "is the complete search's (footstep.search complete or "
+                "hybrid): the sampled search ignores it")
     return None
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-import time
 from collections.abc import Callable, Collection
 
 import numpy as np
@@ -51,9 +50,10 @@ from planning.lattice_search import (
     stance_components,
     threads_held,
 )
+from planning.search_clock import search_clock
 from planning.search_cost import RegraspHeuristic, edge_cost, goal_distance
 from planning.search_outcome import Stop
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, as_given
 from rb_drake.scenario import Scenario
 
 
@@ -76,7 +76,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     ignore_grasps = config.ignore_grasps
     memo = memo if memo is not None else LatticeMemo(config=cfg)
     memo.bind(scn, cfg, ignore_grasps)
-    t0 = time.perf_counter()
+    clock0 = search_clock()  # the time limit's: numba's compiling left out
     budget = -math.log(min_success)
     slack = budget * (1.0 + 1e-12)
     bound = RegraspHeuristic(scn)
@@ -181,12 +181,12 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
             progress(expansions, tested, nearest)
         if max_expansions is not None and expansions > max_expansions:
             stop, reason = Stop.BUDGET, (f"gave up after {max_expansions} expansions without a "
-                                      f"route of predicted success >= {min_success:g}")
+                                      f"route of predicted success >= {as_given(min_success)}")
             break
-        if time_limit is not None and time.perf_counter() - t0 > time_limit:
+        if time_limit is not None and search_clock() - clock0 > time_limit:
             stop, reason = Stop.BUDGET, (f"gave up after {time_limit:g} s ({expansions} "
                                       f"expansions) without a route of predicted success >= "
-                                      f"{min_success:g}")
+                                      f"{as_given(min_success)}")
             break
         # a pending move keeps no lattice rows (they are in `memo.move_table`, within its cap):
         # kept in the open list they took most of the search's own memory
@@ -203,7 +203,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
             stop = Stop.EXHAUSTED
             reason = f"no route without the {len(excluded)} excluded moves"
         elif stop == Stop.NOROUTE:
-            reason = (f"no route with predicted success >= {min_success:g} at resolution "
+            reason = (f"no route with predicted success >= {as_given(min_success)} at resolution "
                       f"{cfg.position_step * 100:g} cm / {cfg.angle_step_deg:g} deg: every "
                       f"route's search cost exceeds -log P = {budget:.4g} ({expansions} "
                       "vertices expanded)")

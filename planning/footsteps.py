@@ -60,6 +60,7 @@ from planning.refinement import (
 )
 from planning.route_repair import repair_route
 from planning.sampled_search import candidate_moves, explored_stances, goal_pose_in, plan_sampled
+from planning.search_clock import search_clock
 from planning.search_cost import (
     centroid_distance,
     goal_distance,
@@ -92,15 +93,19 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         budget = cfg.sampled_expansions
         if cfg.max_expansions is not None:
             budget = min(budget, cfg.max_expansions)
-        t0 = time.perf_counter()
+        t0, clock0 = time.perf_counter(), search_clock()
         first = plan_footsteps(scn, dataclasses.replace(cfg, search="sampled",
                                                         max_expansions=budget),
                                progress, exclude, memo)
         if first.success:
             return first
         rest = None if cfg.max_expansions is None else max(1, cfg.max_expansions - budget)
-        second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest), progress,
-                                exclude, memo, partial)
+        # the time limit holds for both stages together (each had all of it)
+        left = None if cfg.time_limit is None else max(
+            1e-3, cfg.time_limit - (search_clock() - clock0))
+        second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest,
+                                                         time_limit=left),
+                                progress, exclude, memo, partial)
         return second._replace(seconds=time.perf_counter() - t0,
                                expansions=first.expansions + second.expansions,
                                transitions_tested=first.transitions_tested
@@ -130,7 +135,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
                    exclude: Collection[tuple[tuple[str, ...], int, str]],
                    memo: FootstepMemo, partial: bool = False) -> FootstepPlan:
     """plan_footsteps through the complete search (planning.complete)."""
-    t0 = time.perf_counter()
+    t0, clock0 = time.perf_counter(), search_clock()
     start_pose = np.asarray(scn.start_pose, dtype=float)
     asked = cfg
     cfg = dataclasses.replace(cfg, max_expansions=expansion_budget(scn, cfg))
@@ -143,7 +148,7 @@ def _plan_complete(scn: Scenario, cfg: FootstepConfig,
     while True:
         # a time limit holds for all the lattices together
         left = None if cfg.time_limit is None else max(
-            1e-3, cfg.time_limit - (time.perf_counter() - t0))
+            1e-3, cfg.time_limit - (search_clock() - clock0))
         result = _search_lattice(
             scn, dataclasses.replace(asked, lattice=lattices[level], time_limit=left),
             dataclasses.replace(cfg, lattice=lattices[level], time_limit=left),

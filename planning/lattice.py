@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from planning.config_ranges import angle_count, angle_step_problem
 from planning.lattice_kernels import reach_violation
 from rb_drake.errors import RbpInputError
 from rb_drake.params import RobotParams
@@ -63,10 +64,9 @@ class LatticeConfig:
     @functools.cached_property  # asked for at every move of a search
     def angle_count(self) -> int:
         """Orientation indices -n/2 .. n/2 - 1 cover the whole circle."""
-        n = round(360.0 / self.angle_step_deg)
-        if n % 2 or abs(n * self.angle_step_deg - 360.0) > 1e-9:
-            raise RbpInputError(f"must divide 180 deg, got {self.angle_step_deg}",
-                                field="angle_step_deg")
+        n = angle_count(self.angle_step_deg)
+        if n is None:
+            raise RbpInputError(angle_step_problem(self.angle_step_deg), field="angle_step_deg")
         return n
 
 

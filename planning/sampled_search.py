@@ -140,7 +140,8 @@ def plan_sampled(scn: Scenario, cfg: FootstepConfig,
                         is_goal=lambda n, d: _as_goal(is_goal(n, d)),
                         weight=cfg.heuristic_weight,
                         max_expansions=cfg.max_expansions or 10**9,
-                        start_data=start_pose, on_expand=on_expand)
+                        start_data=start_pose, on_expand=on_expand,
+                        time_limit=cfg.time_limit)
     seconds = time.perf_counter() - t0
     if not result.success:
         explored, frontier = explored_stances(scn, result, start_pose)
@@ -152,7 +153,9 @@ def plan_sampled(scn: Scenario, cfg: FootstepConfig,
         budget = cfg.max_expansions is not None and result.expansions >= cfg.max_expansions
         if budget:
             reason += f"; a longer search may find one (max_expansions, now {cfg.max_expansions})"
-        stop = Stop.BUDGET if budget else Stop.EXHAUSTED
+        elif result.timed_out:  # the time limit was not passed on (a 10 s limit ran 44 s)
+            reason += f"; a longer search may find one (time_limit, now {cfg.time_limit:g} s)"
+        stop = Stop.BUDGET if budget or result.timed_out else Stop.EXHAUSTED
         return FootstepPlan(False, reason, [start], [], start_pose, None,
                             result.expansions, tested, seconds, result, cache, stop, explored,
                             frontier, memo)

@@ -31,8 +31,10 @@ import numpy as np
 
 from planning.complete import complete_search
 from planning.complete_config import CompleteConfig
+from planning.config_ranges import commit_problem
 from planning.lattice_moves import goal_is_holdable
 from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Vertex
+from planning.search_clock import search_clock
 from planning.search_cost import RegraspHeuristic, edge_cost
 from planning.search_outcome import Quality, Stop
 from rb_drake.errors import RbpInputError
@@ -59,9 +61,8 @@ class SegmentConfig:
                     0.0 < value < math.inf):
                 raise RbpInputError(f"must be a positive number of metres, got {value!r}",
                                     field=f"footstep.segments.{name}")
-        if self.commit > self.lookahead:
-            raise RbpInputError(f"must be at most lookahead ({self.lookahead:g} m), got "
-                                f"{self.commit:g}", field="footstep.segments.commit")
+        if problem := commit_problem(self.commit, self.lookahead):
+            raise RbpInputError(problem, field="footstep.segments.commit")
 
 
 def climb_distance(scn: Scenario) -> float:
@@ -110,13 +111,13 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
     if climb_distance(scn) <= segment.min_climb:
         return complete_search(scn, dataclasses.replace(config, max_expansions=budget(scn)),
                                exclude=exclude, memo=memo, progress=progress, partial=partial)
-    t0 = time.perf_counter()
+    t0, clock0 = time.perf_counter(), search_clock()
 
     def limited(scenario: Scenario) -> CompleteConfig:
         """`config` for a search of `scenario`: its budget, and the time left of the limit."""
         limit = config.time_limit
         if limit is not None:
-            limit = max(limit - (time.perf_counter() - t0), 1e-3)
+            limit = max(limit - (search_clock() - clock0), 1e-3)
         return dataclasses.replace(config, max_expansions=budget(scenario), time_limit=limit)
 
     goal = np.asarray(scn.goal_position, dtype=float)

@@ -53,6 +53,13 @@ def apart(value: float, limit: float, decimals: int = 3) -> str:
     return repr(value)
 
 
+def as_given(value: float) -> str:
+    """`value` as `:g` writes it when that reads back as the same number, else in full (repr):
+    a probability of 0.9999999999999999 is never printed as 1."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
+
+
 # The exit status of an rbp command or an experiment script (`rbp --help` lists them). Plain
 # ints, as `sys.exit` and the tests compare them.
 EXIT_OK: Final = 0           # done: a plan was found and written, a plan verified, ...
@@ -64,6 +71,20 @@ EXIT_INTERRUPTED: Final = 3  # Ctrl-C (or a closed output pipe): no traceback, n
 # The largest seed any reader takes (--seed, a plan's provenance, a configuration, the
 # experiments): numpy's generators take seeds 0 and up; rbp's stay in 64-bit integers
 MAX_SEED: Final = 2**63 - 1
+
+
+def key_text(key: object) -> str:
+    """A mapping's key in a field's name as the file wrote it: YAML's null and booleans as
+    `null`, `true` and `false` (they were named `None` and `True`), and an empty key or one
+    with a dot or surrounding spaces quoted (`footstep.` named the key '')."""
+    if key is None:
+        return "null"
+    if isinstance(key, bool):
+        return "true" if key else "false"
+    text = str(key)
+    if not text or "." in text or text != text.strip():
+        return repr(text)
+    return text
 
 
 def field_path(parts: Iterable[str | int]) -> str:

@@ -38,11 +38,15 @@ def output_problem(path: str | Path,
     that a plan of minutes is not computed for nothing. A symlink is followed to its target; a
     missing folder is fine if it can be created. A name whose temporary file would exceed the
     folder's longest name is refused (it failed only after the work), and so is a path that is
-    one of the command's `inputs` ({what: path}: the output would overwrite it)."""
+    one of the command's `inputs` ({what: path}: the output would overwrite it). A name given
+    as a string that ends with "/" is refused: pathlib drops the slash, and `-o plan.json/`
+    wrote the file plan.json."""
     try:
         target = output_target(path)
         if (problem := _not_regular(target)) is not None:
             return problem
+        if isinstance(path, str) and path.endswith(("/", os.sep)):
+            return "ends with '/', a folder's name: give a file name"
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
             folder = folder.parent  # the nearest existing folder must let us create the rest

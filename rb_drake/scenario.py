@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 from rb_drake.collision import MIN_EDGE, Rock, polygon_is_simple, signed_area
-from rb_drake.errors import RbpInputError, apart
+from rb_drake.errors import RbpInputError, apart, key_text
 from rb_drake.input_files import InputFileError, load_yaml, read_text
 from rb_drake.params import NUM_BOOMS, ParamError, RobotParams, robot_from_dict
 from rb_drake.stance import Stance
@@ -209,9 +209,9 @@ class _Reader:
         """A mapping of only `known` keys (a misspelt key, silently ignored, would leave its
         default in force)."""
         m = self.mapping(field, value)
-        extra = sorted(str(k) for k in set(m) - known)
+        extra = sorted(set(m) - known, key=str)
         if extra:
-            raise self.fail(f"{field}.{extra[0]}", f"unknown field; expected one of "
+            raise self.fail(f"{field}.{key_text(extra[0])}", f"unknown field; expected one of "
                             f"{sorted(known)}")
         return m
 
@@ -269,9 +269,10 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     if str(data.get("format", "")).startswith("reachbot-plan/"):
         raise rd.fail("format", f"this is a plan ({data['format']}), not a scenario: to plan "
                       f"its cave again, rbp plan --from-plan {source} -o NEW.json")
-    unknown = sorted(str(k) for k in set(data) - TOP_LEVEL)
+    unknown = sorted(set(data) - TOP_LEVEL, key=str)
     if unknown:
-        raise rd.fail(str(unknown[0]), f"unknown field; expected one of {sorted(TOP_LEVEL)}")
+        raise rd.fail(key_text(unknown[0]), f"unknown field; expected one of "
+                      f"{sorted(TOP_LEVEL)}")
     fmt = rd.require("", data, "format")
     if fmt != FORMAT:
         raise rd.fail("format", f"expected {FORMAT!r}, got {fmt!r}")

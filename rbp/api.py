@@ -249,7 +249,8 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
 
     Returns the plan (`planning.plan_model.Plan`); when no climb is found it has
     `success` False and the `reason`, and is still a plan to write and draw."""
-    from planning.config_io import checked_config
+    from planning.config_io import ConfigError, checked_config
+    from planning.config_ranges import search_problem
     from planning.footsteps import expansion_budget
     from planning.pipeline import PLANNERS, PipelineConfig, plan_climb
     from rb_drake.errors import RbpInputError
@@ -272,6 +273,12 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                             f"{type(config).__name__}", field="config")
     # held to a configuration file's ranges before any work (dt=0 failed after the search)
     cfg = PipelineConfig() if config is None else checked_config(config)
+    if planner == "rbp" and (found := search_problem(cfg.footstep)):  # returned it ignored
+        raise ConfigError("config", *found)
+    if partial and cfg.footstep.search == "sampled":  # it returned no partial climb, silently
+        raise RbpInputError("a partial climb is the complete search's (footstep.search "
+                            "'complete' or 'hybrid'): the sampled search gives none",
+                            field="partial")
     scn = _scenario(scenario, "scenario")
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)

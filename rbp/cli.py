@@ -24,6 +24,7 @@ from rb_drake.errors import (
     EXIT_OK,
     EXIT_USAGE,
     RbpInputError,
+    as_given,
     one_line,
 )
 from rbp.commands.common import RECEIVED as INTERRUPTS_RECEIVED
@@ -205,7 +206,7 @@ def _summary(plan: Plan) -> str:
     search = plan.search.to_dict() if plan.search is not None else {}
     if not plan.success:
         hint = ""
-        if search.get("stop") == "budget":
+        if search.get("stop") == "budget" and plan.planner == "rbp":  # not the naive's steps
             hint = ("; rbp plan --thorough searches on without a budget, --max-expansions N "
                     "or --time-limit S sets another")
         if plan.partial is not None and plan.p_path is not None:
@@ -232,7 +233,8 @@ def _route_quality(search: dict) -> str:
 
 def _bound_text(search: dict) -> str:
     if search.get("min_success") is not None:
-        return (f"; the fewest regrasps with predicted success >= {search['min_success']:g} "
+        wanted = as_given(search["min_success"])
+        return (f"; the fewest regrasps with predicted success >= {wanted} "
                 f"(search cost {search['cost']:.4f}, exp(-cost) {math.exp(-search['cost']):.4f})")
     if search.get("quality") == "optimal":
         return f"; route optimal (search cost {search['cost']:.4f})"
@@ -267,6 +269,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     )
 
     check_plan_output(args)
+    if args.animate and args.no_pictures:  # it wrote no animation, silently
+        raise UserError("--animate: draws the climb, which --no-pictures leaves out")
     if args.animate:
         from rbp.commands.plan import check_animation
 
@@ -284,8 +288,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from planning.plan import write_plan
 
     partial = getattr(args, "partial", False)
-    if partial and (planner != "rbp" or not motion):
-        flag = "--planner naive" if planner != "rbp" else "--footsteps-only"
+    if partial and (planner != "rbp" or not motion):  # --from-plan's, once read
+        flag = ("--planner naive" if args.planner == "naive" else "--from-plan's naive planner"
+                if planner != "rbp" else "--footsteps-only" if args.footsteps_only
+                else "--from-plan's footstep plan (made with --footsteps-only)")
         raise UserError(f"--partial: flies the partial climb through the whole pipeline of the "
                         f"rbp planner, which {flag} leaves out")
     record = SearchRecord()

@@ -153,8 +153,9 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
     suffix (an HTML page)."""
     from rb_drake.files import IMAGE_SUFFIXES, output_problem, picture_format_problem
 
+    given = str(path)  # named as given: Path drops a trailing "/"
+    problem = output_problem(given, inputs)
     path = Path(path)
-    problem = output_problem(path, inputs)
     if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
@@ -164,7 +165,7 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
     if problem is None and _OUTPUTS.get(key, flag) != flag:
         problem = f"is also {_OUTPUTS[key]}'s output; give each output its own path"
     if problem is not None:
-        raise UserError(f"{path}: {flag}: {problem}")
+        raise UserError(f"{given}: {flag}: {problem}")
     _OUTPUTS[key] = flag
     return path
 

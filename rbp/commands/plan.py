@@ -37,6 +37,10 @@ MIN_DT, MAX_DT = MIN_TIME_STEP, MAX_TIME_STEP
 OPTION_FIELDS = {"--max-expansions": ("FootstepConfig", "max_expansions"),
                  "--time-limit": ("FootstepConfig", "time_limit")}
 
+# --partial with a configuration's sampled search, which wrote no partial climb
+PARTIAL_SAMPLED = ("--partial climbs with the complete search (complete or hybrid), and the "
+                   "sampled one gives no partial climb")
+
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
 
@@ -78,7 +82,7 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     issue 28's 1 s and 200 MB; `rbp scenario check` refused the same in 0.55 s and 100 MB.
     The configurations' keys are checked in `plan_setup`, against the planner's classes."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import range_problem, unknown_key
+    from planning.config_ranges import joint_problem, range_problem, unknown_key
     from rb_drake.scenario import read_yaml_file
     from rbp.commands.common import load_scenario_spec
 
@@ -90,8 +94,13 @@ def read_plan_inputs(args: argparse.Namespace) -> None:
     if args.config:
         data = read_yaml_file(args.config, ConfigError)
         args.config_data = {} if data is None else data
-        if found := unknown_key(args.config_data) or range_problem(args.config_data):
+        if found := (unknown_key(args.config_data) or range_problem(args.config_data)
+                     or joint_problem(args.config_data)):
             raise ConfigError(args.config, *found)  # as plan_setup's classes would refuse it
+        footstep = args.config_data.get("footstep")
+        if args.partial and args.search is None and isinstance(footstep, dict) and \
+                footstep.get("search") == "sampled":  # as plan_setup would, before the imports
+            raise ConfigError(args.config, "footstep.search", PARTIAL_SAMPLED)
 
 
 def check_options(args: argparse.Namespace) -> None:
@@ -109,17 +118,65 @@ def check_options(args: argparse.Namespace) -> None:
         check_seed(args.seed, "--seed")
     if args.dt is not None and not MIN_DT <= args.dt <= MAX_DT:
         raise UserError(f"--dt: seconds between trajectory steps must be at least {MIN_DT:g} "
-                        f"(rule speed) and at most {MAX_DT:g}, got {args.dt:g}")
+                        f"(rule speed) and at most {MAX_DT:g}, got {args.dt!r}")
     wanted = getattr(args, "min_success", None)
     if wanted is not None and not args.thorough and not 0.0 < wanted < 1.0:
         raise UserError(f"--min-success: must lie strictly between 0 and 1, got {wanted}")
+    option_conflict(args, args.planner)
+
+
+def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
+    """Refuse options that contradict each other (UserError naming one), before the planner's
+    imports where the command line alone says so (such refusals took 1.1-1.2 s and 172 MB),
+    and again in `plan_setup` once --from-plan's planner is known. An option the run would
+    silently ignore is refused too: --search sampled with --thorough searched completely,
+    --partial with the sampled search (which gives no partial climb) wrote none, and the naive
+    planner ignored --thorough, --min-success, --repair, --search, --max-expansions and
+    --time-limit."""
+    from rbp.commands.common import UserError
+
+    if args.scenario is not None and args.from_plan:
+        raise UserError(f"{args.scenario}: (argument): give a scenario or --from-plan, "
+                        "not both (the plan holds its scenario)")
+    if getattr(args, "min_success", None) is not None and args.thorough:
+        raise UserError("--min-success: give it or --thorough, not both (--thorough asks "
+                        "for the most robust route, --min-success for the fewest regrasps "
+                        "within a success probability)")
+    search_flag = ("--thorough" if args.thorough else "--min-success"
+                   if getattr(args, "min_success", None) is not None else None)
+    if search_flag and args.search not in (None, "complete"):
+        raise UserError(f"--search: {search_flag} runs the complete search, not the "
+                        f"{args.search} one: give --search complete or leave it out")
+    if args.thorough and args.max_expansions is not None:
+        raise UserError("--max-expansions: --thorough searches without an expansion budget "
+                        "(--time-limit bounds its time): give one or the other")
+    partial = getattr(args, "partial", False)
+    naive = "--planner naive" if args.planner == "naive" else "--from-plan's naive planner"
+    if partial and (planner == "naive" or args.footsteps_only):
+        flag = naive if planner == "naive" else "--footsteps-only"
+        raise UserError(f"--partial: flies the partial climb through the whole pipeline of the "
+                        f"rbp planner, which {flag} leaves out")
+    if partial and args.search == "sampled":
+        raise UserError("--partial: the partial climb is the complete search's (the default, "
+                        "or --search hybrid), which --search sampled leaves out")
+    if planner == "naive":
+        given = [flag for flag, on in (
+            ("--thorough", args.thorough),
+            ("--min-success", getattr(args, "min_success", None) is not None),
+            ("--repair", getattr(args, "repair", False)), ("--search", args.search is not None),
+            ("--max-expansions", args.max_expansions is not None),
+            ("--time-limit", args.time_limit is not None))
+            if on]
+        if given:
+            raise UserError(f"{given[0]}: sets the rbp planner's footstep search, which "
+                            f"{naive} does not use")
 
 
 def plan_setup(args: argparse.Namespace):
     """(scenario, planner, PipelineConfig, motion) for `rbp plan`, from its arguments."""
     from planning.complete_config import AnytimeConfig
     from planning.config_io import config_from_dict, load_config
-    from planning.config_ranges import FIELDS
+    from planning.config_ranges import FIELDS, search_problem
     from planning.pipeline import PipelineConfig
     from rbp.commands.common import MAX_SEED, UserError, check_seed, load_scenario_spec
 
@@ -129,14 +186,18 @@ def plan_setup(args: argparse.Namespace):
             raise UserError(f"{flag}: {problem}")
     cfg = PipelineConfig()
     planner, motion = args.planner or "rbp", not args.footsteps_only
+    option_conflict(args, args.planner)
     if args.from_plan:
-        if args.scenario is not None:
-            raise UserError(f"{args.scenario}: (argument): give a scenario or --from-plan, "
-                            "not both (the plan holds its scenario)")
         scn, recorded, cfg, partial = _from_plan(Path(args.from_plan),
                                                  getattr(args, "loaded_from_plan", None))
         planner = args.planner or recorded.planner
+        option_conflict(args, planner)
         if partial:  # a partial plan is made again partial (the flag is not in the config)
+            if not getattr(args, "partial", False) and (args.footsteps_only or planner != "rbp"):
+                flag = "--footsteps-only" if args.footsteps_only else "--planner naive"
+                raise UserError(f"{flag}: {args.from_plan} is a partial climb, made again "
+                                "through the whole pipeline of the rbp planner, which "
+                                f"{flag} leaves out")  # it named --partial, never given
             args.partial = True
         motion = recorded.motion and not args.footsteps_only
     elif args.scenario is None:
@@ -159,10 +220,6 @@ def plan_setup(args: argparse.Namespace):
         flags["search"], flags["max_expansions"] = "complete", None
         flags["anytime"] = AnytimeConfig(improve_factor=None)
     if getattr(args, "min_success", None) is not None:
-        if args.thorough:
-            raise UserError("--min-success: give it or --thorough, not both (--thorough asks "
-                            "for the most robust route, --min-success for the fewest regrasps "
-                            "within a success probability)")
         if not 0.0 < args.min_success < 1.0:
             raise UserError(f"--min-success: must lie strictly between 0 and 1, got "
                             f"{args.min_success}")
@@ -197,6 +254,14 @@ def plan_setup(args: argparse.Namespace):
         source = args.config or args.from_plan or "(configuration)"
         raise UserError(f"{source}: footstep.search: must be one of {', '.join(SEARCHES)}, "
                         f"got {cfg.footstep.search!r}")
+    if planner == "rbp" and (found := search_problem(cfg.footstep)):
+        source = ("--search" if args.search is not None
+                  else args.config or args.from_plan or "(configuration)")
+        raise UserError(f"{source}: {found[0]}: {found[1]}")
+    if getattr(args, "partial", False) and planner == "rbp" and \
+            cfg.footstep.search == "sampled":  # it wrote no partial climb, silently
+        source = args.config or args.from_plan or "(configuration)"
+        raise UserError(f"{source}: footstep.search: {PARTIAL_SAMPLED}")
     anytime = cfg.footstep.anytime
     if anytime is not None:
         source = args.config or args.from_plan or "(configuration)"
@@ -245,9 +310,9 @@ def check_recorded_config(config: Any, path: str | Path) -> None:
     --from-plan` before them, and `rbp check` (which said ok to a dt of 1e308 that
     --from-plan refused)."""
     from planning.config_io import ConfigError
-    from planning.config_ranges import range_problem, unknown_key
+    from planning.config_ranges import joint_problem, range_problem, unknown_key
 
-    if found := unknown_key(config) or range_problem(config):
+    if found := unknown_key(config) or range_problem(config) or joint_problem(config):
         raise ConfigError(str(path), f"provenance.config.{found[0]}", found[1])
     from planning.config_ranges import recorded_speed_problem
 

@@ -74,7 +74,9 @@ def test_above_the_optimum_is_a_proof_of_no_route(demo: Scenario, optimal) -> No
     found = constrained_search(demo, p, CompleteConfig(COARSE))
     assert not found.success and found.stop == "noroute", (
         f"no route can beat the proven optimum, yet: {found.stop} {found.reason}")
-    assert f"{p:g}" in found.reason
+    from rb_drake.errors import as_given
+
+    assert as_given(p) in found.reason, f"the reason does not name P as given: {found.reason}"
 
 
 def test_a_loose_p_gives_the_fewest_regrasps(loose, fewest: int) -> None:

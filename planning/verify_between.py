@@ -12,7 +12,10 @@ boom's shoulder torque within its limit, the booms' wrench not degenerate, and t
 most robust allocation, the planner's model of them, which `rbp simulate`'s feed-forward
 follows between steps) within the tension limits that balance gravity with every grasp pulled
 within max_pull_angle_deg and P at least p_min. `TENSION_SLACK` is the one tolerance, on the
-lower tension bound only (docs/formats.md says why). An interval in which neither the body
+lower tension bound only (docs/formats.md says why). Between successive checked
+configurations, the paths of the points that move farthest, each boom's end and each body
+corner, are tested for rock too (`travel_failures`): a rock corner they cut between two
+samples passed before. An interval in which neither the body
 nor the free gripper moves (a release or attach ramp, a dwell) has nothing between its steps
 to sample: a ramp moves the load linearly at one pose, where the statics hold exactly.
 """

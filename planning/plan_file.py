@@ -23,8 +23,9 @@ from rb_drake.errors import RbpInputError, field_path
 from rb_drake.input_files import InputFileError, load_json, read_text
 
 # bump when the rules change: older stamps then no longer count (3: rule between; 4: rule
-# between on the smooth path `rbp simulate` follows)
-VERIFIER = "rbp-verify/4"
+# between on the smooth path `rbp simulate` follows; 5: rule between tests the paths of the
+# boom ends and body corners between checked configurations for rock)
+VERIFIER = "rbp-verify/5"
 
 
 class PlanFileError(RbpInputError):

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from pydrake.trajectories import PiecewisePolynomial
 
-from planning.plan_model import Plan, Step
+from planning.plan_model import Phase, Plan, Step
 from planning.verify_between import (
     MAX_PARTS,
     MAX_PHASE_SAMPLES,
@@ -35,6 +35,9 @@ from planning.verify_between import (
     failing_intervals,
     first_failure,
     parts_for,
+    phase_world,
+    travel_failures,
+    travel_text,
     verification_world,
 )
 from planning.verify_climb import TIME_TOL
@@ -378,7 +381,32 @@ def smooth_path_problems(plan: Plan, world: World, stance_of, fail) -> int:
                  f"long to verify (over {MAX_PARTS} samples an interval, or "
                  f"{MAX_PHASE_SAMPLES} a phase, at the resolution)")
         checked += len(s.t)
-        for n, text in failing_intervals(vworld, stance_of(k), plan.phases[k], s,
-                                         " on rbp simulate's smooth path"):
+        found = failing_intervals(vworld, stance_of(k), plan.phases[k], s,
+                                  " on rbp simulate's smooth path")
+        if not too_long:  # a phase with intervals left unsampled is refused above
+            bad = {n for n, _ in found}
+            found += path_travel(vworld, stance_of(k), plan.phases[k], path, s, bad)
+        for n, text in found:
             fail(k, n, text)
     return checked
+
+
+def path_travel(world: World, stance: Stance, phase: Phase, path: SmoothPath, s: Samples,
+                skip: set[int]) -> list[tuple[int, str]]:
+    """`verify_between.travel_failures` on the smooth path: its knots and samples in time
+    order, intervals in `skip` (already failing) left out."""
+    knots = path.knots
+    t = np.concatenate([knots, s.t])
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    q = path.pose.vector_values(t).T
+    g = None if path.tip is None else path.tip.vector_values(t).T
+    pair = np.clip(np.searchsorted(knots, t[:-1], side="right") - 1, 0, len(knots) - 2)
+    out = []
+    for j, n, boom in travel_failures(phase_world(world, phase), stance, q, g, pair):
+        if n + path.first_step in skip:
+            continue
+        w = (t[j] - knots[n]) / (knots[n + 1] - knots[n])
+        out.append((n + path.first_step, travel_text(n + path.first_step, float(t[j]), q[j], w,
+                                                     boom, " on rbp simulate's smooth path")))
+    return out

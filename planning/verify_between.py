@@ -12,7 +12,10 @@ boom's shoulder torque within its limit, the booms' wrench not degenerate, and t
 most robust allocation, the planner's model of them, which `rbp simulate`'s feed-forward
 follows between steps) within the tension limits that balance gravity with every grasp pulled
 within max_pull_angle_deg and P at least p_min. `TENSION_SLACK` is the one tolerance, on the
-lower tension bound only (docs/formats.md says why). An interval in which neither the body
+lower tension bound only (docs/formats.md says why). Between successive checked
+configurations, the paths of the points that move farthest, each boom's end and each body
+corner, are tested for rock too (`travel_failures`): a rock corner they cut between two
+samples passed before. An interval in which neither the body
 nor the free gripper moves (a release or attach ramp, a dwell) has nothing between its steps
 to sample: a ramp moves the load linearly at one pose, where the statics hold exactly.
 """
@@ -27,13 +30,15 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from planning.plan_model import Phase
-from rb_drake.collision import Rock
+from rb_drake import geometry
+from rb_drake.collision import Rock, boom_clearances
 from rb_drake.feasibility import (
     REASON_TEXT,
     PoseCheck,
     ReachWorld,
     Reason,
     World,
+    _targets,
     check_poses,
     reach_world,
 )
@@ -282,9 +287,33 @@ def between_problems(phases: tuple[Phase, ...], scn: Scenario, skip: Collection[
             break
         s = phase_samples(robot, phase)
         checked += len(s.t)
-        for n, text in failing_intervals(world, stance, phase, s):
+        found = failing_intervals(world, stance, phase, s)
+        # intervals failing already, or too long to sample (reported above), are not tested
+        bad = {n for n, _ in found} | {int(n) for n in np.flatnonzero(parts > MAX_PARTS)}
+        times, poses, tips = phase_arrays(phase)
+        for n, text in found + straight_travel(world, phase, stance, s, times, poses, tips, bad):
             fail(k, n, text)
     return checked
+
+
+def straight_travel(world: _World | World, phase: Phase, stance: Stance, s: Samples,
+                    times: np.ndarray, poses: np.ndarray, tips: np.ndarray | None,
+                    skip: Collection[int]) -> list[tuple[int, str]]:
+    """`travel_failures` on the straight motion: the steps and the samples between them in
+    time order, intervals in `skip` (already failing) left out."""
+    t = np.concatenate([times, s.t])
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    q = np.vstack([poses, s.poses])[order]
+    g = None if tips is None or s.tips is None else np.vstack([tips, s.tips])[order]
+    pair = np.clip(np.searchsorted(times, t[:-1], side="right") - 1, 0, len(times) - 2)
+    out = []
+    for j, n, boom in travel_failures(phase_world(world, phase), stance, q, g, pair):
+        if n in skip:
+            continue
+        w = (t[j] - times[n]) / (times[n + 1] - times[n])
+        out.append((n, travel_text(n, float(t[j]), q[j], w, boom)))
+    return out
 
 
 def failing_intervals(world: _World | World, stance: Stance, phase: Phase, s: Samples,
@@ -307,6 +336,61 @@ def failing_intervals(world: _World | World, stance: Stance, phase: Phase, s: Sa
             failed.add(n)
             out.append((n, _text(phase, s, lo + i, check, i, world.robot.p_min, what)))
     return out
+
+
+def travel_failures(world: _World | World, stance: Stance, poses: np.ndarray,
+                    tips: np.ndarray | None, pair: np.ndarray
+                    ) -> list[tuple[int, int, int]]:
+    """Rock crossed between successive checked configurations: (j, n, boom) for each interval n
+    whose motion from configuration j to j + 1 (`poses`, `tips` in time order, the steps at
+    the intervals' ends included; `pair` (J - 1,): the interval of each pair, -1 to skip it)
+    moves a boom's end (its gripper, or a held boom's end ANCHOR_CLEARANCE short
+    of its anchor, as `check_poses` tests it) or a body corner (boom -1) across a rock edge.
+    Those points move farthest between configurations, and the samples alone let a rock
+    corner that their path cuts between two of them pass (a spike 3 mm wide across a free
+    gripper's path: tests/test_hostile_round16.py); their paths between configurations are the
+    chords between them (exactly on the straight motion; on the smooth path and where the body
+    turns, within micrometres of them at the rule's resolution). One per interval, the first."""
+    rock = world.rock
+    if not rock.polygons or len(poses) < 2:
+        return []
+    P = len(poses)
+    targets = _targets(stance, tips, P)
+    used = np.isfinite(targets[..., 0])
+    geo = geometry.boom_geometry(world.robot, poses, targets)
+    clearance = boom_clearances(world.anchor_positions, P, stance.free_boom, tips)
+    with np.errstate(invalid="ignore"):
+        ends = targets - clearance[:, :, None] * np.nan_to_num(geo.u)
+    corners = geometry.body_corners(world.robot, poses)
+    moving = np.any(poses[1:] != poses[:-1], axis=1)
+    if tips is not None:
+        moving |= np.any(tips[1:] != tips[:-1], axis=1)
+    pairs = np.flatnonzero(moving & (pair >= 0))
+    if not len(pairs):
+        return []
+    boom_hit = rock.segments_hit(ends[pairs], ends[pairs + 1], inside=False)
+    boom_hit &= used[pairs] & used[pairs + 1]
+    body_hit = rock.segments_hit(corners[pairs], corners[pairs + 1], inside=False)
+    out: list[tuple[int, int, int]] = []
+    seen: set[int] = set()
+    for i in map(int, np.flatnonzero(boom_hit.any(axis=1) | body_hit.any(axis=1))):
+        n = int(pair[pairs[i]])
+        if n in seen:
+            continue
+        seen.add(n)
+        boom = int(np.argmax(boom_hit[i])) if boom_hit[i].any() else -1
+        out.append((int(pairs[i]), n, boom))
+    return out
+
+
+def travel_text(n: int, t0: float, pose: np.ndarray, w: float, boom: int,
+                motion: str = "") -> str:
+    """`travel_failures`' finding in words."""
+    where = ", ".join(f"{v:.4f}" for v in pose)
+    what = (f"boom {boom}: its end crosses rock" if boom >= 0
+            else "a body corner crosses rock")
+    return (f"between steps {n} and {n + 1}{motion}, from {w:.3f} of the way (t={t0:.4f}, "
+            f"pose [{where}]) to the next configuration checked: {what}")
 
 
 def _text(phase: Phase, s: Samples, j: int, check: PoseCheck, i: int, p_min: float,

@@ -29,6 +29,7 @@ from planning.plan_model import PhaseKind, Plan
 from planning.scp import ScpConfig, ScpResult, optimise_body, optimise_reach
 from planning.seeds import Seed, SeedConfig, body_seed, reach_seed
 from planning.smooth_motion import smooth_path_problems
+from planning.verify_between import between_problems
 from rb_drake.feasibility import check_poses, reach_world
 from rb_drake.scenario import Scenario
 from rb_drake.statics import allocate, statics_problem
@@ -287,7 +288,7 @@ def _fly(scn: Scenario, fp: FootstepPlan, cfg: PipelineConfig, timing: dict[str,
     """Why the motions of a route (`phase_motions`) failed ('' when they did not), how many
     phases came before the failure, and the plan they make (None when they failed).
     Motions that succeed are built into the plan's phases (eased, ramps added) and their
-    smooth paths tested as `rbp check` does: a phase whose path fails (a kept seed whose path
+    smooth paths and straight motion tested as `rbp check` does: a phase whose path fails (a kept seed whose path
     rounds a corner across a limit, which no easing helps: crevasse-78) fails as a motion
     does, and the route is searched again."""
     motions, failure = phase_motions(scn, fp, cfg, timing, progress)
@@ -298,6 +299,9 @@ def _fly(scn: Scenario, fp: FootstepPlan, cfg: PipelineConfig, timing: dict[str,
     found: list[tuple[int, str]] = []
     smooth_path_problems(built, scn, lambda k: scn.stance(tuple(built.phases[k].stance)),
                          lambda k, n, text: found.append((k, text)))
+    # and the straight motion `rbp rig-run` commands, as rule `between` verifies it (SCP tested
+    # its samples, not the rock its boom ends and body corners cut between them)
+    between_problems(built.phases, scn, set(), lambda k, n, text: found.append((k, text)))
     if not found:
         return "", len(motions), built
     k, text = min(found)

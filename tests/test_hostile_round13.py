@@ -82,3 +82,22 @@ def test_a_search_without_the_grasps_prints_no_overflow_warning():
         warnings.simplefilter("error", RuntimeWarning)
         fp = plan_footsteps(make_cave("crevasse", 30, (4.5, 5.0)), cfg)
     assert fp.success, f"no route without the grasps on crevasse 30: {fp.reason}"
+
+
+def test_rbp_check_says_the_route_quality_is_the_search_record(tmp_path):
+    """A plan edited consistently (lower_bound = cost, bound 1, quality optimal) passes every
+    rule: the verifier cannot prove optimality without searching again, so its ok line says
+    the claim is the plan's record, not its own finding."""
+    golden = json.loads((ROOT / "tests" / "data" / "golden" / "demo-shaft-current.json")
+                        .read_text())
+    golden.pop("verified", None)
+    search = golden["search"]
+    search["lower_bound"], search["bound"], search["quality"] = search["cost"], 1.0, "optimal"
+    if search.get("history"):
+        search["history"][-1]["lower_bound"] = search["cost"]
+    path = tmp_path / "forged.json"
+    path.write_text(json.dumps(golden))
+    result = run("check", str(path))
+    assert result.returncode == 0, result.stderr[-500:]
+    assert "route optimal" in result.stdout and "not searched again" in result.stdout, \
+        result.stdout

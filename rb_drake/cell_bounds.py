@@ -279,20 +279,130 @@ class RobustnessBound(NamedTuple):
     lps: int              # LPs solved
 
 
-def _polytope(cs: CellStatics, att: np.ndarray, f_lo: float, f_hi: float):
-    """A_ub, b_ub and bounds of the Oettli-Prager polytope over the attached tensions."""
+class TaylorModel(NamedTuple):
+    """A(q) = A_0 + sum_k J[:, :, k] (q - q_c)_k + R(q) over the cell, |R| <= E entrywise:
+    A_0 (3, 4) at the centre, J (3, 4, 3) its derivatives there, E (3, 4) a bound on the
+    second-order remainder (free boom's entries zero)."""
+
+    A0: np.ndarray
+    J: np.ndarray
+    E: np.ndarray
+
+
+def cell_taylor(robot: RobotParams, stance: Stance, centre: np.ndarray, half: np.ndarray,
+                geo: CellGeometry) -> TaylorModel:
+    """The first-order model of the wrench matrix over the cell, with a sound remainder.
+
+    Along q(t) = q_c + t dq, boom i's vector d = a_i - c - R(phi) s_i has |d'| <= v_i =
+    |(dx, dy)| + |s_i| |dphi| and |d''| <= |s_i| dphi^2, so its direction beta has
+    |beta'| <= v_i / L, |beta''| <= |d''| / L + 2 v_i^2 / L^2 (L >= the cell's least length).
+    Then |u''| <= beta'^2 + |beta''| and the moment entry |s_i| sin(beta - phi - alpha_i) has
+    second derivative at most |s_i| ((|beta'| + |dphi|)^2 + |beta''|): half of each bounds
+    Taylor's remainder."""
+    hx, hy, hphi = (abs(float(v)) for v in half)
+    phi = float(centre[2])
+    att = stance.attached
+    s = robot.shoulder_array
+    c, sn = math.cos(phi), math.sin(phi)
+    off = np.stack([c * s[:, 0] - sn * s[:, 1], sn * s[:, 0] + c * s[:, 1]], axis=-1)
+    d = geo.targets - geo.shoulder_c
+    L = geo.length_c
+    u = d / L[:, None]
+    # d d / d q: -(1, 0), -(0, 1), -perp(R s)
+    dd = np.zeros((NUM_BOOMS, 2, 3))
+    dd[:, 0, 0] = -1.0
+    dd[:, 1, 1] = -1.0
+    dd[:, 0, 2] = off[:, 1]
+    dd[:, 1, 2] = -off[:, 0]
+    dbeta = (d[:, 0, None] * dd[:, 1, :] - d[:, 1, None] * dd[:, 0, :]) / (L[:, None] ** 2)
+    J = np.zeros((3, NUM_BOOMS, 3))
+    J[0] = -u[:, 1, None] * dbeta
+    J[1] = u[:, 0, None] * dbeta
+    cosg = off[:, 0] * u[:, 0] + off[:, 1] * u[:, 1]  # (R s) . u = |s| cos(gamma)
+    dg = dbeta.copy()
+    dg[:, 2] -= 1.0
+    J[2] = cosg[:, None] * dg
+    s_norm = np.hypot(s[:, 0], s[:, 1])
+    v = math.hypot(hx, hy) + s_norm * hphi
+    acc = s_norm * hphi**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Lm = geo.length_lo
+        b1 = v / Lm
+        b2 = acc / Lm + 2.0 * v**2 / Lm**2
+        e_u = 0.5 * (b1**2 + b2)
+        e_t = 0.5 * s_norm * ((b1 + hphi) ** 2 + b2)
+    e_u = np.where(Lm > 0, e_u, np.inf)
+    e_t = np.where(Lm > 0, e_t, np.inf)
+    E = np.stack([e_u, e_u, e_t]) * (1.0 + 1e-9) + 1e-15
+    A0 = np.stack([u[:, 0], u[:, 1], off[:, 0] * u[:, 1] - off[:, 1] * u[:, 0]])
+    A0 = np.where(att, A0, 0.0)
+    J = np.where(att[None, :, None], J, 0.0)
+    E = np.where(att, E, 0.0)
+    return TaylorModel(A0, J, E)
+
+
+def _polytope(cs: CellStatics, att: np.ndarray, f_lo: float, f_hi: float,
+              tm: TaylorModel | None = None, half: np.ndarray | None = None,
+              f_box: tuple[np.ndarray, np.ndarray] | None = None):
+    """A_ub, b_ub and bounds of a polytope over z = (f, dq, w) (the attached tensions, then,
+    with a Taylor model, the pose offset and w_ik standing for f_i dq_k) whose projection on f
+    holds every pose's tensions: the Oettli-Prager polytope of the interval A and b, and the
+    Taylor model's `|A_0 f + sum J_k w_k - b| <= E f + delta` with McCormick's envelopes of
+    the products f_i dq_k. `f_box` (per attached boom, lo and hi): tighter tension bounds
+    already proven for every pose of the cell, which tighten the McCormick envelopes."""
     A_c, D = cs.A_c[:, att], cs.A_delta[:, att]
+    m = int(att.sum())
     delta = cs.b_delta + STATICS_TOL  # feasibility calls residuals < STATICS_TOL equilibrium
     lo, hi = f_lo - TENSION_SLACK, f_hi + TENSION_SLACK
-    if lo >= 0.0:  # f >= 0: |f| = f, linear
-        A_ub = np.vstack([A_c - D, -A_c - D])
-        b_ub = np.concatenate([cs.b_c + delta, -cs.b_c + delta])
-    else:  # |f| <= max(|lo|, |hi|): looser, still sound
-        fa = max(abs(lo), abs(hi))
-        slack = D.sum(axis=1) * fa + delta
-        A_ub = np.vstack([A_c, -A_c])
-        b_ub = np.concatenate([cs.b_c + slack, -cs.b_c + slack])
-    return A_ub, b_ub, [(lo, hi)] * int(att.sum())
+    if lo < 0.0:
+        raise ValueError("cell bounds assume positive tension bounds (f >= 0)")
+    nz = m if tm is None else m + 3 + 3 * m
+    rows: list[np.ndarray] = []
+    rhs: list[np.ndarray] = []
+    # Oettli-Prager, f >= 0: |A_c f - b_c| <= D f + delta
+    for sign in (1.0, -1.0):
+        R = np.zeros((3, nz))
+        R[:, :m] = sign * A_c - D
+        rows.append(R)
+        rhs.append(sign * cs.b_c + delta)
+    flo = np.full(m, lo) if f_box is None else np.maximum(lo, f_box[0])
+    fhi = np.full(m, hi) if f_box is None else np.minimum(hi, f_box[1])
+    fhi = np.maximum(fhi, flo)
+    bounds = [(float(a), float(b)) for a, b in zip(flo, fhi, strict=True)]
+    if tm is not None and half is not None:
+        A0, E = tm.A0[:, att], tm.E[:, att]
+        J = tm.J[:, att, :]  # (3, m, 3)
+        h = np.abs(np.asarray(half, dtype=float))
+        W = J.reshape(3, 3 * m)  # column i * 3 + k: w_ik
+        for sign in (1.0, -1.0):
+            R = np.zeros((3, nz))
+            R[:, :m] = sign * A0 - E
+            R[:, m + 3:] = sign * W
+            rows.append(R)
+            rhs.append(sign * cs.b_c + delta)
+        mc = np.zeros((4 * 3 * m, nz))
+        mb = np.zeros(4 * 3 * m)
+        r = 0
+        for i in range(m):
+            for k in range(3):
+                col = m + 3 + 3 * i + k
+                # w >= lo d - h f + h lo ;  w >= hi d + h f - h hi
+                # w <= hi d - h f + h hi ;  w <= lo d + h f - h lo
+                a, b = flo[i], fhi[i]
+                for cw, cd, cf, cb in ((-1.0, a, -h[k], -h[k] * a),
+                                       (-1.0, b, h[k], h[k] * b),
+                                       (1.0, -b, h[k], h[k] * b),
+                                       (1.0, -a, -h[k], -h[k] * a)):
+                    mc[r, col] = cw
+                    mc[r, m + k] = cd
+                    mc[r, i] = cf
+                    mb[r] = cb
+                    r += 1
+        rows.append(mc)
+        rhs.append(mb)
+        bounds = bounds + [(-float(v), float(v)) for v in h] + [
+            (-h[k] * fhi[i], h[k] * fhi[i]) for i in range(m) for k in range(3)]
+    return np.vstack(rows), np.concatenate(rhs), bounds
 
 
 def _lp(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, bounds) -> tuple[bool, float,
@@ -307,9 +417,12 @@ def _lp(c: np.ndarray, A_ub: np.ndarray, b_ub: np.ndarray, bounds) -> tuple[bool
 
 def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
                      free_tip: np.ndarray | None = None, max_cuts: int = 12,
-                     gap_tol: float = 1e-4, geo: CellGeometry | None = None
-                     ) -> RobustnessBound:
-    """An upper bound on the robustness r of every pose in the cell (see the module doc)."""
+                     gap_tol: float = 1e-4, geo: CellGeometry | None = None,
+                     taylor: bool = True, tighten: int = 2) -> RobustnessBound:
+    """An upper bound on the robustness r of every pose in the cell (see the module doc);
+    `taylor`: intersect the Oettli-Prager polytope with the Taylor model's (`_polytope`);
+    `tighten`: rounds that rebuild it with the tension ranges just proven (McCormick's
+    envelopes of f_i dq_k shrink with the range of f_i)."""
     robot = world.robot
     g = geo if geo is not None else cell_geometry(robot, stance, centre, half, free_tip)
     att = stance.attached
@@ -321,20 +434,26 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
         return RobustnessBound(-math.inf, -math.inf, nan4, nan4, 0.0, 0)
     cs = cell_statics(robot, world.gravity_vector, stance, centre, half, g)
     f_lo, f_hi = robot.boom_tension
-    A_ub, b_ub, bounds = _polytope(cs, att, f_lo, f_hi)
-    f_min, f_max = nan4.copy(), nan4.copy()
+    tm = cell_taylor(robot, stance, centre, half, g) if taylor else None
+    hv = np.asarray(half, dtype=float)
+    f_box: tuple[np.ndarray, np.ndarray] | None = None
     lps = 0
-    for k in range(m):
-        c = np.zeros(m)
-        c[k] = 1.0
-        ok, val, _ = _lp(c, A_ub, b_ub, bounds)
-        lps += 1
-        if not ok:  # no tensions balance any pose of the cell: r = -inf throughout
-            return RobustnessBound(-math.inf, -math.inf, nan4, nan4, 0.0, lps)
-        f_min[idx[k]] = val - LP_SLACK
-        ok, val, _ = _lp(-c, A_ub, b_ub, bounds)
-        lps += 1
-        f_max[idx[k]] = -val + LP_SLACK
+    for _ in range(1 + (tighten if tm is not None else 0)):
+        A_ub, b_ub, bounds = _polytope(cs, att, f_lo, f_hi, tm, hv, f_box)
+        nz = A_ub.shape[1]
+        f_min, f_max = nan4.copy(), nan4.copy()
+        for k in range(m):
+            c = np.zeros(nz)
+            c[k] = 1.0
+            ok, val, _ = _lp(c, A_ub, b_ub, bounds)
+            lps += 1
+            if not ok:  # no tensions balance any pose of the cell: r = -inf throughout
+                return RobustnessBound(-math.inf, -math.inf, nan4, nan4, 0.0, lps)
+            f_min[idx[k]] = val - LP_SLACK
+            ok, val, _ = _lp(-c, A_ub, b_ub, bounds)
+            lps += 1
+            f_max[idx[k]] = -val + LP_SLACK
+        f_box = (f_min[idx], f_max[idx])  # every pose's tensions lie within: tighter envelopes
     gmin = np.array([float(grasp_upper(f_min[i], gb, i)) for i in idx])
     simple = float(gmin.sum())
     # Poses with some f_i above mu_hi_i: that grasp's g_i <= g_i(max(mu_hi_i, f_min_i)).
@@ -346,7 +465,7 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
     # Every f_i <= mu_hi_i: the concave sum of log Phi((mu_hi - f) / sigma_lo), cutting planes.
     mu = gb.mu_hi[idx]
     slo = gb.sigma_lo[idx]
-    cap = [(lo, min(hi, float(mu[k]))) for k, (lo, hi) in enumerate(bounds)]
+    cap = [(lo, min(hi, float(mu[k]))) for k, (lo, hi) in enumerate(bounds[:m])]
     if all(lo <= hi for lo, hi in cap):
         cuts_A: list[np.ndarray] = []
         cuts_b: list[float] = []
@@ -355,8 +474,8 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
             z = (mu[k] - a) / slo[k]
             val = float(log_ndtr(z))
             slope = -float(grasp.mills_ratio(np.array(z))) / slo[k]
-            row = np.zeros(2 * m)
-            row[m + k] = 1.0      # t_k - slope f_k <= val - slope a
+            row = np.zeros(nz + m)
+            row[nz + k] = 1.0      # t_k - slope f_k <= val - slope a
             row[k] = -slope
             cuts_A.append(row)
             cuts_b.append(val - slope * a)
@@ -367,13 +486,13 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
             for a in np.linspace(a0, max(a0, a1), 3):
                 add_cut(k, float(a))
         base_A = np.hstack([A_ub, np.zeros((A_ub.shape[0], m))])
-        t_bounds = [(None, 0.0)] * m  # log P <= 0
-        c = np.concatenate([np.zeros(m), -np.ones(m)])
+        t_bounds: list[tuple[float | None, float]] = [(None, 0.0)] * m  # log P <= 0
+        c = np.concatenate([np.zeros(nz), -np.ones(m)])
         best = math.inf
         gap = math.inf
         for _ in range(max_cuts):
             ok, val, sol = _lp(c, np.vstack([base_A, *cuts_A]),
-                               np.concatenate([b_ub, cuts_b]), cap + t_bounds)
+                               np.concatenate([b_ub, cuts_b]), cap + bounds[m:] + t_bounds)
             lps += 1
             if not ok:
                 best = -math.inf

@@ -218,9 +218,9 @@ def cell_statics(robot: RobotParams, gravity: np.ndarray, stance: Stance, centre
         tc = (t[0] - x) * g[1] - (t[1] - y) * g[0]
         tc_half = hx * abs(g[1]) + hy * abs(g[0])
         tcx = (tc - tc_half, tc + tc_half)
-        # (R s_j) x g = |s_j| |g| sin(phi + alpha_j - angle(g))
+        # (R s_j) x g = |s_j| |g| sin(angle(g) - phi - alpha_j)
         gn = float(np.hypot(g[0], g[1]))
-        sg = _angle_interval_sin(np.array(phi + alpha[j] - math.atan2(g[1], g[0])),
+        sg = _angle_interval_sin(np.array(math.atan2(g[1], g[0]) - phi - alpha[j]),
                                  np.array(hphi + ANGLE_SLACK))
         sxg = (float(s_norm[j] * gn * sg[0]), float(s_norm[j] * gn * sg[1]))
         # tau = m_b / 2 ((R s_j) x g + (t - c) x g) + m_g (t - c) x g

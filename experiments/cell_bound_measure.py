@@ -54,9 +54,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--per-stance", type=int, default=120)
     ap.add_argument("--neighbours", type=int, default=3)
+    ap.add_argument("--depth", type=int, default=0,
+                    help="also try splitting unproven cells (branch and bound) to this depth")
     args = ap.parse_args()
     rng = np.random.default_rng(30)
     rows = []
+    split_time: list[float] = []
     for kind, seed in CAVES:
         scn = make_cave(kind, seed, (4.5, 5.0))
         log_p_min = scn.robot.log_p_min
@@ -78,9 +81,15 @@ def main() -> None:
                 elapsed = time.perf_counter() - t
                 samp = centre + rng.uniform(-1, 1, (200, 3)) * HALF
                 c = check_poses(scn, stance, samp, full=True)
+                split = bound.upper < log_p_min
+                if args.depth and not split and not c.feasible.any():
+                    t = time.perf_counter()
+                    split = cb.cell_probability_excluded(scn, stance, centre, HALF,
+                                                         depth=args.depth)
+                    split_time.append(time.perf_counter() - t)
                 rows.append((kind, seed, ids, chk.allocation.robustness[k], bound.upper,
                              float(c.allocation.robustness.max()), bool(c.feasible.any()), elapsed,
-                             log_p_min, bool(near[k])))
+                             log_p_min, bool(near[k]), split))
             print(f"{kind} {seed} {ids}: {len(grid)} lattice points, {n_feas} feasible, "
                   f"{len(prob)} infeasible for probability, {len(pick)} cells bounded",
                   flush=True)
@@ -91,6 +100,13 @@ def main() -> None:
     dt = np.array([r[7] for r in rows])
     lpm = np.array([r[8] for r in rows])
     near = np.array([r[9] for r in rows])
+    split = np.array([r[10] for r in rows])
+    if args.depth:
+        print(f"with splitting to depth {args.depth}: proven {split.mean():.3f}, among cells "
+              f"without a feasible sample {split[~feas].mean():.3f}, next to a feasible lattice "
+              f"point {split[near].mean():.3f}, not {split[~near].mean():.3f}; time per split "
+              f"cell median {1e3 * np.median(split_time or [0.0]):.0f} ms, max "
+              f"{1e3 * max(split_time or [0.0]):.0f} ms")
     proven = upper < lpm
     fin = np.isfinite(upper)
     print(f"cells {len(rows)}: proven {proven.mean():.3f} ({proven.sum()}); "

@@ -45,7 +45,7 @@ from scipy.optimize import linprog
 from scipy.special import log_ndtr
 
 from rb_drake import grasp
-from rb_drake.feasibility import Reason, World
+from rb_drake.feasibility import Reason, World, check_poses
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import STATICS_TOL
@@ -514,9 +514,27 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
 
 
 def cell_probability_excluded(world: World, stance: Stance, centre: np.ndarray,
-                              half: np.ndarray, free_tip: np.ndarray | None = None) -> bool:
-    """Whether no pose of the cell has r >= log p_min (the probability rule, or statics)."""
-    return robustness_bound(world, stance, centre, half, free_tip).upper < world.robot.log_p_min
+                              half: np.ndarray, free_tip: np.ndarray | None = None,
+                              depth: int = 0) -> bool:
+    """Whether no pose of the cell has r >= log p_min (the probability rule, or statics).
+
+    `depth` > 0: where the cell's bound does not prove it, split the cell into its 8 halves
+    and prove each (branch and bound, to that depth); a sub-cell whose centre pose has
+    r >= log p_min stops the search (no bound can prove it)."""
+    log_p_min = world.robot.log_p_min
+    centre = np.asarray(centre, dtype=float)
+    half = np.asarray(half, dtype=float)
+    if robustness_bound(world, stance, centre, half, free_tip).upper < log_p_min:
+        return True
+    if depth <= 0:
+        return False
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    subs = centre + signs * (half / 2)
+    r = check_poses(world, stance, subs, free_tip=free_tip, full=True).allocation.robustness
+    if np.any(r >= log_p_min):
+        return False
+    return all(cell_probability_excluded(world, stance, c, half / 2, free_tip, depth - 1)
+               for c in subs)
 
 
 def cell_excluded(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,

@@ -183,3 +183,27 @@ def test_taylor_model_remainder_holds():
                 b = check_poses(scn, stance, poses, free_tip=tip, full=True).problem.b
                 assert np.all(np.abs(b - cs.b_c[None]) <= cs.b_delta[None] + 1e-12), (
                     f"load outside its interval by {np.abs(b - cs.b_c).max():.3g}")
+
+
+def test_split_proof_holds_for_every_sampled_pose():
+    """cell_probability_excluded with splitting: no sampled pose of a proven cell has
+    r >= log p_min, and splitting proves at least what the bound alone proves."""
+    rng = np.random.default_rng(11)
+    proven = {0: 0, 2: 0}
+    for _name, scn in _caves()[:3]:
+        p0 = np.array(scn.start_pose)
+        stance = scn.stance(scn.start_stance)
+        centres = p0 + rng.normal(0.0, 1.0, (12, 3)) * np.array([0.08, 0.08, 0.1])
+        for centre in centres:
+            half = LATTICE_HALF * 2.0
+            r = check_poses(scn, stance, _cell_samples(rng, centre, half),
+                            full=True).allocation.robustness
+            plain = cb.cell_probability_excluded(scn, stance, centre, half)
+            split = cb.cell_probability_excluded(scn, stance, centre, half, depth=2)
+            assert split or not plain, f"{centre.tolist()}: splitting proved less"
+            if split:
+                assert np.all(r < scn.robot.log_p_min), (
+                    f"{centre.tolist()}: proven, but a sampled pose has r {r.max():.4f}")
+            proven[0] += plain
+            proven[2] += split
+    assert proven[2] >= proven[0] and proven[2] > 0, f"cells proven (by depth): {proven}"

@@ -20,7 +20,11 @@ that `feasibility.check_poses` calls feasible) and never used by the planner:
   tensions f >= 0 the Oettli-Prager theorem makes the set of f that solve `A f = b` for SOME A, b
   of those boxes the polytope `|A_c f - b_c| <= Delta f + delta`; intersected with the tension
   bounds it holds every pose's tensions (`delta` also holds the statics tolerance, the bounds
-  their 1e-9 N). Each grasp's `log P_i = log Phi((mu_i(psi_i) - f_i) / sigma_i(psi_i))` is at
+  their 1e-9 N). The boxes forget that all entries move with the same three pose offsets, so
+  the polytope is intersected with a Taylor model's (`cell_taylor`: A = A_0 + J dq + R with a
+  proven bound on R; the products f_i dq_k relaxed by McCormick's envelopes, rebuilt with the
+  tension ranges each round proves).
+  Each grasp's `log P_i = log Phi((mu_i(psi_i) - f_i) / sigma_i(psi_i))` is at
   most `g_i(f_i) = log Phi(zmax_i(f_i))`, `zmax_i = (mu_hi - f) / sigma_lo` for `f <= mu_hi`
   and `(mu_hi - f) / sigma_hi` above, with mu and sigma bounded over the cell's pull-angle
   interval (both are monotone in |psi|): g_i is decreasing in f_i. So

@@ -288,9 +288,9 @@ def _fly(scn: Scenario, fp: FootstepPlan, cfg: PipelineConfig, timing: dict[str,
     """Why the motions of a route (`phase_motions`) failed ('' when they did not), how many
     phases came before the failure, and the plan they make (None when they failed).
     Motions that succeed are built into the plan's phases (eased, ramps added) and their
-    smooth paths and straight motion tested as `rbp check` does: a phase whose path fails (a kept seed whose path
-    rounds a corner across a limit, which no easing helps: crevasse-78) fails as a motion
-    does, and the route is searched again."""
+    smooth paths and straight motion tested as `rbp check` does: a phase whose path fails (a
+    kept seed whose path rounds a corner across a limit, which no easing helps: crevasse-78)
+    fails as a motion does, and the route is searched again."""
     motions, failure = phase_motions(scn, fp, cfg, timing, progress)
     if failure:
         return failure, len(motions), None

@@ -94,6 +94,18 @@ def input_file(text: str) -> str:
 input_file.__name__ = "file name"
 
 
+def path_name(text: str) -> str:
+    """A file's or folder's name, not empty: `--out ''` was read as the current folder (a sweep
+    wrote results.json there and its figure at /baseline.png) and `rbp bench --json ''` was
+    ignored, as rbp's own commands refuse it (rbp.commands.common.refuse_empty_paths)."""
+    if text == "":
+        raise argparse.ArgumentTypeError("an empty path (''): give a file or folder name")
+    return text
+
+
+path_name.__name__ = "path"
+
+
 def whole(lo: int, hi: int) -> Callable[[str], int]:
     """A whole number from `lo` to `hi`."""
     def parse(text: str) -> int:

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
+from experiments.arguments import MAX_EXPANSIONS, number, path_name, seed_number, whole
 from experiments.records import (
     BOOLEAN,
     COUNT,
@@ -265,7 +265,7 @@ def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 10
 
 
 def add_ompl_log_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--ompl-log", metavar="PATH", default=None,
+    parser.add_argument("--ompl-log", metavar="PATH", type=path_name, default=None,
                         help="also write the runs as an OMPL benchmark log (a planner per "
                              "planner or variant, a run per cave), for ompl_benchmark_statistics "
                              "and Planner Arena")

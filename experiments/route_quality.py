@@ -33,6 +33,7 @@ from experiments.arguments import (
     OneLineParser,
     json_argument,
     number,
+    path_name,
     seed_number,
     whole,
 )
@@ -189,8 +190,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-limit", type=number(0.001, 86_400), default=None,
                         help="s per search of the oracle variants (default 600)")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
-    parser.add_argument("--out", default="out/route_quality.json")
-    parser.add_argument("--compare", default=None, help="another run's json")
+    parser.add_argument("--out", type=path_name, default="out/route_quality.json")
+    parser.add_argument("--compare", type=path_name, default=None, help="another run's json")
     parser.add_argument("--against-oracle", nargs="+", metavar="RUN.json", default=None,
                         help="no search: compare the variants of these runs' files with the "
                              "oracle variant found in them, cave by cave, and print it (a "

@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, path_name, tcp_address, whole
 from experiments.records import shown
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError, one_line
 from rb_drake.files import atomic_write_text, output_problem
@@ -332,7 +332,7 @@ def ok_records(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def add_sweep_arguments(parser: argparse.ArgumentParser, trials: int, out: str) -> None:
     """The flags every sweep shares: --out, --trials, --workers, --cluster."""
-    parser.add_argument("--out", default=out, help=f"output folder (default {out})")
+    parser.add_argument("--out", type=path_name, default=out, help=f"output folder (default {out})")
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=trials,
                         help=f"number of trials, 1 to {MAX_TRIALS:,} (default {trials})")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=None,

@@ -137,6 +137,19 @@ def number(lo: float, hi: float) -> Callable[[str], float]:
 
 seed_number = whole(0, MAX_SEED)
 
+
+def seed_list(text: str) -> list[int]:
+    """Comma-separated seeds, each a whole number from 0 to MAX_SEED, none twice: an empty
+    item, a word or a negative seed was a traceback (int() in the script, or in a worker's
+    cave generator), and a seed given twice ran its cave twice."""
+    seeds = [seed_number(item) for item in text.split(",")]  # "" refused as not a number
+    if (twice := next((s for k, s in enumerate(seeds) if s in seeds[:k]), None)) is not None:
+        raise argparse.ArgumentTypeError(f"seed {twice} given twice in {text[:80]!r}")
+    return seeds
+
+
+seed_list.__name__ = "seed list"
+
 _HOST = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?"
                    r"(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*$")
 

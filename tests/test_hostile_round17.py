@@ -61,3 +61,92 @@ def test_a_folder_that_cannot_be_made_is_refused_before_the_work(tmp_path: Path)
     assert result.returncode == 2, result.stderr[-800:]
     assert one_error(result).startswith("error: /proc/rbp-probe-17/plan.json: -o: ")
     assert time.perf_counter() - start < 5, "refused only after planning"
+
+
+def usage_error(main, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """The one line with which an experiment script's `main(argv)` refuses (status 2)."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), captured.err[-800:]
+    return lines[0]
+
+
+@pytest.mark.parametrize("argv, start", [
+    (["--seeds", "1,,2"], "error: --seeds: must be a whole number, got ''"),
+    (["--seeds", "1,x"], "error: --seeds: must be a whole number, got 'x'"),
+    (["--seeds", "-5"], "error: --seeds: must be a whole number from 0 to "),
+    (["--seeds", "99999999999999999999"], "error: --seeds: must be a whole number from 0 "),
+    (["--seeds", "3,1,3"], "error: --seeds: seed 3 given twice"),
+    (["--kind", "foo"], "error: --kind: invalid choice: 'foo'"),
+    (["--length", "5", "4"], "error: --length: need 2 <= MIN <= MAX"),
+    (["--variants", "corridorx"], "error: --variants: corridorx: cannot be read"),
+    (["--variants", "x-"], "error: --variants: x-: cannot be read"),
+    (["--variants", "x-m0"], "error: --variants: x-m0: max_expansions: must be a whole number"),
+    (["--variants", "corridor-1"], "error: --variants: corridor-1: anytime.corridor: must be"),
+    (["--variants", "default,default"], "error: --variants: a variant named twice"),
+    (["--variants", "default-quarter,default"],
+     "error: --variants: default-quarter needs default before it"),
+    (["--first-seed", str(2**63 - 1), "--trials", "2"],
+     "error: --first-seed: the last cave's seed, 9223372036854775808, is beyond"),
+])
+def test_route_quality_refuses_its_options_before_the_caves(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], start: str) -> None:
+    from experiments.route_quality import main
+
+    out = tmp_path / "rq.json"
+    line = usage_error(main, ["--trials", "1", "--out", str(out), *argv], capsys)
+    assert line.startswith(start), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_route_quality_refuses_a_folder_for_out_before_the_caves(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from experiments.route_quality import main
+
+    line = usage_error(main, ["--trials", "1", "--out", str(tmp_path)], capsys)
+    assert line.startswith(f"error: --out: {tmp_path}: is a directory"), line
+    assert not Path(f"{tmp_path}.tmp").exists()
+
+
+@pytest.mark.parametrize("values, start", [
+    ("0.5000001,0.5000002", "error: --values: two values read 0.5 to 6 significant digits"),
+    ("1_0", "error: --values: comma-separated numbers, got '1_0'"),
+    ("\uff10.\uff15", "error: --values: comma-separated numbers"),
+])
+def test_param_sweep_values_are_read_as_numbers_that_name_distinct_trials(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], values: str, start: str) -> None:
+    from experiments.param_sweep import main
+
+    line = usage_error(main, ["--param", "p_min", "--values", values, "--trials", "1",
+                              "--out", str(tmp_path / "out")], capsys)
+    assert line.startswith(start), line
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("module", ["baseline_comparison", "monte_carlo", "param_sweep",
+                                    "seed_vs_scp", "timing_table"])
+def test_a_sweeps_seeds_stay_within_the_seed_range(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], module: str) -> None:
+    import importlib
+
+    main = importlib.import_module(f"experiments.{module}").main
+    extra = ["--param", "p_min", "--values", "0.5"] if module == "param_sweep" else []
+    argv = ["--trials", "2", "--first-seed", str(2**63 - 1), "--out", str(tmp_path / "o"),
+            *extra]
+    line = usage_error(main, argv, capsys)
+    assert line.startswith("error: --first-seed: the last trial's seed, 9223372036854775808, "
+                           "is beyond 9223372036854775807"), line
+    assert list(tmp_path.iterdir()) == []
+    # the largest first seed that keeps every trial's seed in range is accepted by the check
+    from experiments.arguments import OneLineParser
+    from experiments.common import add_cave_arguments, check_cave_arguments
+    from experiments.sweep import add_sweep_arguments
+
+    parser = OneLineParser(prog="probe")
+    add_sweep_arguments(parser, trials=2, out="o")
+    add_cave_arguments(parser)
+    check_cave_arguments(parser, parser.parse_args(["--first-seed", str(2**63 - 2)]))

@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     trials = [t for v in values for t in climb_trials(
         args, [args.planner], args.motion, prefix=f"{args.param}={v:g}-", **{args.param: v})]
-    records = sweep(trials, args)
+    records = sweep(trials, args, experiment="param_sweep")
     done = ok_records(records)
     summary = []
     for v in values:

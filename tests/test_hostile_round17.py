@@ -150,3 +150,20 @@ def test_a_sweeps_seeds_stay_within_the_seed_range(
     add_sweep_arguments(parser, trials=2, out="o")
     add_cave_arguments(parser)
     check_cave_arguments(parser, parser.parse_args(["--first-seed", str(2**63 - 2)]))
+
+
+def test_out_of_another_experiments_folder_is_refused_before_the_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from experiments.param_sweep import main
+
+    results = tmp_path / "results.json"
+    results.write_text(json.dumps({"experiment": "baseline_comparison", "summary": {}}))
+    before = results.read_bytes()
+    line = usage_error(main, ["--param", "p_min", "--values", "0.5", "--trials", "1",
+                              "--workers", "1", "--out", str(tmp_path)], capsys)
+    assert line == (f"error: {results}: --out: holds the results of the experiment "
+                    "'baseline_comparison', which param_sweep would replace; give it another "
+                    "--out folder"), line
+    assert results.read_bytes() == before and sorted(tmp_path.iterdir()) == [results]

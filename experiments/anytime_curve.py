@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from experiments.arguments import OneLineParser, number
+from experiments.arguments import OneLineParser, number, path_name
 from experiments.common import make_cave
 from rb_drake.errors import EXIT_OK
 
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="kind:seed, comma-separated")
     parser.add_argument("--time-limit", type=number(0.001, 86_400), default=120.0,
                         help="s per cave")
-    parser.add_argument("--out", default="out/anytime-curve.png")
+    parser.add_argument("--out", type=path_name, default="out/anytime-curve.png")
     args = parser.parse_args(argv)
     from rb_drake.files import atomic_save_figure, atomic_write_text
 

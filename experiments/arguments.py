@@ -94,6 +94,18 @@ def input_file(text: str) -> str:
 input_file.__name__ = "file name"
 
 
+def path_name(text: str) -> str:
+    """A file's or folder's name, not empty: `--out ''` was read as the current folder (a sweep
+    wrote results.json there and its figure at /baseline.png) and `rbp bench --json ''` was
+    ignored, as rbp's own commands refuse it (rbp.commands.common.refuse_empty_paths)."""
+    if text == "":
+        raise argparse.ArgumentTypeError("an empty path (''): give a file or folder name")
+    return text
+
+
+path_name.__name__ = "path"
+
+
 def whole(lo: int, hi: int) -> Callable[[str], int]:
     """A whole number from `lo` to `hi`."""
     def parse(text: str) -> int:
@@ -124,6 +136,19 @@ def number(lo: float, hi: float) -> Callable[[str], float]:
 
 
 seed_number = whole(0, MAX_SEED)
+
+
+def seed_list(text: str) -> list[int]:
+    """Comma-separated seeds, each a whole number from 0 to MAX_SEED, none twice: an empty
+    item, a word or a negative seed was a traceback (int() in the script, or in a worker's
+    cave generator), and a seed given twice ran its cave twice."""
+    seeds = [seed_number(item) for item in text.split(",")]  # "" refused as not a number
+    if (twice := next((s for k, s in enumerate(seeds) if s in seeds[:k]), None)) is not None:
+        raise argparse.ArgumentTypeError(f"seed {twice} given twice in {text[:80]!r}")
+    return seeds
+
+
+seed_list.__name__ = "seed list"
 
 _HOST = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?"
                    r"(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*$")

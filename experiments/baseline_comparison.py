@@ -174,12 +174,14 @@ def labelled_sweep(args: argparse.Namespace, planners: list[str]) -> list[dict[s
     (`kernel_threads`): the others run one per worker, a core each, as they cannot use more.
     Its records (trials named oracle-...) join the others'."""
     others = [p for p in planners if p != "oracle"]
-    records = sweep(climb_trials(args, others, motion=args.motion), args) if others else []
+    records = sweep(climb_trials(args, others, motion=args.motion), args,
+                    experiment="baseline_comparison") if others else []
     if "oracle" not in planners:
         return records
     alone = argparse.Namespace(**{**vars(args), "workers": 1})
     labels = sweep(climb_trials(args, ["oracle"], motion=False, prefix="oracle-",
-                                oracle_seconds=args.oracle_time), alone)
+                                oracle_seconds=args.oracle_time), alone,
+                   experiment="baseline_comparison")
     if not records:
         return [{**o, "name": o["name"].removeprefix("oracle-")} for o in labels]
     merged = []

@@ -20,6 +20,7 @@ from experiments.arguments import (
     MAX_TRIALS,
     OneLineParser,
     number,
+    path_name,
     seed_number,
     whole,
 )
@@ -42,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=None, metavar=("MIN",
                         "MAX"),
                         help="cave length range in m (default: the generator's, 7 to 9)")
-    parser.add_argument("--out", default="out/bench")
+    parser.add_argument("--out", type=path_name, default="out/bench")
     args = parser.parse_args(argv)
     kinds = args.kind.split(",")
     unknown = sorted(set(kinds) - set(KINDS))

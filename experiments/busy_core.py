@@ -32,7 +32,15 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, OneLineParser, number, seed_number, whole
+from experiments.arguments import (
+    MAX_TRIALS,
+    MAX_WORKERS,
+    OneLineParser,
+    number,
+    path_name,
+    seed_number,
+    whole,
+)
 from experiments.common import ROUTE_VARIANTS, cave_kind
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
@@ -126,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
                              "one (RBP_THREADS=1); every thread always, waiting as: before "
                              "(libgomp's default), active (OMP_WAIT_POLICY=ACTIVE), passive "
                              "(OMP_WAIT_POLICY=PASSIVE), spinN (GOMP_SPINCOUNT=N)")
-    parser.add_argument("--out", default="out/busy_core.json")
+    parser.add_argument("--out", type=path_name, default="out/busy_core.json")
     args = parser.parse_args(argv)
     if args.trials < 1 or args.busy < 0:
         parser.error("--trials must be at least 1 and --busy at least 0")

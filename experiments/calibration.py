@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     from rb_drake.files import atomic_save_figure
 
     start = time.perf_counter()
-    records = sweep(calibration_trials(args), args)
+    records = sweep(calibration_trials(args), args, experiment="calibration")
     done = ok_records(records)
     rows = rows_of(done)
     calibrated = sum(r["calibrated"] for r in rows)

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from statistics import median
 
-from experiments.arguments import OneLineParser, whole
+from experiments.arguments import OneLineParser, path_name, whole
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
 FLOOR_IMPORTS = ("numpy", "scipy.special", "scipy.sparse", "scipy.ndimage", "numba", "networkx",
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser.add_argument("--cave", default="demo-shaft", help="scenario (default demo-shaft)")
     parser.add_argument("--repeats", type=whole(1, 1000), default=3,
                         help="runs of each (default 3)")
-    parser.add_argument("--out", default="out/cli_overhead", help="output folder")
+    parser.add_argument("--out", type=path_name, default="out/cli_overhead", help="output folder")
     parser.add_argument("--before", metavar="DIR",
                         help="also run the source tree DIR (no --no-pictures there), "
                              "interleaved, labelled 'before'")

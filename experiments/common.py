@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_EXPANSIONS, number, seed_number, whole
+from experiments.arguments import MAX_EXPANSIONS, number, path_name, seed_number, whole
 from experiments.records import (
     BOOLEAN,
     COUNT,
@@ -38,6 +38,7 @@ from experiments.sweep import (
     check_sweep_arguments,
     quantiles,
 )
+from rb_drake.errors import MAX_SEED
 
 MIXED = ("shaft", "crevasse", "shaft", "rockfall")  # shafts and passages, alternating
 THRESHOLDS = (0.90, 0.95)
@@ -265,7 +266,7 @@ def add_cave_arguments(parser: argparse.ArgumentParser, max_expansions: int = 10
 
 
 def add_ompl_log_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--ompl-log", metavar="PATH", default=None,
+    parser.add_argument("--ompl-log", metavar="PATH", type=path_name, default=None,
                         help="also write the runs as an OMPL benchmark log (a planner per "
                              "planner or variant, a run per cave), for ompl_benchmark_statistics "
                              "and Planner Arena")
@@ -293,6 +294,10 @@ def check_cave_arguments(parser: argparse.ArgumentParser, args: argparse.Namespa
         parser.error(f"--length: {problem}")
     if args.max_expansions < 1:
         parser.error(f"--max-expansions: must be 1 or more, got {args.max_expansions}")
+    if (last := args.first_seed + args.trials - 1) > MAX_SEED:  # trial i's seed is first + i
+        parser.error(f"--first-seed: the last trial's seed, {last}, is beyond {MAX_SEED} "
+                     f"(--first-seed at most {MAX_SEED - args.trials + 1} for {args.trials} "
+                     "trials)")
 
 
 def climb_trials(args: argparse.Namespace, planners: list[str], motion: bool,

@@ -22,7 +22,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_WORKERS, OneLineParser, number, whole
+from experiments.arguments import MAX_WORKERS, OneLineParser, number, path_name, whole
 from experiments.common import ROUTE_VARIANTS as VARIANTS
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", default="default,before",
                         help=f"comma-separated, of {', '.join(VARIANTS)}")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
-    parser.add_argument("--out", default="out/long-climbs.json")
+    parser.add_argument("--out", type=path_name, default="out/long-climbs.json")
     args = parser.parse_args(argv)
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in VARIANTS and not v.startswith(("corridor", "x-"))]

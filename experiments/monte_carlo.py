@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     from rb_drake.files import atomic_save_figure
 
-    records = sweep(calibration_trials(args), args)
+    records = sweep(calibration_trials(args), args, experiment="monte_carlo")
     done = ok_records(records)
     rows = simulated(done)
     bins = pooled(rows)

@@ -20,7 +20,7 @@ from collections import Counter
 
 import numpy as np
 
-from experiments.arguments import OneLineParser, seed_number, whole
+from experiments.arguments import OneLineParser, path_name, seed_number, whole
 from planning.pipeline import plan_climb
 from planning.plan_faults import FAULTS, judge, random_fault
 from planning.plan_model import plan_dict
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"bundled caves, comma-separated (default {','.join(CAVES)})")
     parser.add_argument("--classes", help="only these fault classes, comma-separated (default: "
                         "all); e.g. --classes between-cut")
-    parser.add_argument("--out", help="write the counts to this JSON file")
+    parser.add_argument("--out", type=path_name, help="write the counts to this JSON file")
     args = parser.parse_args(argv)
     caves = bundled_caves()
     names = args.caves.split(",")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from experiments.arguments import OneLineParser
+from experiments.arguments import OneLineParser, decimal
 from experiments.common import (
     add_cave_arguments,
     check_cave_arguments,
@@ -97,12 +97,19 @@ def sweep_figure(param: str, values: list[float], summary: list[dict[str, Any]],
 
 def parse_values(parser: argparse.ArgumentParser, param: str, text: str) -> list[float]:
     given = [v.strip() for v in text.split(",") if v.strip()]
-    try:
-        values = [float(v) for v in given]
-    except ValueError:
+    try:  # as --length reads a number: float() took "1_0" as 10 and full-width digits
+        values = [decimal(v) for v in given]
+    except argparse.ArgumentTypeError:
         parser.error(f"--values: comma-separated numbers, got {text!r}")
     if not values or len(set(values)) != len(values):
         parser.error(f"--values: give distinct values, got {text!r}")
+    # a value's trials, line and figure are named by its %g (6 digits): two values alike there
+    # made one trial name twice ("error: trial name ...: used twice in one sweep")
+    shown = [f"{v:g}" for v in values]
+    if len(set(shown)) != len(shown):
+        twice = next(s for k, s in enumerate(shown) if s in shown[:k])
+        parser.error(f"--values: two values read {twice} to 6 significant digits, which name "
+                     f"the trials; give values that differ there, got {text!r}")
     # as given: 20.0000001 printed with %g read "20 is not ... at most 20"
     bad = [g for g, v in zip(given, values, strict=True) if not PARAMETERS[param][1](v)]
     if bad:
@@ -128,7 +135,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     trials = [t for v in values for t in climb_trials(
         args, [args.planner], args.motion, prefix=f"{args.param}={v:g}-", **{args.param: v})]
-    records = sweep(trials, args)
+    records = sweep(trials, args, experiment="param_sweep")
     done = ok_records(records)
     summary = []
     for v in values:

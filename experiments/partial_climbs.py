@@ -23,7 +23,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import MAX_TRIALS, OneLineParser, json_argument, seed_number, whole
+from experiments.arguments import (
+    MAX_TRIALS,
+    OneLineParser,
+    json_argument,
+    path_name,
+    seed_number,
+    whole,
+)
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
 from rb_drake.files import atomic_write_text
@@ -94,7 +101,8 @@ def _median(values: list[float]) -> float | None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = OneLineParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", required=True, help="results (.json), rewritten after each cave")
+    ap.add_argument("--out", type=path_name, required=True,
+                    help="results (.json), rewritten after each cave")
     ap.add_argument("--seeds", type=seed_number, nargs="*",
                     help="only these seeds of the no-route caves (default: all of them)")
     ap.add_argument("--limit", type=whole(1, MAX_TRIALS), help="at most this many caves")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from experiments.arguments import OneLineParser, number, seed_number
+from experiments.arguments import OneLineParser, number, path_name, seed_number
 from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_FAILED, EXIT_OK
 
@@ -45,7 +45,7 @@ def rbp_body_plan(scn) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="out/rig_experiment", help="output folder")
+    parser.add_argument("--out", type=path_name, default="out/rig_experiment", help="output folder")
     parser.add_argument("--planner", choices=("rbp", "straight"), default="rbp",
                         help="the body movement: RBP seed + SCP (default) or the straight line")
     parser.add_argument("--lcm-url", default="memq://",

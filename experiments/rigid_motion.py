@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, OneLineParser, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, OneLineParser, path_name, whole
 from experiments.common import ROUTE_VARIANTS, cave_kind, make_cave, variant_config
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", default="lattice,default",
                         help=f"comma-separated, of {', '.join(ROUTE_VARIANTS)}")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
-    parser.add_argument("--out", default="out/rigid_motion.json")
+    parser.add_argument("--out", type=path_name, default="out/rigid_motion.json")
     args = parser.parse_args(argv)
     variants = args.variants.split(",")
     bad = [v for v in variants if v not in ROUTE_VARIANTS and not v.startswith("x-")]

@@ -33,15 +33,20 @@ from experiments.arguments import (
     OneLineParser,
     json_argument,
     number,
+    path_name,
+    seed_list,
     seed_number,
     whole,
 )
 from experiments.common import ROUTE_VARIANTS as VARIANTS
-from experiments.common import add_ompl_log_argument, cave_kind, check_ompl_log
+from experiments.common import add_ompl_log_argument, cave_kind, check_ompl_log, variant_config
 from experiments.common import finite_median as median
 from experiments.common import route_variants as run_cave
 from experiments.sweep import machine_info
-from rb_drake.errors import EXIT_OK, EXIT_USAGE, one_line
+from planning.config_io import ConfigError, checked_config
+from rb_drake.errors import EXIT_OK, EXIT_USAGE, MAX_SEED, one_line
+from rb_drake.files import atomic_write_text, output_problem
+from rb_drake.generate import length_problem
 
 
 def summary(caves: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
@@ -180,17 +185,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=100,
                         help="caves (default 100)")
     parser.add_argument("--first-seed", type=seed_number, default=1)
-    parser.add_argument("--seeds", default=None,
+    parser.add_argument("--seeds", type=seed_list, default=None,
                         help="comma-separated seeds of the benchmark to run, instead of --trials")
-    parser.add_argument("--kind", default="mixed", help="shaft, crevasse, rockfall or mixed")
+    parser.add_argument("--kind", default="mixed", choices=("mixed", "shaft", "crevasse",
+                                                             "rockfall"),
+                        help="shaft, crevasse, rockfall or mixed")
     parser.add_argument("--length", type=number(0, 1e4), nargs=2, default=(4.5, 5.0))
     parser.add_argument("--variants", default="default",
                         help=f"comma-separated, of {', '.join(VARIANTS)}")
     parser.add_argument("--time-limit", type=number(0.001, 86_400), default=None,
                         help="s per search of the oracle variants (default 600)")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=1)
-    parser.add_argument("--out", default="out/route_quality.json")
-    parser.add_argument("--compare", default=None, help="another run's json")
+    parser.add_argument("--out", type=path_name, default="out/route_quality.json")
+    parser.add_argument("--compare", type=path_name, default=None, help="another run's json")
     parser.add_argument("--against-oracle", nargs="+", metavar="RUN.json", default=None,
                         help="no search: compare the variants of these runs' files with the "
                              "oracle variant found in them, cave by cave, and print it (a "
@@ -198,6 +205,12 @@ def main(argv: list[str] | None = None) -> int:
     add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
     check_ompl_log(parser, args.ompl_log, args.out)
+    # before the caves are searched: a bad --length, variant or --out was a worker's traceback
+    # (or the results' rename's, after the whole run, leaving OUT.tmp)
+    if (problem := length_problem(*args.length)) is not None:
+        parser.error(f"--length: {problem}")
+    if (problem := output_problem(args.out)) is not None:
+        parser.error(f"--out: {args.out}: {problem}")
     old = run_file(args.compare) if args.compare else None  # before the run: it fails fast
     if args.against_oracle:
         runs = [run_file(f) for f in args.against_oracle]
@@ -207,8 +220,23 @@ def main(argv: list[str] | None = None) -> int:
     bad = [v for v in variants if v not in VARIANTS and not v.startswith(("corridor", "x-"))]
     if bad:
         parser.error(f"--variants: unknown {bad}; choose from {list(VARIANTS)}")
+    if len(set(variants)) != len(variants):
+        parser.error(f"--variants: a variant named twice in {args.variants!r}")
+    if "default-quarter" in variants and "default" not in variants[:variants.index(
+            "default-quarter")]:
+        parser.error("--variants: default-quarter needs default before it")
+    for v in variants:
+        try:
+            checked_config(variant_config(v, args.time_limit), v)
+        except ConfigError as e:  # "VARIANT: FIELD: REASON"
+            parser.error(f"--variants: {e}")
+        except (ValueError, IndexError) as e:
+            parser.error(f"--variants: {v}: cannot be read ({e})")
+    if args.seeds is None and args.first_seed + args.trials - 1 > MAX_SEED:
+        parser.error(f"--first-seed: the last cave's seed, {args.first_seed + args.trials - 1}"
+                     f", is beyond {MAX_SEED}")
     indices = (range(args.trials) if args.seeds is None
-               else [int(v) - args.first_seed for v in args.seeds.split(",")])
+               else [v - args.first_seed for v in args.seeds])
     jobs = [(cave_kind(i, args.kind), args.first_seed + i, tuple(args.length), variants,
              args.time_limit) for i in indices]
     if args.workers > 1:  # a search per core
@@ -225,11 +253,7 @@ def main(argv: list[str] | None = None) -> int:
               "args": {k: v for k, v in vars(args).items() if k != "compare"},
               "wall_seconds": time.perf_counter() - t0,
               "summary": summary(caves, variants), "caves": caves}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=1) + "\n")
-    tmp.replace(out)
+    out = atomic_write_text(args.out, json.dumps(result, indent=1) + "\n")
     print(json.dumps(result["summary"], indent=1))
     print(f"wrote {out}")
     if args.ompl_log:

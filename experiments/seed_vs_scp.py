@@ -140,7 +140,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     from rb_drake.files import atomic_save_figure
 
-    records = sweep(climb_trials(args, ["rbp"], motion=True), args)
+    records = sweep(climb_trials(args, ["rbp"], motion=True), args,
+                    experiment="seed_vs_scp")
     done = ok_records(records)
     rows = phase_rows(done)
     summary = improvement_summary(rows)

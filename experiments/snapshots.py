@@ -10,7 +10,14 @@ until one gives a plan.
 
 from __future__ import annotations
 
-from experiments.arguments import MAX_EXPANSIONS, OneLineParser, number, seed_number, whole
+from experiments.arguments import (
+    MAX_EXPANSIONS,
+    OneLineParser,
+    number,
+    path_name,
+    seed_number,
+    whole,
+)
 from experiments.common import make_cave, plan_cave, plan_record
 from experiments.sweep import check_out_files, machine_info, write_results
 from rb_drake.errors import EXIT_OK
@@ -18,7 +25,7 @@ from rb_drake.errors import EXIT_OK
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     parser = OneLineParser(prog=prog, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="out/snapshots", help="output folder")
+    parser.add_argument("--out", type=path_name, default="out/snapshots", help="output folder")
     parser.add_argument("--kind", default="shaft", choices=("shaft", "crevasse", "rockfall"))
     parser.add_argument("--seed", type=seed_number, default=1, help="cave seed (default 1)")
     parser.add_argument("--tries", type=whole(1, 1000), default=3,

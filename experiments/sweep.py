@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any, NamedTuple
 
-from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, tcp_address, whole
+from experiments.arguments import MAX_TRIALS, MAX_WORKERS, json_type, path_name, tcp_address, whole
 from experiments.records import shown
 from rb_drake.errors import EXIT_INTERRUPTED, EXIT_USAGE, RbpError, one_line
 from rb_drake.files import atomic_write_text, output_problem
@@ -332,7 +332,7 @@ def ok_records(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def add_sweep_arguments(parser: argparse.ArgumentParser, trials: int, out: str) -> None:
     """The flags every sweep shares: --out, --trials, --workers, --cluster."""
-    parser.add_argument("--out", default=out, help=f"output folder (default {out})")
+    parser.add_argument("--out", type=path_name, default=out, help=f"output folder (default {out})")
     parser.add_argument("--trials", type=whole(1, MAX_TRIALS), default=trials,
                         help=f"number of trials, 1 to {MAX_TRIALS:,} (default {trials})")
     parser.add_argument("--workers", type=whole(1, MAX_WORKERS), default=None,
@@ -349,11 +349,16 @@ def check_sweep_arguments(parser: argparse.ArgumentParser, args: argparse.Namesp
         parser.error(f"--workers: must be 1 or more, got {args.workers}")
 
 
-def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, Any]]:
+def sweep(trials: Iterable[Trial], args: argparse.Namespace,
+          experiment: str | None = None) -> list[dict[str, Any]]:
     """`run_sweep` with the shared flags, for a script: a sweep that cannot run ends it with
     one line on stderr (status EXIT_USAGE), an interruption with a line on how to resume
-    (EXIT_INTERRUPTED, as every rbp command)."""
+    (EXIT_INTERRUPTED, as every rbp command). `experiment`: the script's name, which its
+    OUT/results.json records; a folder whose results.json another experiment wrote is refused
+    (`--out` of another experiment's folder: its results were replaced after the work)."""
     try:
+        if experiment is not None:
+            results_owner_check(args.out, experiment)
         return run_sweep(trials, args.out, args.workers, args.cluster)
     except SweepError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -362,6 +367,21 @@ def sweep(trials: Iterable[Trial], args: argparse.Namespace) -> list[dict[str, A
         print(f"interrupted: finished trials are kept in {Path(args.out) / 'trials'}; run the "
               "same command again to resume", file=sys.stderr)
         raise SystemExit(EXIT_INTERRUPTED) from None
+
+
+def results_owner_check(out: str | Path, experiment: str) -> None:
+    """Raise SweepError when OUT/results.json holds another experiment's results (its
+    "experiment" field); a file rbp cannot read as such is replaced as before."""
+    path = Path(out) / "results.json"
+    try:
+        results = load_json(read_text(path))
+    except (InputFileError, json.JSONDecodeError, RecursionError, OSError):
+        return
+    other = results.get("experiment") if isinstance(results, dict) else None
+    if isinstance(other, str) and other != experiment:
+        raise SweepError(f"{path}: --out: holds the results of the experiment "
+                         f"{shown(other)}, which {experiment} would replace; give it another "
+                         "--out folder")
 
 
 def check_out_files(out: str | Path, names: Sequence[str]) -> None:

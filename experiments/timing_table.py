@@ -141,7 +141,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
 
     from rb_drake.files import atomic_save_figure, atomic_write_text
 
-    records = sweep(climb_trials(args, ["rbp", "naive"], motion=True), args)
+    records = sweep(climb_trials(args, ["rbp", "naive"], motion=True), args,
+                    experiment="timing_table")
     done = ok_records(records)
     rows = timing_rows(done)
     machine = trial_machines(done)

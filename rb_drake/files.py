@@ -73,6 +73,11 @@ def output_problem(path: str | Path,
             os.unlink(tmp)
         except OSError as e:
             return f"cannot write a file there ({e.strerror})"
+    else:  # and can the missing folders be made in it? (-o /sys/kernel/x/plan.json and an
+        try:  # experiment's --out under /sys failed only after the work, naming no option)
+            os.rmdir(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder))
+        except OSError as e:
+            return f"cannot make a folder in {folder} ({e.strerror})"
     return None
 
 

@@ -48,7 +48,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import OneLineParser, json_type, read_json_file, seed_number, whole
+from experiments.arguments import (
+    OneLineParser,
+    json_type,
+    path_name,
+    read_json_file,
+    seed_number,
+    whole,
+)
 from experiments.bench.allocation import run_allocation
 from experiments.bench.footstep import run_footstep
 from experiments.bench.report import jsonable, machine, print_comparison
@@ -77,9 +84,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-expansions", type=whole(1, 1_000_000), default=60,
                         help="footstep: the planners' cap, 1 to 1,000,000 (default 60)")
     parser.add_argument("--seed", type=seed_number, default=0)
-    parser.add_argument("--out", default="out/bench", help="output folder (default out/bench)")
-    parser.add_argument("--json", metavar="FILE", help="results file (default OUT/bench.json)")
-    parser.add_argument("--compare", metavar="OLD", help="an earlier results file: print the "
+    parser.add_argument("--out", type=path_name, default="out/bench",
+                        help="output folder (default out/bench)")
+    parser.add_argument("--json", metavar="FILE", type=path_name,
+                        help="results file (default OUT/bench.json)")
+    parser.add_argument("--compare", metavar="OLD", type=path_name,
+                        help="an earlier results file: print the "
                         "ratio new/old of every summary metric")
 
 

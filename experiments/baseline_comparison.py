@@ -214,10 +214,12 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     add_ompl_log_argument(parser)
     args = parser.parse_args(argv)
     check_cave_arguments(parser, args)
-    planners = [p for p in args.planners.split(",") if p]
-    if not planners or not set(planners) <= set(PLANNERS + OTHER_PLANNERS):
+    planners = [p.strip() for p in args.planners.split(",")]
+    if not all(planners) or not set(planners) <= set(PLANNERS + OTHER_PLANNERS):
         parser.error(f"--planners: choose from {','.join(PLANNERS + OTHER_PLANNERS)}, got "
                      f"{args.planners!r}")
+    if len(set(planners)) != len(planners):
+        parser.error(f"--planners: each planner once, got {args.planners!r}")
     if not args.oracle_time > 0:
         parser.error(f"--oracle-time: must be positive, got {args.oracle_time}")
     check_ompl_log(parser, args.ompl_log, args.out)

@@ -96,7 +96,9 @@ def sweep_figure(param: str, values: list[float], summary: list[dict[str, Any]],
 
 
 def parse_values(parser: argparse.ArgumentParser, param: str, text: str) -> list[float]:
-    given = [v.strip() for v in text.split(",") if v.strip()]
+    given = [v.strip() for v in text.split(",")]
+    if not all(given):  # "0.5,,0.6" dropped its empty item: a typo, not two values
+        parser.error(f"--values: an empty item in {text!r}")
     try:  # as --length reads a number: float() took "1_0" as 10 and full-width digits
         values = [decimal(v) for v in given]
     except argparse.ArgumentTypeError:

@@ -101,3 +101,14 @@ def test_rbp_check_says_the_route_quality_is_the_search_record(tmp_path):
     assert result.returncode == 0, result.stderr[-500:]
     assert "route optimal" in result.stdout and "not searched again" in result.stdout, \
         result.stdout
+
+
+@pytest.mark.parametrize("args, needle", [
+    (("baseline_comparison", "--planners", "naive,naive"), "--planners: each planner once"),
+    (("baseline_comparison", "--planners", "naive,,rbp"), "--planners"),
+    (("param_sweep", "--param", "p_min", "--values", "0.5,,0.6"), "--values: an empty item")])
+def test_sweep_lists_with_repeats_or_empty_items_are_refused(tmp_path, args, needle):
+    """A repeated planner ran its trials twice; an empty item of --values was dropped."""
+    out = tmp_path / "out"
+    one_error_line(run("experiment", *args, "--trials", "1", "--out", str(out)), needle)
+    assert not out.exists(), "a refused sweep wrote its output folder"

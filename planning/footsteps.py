@@ -97,9 +97,9 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         first = plan_footsteps(scn, dataclasses.replace(cfg, search="sampled",
                                                         max_expansions=budget),
                                progress, exclude, memo)
-        if first.success:
-            return first
-        rest = None if cfg.max_expansions is None else max(1, cfg.max_expansions - budget)
+        if first.success or (cfg.max_expansions is not None and cfg.max_expansions <= budget):
+            return first  # a route, or the whole budget spent by the sampled stage
+        rest = None if cfg.max_expansions is None else cfg.max_expansions - budget
         # the time limit holds for both stages together (each had all of it)
         left = None if cfg.time_limit is None else max(
             1e-3, cfg.time_limit - (search_clock() - clock0))

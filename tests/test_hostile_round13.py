@@ -112,3 +112,15 @@ def test_sweep_lists_with_repeats_or_empty_items_are_refused(tmp_path, args, nee
     out = tmp_path / "out"
     one_error_line(run("experiment", *args, "--trials", "1", "--out", str(out)), needle)
     assert not out.exists(), "a refused sweep wrote its output folder"
+
+
+def test_the_hybrid_search_keeps_to_a_budget_its_sampled_stage_spent(tmp_path):
+    """`--search hybrid --max-expansions 2`: the sampled stage spent both expansions, then the
+    complete stage ran one more and said "max_expansions 1", a budget the user never gave."""
+    out = tmp_path / "hy.json"
+    result = run("plan", "demo-shaft", "--footsteps-only", "--search", "hybrid",
+                 "--max-expansions", "2", "--no-pictures", "-o", str(out))
+    assert result.returncode == 1, result.stderr[-500:]
+    plan = json.loads(out.read_text())
+    assert plan["search"]["expansions"] <= 2, plan["search"]
+    assert "max_expansions 1)" not in plan["reason"], plan["reason"]

@@ -234,7 +234,9 @@ def _rrt_connect(scn: Scenario, stance: Stance, start: np.ndarray, goal: np.ndar
         st = space.allocState()
         st.setX(float(pose[0]))
         st.setY(float(pose[1]))
-        st.setYaw(float(pose[2]))
+        # within SE(2)'s bounds, [-pi, pi]: a heading past them (a body turned over, 3.18 rad
+        # on rockfall-7029 at 8 m) was refused as an invalid start, on the terminal
+        st.setYaw(math.remainder(float(pose[2]), 2.0 * math.pi))
         states.append(st)
     ss.setStartAndGoalStates(*states)
     # Stopped on the work done, not on the clock, so that a seed gives the same path on a busy
@@ -249,6 +251,8 @@ def _rrt_connect(scn: Scenario, stance: Stance, start: np.ndarray, goal: np.ndar
                       + ("" if cfg.ompl_time is None else f" or {cfg.ompl_time} s"))
     path = np.array([[s.getX(), s.getY(), s.getYaw()] for s in ss.getSolutionPath().getStates()])
     path[:, 2] = start[2] + np.unwrap(path[:, 2] - start[2])
+    # the first state holds the start's heading wrapped to [-pi, pi]: whole turns back
+    path[:, 2] += 2.0 * math.pi * round((start[2] - path[0, 2]) / (2.0 * math.pi))
     path[0] = start
     if abs(path[-1, 2] - goal[2]) > 1e-6:
         return None, "OMPL path ends a full turn away from the goal's orientation"

@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -35,6 +35,7 @@ from rb_drake.scenario import Scenario
 from rb_drake.statics import allocate, statics_problem
 
 PLANNERS = ("rbp", "naive")
+Move = tuple[tuple[str, ...], int, str]  # (stance, boom, anchor) of a footstep move
 
 
 @dataclasses.dataclass(frozen=True)
@@ -248,14 +249,14 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         return build_plan(scn, fp, planner, timing)
     failure, done, built = _fly(scn, fp, cfg, timing, planner, progress)
     memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
-    excluded: list[tuple[tuple[str, ...], int, str]] = []
+    excluded: list[Move] = []
     last_search = ""  # how the last search again ended, when it found no route
     for _ in range(cfg.motion_retries):
         if not failure:
             break
         # A transition holds at its pose, but the motion through it may not (a reach arc whose
         # intermediate cantilevers no tensions balance): search again without that move.
-        move = failed_move(fp, done)
+        move = failed_move(fp, done, excluded)
         excluded.append(move)
         if progress is not None:
             progress(f"{failure[:100]}...; searching footsteps again without boom {move[1]} "
@@ -331,7 +332,7 @@ def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
     if route is None:
         raise ValueError("partial_climb: the footstep plan has no partial route")
     memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
-    excluded: list[tuple[tuple[str, ...], int, str]] = []
+    excluded: list[Move] = []
     search = fp
     kept: tuple | None = None  # (distance, motions, flown route, failure, search)
     first_failure = ""
@@ -349,7 +350,7 @@ def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
                 kept = (flown.goal_distance, motions, flown, failure, search)
         if not failure or not route.steps or attempt == cfg.motion_retries:
             break
-        excluded.append(failed_move(route, len(motions)))
+        excluded.append(failed_move(route, len(motions), excluded))
         t0 = time.perf_counter()
         search = plan_footsteps(scn, cfg.footstep, progress=footstep_progress, exclude=excluded,
                                 memo=memo, partial=True)
@@ -382,7 +383,7 @@ def partial_climb(scn: Scenario, fp: FootstepPlan, config: PipelineConfig | None
                                         start_distance_m=start))
 
 
-def retries_made(excluded: list[tuple[tuple[str, ...], int, str]], last_search: str,
+def retries_made(excluded: list[Move], last_search: str,
                  allowed: int) -> str:
     """What a failed plan's reason adds about the footstep searches made again after a motion
     failed: the moves each was made without (`failed_move`), in order, and how they ended
@@ -399,13 +400,21 @@ def retries_made(excluded: list[tuple[tuple[str, ...], int, str]], last_search: 
     return f"{text}; motion_retries {allowed} used up (--config sets motion_retries)"
 
 
-def failed_move(fp: FootstepPlan, done: int) -> tuple[tuple[str, ...], int, str]:
+def failed_move(fp: FootstepPlan, done: int, excluded: Collection[Move] = ()) -> Move:
     """The move (stance, boom, anchor) to exclude when `phase_motions` stopped after `done`
     phases: a failed reach is its own move's; a failed body phase leads to the next move (or,
-    the last one, from the previous)."""
+    the last one, from the previous), unless a move out of the same stance was excluded
+    already: then the body's way out was not what failed but its way in (its start pose, where
+    the booms nearly meet: generated rockfall 7029 failed its ten retries on one stance's
+    exits), and the move into the stance is excluded."""
     k = min(done // 2, len(fp.steps) - 1)
+    stance = tuple(fp.stances[k])
+    body = done % 2 == 0 and done // 2 < len(fp.steps)
+    if body and k > 0 and any(move[0] == stance for move in excluded):
+        before = fp.steps[k - 1]
+        return tuple(fp.stances[k - 1]), before.boom, before.to_anchor
     step = fp.steps[k]
-    return tuple(fp.stances[k]), step.boom, step.to_anchor
+    return stance, step.boom, step.to_anchor
 
 
 ROOM = 1e-4  # a phase whose seed's mean P is within this of 1 leaves SCP nothing to gain

@@ -28,8 +28,8 @@ RULES = {
     "start": "the climb starts at t = 0 at the start pose, in the start stance",
     "goal": "a plan that claims success ends inside the goal disc (and its search record, if "
             "any, says a route was found); a partial plan (`partial`) "
-            "does not claim success and ends in the stance it names, as far from the goal as "
-            "it says",
+            "does not claim success (nor does its search record say a route was found) and "
+            "ends in the stance it names, as far from the goal as it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
                    "on a body phase",
     "phase-form": "a phase's stance, free boom, anchors and steps fit its kind",
@@ -400,6 +400,11 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
     if plan.success:
         fail("goal", "a plan that claims success is not partial (it reaches the goal or it is "
              "not a success)")
+    if plan.search is not None and plan.search.stop == Stop.ROUTE:
+        # a partial climb is flown only when the search found no route (its stop says how it
+        # ended); a record saying a route was found contradicts the plan's failure
+        fail("goal", "a partial plan's search record says a route was found (stop ''): a "
+             "partial climb follows a search that found none")
     last = plan.phases[k]
     if last.kind == "body" and tuple(last.stance) != tuple(part.reached_stance):
         fail("goal", f"partial.reached_stance {list(part.reached_stance)} but the climb ends in "

@@ -420,6 +420,17 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
         mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
         if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
+    # the reason, which `rbp check` prints on its ok line, says what the partial climb is in
+    # the words planning.pipeline.partial_climb writes: they are the climb's
+    n = sum(p.kind == "reach" for p in plan.phases)
+    told = (f"partial climb: {n} regrasp{'' if n == 1 else 's'} to stance "
+            f"{list(part.reached_stance)}, {part.goal_distance_m:.2f} m from the goal (the "
+            f"start is {part.start_distance_m:.2f} m)")
+    if told not in plan.reason:
+        at = plan.reason.find("partial climb:")
+        theirs = (f"it says {plan.reason[at:at + len(told) + 40]!r}" if at >= 0
+                  else "it does not say")
+        fail("goal", f"the reason does not say what the partial climb is ({told!r}): {theirs}")
 
 
 def scenario_problems(plan: Plan, scn: Scenario) -> list[Problem]:

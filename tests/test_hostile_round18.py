@@ -97,3 +97,51 @@ def test_a_partial_plan_whose_search_found_a_route_is_refused(partial: PlanFile,
     assert plan["search"]["stop"] != ""
     plan["search"]["stop"] = ""
     refused(plan, tmp_path, "goal", "search record says a route was found")
+
+
+def _rescored(plan: PlanFile) -> PlanFile:
+    from planning.plan import score_plan
+
+    model = Plan.from_dict(plan)
+    return plan_dict(score_plan(model, plan_scenario(model, "x").robot.attach_failure))
+
+
+def _cut_partial(plan: PlanFile, k: int) -> PlanFile:
+    """The partial plan cut to its phases up to body phase k (its release ramp removed), a
+    partial climb in its own right: rescored, its `partial` record recomputed."""
+    plan = copy.deepcopy(plan)
+    plan["phases"] = plan["phases"][:k + 1]
+    phase = plan["phases"][k]
+    assert phase["kind"] == "body"
+    keep = len(phase["steps"])
+    while "ramp" in phase["steps"][keep - 1]:
+        keep -= 1
+    phase["steps"] = phase["steps"][:keep]
+    for key in ("seed_p_success", "seed_tension", "seed_effort", "effort"):
+        phase["motion"][key] = phase["motion"][key][:keep]
+    plan = _rescored(plan)
+    scn = plan_scenario(Plan.from_dict(plan), "x")
+    centre = scn.anchor_positions[[scn.anchor_index[a] for a in phase["stance"]]].mean(axis=0)
+    plan["partial"]["reached_stance"] = phase["stance"]
+    plan["partial"]["goal_distance_m"] = float(np.linalg.norm(centre - scn.goal_position))
+    return plan
+
+
+def test_a_partial_plan_whose_reason_names_another_climb_is_refused(partial: PlanFile,
+                                                                   tmp_path: Path) -> None:
+    """The reason, which `rbp check` prints on its ok line, names the partial climb's regrasps,
+    stance and distances: a partial plan cut to fewer phases (a valid partial climb, rescored,
+    its record recomputed) passed still saying "partial climb: N regrasps to stance S" of the
+    climb it no longer holds."""
+    k = max(k for k, p in enumerate(partial["phases"][:-1]) if p["kind"] == "body")
+    plan = _cut_partial(partial, k)
+    assert plan["regrasps"] < partial["regrasps"]
+    refused(plan, tmp_path, "goal", "the reason does not say what the partial climb is")
+    n = plan["regrasps"]
+    part = plan["partial"]
+    plan["reason"] = plan["reason"].replace(
+        partial["reason"].split("partial climb: ")[1].split(")")[0] + ")",
+        f"{n} regrasp{'' if n == 1 else 's'} to stance {part['reached_stance']}, "
+        f"{part['goal_distance_m']:.2f} m from the goal (the start is "
+        f"{part['start_distance_m']:.2f} m)")
+    assert verify_plan(plan) == [], "the cut climb, its reason told, is a partial plan"

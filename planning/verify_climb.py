@@ -178,6 +178,9 @@ def _start(plan: Plan, scn: Scenario, fail) -> None:
     if held != start_stance:
         fail("start", f"the climb starts in stance {held}, not the start stance "
              f"{start_stance}", 0, 0)
+    elif len(set(held)) != len(held):  # a continuation's first reach left an anchor held twice
+        fail("start", f"the start stance {start_stance} holds an anchor with two booms (a "
+             "stance holds four distinct anchors)", 0, 0)
     gap = np.abs(np.subtract(step.pose, start_pose)).max()
     if not gap <= POSE_TOL:
         fail("start", f"the first pose {list(step.pose)} is not the start pose {start_pose} "

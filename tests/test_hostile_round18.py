@@ -145,3 +145,23 @@ def test_a_partial_plan_whose_reason_names_another_climb_is_refused(partial: Pla
         f"{part['goal_distance_m']:.2f} m from the goal (the start is "
         f"{part['start_distance_m']:.2f} m)")
     assert verify_plan(plan) == [], "the cut climb, its reason told, is a partial plan"
+
+
+def test_a_continuation_starting_with_an_anchor_held_twice_is_refused(
+        continuation: PlanFile, tmp_path: Path) -> None:
+    """A continuation's first reach leaves `from_anchor`, which its `start` stance holds; the
+    phase's stance (three booms) was checked for distinct anchors but not the start stance
+    with from_anchor: one held by another boom gave a start on an anchor held twice, which
+    rule start did not name (on the bundled caves no such reach holds, so other rules refused
+    it; a cave where one did would have passed)."""
+    plan = copy.deepcopy(continuation)
+    first = plan["phases"][0]
+    assert first["kind"] == "reach"
+    j = first["free_boom"]
+    other = next(a for a in first["stance"] if a is not None)
+    first["from_anchor"] = other
+    plan["start"]["stance"][j] = other
+    problems = verify_plan(plan)
+    assert any(p.rule == "start" and "two booms" in p.text for p in problems), \
+        "\n".join(map(str, problems))
+    refused(plan, tmp_path, "start", "holds an anchor with two booms")

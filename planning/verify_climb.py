@@ -481,8 +481,14 @@ def check_note(plan: Plan) -> str:
         # the verifier trusts a continuation's `start`: say where it starts, so that a climb
         # cut from the middle of another does not read as a climb from the cave's start
         start = plan.scenario.get("start", {})
+        first = plan.phases[0] if plan.phases else None
+        free = ""
+        if first is not None and first.kind == "reach":  # it starts after a failed grasp
+            free = (f" with boom {first.free_boom} free, its gripper at {first.from_anchor} (a "
+                    "grasp that failed: the robot starts on three booms, and that stance "
+                    "holding on four is not verified)")
         notes.append(f"a continuation: starts at pose {_rounded(plan.start.pose)} in stance "
-                     f"{list(plan.start.stance)} (the cave's start: pose "
+                     f"{list(plan.start.stance)}{free} (the cave's start: pose "
                      f"{_rounded(start.get('pose', []))} in stance {start.get('stance')}); how "
                      "the robot got there is not verified")
     part = plan.partial

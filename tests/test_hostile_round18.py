@@ -165,3 +165,14 @@ def test_a_continuation_starting_with_an_anchor_held_twice_is_refused(
     assert any(p.rule == "start" and "two booms" in p.text for p in problems), \
         "\n".join(map(str, problems))
     refused(plan, tmp_path, "start", "holds an anchor with two booms")
+
+
+def test_a_continuation_starting_mid_reach_says_its_boom_is_free(continuation: PlanFile,
+                                                                 tmp_path: Path) -> None:
+    """The ok line said a continuation "starts ... in stance S" of one that starts mid-reach,
+    after a failed grasp: on three booms, S (with the failed anchor) never verified."""
+    done = check(continuation, tmp_path)
+    first = continuation["phases"][0]
+    assert done.returncode == 0, done.stdout
+    assert (f"with boom {first['free_boom']} free, its gripper at {first['from_anchor']}"
+            in done.stdout and "is not verified" in done.stdout), done.stdout

@@ -176,3 +176,15 @@ def test_a_continuation_starting_mid_reach_says_its_boom_is_free(continuation: P
     assert done.returncode == 0, done.stdout
     assert (f"with boom {first['free_boom']} free, its gripper at {first['from_anchor']}"
             in done.stdout and "is not verified" in done.stdout), done.stdout
+
+
+def test_a_continuations_route_quality_is_said_to_be_the_plan_it_continues(
+        continuation: PlanFile, tmp_path: Path) -> None:
+    """A continuation keeps the search record of the plan it continues: the ok line said
+    "route cost C, within 2.03x of the optimum (as the plan's search record states it)" of a
+    climb that is not that route (a retry's reach added; a footstep replan's other route)."""
+    assert continuation["search"]["cost"] is not None
+    done = check(continuation, tmp_path)
+    assert done.returncode == 0, done.stdout
+    assert "of the optimum" in done.stdout and "the plan this continuation continues" in \
+        done.stdout and "as the plan's search record states it" not in done.stdout, done.stdout

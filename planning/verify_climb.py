@@ -403,6 +403,11 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
     if plan.success:
         fail("goal", "a plan that claims success is not partial (it reaches the goal or it is "
              "not a success)")
+    if plan.start is not None:
+        # rbp plan --partial climbs from the cave's start, which start_distance_m measures; a
+        # replan (systems.replanning) is a route to the goal or none
+        fail("goal", "a continuation (a plan with `start`) is not a partial plan: a partial "
+             "climb starts at the cave's start")
     if plan.search is not None and plan.search.stop == Stop.ROUTE:
         # a partial climb is flown only when the search found no route (its stop says how it
         # ended); a record saying a route was found contradicts the plan's failure

@@ -188,3 +188,28 @@ def test_a_continuations_route_quality_is_said_to_be_the_plan_it_continues(
     assert done.returncode == 0, done.stdout
     assert "of the optimum" in done.stdout and "the plan this continuation continues" in \
         done.stdout and "as the plan's search record states it" not in done.stdout, done.stdout
+
+
+def test_a_partial_continuation_is_refused(continuation: PlanFile, tmp_path: Path) -> None:
+    """No command writes a continuation (`start`) that is partial: `rbp plan --partial` climbs
+    from the cave's start (`partial.start_distance_m` measures it) and a replanner returns a
+    route to the goal or none. One made of the retry continuation cut to a body phase, its
+    record recomputed and its reason told, passed, saying `(the start is X m)` of the cave's
+    start while the climb starts elsewhere."""
+    plan = copy.deepcopy(continuation)
+    k = max(k for k, p in enumerate(plan["phases"][:-1]) if p["kind"] == "body")
+    plan.update(success=False, search=dict(plan["search"], stop="noroute"),
+                partial={"reached_stance": plan["phases"][k]["stance"], "goal_distance_m": 0.0,
+                         "start_distance_m": 0.0})
+    plan = _cut_partial(plan, k)
+    scn = plan_scenario(Plan.from_dict(plan), "x")
+    ids = [scn.anchor_index[a] for a in scn.start_stance]
+    part, n = plan["partial"], plan["regrasps"]
+    part["start_distance_m"] = float(np.linalg.norm(scn.anchor_positions[ids].mean(axis=0)
+                                                    - scn.goal_position))
+    plan["reason"] = (f"no route; partial climb: {n} regrasps to stance "
+                      f"{part['reached_stance']}, {part['goal_distance_m']:.2f} m from the goal "
+                      f"(the start is {part['start_distance_m']:.2f} m)")
+    problems = verify_plan(copy.deepcopy(plan))
+    assert [p.rule for p in problems] == ["goal"], "\n".join(map(str, problems))
+    refused(plan, tmp_path, "goal", "is not a partial plan")

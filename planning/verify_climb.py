@@ -27,7 +27,7 @@ RULES = {
     "robot": "the robot under `scenario` is the robot at the top level",
     "start": "the climb starts at t = 0 at the start pose, in the start stance",
     "goal": "a plan that claims success ends inside the goal disc (and its search record, if "
-            "any, says a route was found); a partial plan (`partial`) "
+            "any, says a route was found); a partial plan (`partial`, never a continuation) "
             "does not claim success (nor does its search record say a route was found) and "
             "ends in the stance it names, as far from the goal as it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "

@@ -27,9 +27,9 @@ RULES = {
     "robot": "the robot under `scenario` is the robot at the top level",
     "start": "the climb starts at t = 0 at the start pose, in the start stance",
     "goal": "a plan that claims success ends inside the goal disc (and its search record, if "
-            "any, says a route was found); a partial plan (`partial`) "
-            "does not claim success and ends in the stance it names, as far from the goal as "
-            "it says",
+            "any, says a route was found); a partial plan (`partial`, never a continuation) "
+            "does not claim success (nor does its search record say a route was found) and "
+            "ends in the stance it names, as far from the goal as it says",
     "phase-order": "phases alternate body, reach, ..., and a successful or partial plan ends "
                    "on a body phase",
     "phase-form": "a phase's stance, free boom, anchors and steps fit its kind",
@@ -178,6 +178,9 @@ def _start(plan: Plan, scn: Scenario, fail) -> None:
     if held != start_stance:
         fail("start", f"the climb starts in stance {held}, not the start stance "
              f"{start_stance}", 0, 0)
+    elif len(set(held)) != len(held):  # a continuation's first reach left an anchor held twice
+        fail("start", f"the start stance {start_stance} holds an anchor with two booms (a "
+             "stance holds four distinct anchors)", 0, 0)
     gap = np.abs(np.subtract(step.pose, start_pose)).max()
     if not gap <= POSE_TOL:
         fail("start", f"the first pose {list(step.pose)} is not the start pose {start_pose} "
@@ -400,6 +403,16 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
     if plan.success:
         fail("goal", "a plan that claims success is not partial (it reaches the goal or it is "
              "not a success)")
+    if plan.start is not None:
+        # rbp plan --partial climbs from the cave's start, which start_distance_m measures; a
+        # replan (systems.replanning) is a route to the goal or none
+        fail("goal", "a continuation (a plan with `start`) is not a partial plan: a partial "
+             "climb starts at the cave's start")
+    if plan.search is not None and plan.search.stop == Stop.ROUTE:
+        # a partial climb is flown only when the search found no route (its stop says how it
+        # ended); a record saying a route was found contradicts the plan's failure
+        fail("goal", "a partial plan's search record says a route was found (stop ''): a "
+             "partial climb follows a search that found none")
     last = plan.phases[k]
     if last.kind == "body" and tuple(last.stance) != tuple(part.reached_stance):
         fail("goal", f"partial.reached_stance {list(part.reached_stance)} but the climb ends in "
@@ -415,6 +428,17 @@ def _partial(plan: Plan, scn: Scenario, fail) -> None:
         mine = float(np.linalg.norm(centre - np.asarray(scn.goal_position, dtype=float)))
         if not math.isclose(mine, said, rel_tol=1e-9, abs_tol=1e-9):
             fail("goal", f"partial.{name}: the plan says {said}, recomputed {mine}")
+    # the reason, which `rbp check` prints on its ok line, says what the partial climb is in
+    # the words planning.pipeline.partial_climb writes: they are the climb's
+    n = sum(p.kind == "reach" for p in plan.phases)
+    told = (f"partial climb: {n} regrasp{'' if n == 1 else 's'} to stance "
+            f"{list(part.reached_stance)}, {part.goal_distance_m:.2f} m from the goal (the "
+            f"start is {part.start_distance_m:.2f} m)")
+    if told not in plan.reason:
+        at = plan.reason.find("partial climb:")
+        theirs = (f"it says {plan.reason[at:at + len(told) + 40]!r}" if at >= 0
+                  else "it does not say")
+        fail("goal", f"the reason does not say what the partial climb is ({told!r}): {theirs}")
 
 
 def scenario_problems(plan: Plan, scn: Scenario) -> list[Problem]:
@@ -462,8 +486,14 @@ def check_note(plan: Plan) -> str:
         # the verifier trusts a continuation's `start`: say where it starts, so that a climb
         # cut from the middle of another does not read as a climb from the cave's start
         start = plan.scenario.get("start", {})
+        first = plan.phases[0] if plan.phases else None
+        free = ""
+        if first is not None and first.kind == "reach":  # it starts after a failed grasp
+            free = (f" with boom {first.free_boom} free, its gripper at {first.from_anchor} (a "
+                    "grasp that failed: the robot starts on three booms, and that stance "
+                    "holding on four is not verified)")
         notes.append(f"a continuation: starts at pose {_rounded(plan.start.pose)} in stance "
-                     f"{list(plan.start.stance)} (the cave's start: pose "
+                     f"{list(plan.start.stance)}{free} (the cave's start: pose "
                      f"{_rounded(start.get('pose', []))} in stance {start.get('stance')}); how "
                      "the robot got there is not verified")
     part = plan.partial

@@ -217,21 +217,29 @@ def _summary(plan: Plan, recorded: bool = False) -> str:
     grasps = f" (grasps alone {plan.p_grasps:.4f})" if plan.p_grasps is not None else ""
     return (f"success: true, p_min {plan.p_min:.4f}, p_path {plan.p_path:.4f}{grasps}, "
             f"regrasps {plan.regrasps}, time {plan.timing['total']:.2f} s"
-            + _route_quality(search, recorded))
+            + _route_quality(search, recorded, continuation=plan.start is not None))
 
 
-def _route_quality(search: dict, recorded: bool = False) -> str:
+def _route_quality(search: dict, recorded: bool = False,
+                   continuation: bool = False) -> str:
     """How far the route is from the best one, as the anytime search proved it, and the
     refined lattice it was found on (planning.refinement). `recorded` (rbp check): said to be
     the search's record, which the verifier holds consistent but cannot prove without
-    searching again (a lower bound copied onto the cost reads "optimal")."""
+    searching again (a lower bound copied onto the cost reads "optimal"). A `continuation`
+    (a plan with `start`, systems.replanning) keeps the record of the plan it continues, whose
+    route is not the continuation's (a retry adds a reach, a footstep replan climbs another
+    route): said so."""
     text = _bound_text(search)
     refined = search.get("refined")
     if refined:
         step, angle = refined[-1]
         text += (f"; on the refined lattice {step * 100:g} cm / {angle:g} deg, the coarser "
                  "having no route")
-    if recorded and text:
+    if recorded and text and continuation:
+        text += (" (as the search record of the plan this continuation continues states it, "
+                 "of that plan's route from the cave's start, not of this climb; not searched "
+                 "again here)")
+    elif recorded and text:
         text += " (as the plan's search record states it; not searched again here)"
     return text
 

@@ -106,6 +106,14 @@ def path_name(text: str) -> str:
 path_name.__name__ = "path"
 
 
+def path_argument(text: str) -> Path:
+    """`path_name` as a Path (pathlib reads '' as the current folder)."""
+    return Path(path_name(text))
+
+
+path_argument.__name__ = "path"
+
+
 def whole(lo: int, hi: int) -> Callable[[str], int]:
     """A whole number from `lo` to `hi`."""
     def parse(text: str) -> int:

@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import OneLineParser, json_argument, number, seed_number
+from experiments.arguments import OneLineParser, json_argument, number, path_argument, seed_number
 from experiments.common import cave_kind
 from experiments.sweep import quantiles
 from rb_drake.errors import EXIT_OK
@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="one tree after the other, each with every core (the oracle's "
                              "setting; the order alternates from cave to cave), not both at "
                              "once on a core each")
-    parser.add_argument("--out", type=Path, required=True, help="results JSON")
+    parser.add_argument("--out", type=path_argument, required=True, help="results JSON")
     args = parser.parse_args(argv)
     for tree in (args.old, args.new):
         if not (tree / "planning" / "complete.py").is_file():

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from experiments.arguments import OneLineParser, number, whole
+from experiments.arguments import OneLineParser, number, path_argument, whole
 from experiments.sweep import machine_info
 from rb_drake.errors import EXIT_OK
 
@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
                         metavar=("OLD", "NEW"), help="the two trees' names in the figure")
     parser.add_argument("--title", default="Footstep search memory (--thorough), before and "
                         "after issue 31")
-    parser.add_argument("--out", type=Path, default=Path("out/search-memory.png"))
+    parser.add_argument("--out", type=path_argument, default=Path("out/search-memory.png"))
     args = parser.parse_args(argv)
     runs = [run_cave(args.old, args.new, cave, args.time_limit, args.every, args.memory_mb)
             for cave in args.caves]

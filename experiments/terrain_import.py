@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from experiments.arguments import OneLineParser, seed_number
+from experiments.arguments import OneLineParser, path_argument, seed_number
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS_FIGURE = ROOT / "docs" / "figures" / "terrain-import.png"
@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scan", type=Path, default=MESH,
                         help="a mesh or point cloud (.stl, .obj, .ply; default the lava tube)")
     parser.add_argument("--seed", type=seed_number, default=0, help="the anchors' seed (default 0)")
-    parser.add_argument("--out", type=Path, default=DOCS_FIGURE, help="the picture to write")
+    parser.add_argument("--out", type=path_argument, default=DOCS_FIGURE,
+                        help="the picture to write")
     args = parser.parse_args(argv)
 
     # rbp.import_scenario and rbp.plan(footsteps_only=True), from below the command line's

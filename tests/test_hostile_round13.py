@@ -124,3 +124,12 @@ def test_the_hybrid_search_keeps_to_a_budget_its_sampled_stage_spent(tmp_path):
     plan = json.loads(out.read_text())
     assert plan["search"]["expansions"] <= 2, plan["search"]
     assert "max_expansions 1)" not in plan["reason"], plan["reason"]
+
+
+@pytest.mark.parametrize("module", ["footstep_ab", "search_memory", "terrain_import"])
+def test_the_scripts_refuse_an_empty_out(module):
+    """`--out ''` was read by pathlib as the current folder in these three scripts."""
+    env = dict(os.environ, RBP_THREADS="1")
+    result = subprocess.run([sys.executable, "-m", f"experiments.{module}", "--out", ""],
+                            capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    one_error_line(result, "--out", "an empty path")

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_helpers import one_error_line
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml"
@@ -19,15 +20,6 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, LCM_DEFAULT_URL="memq://", RBP_THREADS="1")
     return subprocess.run([sys.executable, "-m", "rbp", *args], capture_output=True, text=True,
                           env=env, cwd=ROOT, timeout=120)
-
-
-def one_error_line(result: subprocess.CompletedProcess[str], *needles: str) -> str:
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2, f"exit {result.returncode}, stderr {result.stderr[-400:]!r}"
-    assert len(lines) == 1 and lines[0].startswith("error: "), f"not one line: {lines!r}"
-    for needle in needles:
-        assert needle in lines[0], f"{needle!r} not in {lines[0]!r}"
-    return lines[0]
 
 
 @pytest.mark.parametrize("text", ["2_0", "４.5", "0x10", "5.", "1e"])
@@ -46,10 +38,13 @@ def test_a_file_name_with_a_trailing_slash_is_refused(tmp_path):
     """pathlib.Path("plan.json/") is Path("plan.json"): the slash must not be dropped."""
     plan = tmp_path / "plan.json"
     plan.write_text(json.dumps({"format": "reachbot-plan/1"}))
-    one_error_line(run("check", f"{plan}/"), "plan", "ends with '/'", "not a directory")
-    one_error_line(run("scenario", "check", f"{DEMO}/"), "scenario", "ends with '/'")
+    line = one_error_line(run("check", f"{plan}/"), "plan", "ends with '/'", "not a directory")
+    assert f"'{plan}/'" in line, f"the name is not shown as given: {line}"
+    line = one_error_line(run("scenario", "check", f"{DEMO}/"), "scenario", "ends with '/'")
+    assert f"'{DEMO}/'" in line, f"the name is not shown as given: {line}"
     # a directory given with its slash is still a directory, refused by the reader
-    one_error_line(run("check", f"{tmp_path}/"), "is a directory")
+    line = one_error_line(run("check", f"{tmp_path}/"), "is a directory")
+    assert "ends with '/'" not in line, f"a folder's slash called a typo: {line}"
 
 
 def test_an_import_with_too_few_anchors_names_the_option(tmp_path):
@@ -132,4 +127,5 @@ def test_the_scripts_refuse_an_empty_out(module):
     env = dict(os.environ, RBP_THREADS="1")
     result = subprocess.run([sys.executable, "-m", f"experiments.{module}", "--out", ""],
                             capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
-    one_error_line(result, "--out", "an empty path")
+    line = one_error_line(result, "--out", "an empty path")
+    assert line.startswith("error: --out: "), f"the option is not named first: {line}"

@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from cli_helpers import one_error_line
 
 import rbp
 from planning.complete_config import AnytimeConfig
@@ -34,15 +35,6 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
                           env=env(), cwd=ROOT, timeout=120)
 
 
-def one_error_line(result: subprocess.CompletedProcess[str], *needles: str) -> str:
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2, f"exit {result.returncode}, stderr {result.stderr[-400:]!r}"
-    assert len(lines) == 1 and lines[0].startswith("error: "), f"not one line: {lines!r}"
-    for needle in needles:
-        assert needle in lines[0], f"{needle!r} not in {lines[0]!r}"
-    return lines[0]
-
-
 @pytest.mark.parametrize("command", [
     ["plan", "demo-shaft", "--footsteps-only", "-o"],
     ["plan", "demo-shaft", "--footsteps-only", "--no-pictures", "-o"],
@@ -59,8 +51,10 @@ def test_an_output_name_ending_in_a_slash_is_refused(tmp_path, command):
 
 
 def test_an_existing_folder_with_its_slash_is_still_called_a_folder(tmp_path):
-    one_error_line(run("plan", "demo-shaft", "--footsteps-only", "-o", f"{tmp_path}/"),
-                   "-o", "is a directory")
+    line = one_error_line(run("plan", "demo-shaft", "--footsteps-only", "-o", f"{tmp_path}/"),
+                          "-o", "is a directory")
+    assert "ends with '/'" not in line, f"a folder's slash called a typo: {line}"
+    assert list(tmp_path.iterdir()) == [], f"a refused command wrote {list(tmp_path.iterdir())}"
 
 
 def test_the_api_refuses_an_output_name_ending_in_a_slash(tmp_path):
@@ -88,6 +82,18 @@ CONFLICTS = [
 ]
 
 
+def main_in_a_fresh_process(args: list[str], cwd: Path,
+                            modules: tuple[str, ...] = ("numba",)
+                            ) -> subprocess.CompletedProcess[str]:
+    """`rbp.cli.main(args)` in a new interpreter, which prints its status and whether each of
+    `modules` was imported: refusals must come before the planner's imports."""
+    code = ("import sys; from rbp.cli import main; "
+            f"status = main({args!r}); "
+            f"print(status, *(m in sys.modules for m in {modules!r}))")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env(), cwd=cwd, timeout=120)
+
+
 @pytest.mark.parametrize("options, flag, reason", CONFLICTS)
 def test_conflicting_options_are_refused_before_the_planner_is_imported(tmp_path, options,
                                                                         flag, reason):
@@ -96,11 +102,8 @@ def test_conflicting_options_are_refused_before_the_planner_is_imported(tmp_path
     silent ones searched completely for --search sampled, wrote no partial climb, ignored
     the naive planner's search options or dropped the expansion budget)."""
     out = tmp_path / "p.json"
-    code = ("import sys; from rbp.cli import main; "
-            f"status = main({['plan', 'demo-shaft', '-o', str(out), *options]!r}); "
-            "print(status, 'numba' in sys.modules, 'planning.pipeline' in sys.modules)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env(), cwd=tmp_path, timeout=120)
+    done = main_in_a_fresh_process(["plan", "demo-shaft", "-o", str(out), *options], tmp_path,
+                                   ("numba", "planning.pipeline"))
     lines = done.stderr.strip().splitlines()
     assert done.stdout.strip().splitlines()[-1:] == ["2 False False"], (
         f"not refused before the imports (status, numba, planning.pipeline): {done.stdout!r} "
@@ -113,11 +116,8 @@ def test_conflicting_options_are_refused_before_the_planner_is_imported(tmp_path
 def test_a_scenario_with_from_plan_is_refused_before_the_imports(tmp_path):
     plan = tmp_path / "p.json"
     plan.write_text('{"format": "reachbot-plan/2"}')
-    code = ("import sys; from rbp.cli import main; "
-            f"status = main(['plan', 'demo-crevasse', '--from-plan', {str(plan)!r}, '-o', "
-            f"{str(tmp_path / 'q.json')!r}]); print(status, 'numba' in sys.modules)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env(), cwd=tmp_path, timeout=120)
+    done = main_in_a_fresh_process(["plan", "demo-crevasse", "--from-plan", str(plan), "-o",
+                                    str(tmp_path / "q.json")], tmp_path)
     assert done.stdout.strip().splitlines()[-1:] == ["2 False"], done.stdout + done.stderr
     assert "not both" in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
 
@@ -244,11 +244,8 @@ def test_a_recorded_configuration_failing_a_joint_check_is_refused_by_check_too(
 def test_a_joint_check_of_a_config_file_comes_before_the_imports(tmp_path, text, field):
     config = tmp_path / "planner.yaml"
     config.write_text(text + "\n")
-    code = ("import sys; from rbp.cli import main; "
-            f"status = main(['plan', 'demo-shaft', '--config', {str(config)!r}, '-o', "
-            f"{str(tmp_path / 'p.json')!r}]); print(status, 'numba' in sys.modules)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env(), cwd=tmp_path, timeout=120)
+    done = main_in_a_fresh_process(["plan", "demo-shaft", "--config", str(config), "-o",
+                                    str(tmp_path / "p.json")], tmp_path)
     assert done.stdout.strip().splitlines()[-1:] == ["2 False"], done.stdout + done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {config}: {field}: "), lines

@@ -366,7 +366,9 @@ def test_the_search_clock_leaves_out_numbas_compiling():
     compiled = compile_seconds() - compiled0
     wall, searched = time.perf_counter() - wall0, search_clock() - clock0
     assert compiled > 0.0, "numba's compile event was not timed"
-    assert abs((wall - searched) - compiled) < 1e-6, (wall, searched, compiled)
+    # The two clocks are read a few microseconds apart (CI once saw 1.2 us): 1 ms tolerance,
+    # far below the ~20-30 ms that compiling even this function takes.
+    assert abs((wall - searched) - compiled) < 1e-3, (wall, searched, compiled)
 
 
 def test_a_time_limit_is_not_spent_compiling_the_kernels(tmp_path):

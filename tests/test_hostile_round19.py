@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_helpers import run_rbp
 
 from planning import verify_between
 from planning.check import verify_plan
@@ -111,3 +112,42 @@ def test_the_chunked_rock_test_finds_what_one_batch_finds(golden: PlanFile,
         monkeypatch.setattr(verify_between, "CHUNK", chunk)
         assert verify_between.travel_failures(world, stance, q, None, pair) == whole, (
             f"chunks of {chunk} configurations find other crossings than one batch")
+
+
+def footstep_plan(plan: PlanFile) -> PlanFile:
+    """`plan` without `time_step` and its `motion` records: a footstep plan, whose end
+    configurations alone `rbp check` verifies."""
+    out = copy.deepcopy(plan)
+    del out["time_step"]
+    for phase in out["phases"]:
+        del phase["motion"]
+    return out
+
+
+def with_pebble_under_the_body(plan: PlanFile) -> PlanFile:
+    """A rock 4 cm wide wholly inside the body's outline where the first reach phase holds
+    it (no body edge crosses it, no body corner lies in it; the booms start at the corners)."""
+    out = copy.deepcopy(plan)
+    x, y = out["phases"][1]["steps"][0]["pose"][:2]
+    out["scenario"]["walls"].append([[x - 0.02, y - 0.01], [x + 0.02, y - 0.01], [x, y + 0.02]])
+    return out
+
+
+def test_a_rock_wholly_inside_the_body_is_a_collision(golden: PlanFile, tmp_path: Path) -> None:
+    """Rule `collision` at a step tested the body's edges and corners against rock, so a
+    footstep plan whose body rested on a pebble (wholly inside its outline) for five steps
+    passed `rbp check`; between steps, `check_poses` already saw it (`body_in_rock`)."""
+    plain = footstep_plan(golden)
+    assert verify_plan(plain) == [], "the golden plan as a footstep plan must verify"
+    problems = verify_plan(with_pebble_under_the_body(plain))
+    hits = [(p.phase, p.step) for p in problems if p.rule == "collision"]
+    assert (1, 0) in hits and len(problems) == len(hits), [str(p) for p in problems]
+    # the motion plan too: at its steps, not only between them
+    problems = verify_plan(with_pebble_under_the_body(golden))
+    assert any(p.rule == "collision" and p.phase == 1 and p.step == 0 for p in problems), (
+        [str(p) for p in problems if p.rule == "collision"])
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(with_pebble_under_the_body(plain)))
+    done = run_rbp("check", str(path), cwd=tmp_path)
+    assert done.returncode == 1, f"exit {done.returncode}: {done.stdout[-400:]}"
+    assert "phases[1] (reach) step 0 (t=8.0): collision: body collides with rock" in done.stdout

@@ -24,8 +24,9 @@ from rb_drake.input_files import InputFileError, load_json, read_text
 
 # bump when the rules change: older stamps then no longer count (3: rule between; 4: rule
 # between on the smooth path `rbp simulate` follows; 5: rule between tests the paths of the
-# boom ends and body corners between checked configurations for rock)
-VERIFIER = "rbp-verify/5"
+# boom ends and body corners between checked configurations for rock; 6: rule collision at a
+# step finds rock wholly inside the body)
+VERIFIER = "rbp-verify/6"
 
 
 class PlanFileError(RbpInputError):

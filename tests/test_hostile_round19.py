@@ -13,10 +13,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from cli_helpers import run_rbp
+from cli_helpers import one_error_line, run_rbp
 
 from planning import verify_between
 from planning.check import verify_plan
+from planning.plan_file import PlanFileError, plan_from
 from planning.plan_model import Plan, plan_scenario
 
 DATA = Path(__file__).parent / "data"
@@ -151,3 +152,30 @@ def test_a_rock_wholly_inside_the_body_is_a_collision(golden: PlanFile, tmp_path
     done = run_rbp("check", str(path), cwd=tmp_path)
     assert done.returncode == 1, f"exit {done.returncode}: {done.stdout[-400:]}"
     assert "phases[1] (reach) step 0 (t=8.0): collision: body collides with rock" in done.stdout
+
+
+def test_a_footstep_body_move_spinning_for_hours_is_refused(golden: PlanFile,
+                                                            tmp_path: Path) -> None:
+    """A step may come more than 60 s after the one before only for a footstep plan's body
+    move at its nominal speeds, 0.1 m/s and 0.2 rad/s; its turn counted in full, a body move
+    spinning 1,500 turns in 13 hours (each end the same configuration) passed `rbp check`,
+    whose footstep plans' motion is unverified, and `rbp simulate` ran it (10 turns: 405 s
+    simulated in 35 s). A move's turn now counts up to a full turn."""
+    plan = footstep_plan(golden)
+    steps = [s for phase in plan["phases"] for s in phase["steps"]]
+    first, second = steps[0], steps[1]
+    spin = 2 * math.pi * 1500
+    turn = abs(second["pose"][2] + spin - first["pose"][2])
+    later = math.floor(turn / 0.2 * 1e6) / 1e6 - second["t"]  # just within 0.2 rad/s
+    for step in steps[1:]:
+        step["pose"][2] += spin
+        step["t"] = round(step["t"] + later, 6)
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(plan))
+    line = one_error_line(run_rbp("check", str(path), cwd=tmp_path),
+                          "phases[0].steps[1].t", "s after the step before", "full turn")
+    assert "47123" in line, line
+    with pytest.raises(PlanFileError) as refused:
+        plan_from(plan)
+    assert refused.value.field == "phases[0].steps[1].t", refused.value.field
+    assert plan_from(footstep_plan(golden)).time_step is None, "a footstep plan still reads"

@@ -28,9 +28,13 @@ from planning.ramps import ramp_statics
 from planning.smooth_motion import smooth_path_problems
 from planning.verify_between import between_problems
 from planning.verify_climb import Problem, climb_problems, locate
-from rb_drake import geometry
 from rb_drake.collision import boom_clearances
-from rb_drake.feasibility import MIN_CONDITIONING, pull_within, wrench_conditioning
+from rb_drake.feasibility import (
+    MIN_CONDITIONING,
+    body_in_rock,
+    pull_within,
+    wrench_conditioning,
+)
 from rb_drake.statics import STATICS_TOL, statics_problem
 
 TOL = 1e-9
@@ -165,8 +169,9 @@ def _check_configuration(scn, own, stance, pose, tip, step: Step, fail):
         if not abs(th) <= robot.shoulder_range + TOL:
             fail("kinematics", f"boom {i} shoulder angle {math.degrees(th):.2f} deg")
     rock = scn.rock
-    corners = geometry.body_corners(robot, pose)
-    if rock.segments_hit(corners, np.roll(corners, -1, axis=1)).any():
+    # a rock wholly inside the body's outline too, as between steps (check_poses): its edges
+    # and corners alone passed a footstep plan's body resting on a pebble
+    if body_in_rock(robot, rock, pose[None])[0]:
         fail("collision", "body collides with rock")
     booms = np.flatnonzero(used)
     clearance = boom_clearances(own, 1, stance.free_boom, tip)[0, booms]

@@ -24,8 +24,9 @@ from rb_drake.input_files import InputFileError, load_json, read_text
 
 # bump when the rules change: older stamps then no longer count (3: rule between; 4: rule
 # between on the smooth path `rbp simulate` follows; 5: rule between tests the paths of the
-# boom ends and body corners between checked configurations for rock)
-VERIFIER = "rbp-verify/5"
+# boom ends and body corners between checked configurations for rock; 6: rule collision at a
+# step finds rock wholly inside the body)
+VERIFIER = "rbp-verify/6"
 
 
 class PlanFileError(RbpInputError):
@@ -171,6 +172,7 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
 
 # s: slack on the longest wait, for times rounded to 1 us and a duration rounded with them
 GAP_TOL = 1e-3
+MAX_TURN = 2.0 * math.pi  # rad: the most a body move's turn counts towards its duration
 
 
 def check_times(plan: dict[str, Any]) -> None:
@@ -179,8 +181,8 @@ def check_times(plan: dict[str, Any]) -> None:
     last, or whose first step is more than MAX_STEP_GAP from 0 s: the planner writes steps at
     most --dt apart from 0 s, and the simulator and the rig sample the plan over its time. A
     footstep plan's body phase may take longer, at its nominal speeds
-    (planning.plan.build_plan). Times that do not increase are the verifier's (rule
-    time-order): they stretch nothing."""
+    (planning.plan.build_plan), its turn counted up to MAX_TURN. Times that do not increase
+    are the verifier's (rule time-order): they stretch nothing."""
     before: dict[str, Any] | None = None
     for k, phase in enumerate(plan["phases"]):
         for n, step in enumerate(phase["steps"]):
@@ -193,13 +195,18 @@ def check_times(plan: dict[str, Any]) -> None:
             if before is not None:
                 gap = step["t"] - before["t"]
                 a, b = before["pose"], step["pose"]
+                # a turn counts up to a full turn (the planner's headings lie in [-pi, pi]): a
+                # footstep plan's body spinning 1,500 turns at TURN_SPEED in one move passed
+                # `rbp check` (its motion unverified) and `rbp simulate` ran it for an hour
+                turn = min(abs(b[2] - a[2]), MAX_TURN)
                 allowed = max(MAX_STEP_GAP, math.hypot(b[0] - a[0], b[1] - a[1]) / BODY_SPEED,
-                              abs(b[2] - a[2]) / TURN_SPEED)
+                              turn / TURN_SPEED)
                 if gap > allowed + GAP_TOL:
                     raise PlanFileError(
                         f"phases[{k}].steps[{n}].t", f"{gap:.6g} s after the step before: steps "
                         f"are at most {MAX_STEP_GAP:g} s apart (longer only for a body move "
-                        f"at {BODY_SPEED:g} m/s, {TURN_SPEED:g} rad/s)")
+                        f"at {BODY_SPEED:g} m/s, or {TURN_SPEED:g} rad/s through at most a "
+                        "full turn)")
             before = step
 
 

@@ -402,6 +402,7 @@ def path_travel(world: World, stance: Stance, phase: Phase, path: SmoothPath, s:
     q = path.pose.vector_values(t).T
     g = None if path.tip is None else path.tip.vector_values(t).T
     pair = np.clip(np.searchsorted(knots, t[:-1], side="right") - 1, 0, len(knots) - 2)
+    pair[np.isin(pair + path.first_step, list(skip))] = -1  # failing already: not tested again
     out = []
     for j, n, boom in travel_failures(phase_world(world, phase), stance, q, g, pair):
         if n + path.first_step in skip:

@@ -307,6 +307,7 @@ def straight_travel(world: _World | World, phase: Phase, stance: Stance, s: Samp
     q = np.vstack([poses, s.poses])[order]
     g = None if tips is None or s.tips is None else np.vstack([tips, s.tips])[order]
     pair = np.clip(np.searchsorted(times, t[:-1], side="right") - 1, 0, len(times) - 2)
+    pair[np.isin(pair, list(skip))] = -1  # failing already: not tested again
     out = []
     for j, n, boom in travel_failures(phase_world(world, phase), stance, q, g, pair):
         if n in skip:
@@ -354,6 +355,32 @@ def travel_failures(world: _World | World, stance: Stance, poses: np.ndarray,
     rock = world.rock
     if not rock.polygons or len(poses) < 2:
         return []
+    out: list[tuple[int, int, int]] = []
+    seen: set[int] = set()
+    # in chunks of CHUNK configurations (each chunk's last is the next one's first), as
+    # `failing_intervals` checks samples: a phase of 10^6 samples, within MAX_PHASE_SAMPLES,
+    # took 1.9 GB here in one batch (a 0.5 MB plan turning 3 full turns a step)
+    for lo in range(0, len(poses) - 1, CHUNK):
+        hi = min(lo + CHUNK + 1, len(poses))
+        for j, n, boom in _travel_chunk(world, stance, poses[lo:hi],
+                                        None if tips is None else tips[lo:hi], pair[lo:hi - 1]):
+            if n not in seen:
+                seen.add(n)
+                out.append((lo + j, n, boom))
+    return out
+
+
+def _travel_chunk(world: _World | World, stance: Stance, poses: np.ndarray,
+                  tips: np.ndarray | None, pair: np.ndarray) -> list[tuple[int, int, int]]:
+    """`travel_failures` on consecutive configurations `poses` (P, 3) and `tips` with their
+    pairs' intervals `pair` (P - 1,): (j, n, boom), j numbered within the chunk."""
+    rock = world.rock
+    moving = np.any(poses[1:] != poses[:-1], axis=1)
+    if tips is not None:
+        moving |= np.any(tips[1:] != tips[:-1], axis=1)
+    pairs = np.flatnonzero(moving & (pair >= 0))
+    if not len(pairs):
+        return []
     P = len(poses)
     targets = _targets(stance, tips, P)
     used = np.isfinite(targets[..., 0])
@@ -362,12 +389,6 @@ def travel_failures(world: _World | World, stance: Stance, poses: np.ndarray,
     with np.errstate(invalid="ignore"):
         ends = targets - clearance[:, :, None] * np.nan_to_num(geo.u)
     corners = geometry.body_corners(world.robot, poses)
-    moving = np.any(poses[1:] != poses[:-1], axis=1)
-    if tips is not None:
-        moving |= np.any(tips[1:] != tips[:-1], axis=1)
-    pairs = np.flatnonzero(moving & (pair >= 0))
-    if not len(pairs):
-        return []
     boom_hit = rock.segments_hit(ends[pairs], ends[pairs + 1], inside=False)
     boom_hit &= used[pairs] & used[pairs + 1]
     body_hit = rock.segments_hit(corners[pairs], corners[pairs + 1], inside=False)

@@ -485,7 +485,7 @@ def test_plans_stretched_in_time_refused_at_reading(tmp_path):
         assert done.returncode == 2, done
         assert done.stderr == (f"error: {path}: phases[0].steps[1].t: 100 s after the step before: "
                                "steps are at most 60 s apart (longer only for a body move at "
-                               "0.1 m/s, 0.2 rad/s)\n"), done.stderr
+                               "0.1 m/s, or 0.2 rad/s through at most a full turn)\n"), done.stderr
 
 
 def test_rig_run_refuses_a_log_its_readers_would_refuse(tmp_path):

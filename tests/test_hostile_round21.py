@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 from cli_helpers import one_error_line, run_rbp
-from test_hostile_round19 import footstep_plan
+from test_hostile_round19 import failed_plan, footstep_plan
 
 from planning.check import verify_plan
 from planning.plan import short_way
@@ -80,3 +80,33 @@ def test_the_planner_writes_each_turn_the_short_way_round() -> None:
     assert headings[1] == pytest.approx(2 * math.pi - 3.1), headings
     assert headings[2] == 2.9 and headings[3] == poses[3][2], headings
     assert [float(p[0]) for p in short_way(poses)] == [0.0, 0.1, 0.2, 0.3], "x unchanged"
+
+
+def test_rig_run_refuses_a_failed_plan_that_has_phases(golden: PlanFile,
+                                                       tmp_path: Path) -> None:
+    """A failed plan (`success: false`, not a partial climb) that still has phases (a route
+    whose motion failed) verifies, and `rbp simulate` refuses it in one line (no route,
+    status 1); `rbp rig-run` flew its phase. It now refuses it as simulate does."""
+    failed = failed_plan(golden, golden["phases"])
+    failed.update(regrasps=golden["regrasps"], reason="motion planning failed at phase 3")
+    assert verify_plan(failed) == [], "the failed plan must verify (it is valid as written)"
+    path = tmp_path / "failed.json"
+    path.write_text(json.dumps(failed))
+    lines = {}
+    for command, what in (("simulate", "nothing to simulate"), ("rig-run", "nothing to fly")):
+        log = tmp_path / f"{command}.lcm"
+        args = [command, str(path)] + (["--sim-rig", "--log", str(log)]
+                                       if command == "rig-run" else [])
+        done = run_rbp(*args, cwd=tmp_path)
+        err = done.stderr.strip().splitlines()
+        assert done.returncode == 1 and len(err) == 1, f"{command}: exit {done.returncode}, {err}"
+        assert err[0].startswith(f"error: {path}: success: ") and what in err[0], err[0]
+        assert "motion planning failed at phase 3" in err[0], err[0]
+        lines[command] = err[0]
+        assert not log.exists(), f"{command} logged a refused plan"
+    # the plan that succeeded, the same phases: rig-run flies it
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps(golden))
+    done = run_rbp("rig-run", str(good), "--sim-rig", "--log", str(tmp_path / "g.lcm"),
+                   cwd=tmp_path)
+    assert done.returncode == 0, f"exit {done.returncode}: {done.stderr[-400:]}"

@@ -103,8 +103,12 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
     plan = plan_header(scn, planner, bool(fp.success), fp.reason, timing, search_record(fp))
     phases: list[Phase] = []
     t = 0.0
-    poses = [fp.start_pose] + [s.pose for s in fp.steps]
-    ends = [s.pose for s in fp.steps] + ([fp.goal_pose] if fp.goal_pose is not None else [])
+    # each heading the short way round from the one before, as the motion's seeds take it
+    # (body_seeds): the search's headings lie in [-pi, pi], and a plan's step turns at most
+    # half a turn (plan_file.check_times)
+    chain = short_way([fp.start_pose] + [s.pose for s in fp.steps]
+                      + ([fp.goal_pose] if fp.goal_pose is not None else []))
+    poses, ends = chain[:len(fp.steps) + 1], chain[1:]
     for k, stance in enumerate(fp.stances):
         if k < len(ends):
             a, b = np.asarray(poses[k]), np.asarray(ends[k])
@@ -124,13 +128,26 @@ def build_plan(scn: Scenario, fp: FootstepPlan, planner: str,
             phases.append(Phase(
                 kind="reach", stance=three, free_boom=step.boom,
                 from_anchor=step.from_anchor, to_anchor=step.to_anchor,
-                steps=(_configuration(scn, three, step.pose, old, t),
-                       _configuration(scn, three, step.pose, new, t + duration))))
+                steps=(_configuration(scn, three, poses[k + 1], old, t),
+                       _configuration(scn, three, poses[k + 1], new, t + duration))))
             t += duration
     plan = add_ramps(plan.replace(regrasps=len(fp.steps), phases=tuple(phases)), scn)
     if fp.success:
         plan = score_plan(plan, scn.robot.attach_failure)
     return plan
+
+
+def short_way(poses: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """`poses` (x, y, heading) with each heading moved by whole turns to within half a turn of
+    the one before (the first as given); a heading within it is kept to the bit."""
+    out = [np.asarray(p, dtype=float) for p in poses[:1]]
+    for p in poses[1:]:
+        q = np.array(p, dtype=float)
+        turn = q[2] - out[-1][2]
+        if abs(turn) > math.pi:
+            q[2] -= 2.0 * math.pi * round(turn / (2.0 * math.pi))
+        out.append(q)
+    return out
 
 
 def plan_header(scn: Scenario, planner: str, success: bool, reason: str,

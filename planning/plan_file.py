@@ -173,6 +173,9 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
 # s: slack on the longest wait, for times rounded to 1 us and a duration rounded with them
 GAP_TOL = 1e-3
 MAX_TURN = 2.0 * math.pi  # rad: the most a body move's turn counts towards its duration
+# rad: the most a step turns the body (the planner's turns are the short way round; slack for
+# rounding)
+MAX_STEP_TURN = math.pi + 1e-9
 
 
 def check_times(plan: dict[str, Any]) -> None:
@@ -182,7 +185,8 @@ def check_times(plan: dict[str, Any]) -> None:
     most --dt apart from 0 s, and the simulator and the rig sample the plan over its time. A
     footstep plan's body phase may take longer, at its nominal speeds
     (planning.plan.build_plan), its turn counted up to MAX_TURN. Times that do not increase
-    are the verifier's (rule time-order): they stretch nothing."""
+    are the verifier's (rule time-order): they stretch nothing. A step turning the body more
+    than MAX_STEP_TURN from the step before is refused (PlanFileError on its `pose[2]`)."""
     before: dict[str, Any] | None = None
     for k, phase in enumerate(plan["phases"]):
         for n, step in enumerate(phase["steps"]):
@@ -207,6 +211,16 @@ def check_times(plan: dict[str, Any]) -> None:
                         f"are at most {MAX_STEP_GAP:g} s apart (longer only for a body move "
                         f"at {BODY_SPEED:g} m/s, or {TURN_SPEED:g} rad/s through at most a "
                         "full turn)")
+                # A heading is an angle: rbp simulate's controller takes its error the short
+                # way round, the rig and the verifier the turn as written. Beyond half a turn
+                # they differ: a footstep move turning 3 full turns passed `rbp check` (its
+                # ends the same configurations) and was simulated 180 deg off its heading.
+                turn = abs(b[2] - a[2])
+                if turn > MAX_STEP_TURN:
+                    raise PlanFileError(
+                        f"phases[{k}].steps[{n}].pose[2]", f"the body turns {turn:.6g} rad from "
+                        f"the step before: a step turns it at most half a turn (pi rad), where "
+                        "the turn as written is the short way round that rbp simulate takes")
             before = step
 
 

@@ -279,6 +279,10 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
         raise RbpInputError("a partial climb is the complete search's (footstep.search "
                             "'complete' or 'hybrid'): the sampled search gives none",
                             field="partial")
+    if partial and cfg.footstep.min_success is not None:  # it returned none, silently
+        raise RbpInputError("a partial climb is the complete search's: the search for the "
+                            "fewest regrasps within footstep.min_success gives none",
+                            field="partial")
     scn = _scenario(scenario, "scenario")
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)

@@ -1,0 +1,70 @@
+"""Probe 20 (session 29): scenarios, planner configurations and the Python API as a researcher
+would misuse them. `--partial` with `--min-success` wrote no partial climb and said nothing; a
+partial climb whose search expanded no stance said nothing either; a goal tolerance under the
+lattice's step was answered "no route ... the body meets rock, or some boom reaches no
+anchor" where the sampled search found a route; numpy's bools were refused as flags;
+`rbp.meshcat` named simulate's argument; an OpenMP variable libgomp cannot read printed its
+warning before every command's output."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+from cli_helpers import one_error_line
+
+import rbp
+from planning.pipeline import PipelineConfig
+from rb_drake.errors import RbpInputError
+from rb_drake.scenario import bundled_caves
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(*args: str, cwd: Path = ROOT, **env: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "rbp", *args], capture_output=True, text=True,
+                          env=dict(os.environ, LCM_DEFAULT_URL="memq://", RBP_THREADS="1",
+                                   **env), cwd=cwd, timeout=300)
+
+
+def demo_with_goal(tmp_path: Path, position: list[float], tolerance: float) -> Path:
+    """demo-shaft with its goal moved (a file, as a user would write it)."""
+    data = yaml.safe_load(bundled_caves()["demo-shaft"].read_text())
+    data["goal"] = {"position": position, "tolerance": tolerance}
+    path = tmp_path / "cave.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_partial_with_min_success_is_refused(tmp_path):
+    """--min-success's search has no partial route: `--partial --min-success 0.99` wrote a plan
+    of no climb, exit 1, the flag silently ignored (as --partial with the sampled search was)."""
+    out = tmp_path / "p.json"
+    line = one_error_line(run("plan", "demo-shaft", "-o", str(out), "--partial",
+                              "--min-success", "0.99"), "--partial", "--min-success")
+    assert "gives none" in line, f"the reason is not said: {line}"
+    config = tmp_path / "planner.yaml"
+    config.write_text("footstep: {min_success: 0.99}\n")
+    line = one_error_line(run("plan", "demo-shaft", "-o", str(out), "--partial", "--config",
+                              str(config)), f"{config}: footstep.min_success")
+    assert not out.exists(), "a refused command wrote its plan"
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, footstep=dataclasses.replace(cfg.footstep, min_success=0.99))
+    with pytest.raises(RbpInputError, match=r"^partial: "):
+        rbp.plan("demo-shaft", cfg, partial=True)
+
+
+def test_a_partial_climb_whose_search_expanded_nothing_says_so(tmp_path):
+    """A goal no lattice pose can hold ends the search before its first expansion: with
+    --partial the plan held no climb and its reason did not say why there was none."""
+    cave = demo_with_goal(tmp_path, [0.0, 9000.0], 0.5)
+    plan = rbp.plan(str(cave), partial=True)
+    assert not plan.success and plan.partial is None, "a climb toward an unreachable goal"
+    assert "no partial climb" in plan.reason, f"the missing climb is not said: {plan.reason}"
+    assert rbp.check(plan) == [], "the plan of no climb does not verify"
+

@@ -68,3 +68,16 @@ def test_a_partial_climb_whose_search_expanded_nothing_says_so(tmp_path):
     assert "no partial climb" in plan.reason, f"the missing climb is not said: {plan.reason}"
     assert rbp.check(plan) == [], "the plan of no climb does not verify"
 
+def test_a_goal_tolerance_holding_no_lattice_point_says_so(tmp_path):
+    """A tolerance of 5 mm about a point off the lattice: the complete search answered that
+    no pose there could hold a stance (the body meets rock, or some boom reaches no anchor),
+    while the sampled search climbed to it."""
+    cave = demo_with_goal(tmp_path, [0.005, 2.505], 0.005)
+    plan = rbp.plan(str(cave), footsteps_only=True)
+    assert not plan.success, "a lattice pose reached a disc that holds none"
+    assert "no lattice point lies within the goal tolerance (0.005 m)" in plan.reason, \
+        f"the tolerance is not named as the cause: {plan.reason}"
+    assert "body meets rock" not in plan.reason, f"a wrong cause given: {plan.reason}"
+    wider = rbp.plan(str(demo_with_goal(tmp_path, [0.005, 2.505], 0.015)), footsteps_only=True)
+    assert "no lattice point" not in wider.reason, f"a disc holding one refused: {wider.reason}"
+

@@ -66,7 +66,9 @@ def _flag(value: Any, field: str) -> bool:
     as true."""
     from rb_drake.errors import RbpInputError
 
-    if not isinstance(value, bool) and type(value).__name__ != "bool_":
+    # numpy's bool is `numpy.bool` since numpy 2 (`bool_` before): np.False_ was refused
+    if not isinstance(value, bool) and not (type(value).__module__ == "numpy"
+                                            and type(value).__name__ in ("bool", "bool_")):
         raise RbpInputError(f"expected True or False, got {value!r:.60}", field=field)
     return bool(value)
 
@@ -530,10 +532,15 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
     every interface). Returns a `MeshcatView` with the `url` to open; it serves until closed
     (`view.close()` or `with rbp.meshcat(plan) as view:`). Raises `RbpInputError` for a plan
     that cannot be simulated (as `simulate`)."""
+    from planning.plan_model import Plan
     from rb_drake.errors import RbpInputError
     from rb_drake.scenario import Scenario
     from systems.meshcat_view import show_climb, show_scenario, start_meshcat
 
+    if not isinstance(what, Scenario | Plan | dict | SimulationResult):  # named as this
+        # argument: simulate's refusal named its own, `plan`
+        raise RbpInputError("expected a Scenario, a Plan, a plan-file object (a dict) or a "
+                            f"SimulationResult, got {type(what).__name__}", field="what")
     speedup = _number(speedup, "speedup")
     if not 0 < speedup < math.inf:
         raise RbpInputError(f"must be above 0 and finite, got {speedup:g}", field="speedup")

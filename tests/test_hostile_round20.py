@@ -14,6 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from cli_helpers import one_error_line
@@ -80,4 +81,20 @@ def test_a_goal_tolerance_holding_no_lattice_point_says_so(tmp_path):
     assert "body meets rock" not in plan.reason, f"a wrong cause given: {plan.reason}"
     wider = rbp.plan(str(demo_with_goal(tmp_path, [0.005, 2.505], 0.015)), footsteps_only=True)
     assert "no lattice point" not in wider.reason, f"a disc holding one refused: {wider.reason}"
+
+def test_numpy_bools_are_flags():
+    """numpy 2's bool type is `numpy.bool`: np.False_ was refused as "expected True or False"."""
+    cave = rbp.load_scenario("demo-shaft", check_start=np.False_)
+    assert cave.name == "demo-shaft"
+    with pytest.raises(RbpInputError, match="check_start"):
+        rbp.load_scenario("demo-shaft", check_start=np.int64(0))
+
+
+def test_meshcat_names_its_own_argument():
+    """`rbp.meshcat("demo-shaft")` was refused as "plan: expected a Plan": an argument it has
+    not."""
+    for what in ("demo-shaft", None, 5):
+        with pytest.raises(RbpInputError) as refused:
+            rbp.meshcat(what)  # type: ignore[arg-type]
+        assert str(refused.value).startswith("what: "), f"not named as given: {refused.value}"
 

@@ -8,6 +8,7 @@ warning before every command's output."""
 
 from __future__ import annotations
 
+import ctypes.util
 import dataclasses
 import os
 import subprocess
@@ -69,6 +70,7 @@ def test_a_partial_climb_whose_search_expanded_nothing_says_so(tmp_path):
     assert "no partial climb" in plan.reason, f"the missing climb is not said: {plan.reason}"
     assert rbp.check(plan) == [], "the plan of no climb does not verify"
 
+
 def test_a_goal_tolerance_holding_no_lattice_point_says_so(tmp_path):
     """A tolerance of 5 mm about a point off the lattice: the complete search answered that
     no pose there could hold a stance (the body meets rock, or some boom reaches no anchor),
@@ -81,6 +83,7 @@ def test_a_goal_tolerance_holding_no_lattice_point_says_so(tmp_path):
     assert "body meets rock" not in plan.reason, f"a wrong cause given: {plan.reason}"
     wider = rbp.plan(str(demo_with_goal(tmp_path, [0.005, 2.505], 0.015)), footsteps_only=True)
     assert "no lattice point" not in wider.reason, f"a disc holding one refused: {wider.reason}"
+
 
 def test_numpy_bools_are_flags():
     """numpy 2's bool type is `numpy.bool`: np.False_ was refused as "expected True or False"."""
@@ -97,4 +100,18 @@ def test_meshcat_names_its_own_argument():
         with pytest.raises(RbpInputError) as refused:
             rbp.meshcat(what)  # type: ignore[arg-type]
         assert str(refused.value).startswith("what: "), f"not named as given: {refused.value}"
+
+
+@pytest.mark.skipif(ctypes.util.find_library("gomp") is None, reason="no libgomp here")
+@pytest.mark.parametrize("variable,value", [("OMP_WAIT_POLICY", "bogus"),
+                                            ("OMP_SCHEDULE", "bogus"),
+                                            ("GOMP_CPU_AFFINITY", "bogus")])
+def test_an_openmp_value_libgomp_cannot_read_is_refused(tmp_path, variable, value):
+    """libgomp printed "libgomp: Invalid value for environment variable ..." before the output
+    of every command that loads it (rbp check, rbp plan), and went on."""
+    line = one_error_line(run("scenario", "list", **{variable: value}),
+                          f"{variable} (environment)", repr(value))
+    assert "libgomp" in line, f"the reader of the value is not named: {line}"
+    ok = run("scenario", "list", OMP_STACKSIZE="2M", OMP_WAIT_POLICY="passive")
+    assert ok.returncode == 0 and ok.stderr == "", f"valid values refused: {ok.stderr!r}"
 

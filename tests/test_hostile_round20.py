@@ -115,3 +115,24 @@ def test_an_openmp_value_libgomp_cannot_read_is_refused(tmp_path, variable, valu
     ok = run("scenario", "list", OMP_STACKSIZE="2M", OMP_WAIT_POLICY="passive")
     assert ok.returncode == 0 and ok.stderr == "", f"valid values refused: {ok.stderr!r}"
 
+
+
+def test_a_dxf_unit_rbp_does_not_convert_is_refused(tmp_path):
+    """A drawing declaring decimetres ($INSUNITS 14; microns, km, US survey feet, ...) was read
+    as metres, silently: a cave ten times too large. --unit still reads it as told."""
+    ezdxf = pytest.importorskip("ezdxf")
+    rock = yaml.safe_load((ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson").read_text())
+    for code, words in ((14, "decimetres (code 14)"), (99, "code 99")):
+        drawing = ezdxf.new()
+        drawing.header["$INSUNITS"] = code
+        for feature in rock["features"]:
+            drawing.modelspace().add_lwpolyline(feature["geometry"]["coordinates"][0][:-1],
+                                                close=True)
+        path = tmp_path / f"section{code}.dxf"
+        drawing.saveas(path)
+        out = tmp_path / "cave.yaml"
+        one_error_line(run("scenario", "import", str(path), "-o", str(out)),
+                       f"{path}: $INSUNITS: ", words, "--unit")
+        assert not out.exists(), "a refused import wrote its cave"
+    told = run("scenario", "import", str(path), "-o", str(out), "--unit", "m")
+    assert told.returncode == 0 and out.exists(), f"--unit m refused: {told.stderr[-300:]}"

@@ -136,3 +136,15 @@ def test_a_dxf_unit_rbp_does_not_convert_is_refused(tmp_path):
         assert not out.exists(), "a refused import wrote its cave"
     told = run("scenario", "import", str(path), "-o", str(out), "--unit", "m")
     assert told.returncode == 0 and out.exists(), f"--unit m refused: {told.stderr[-300:]}"
+
+
+def test_a_point_clouds_resolution_with_a_drawing_is_refused(tmp_path):
+    """--resolution (a point cloud's outline) was ignored for a drawing, silently, while
+    --plane-origin and --plane-normal were refused."""
+    drawing = ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson"
+    out = tmp_path / "cave.yaml"
+    one_error_line(run("scenario", "import", str(drawing), "-o", str(out), "--resolution",
+                       "0.1"), f"{drawing}: --resolution: ", "point cloud")
+    assert not out.exists(), "a refused import wrote its cave"
+    with pytest.raises(RbpInputError, match="--resolution"):
+        rbp.import_scenario(drawing, resolution=0.1)

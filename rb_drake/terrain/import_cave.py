@@ -58,6 +58,9 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         if opts.plane_origin is not None or opts.plane_normal is not None:
             raise RbpInputError("only for a mesh or point cloud (.stl, .obj, .ply)",
                                 file=str(path), field="--plane-origin/--plane-normal")
+        if opts.resolution is not None:  # a point cloud's: a drawing's import ignored it
+            raise RbpInputError("only for a point cloud (.ply, .obj): a drawing's outlines are "
+                                "read as drawn", file=str(path), field="--resolution")
         rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
     from rb_drake.input_files import max_input_values
 

@@ -148,3 +148,17 @@ def test_a_point_clouds_resolution_with_a_drawing_is_refused(tmp_path):
     assert not out.exists(), "a refused import wrote its cave"
     with pytest.raises(RbpInputError, match="--resolution"):
         rbp.import_scenario(drawing, resolution=0.1)
+
+
+def test_a_solvers_stop_is_not_printed_beside_the_plans_lines(tmp_path):
+    """`scp.dynamics_weight: 1e6` (in its range) printed "INFO:drake:Clarabel returns
+    InsufficientProgress" three times on stderr; SCP reads the status and rejects the step."""
+    cave, config = tmp_path / "cave.yaml", tmp_path / "planner.yaml"
+    made = run("scenario", "generate", "--kind", "shaft", "--seed", "3", "--length", "3.5", "4",
+               "-o", str(cave))
+    assert made.returncode == 0, made.stderr
+    config.write_text("scp: {dynamics_weight: 1000000.0}\n")
+    planned = run("plan", str(cave), "-o", str(tmp_path / "p.json"), "--config", str(config),
+                  "--no-pictures", "-q")
+    assert planned.returncode == 0, f"exit {planned.returncode}: {planned.stderr[-300:]}"
+    assert planned.stderr == "", f"stray lines on stderr: {planned.stderr[-300:]!r}"

@@ -285,7 +285,9 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
         raise RbpInputError("a partial climb is the complete search's: the search for the "
                             "fewest regrasps within footstep.min_success gives none",
                             field="partial")
-    scn = _scenario(scenario, "scenario")
+    # its start checked as rbp plan's is: a cave loaded with check_start=False, or a start
+    # replaced, was searched and answered "no route" where the command line names the start
+    scn = _scenario(scenario, "scenario", check_start=True)
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)
     with SearchProgress(f"{planner} on {scn.name}", budget, quiet=not progress) as bar:
@@ -303,14 +305,15 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                           footsteps_done=footsteps_done, partial=partial)
 
 
-def _scenario(scenario: Any, field: str) -> Scenario:
+def _scenario(scenario: Any, field: str, check_start: bool = False) -> Scenario:
     """`scenario` as a Scenario: a Scenario (checked again by the scenario reader, its file
-    named "(FIELD argument)"), or what `load_scenario` takes."""
+    named "(FIELD argument)"; `check_start`: its start stance too), or what `load_scenario`
+    takes (which checks the start stance)."""
     from rb_drake.errors import RbpInputError
     from rb_drake.scenario import Scenario, checked_scenario
 
     if isinstance(scenario, Scenario):
-        return checked_scenario(scenario, f"({field} argument)")
+        return checked_scenario(scenario, f"({field} argument)", check_start)
     if not isinstance(scenario, str | Path):
         raise RbpInputError("expected a Scenario, a scenario file or a bundled cave's name, got "
                             f"{type(scenario).__name__}", field=field)

@@ -23,7 +23,7 @@ from cli_helpers import one_error_line
 import rbp
 from planning.pipeline import PipelineConfig
 from rb_drake.errors import RbpInputError
-from rb_drake.scenario import bundled_caves
+from rb_drake.scenario import ScenarioError, bundled_caves
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -162,3 +162,24 @@ def test_a_solvers_stop_is_not_printed_beside_the_plans_lines(tmp_path):
                   "--no-pictures", "-q")
     assert planned.returncode == 0, f"exit {planned.returncode}: {planned.stderr[-300:]}"
     assert planned.stderr == "", f"stray lines on stderr: {planned.stderr[-300:]!r}"
+
+
+def test_rbp_plan_checks_a_scenario_objects_start_as_rbp_plan_does(tmp_path):
+    """A cave loaded with check_start=False (or its start replaced) was searched by rbp.plan
+    and answered "no route ... the start joined to none of its poses", where `rbp plan`
+    refuses the start in one line: the same check now, before any search."""
+    data = yaml.safe_load(bundled_caves()["demo-shaft"].read_text())
+    data["gravity"] = [0.0, -1000.0]  # no tensions within the booms' bounds hold the body
+    path = tmp_path / "heavy.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    line = one_error_line(run("plan", str(path), "-o", str(tmp_path / "p.json")), "start: ")
+    cave = rbp.load_scenario(path, check_start=False)
+    with pytest.raises(ScenarioError) as refused:
+        rbp.plan(cave, footsteps_only=True)
+    assert refused.value.field == "start", f"not the start named: {refused.value}"
+    assert str(refused.value).split("start: ", 1)[1] == line.split("start: ", 1)[1], \
+        "the API's refusal differs from the command line's"
+    turned = dataclasses.replace(rbp.load_scenario("demo-shaft"), start_pose=(0.0, 1.0, 3.0))
+    with pytest.raises(ScenarioError, match="start"):
+        rbp.plan(turned, footsteps_only=True)
+    assert rbp.draw(cave, tmp_path / "cave.png").exists(), "a cave's picture needs no start"

@@ -276,7 +276,9 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     fmt = rd.require("", data, "format")
     if fmt != FORMAT:
         raise rd.fail("format", f"expected {FORMAT!r}, got {fmt!r}")
-    name = data.get("name", Path(source).stem)
+    # a file's stem as a default name is cut to a name's length (a 220-character file name
+    # refused a scenario that gives no name: "name: 220 characters")
+    name = data.get("name", Path(source).stem[:MAX_NAME])
     if not isinstance(name, str):
         raise rd.fail("name", f"expected a string, got {_describe(name)}")
     if len(name) > MAX_NAME:  # 999,000 characters took minutes and 1 GB to draw in a title

@@ -183,3 +183,22 @@ def test_rbp_plan_checks_a_scenario_objects_start_as_rbp_plan_does(tmp_path):
     with pytest.raises(ScenarioError, match="start"):
         rbp.plan(turned, footsteps_only=True)
     assert rbp.draw(cave, tmp_path / "cave.png").exists(), "a cave's picture needs no start"
+
+
+def test_a_long_file_name_is_no_name_too_long(tmp_path):
+    """A scenario gives no name: its file's stem is its name, and a stem of 220 characters (a
+    file name the system allows) was refused, "name: 220 characters; at most 200"; so was
+    `rbp scenario import` of such a file without --name."""
+    stem = "c" * 220
+    data = yaml.safe_load(bundled_caves()["demo-shaft"].read_text())
+    del data["name"]
+    cave = tmp_path / f"{stem}.yaml"
+    cave.write_text(yaml.safe_dump(data, sort_keys=False))
+    checked = run("scenario", "check", str(cave))
+    assert checked.returncode == 0, f"refused: {checked.stderr[-200:]}"
+    assert rbp.load_scenario(cave).name == stem[:200], "not the stem's first 200 characters"
+    drawing = tmp_path / f"{stem}.geojson"
+    drawing.write_bytes((ROOT / "rb_drake/data/terrain/lava-tube-shaft.geojson").read_bytes())
+    imported = run("scenario", "import", str(drawing), "-o", str(tmp_path / "cave.yaml"))
+    assert imported.returncode == 0, f"refused: {imported.stderr[-200:]}"
+    assert rbp.load_scenario(tmp_path / "cave.yaml").name == stem[:200]

@@ -22,7 +22,7 @@ from cli_helpers import one_error_line
 
 import rbp
 from planning.pipeline import PipelineConfig
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, apart
 from rb_drake.scenario import ScenarioError, bundled_caves
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -202,3 +202,18 @@ def test_a_long_file_name_is_no_name_too_long(tmp_path):
     imported = run("scenario", "import", str(drawing), "-o", str(tmp_path / "cave.yaml"))
     assert imported.returncode == 0, f"refused: {imported.stderr[-200:]}"
     assert rbp.load_scenario(tmp_path / "cave.yaml").name == stem[:200]
+
+
+def test_a_probability_refused_below_p_min_reads_below_it(tmp_path):
+    """p_min 0.9999999999: the start's P of 0.999999x was printed "probability 1.000 below
+    p_min 0.9999999999", a number above the limit it is said to be below."""
+    data = yaml.safe_load(bundled_caves()["demo-shaft"].read_text())
+    data["robot"] = {"p_min": 0.9999999999}
+    cave = tmp_path / "cave.yaml"
+    cave.write_text(yaml.safe_dump(data, sort_keys=False))
+    line = one_error_line(run("scenario", "check", str(cave)), "start: ", "below p_min")
+    shown = float(line.split("probability ", 1)[1].split(" ", 1)[0])
+    assert shown < 0.9999999999, f"P printed on the wrong side of p_min: {line}"
+    assert float(apart(0.99999999985, 0.9999999999)) < 0.9999999999
+    assert float(apart(1.00000000015, 1.0000000001)) > 1.0000000001
+    assert apart(0.5, 0.9) == "0.500", "more digits than a clear case needs"

@@ -13,6 +13,7 @@ import dataclasses
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -217,3 +218,37 @@ def test_a_probability_refused_below_p_min_reads_below_it(tmp_path):
     assert float(apart(0.99999999985, 0.9999999999)) < 0.9999999999
     assert float(apart(1.00000000015, 1.0000000001)) > 1.0000000001
     assert apart(0.5, 0.9) == "0.500", "more digits than a clear case needs"
+
+
+@pytest.mark.parametrize("segments,field", [
+    ("{tolerance: 100.0}", "footstep.segments.tolerance"),
+    ("{lookahead: 0.1, commit: 0.1, min_climb: 0.1}", "footstep.segments.tolerance")])
+def test_a_sub_goal_holding_its_segments_start_is_refused(tmp_path, segments, field):
+    """A sub-goal disc as wide as the lookahead holds the segment's start: each segment was
+    reached where it began, the climb moved on a commit at a time, searching from the start
+    again each time (37 s and 22 s under --time-limit 20 on a 20 m crevasse, said "gave up
+    after 0.001 s")."""
+    config = tmp_path / "planner.yaml"
+    config.write_text(f"footstep: {{segments: {segments}}}\n")
+    one_error_line(run("plan", "demo-shaft", "-o", str(tmp_path / "p.json"), "--config",
+                       str(config)), f"{config}: {field}: ", "below lookahead")
+    from planning.segmented import SegmentConfig
+
+    with pytest.raises(RbpInputError, match=r"footstep\.segments\.tolerance"):
+        SegmentConfig(lookahead=0.5, commit=0.5, tolerance=0.5)
+
+
+def test_segments_stop_at_the_time_limit_and_say_how_long_they_searched():
+    """The segments went on searching past the time limit, each later search given 1 ms, and
+    the answer said "gave up after 0.001 s"."""
+    from planning.complete_config import CompleteConfig
+    from planning.segmented import SegmentConfig, segmented_search
+
+    cave = rbp.generate_scenario("crevasse", seed=5003, length=(20.0, 20.0))
+    config = dataclasses.replace(CompleteConfig(), time_limit=3.0)
+    segment = SegmentConfig(min_climb=0.1, lookahead=0.1, commit=0.1, tolerance=0.01)
+    started = time.perf_counter()
+    result = segmented_search(cave, config, segment, lambda scenario: None)
+    took = time.perf_counter() - started
+    assert not result.success and took < 3.0 + 5.0, f"searched {took:.1f} s under a 3 s limit"
+    assert "gave up after 3 s" in result.reason, f"not the limit's time: {result.reason}"

@@ -252,3 +252,16 @@ def test_segments_stop_at_the_time_limit_and_say_how_long_they_searched():
     took = time.perf_counter() - started
     assert not result.success and took < 3.0 + 5.0, f"searched {took:.1f} s under a 3 s limit"
     assert "gave up after 3 s" in result.reason, f"not the limit's time: {result.reason}"
+
+
+def test_the_hybrid_search_says_the_time_both_stages_searched():
+    """--search hybrid --time-limit 5 searched 5 s in all and said "gave up after 1.83 s (302
+    expansions)", the complete stage's share and count."""
+    cave = rbp.generate_scenario("crevasse", seed=5003, length=(20.0, 20.0))
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, footstep=dataclasses.replace(cfg.footstep, search="hybrid",
+                                                                time_limit=3.0))
+    plan = rbp.plan(cave, cfg, footsteps_only=True)
+    assert not plan.success and plan.search is not None
+    assert plan.reason.startswith(f"gave up after 3 s ({plan.search.expansions} expansions)"), \
+        f"not the whole search's time and expansions: {plan.reason}"

@@ -41,6 +41,7 @@ from planning.complete_config import AnytimeConfig, CompleteConfig
 from planning.components import UNKNOWN
 from planning.lattice_moves import (
     LatticeTransition,
+    goal_disc_problem,
     goal_is_holdable,
     lattice_transition,
     start_components,
@@ -133,6 +134,8 @@ def complete_search(scn: Scenario, config: CompleteConfig | None = None, *,
 
     distance = distance_heuristic.distance
 
+    if (problem := goal_disc_problem(scn, cfg)) is not None:
+        return CompleteResult(False, Stop.NOROUTE, problem, [], [], [], None, 0, 0, [], [], graph)
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, Stop.NOROUTE, "no route: no lattice pose within the goal "
                               "tolerance can hold a stance (the body meets rock, or some boom "

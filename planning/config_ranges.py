@@ -332,8 +332,18 @@ def commit_problem(commit: float, lookahead: float) -> str:
                                            f"{commit:g}")
 
 
+def sub_goal_problem(tolerance: float, lookahead: float) -> str:
+    """Why a segment's sub-goal `tolerance` is refused beside its `lookahead`, or "": a
+    sub-goal disc holding the segment's own start is reached where it begins (the segments
+    then moved on a commit at a time, searching from the start again each time: 37 s under a
+    20 s time limit on a 20 m crevasse)."""
+    return "" if tolerance < lookahead else (f"must be below lookahead ({lookahead:g} m), "
+                                             f"got {tolerance:g}: a sub-goal disc holding the "
+                                             "segment's start is reached where it begins")
+
+
 # planning.segmented.SegmentConfig's defaults (tests/test_hostile_round14.py holds them equal)
-SEGMENT_DEFAULTS = {"lookahead": 4.0, "commit": 2.0}
+SEGMENT_DEFAULTS = {"lookahead": 4.0, "commit": 2.0, "tolerance": 0.6}
 
 
 def joint_problem(data: Any) -> tuple[str, str] | None:
@@ -351,11 +361,13 @@ def joint_problem(data: Any) -> tuple[str, str] | None:
         if problem := angle_step_problem(step):
             return "footstep.lattice.angle_step_deg", problem
     segments = footstep.get("segments")
-    if isinstance(segments, dict) and ("commit" in segments or "lookahead" in segments):
-        commit, lookahead = (_as_number(segments.get(key, SEGMENT_DEFAULTS[key]))[0]
-                             for key in ("commit", "lookahead"))
+    if isinstance(segments, dict) and segments.keys() & SEGMENT_DEFAULTS.keys():
+        commit, lookahead, tolerance = (_as_number(segments.get(key, SEGMENT_DEFAULTS[key]))[0]
+                                        for key in ("commit", "lookahead", "tolerance"))
         if problem := commit_problem(commit, lookahead):
             return "footstep.segments.commit", problem
+        if problem := sub_goal_problem(tolerance, lookahead):
+            return "footstep.segments.tolerance", problem
     return None
 
 

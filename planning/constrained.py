@@ -36,6 +36,7 @@ from planning.complete_config import CompleteConfig
 from planning.components import UNKNOWN
 from planning.lattice import LatticeConfig
 from planning.lattice_moves import (
+    goal_disc_problem,
     goal_is_holdable,
     lattice_transition,
     start_components,
@@ -83,6 +84,8 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
     graph = SearchGraph()
     start = tuple(scn.start_stance)
     joined = start_components(scn, stance_components(scn, memo, start, cfg, ignore_grasps), cfg)
+    if (problem := goal_disc_problem(scn, cfg)) is not None:
+        return CompleteResult(False, Stop.NOROUTE, problem, [], [], [], None, 0, 0, [], [], graph)
     if not goal_is_holdable(scn, cfg):
         return CompleteResult(False, Stop.NOROUTE, "no route: no lattice pose within the goal "
                               "tolerance can hold a stance", [], [], [], None, 0, 0, [], [],

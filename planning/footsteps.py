@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import time
 from collections.abc import Callable, Collection
 from typing import Any
@@ -106,8 +107,14 @@ def plan_footsteps(scn: Scenario, config: FootstepConfig | None = None,
         second = _plan_complete(scn, dataclasses.replace(cfg, max_expansions=rest,
                                                          time_limit=left),
                                 progress, exclude, memo, partial)
-        return second._replace(seconds=time.perf_counter() - t0,
-                               expansions=first.expansions + second.expansions,
+        expansions = first.expansions + second.expansions
+        reason = second.reason  # the two stages' time and expansions (it said the second's)
+        if left is not None and second.stop == Stop.BUDGET:
+            reason = re.sub(r"^gave up after \S+ s \(\d+ expansions\)",
+                            f"gave up after {cfg.time_limit:g} s ({expansions} expansions)",
+                            reason)
+        return second._replace(seconds=time.perf_counter() - t0, reason=reason,
+                               expansions=expansions,
                                transitions_tested=first.transitions_tested
                                + second.transitions_tested)
     return plan_sampled(scn, cfg, progress, exclude, memo)

@@ -253,6 +253,19 @@ def start_components(scn: Scenario, lat: StanceComponents, cfg: LatticeConfig,
     return out
 
 
+def goal_disc_problem(scn: Scenario, cfg: LatticeConfig) -> str | None:
+    """Why no lattice pose can reach the goal when its tolerance disc holds no lattice point
+    at all (a tolerance under the lattice's step, off its points: the search's answer was "no
+    route ... the body meets rock, or some boom reaches no anchor", which the sampled search
+    disproved); None when it holds one. The nearest point rounds each coordinate."""
+    goal, dx = np.asarray(scn.goal_position, dtype=float), cfg.position_step
+    if np.linalg.norm(np.round(goal / dx) * dx - goal) <= scn.goal_tolerance:
+        return None
+    return (f"no route: no lattice point lies within the goal tolerance ({scn.goal_tolerance:g} "
+            f"m) at {dx * 100:g} cm steps (a tolerance of {dx / math.sqrt(2.0):.4g} m always "
+            "holds one): give the goal a larger tolerance, or --search sampled")
+
+
 def goal_is_holdable(scn: Scenario, cfg: LatticeConfig) -> bool:
     """Whether some lattice pose within the goal tolerance could hold a stance at all: its body
     clear of rock and every boom reaching some anchor (a necessary condition for a goal vertex,

@@ -246,7 +246,11 @@ def plan_climb(scn: Scenario, planner: str = "rbp", config: PipelineConfig | Non
         return plan.replace(timing=plan.timing | timing)
     if planner == "naive" or not fp.success:
         timing["total"] = time.perf_counter() - t_start
-        return build_plan(scn, fp, planner, timing)
+        plan = build_plan(scn, fp, planner, timing)
+        if partial and planner == "rbp" and not fp.success:  # it wrote no climb, silently
+            plan = plan.failed(f"{fp.reason}; no partial climb: the search expanded no stance "
+                               "to climb to")
+        return plan
     failure, done, built = _fly(scn, fp, cfg, timing, planner, progress)
     memo = fp.memo if fp.memo is not None else FootstepMemo(fp.transitions or {})
     excluded: list[Move] = []

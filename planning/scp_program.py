@@ -17,7 +17,7 @@ from rb_drake.errors import RbpInputError
 from rb_drake.feasibility import World
 from rb_drake.params import NUM_BOOMS
 from rb_drake.stance import Stance
-from rb_drake.statics import statics_problem
+from rb_drake.statics import quiet_solver_log, statics_problem
 
 
 @dataclasses.dataclass(frozen=True)
@@ -372,7 +372,8 @@ class SubproblemProgram:
         for var, value in ((self.q, it.poses), (self.v, it.velocities), (self.f, it.tensions),
                            (self.w, np.abs(np.diff(it.poses, axis=0)).max(axis=0))):
             self.prog.SetDecisionVariableValueInVector(var, value, guess)
-        result = self.solver.Solve(self.prog, guess, self.options)
+        with quiet_solver_log():  # its status is handled below
+            result = self.solver.Solve(self.prog, guess, self.options)
         status = result.get_solution_result()
         if status in (SolutionResult.kInfeasibleConstraints,
                       SolutionResult.kInfeasibleOrUnbounded):

@@ -31,7 +31,7 @@ import numpy as np
 
 from planning.complete import complete_search
 from planning.complete_config import CompleteConfig
-from planning.config_ranges import commit_problem
+from planning.config_ranges import commit_problem, sub_goal_problem
 from planning.lattice_moves import goal_is_holdable
 from planning.lattice_search import CompleteResult, LatticeMemo, SearchGraph, Vertex
 from planning.search_clock import search_clock
@@ -63,6 +63,8 @@ class SegmentConfig:
                                     field=f"footstep.segments.{name}")
         if problem := commit_problem(self.commit, self.lookahead):
             raise RbpInputError(problem, field="footstep.segments.commit")
+        if problem := sub_goal_problem(self.tolerance, self.lookahead):
+            raise RbpInputError(problem, field="footstep.segments.tolerance")
 
 
 def climb_distance(scn: Scenario) -> float:
@@ -136,6 +138,8 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
     current = scn
     lookahead = segment.lookahead
     while True:
+        if config.time_limit is not None and search_clock() - clock0 >= config.time_limit:
+            break  # the segments spent the limit: the whole search's answer (a budget stop)
         here = np.asarray(current.start_pose[:2], dtype=float)
         final = float(np.linalg.norm(goal - here)) <= lookahead + scn.goal_tolerance
         target = current if final else _sub_goal(current, here, lookahead, segment, config)
@@ -148,11 +152,7 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
         expanded += part.expanded
         graph.update(part.graph)
         if not part.success:  # a dead end or a sub-goal out of reach: the whole search decides
-            fallback = complete_search(scn, limited(scn), exclude=exclude, memo=memo,
-                                       progress=offset, partial=partial)
-            return fallback._replace(expansions=done["expansions"] + fallback.expansions,
-                                     transitions_tested=done["tested"]
-                                     + fallback.transitions_tested)
+            break
         if not part.poses and not final:  # the start's own body motion reaches the sub-goal
             lookahead += segment.commit
             continue
@@ -172,6 +172,16 @@ def segmented_search(scn: Scenario, config: CompleteConfig, segment: SegmentConf
         current = dataclasses.replace(scn, start_stance=end_stance,
                                       start_pose=(float(pose[0]), float(pose[1]),
                                                   float(pose[2])))
+    fallback = complete_search(scn, limited(scn), exclude=exclude, memo=memo, progress=offset,
+                               partial=partial)
+    expansions = done["expansions"] + fallback.expansions
+    reason = fallback.reason
+    if fallback.stop == Stop.BUDGET and config.time_limit is not None and \
+            search_clock() - clock0 >= config.time_limit:  # the segments' time too: it said 0.001 s
+        reason = (f"gave up after {config.time_limit:g} s ({expansions} expansions) without "
+                  "reaching the goal")
+    return fallback._replace(reason=reason, expansions=expansions,
+                             transitions_tested=done["tested"] + fallback.transitions_tested)
 
 
 def _joined(scn: Scenario, last: CompleteResult, path: list[Vertex], poses: list[np.ndarray],

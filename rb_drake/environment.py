@@ -83,6 +83,7 @@ def library_settings() -> None:
                 f"not supported by rbp (it changes how rbp's compiled kernels build or run): "
                 f"unset it; rbp lets through only {', '.join(NUMBA_SUPPORTED)}",
                 field=f"{name} (environment)")
+    _openmp_settings()
     if os.path.isfile(NUMBA_CONFIG_FILE):  # as numba looks for it, in the current folder
         raise RbpInputError(
             # numba applies its keys as NUMBA_* values at import, past the check above:
@@ -91,6 +92,46 @@ def library_settings() -> None:
             "would apply its keys as NUMBA_* settings, which change how rbp's compiled "
             "kernels build or run): remove it or run rbp from another folder",
             field=NUMBA_CONFIG_FILE)
+
+
+def _openmp_settings() -> None:
+    """Refuse an OpenMP variable whose value libgomp would warn about ("libgomp: Invalid value
+    for environment variable OMP_WAIT_POLICY", on every command that loads it, Drake's copy and
+    numba's, before their output or error line): libgomp's own reading of the environment,
+    caught as it loads here, so every variable and form it knows is judged as it judges them.
+    What else it prints (OMP_DISPLAY_ENV's table) goes to stderr as before."""
+    import ctypes
+    import re
+    import tempfile
+
+    if not any(name.startswith(("OMP_", "GOMP_")) for name in os.environ):
+        return
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to catch it on: left to libgomp
+        return
+    with tempfile.TemporaryFile() as caught:
+        try:
+            os.dup2(caught.fileno(), 2)
+            try:
+                ctypes.CDLL("libgomp.so.1")  # reads the variables as it loads, once a process
+            except OSError:
+                return  # not installed: the libraries bring their own, unchecked
+            finally:
+                os.dup2(saved, 2)
+        finally:
+            os.close(saved)
+        caught.seek(0)
+        text = caught.read(65536).decode("utf-8", "replace")
+    found = re.search(r"libgomp: (\w+) value for envi\w* variable (\w+)", text)
+    if found is None:
+        if text:
+            os.write(2, text.encode())
+        return
+    variable = found.group(2)
+    raise RbpInputError(f"OpenMP (libgomp) finds its value {os.environ.get(variable, '')!r:.60} "
+                        f"{found.group(1).lower()}: unset it or give one libgomp reads",
+                        field=f"{variable} (environment)")
 
 
 NUMBA_CONFIG_FILE = ".numba_config.yaml"  # numba reads it from the current folder at import

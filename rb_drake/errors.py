@@ -45,10 +45,12 @@ def one_line(text: str) -> str:
 
 
 def apart(value: float, limit: float, decimals: int = 3) -> str:
-    """`value` with `decimals` decimals, or as many more as it takes to read different from
-    `limit`: a value refused just past a limit is never printed as the limit itself."""
+    """`value` with `decimals` decimals, or as many more as it takes to read on its own side of
+    `limit`: a value refused just past a limit is never printed as the limit itself, nor past
+    it the other way (a probability of 0.99999999985 below p_min 0.9999999999 read "1.000")."""
     for places in range(decimals, 18):
-        if float(text := f"{value:.{places}f}") != limit:
+        shown = float(text := f"{value:.{places}f}")
+        if shown != limit and (shown < limit) == (value < limit):
             return text
     return repr(value)
 

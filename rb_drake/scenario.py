@@ -276,7 +276,9 @@ def scenario_from_dict(data: Any, source: str = "<scenario>",
     fmt = rd.require("", data, "format")
     if fmt != FORMAT:
         raise rd.fail("format", f"expected {FORMAT!r}, got {fmt!r}")
-    name = data.get("name", Path(source).stem)
+    # a file's stem as a default name is cut to a name's length (a 220-character file name
+    # refused a scenario that gives no name: "name: 220 characters")
+    name = data.get("name", Path(source).stem[:MAX_NAME])
     if not isinstance(name, str):
         raise rd.fail("name", f"expected a string, got {_describe(name)}")
     if len(name) > MAX_NAME:  # 999,000 characters took minutes and 1 GB to draw in a title
@@ -449,10 +451,11 @@ def load_scenario(path: str | Path, check_start: bool = True) -> Scenario:
     return scenario_from_dict(data, str(path), check_start=check_start)
 
 
-def checked_scenario(scn: Scenario, source: str) -> Scenario:
+def checked_scenario(scn: Scenario, source: str, check_start: bool = False) -> Scenario:
     """A Scenario object (its fields the caller's to replace) read again as its file would be:
     a NaN start or an unknown stance id raises ScenarioError naming `source` and the field,
-    before a planner or numpy meets it. The object's own source is kept for the messages that
+    before a planner or numpy meets it; `check_start` also checks that the start stance holds
+    the robot, as `load_scenario` does. The object's own source is kept for the messages that
     name the cave."""
     try:
         data = scn.to_dict()
@@ -460,6 +463,8 @@ def checked_scenario(scn: Scenario, source: str) -> Scenario:
         if checked.robot != scn.robot:  # `robot` replaced, not its overrides: read it whole
             data["robot"] = scn.robot.to_dict()
             checked = scenario_from_dict(data, source, check_start=False)
+        if check_start:  # the robot's own, once it is read
+            checked = scenario_from_dict(data, source, check_start=True)
     except (TypeError, ValueError, AttributeError, RecursionError) as e:
         if isinstance(e, ScenarioError):
             raise

@@ -19,6 +19,9 @@ that log Phi is flat) subject to the tension bounds. Two implementations share t
 
 from __future__ import annotations
 
+import contextlib
+import logging
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -32,6 +35,19 @@ from rb_drake.stance import Stance
 REGULARISATION = 1e-8  # N^-2; decides only where every grasp has z > ~5 (P_i > 1 - 1e-7)
 STATICS_TOL = 1e-6     # N (and N m): the largest residual we call equilibrium
 
+
+@contextlib.contextmanager
+def quiet_solver_log() -> Iterator[None]:
+    """Drake's solver messages below a warning kept off stderr while a solve runs: its status
+    is read and handled by the caller (`scp.dynamics_weight: 1e6` printed "INFO:drake:Clarabel
+    returns InsufficientProgress" among rbp plan's lines)."""
+    log = logging.getLogger("drake")
+    level = log.level
+    log.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
 
 class Allocation(NamedTuple):
     """Force allocation for P poses. Tensions are NaN for a free boom and where statics fail."""
@@ -246,7 +262,8 @@ class ForceAllocator:
 
     def _solve_qp(self, H: np.ndarray, q: np.ndarray, guess: np.ndarray) -> np.ndarray | None:
         self.cost.evaluator().UpdateCoefficients(np.diag(H), q, 0.0, is_convex=True)
-        result = self.solver.Solve(self.prog, guess, self.options)
+        with quiet_solver_log():
+            result = self.solver.Solve(self.prog, guess, self.options)
         if not result.is_success():
             from pydrake.solvers import SolutionResult
 

@@ -66,7 +66,9 @@ def _flag(value: Any, field: str) -> bool:
     as true."""
     from rb_drake.errors import RbpInputError
 
-    if not isinstance(value, bool) and type(value).__name__ != "bool_":
+    # numpy's bool is `numpy.bool` since numpy 2 (`bool_` before): np.False_ was refused
+    if not isinstance(value, bool) and not (type(value).__module__ == "numpy"
+                                            and type(value).__name__ in ("bool", "bool_")):
         raise RbpInputError(f"expected True or False, got {value!r:.60}", field=field)
     return bool(value)
 
@@ -279,7 +281,13 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
         raise RbpInputError("a partial climb is the complete search's (footstep.search "
                             "'complete' or 'hybrid'): the sampled search gives none",
                             field="partial")
-    scn = _scenario(scenario, "scenario")
+    if partial and cfg.footstep.min_success is not None:  # it returned none, silently
+        raise RbpInputError("a partial climb is the complete search's: the search for the "
+                            "fewest regrasps within footstep.min_success gives none",
+                            field="partial")
+    # its start checked as rbp plan's is: a cave loaded with check_start=False, or a start
+    # replaced, was searched and answered "no route" where the command line names the start
+    scn = _scenario(scenario, "scenario", check_start=True)
     budget = (expansion_budget(scn, cfg.footstep) if cfg.footstep.search == "complete"
               else cfg.footstep.max_expansions)
     with SearchProgress(f"{planner} on {scn.name}", budget, quiet=not progress) as bar:
@@ -297,14 +305,15 @@ def plan(scenario: Scenario | str | Path, config: PipelineConfig | None = None, 
                           footsteps_done=footsteps_done, partial=partial)
 
 
-def _scenario(scenario: Any, field: str) -> Scenario:
+def _scenario(scenario: Any, field: str, check_start: bool = False) -> Scenario:
     """`scenario` as a Scenario: a Scenario (checked again by the scenario reader, its file
-    named "(FIELD argument)"), or what `load_scenario` takes."""
+    named "(FIELD argument)"; `check_start`: its start stance too), or what `load_scenario`
+    takes (which checks the start stance)."""
     from rb_drake.errors import RbpInputError
     from rb_drake.scenario import Scenario, checked_scenario
 
     if isinstance(scenario, Scenario):
-        return checked_scenario(scenario, f"({field} argument)")
+        return checked_scenario(scenario, f"({field} argument)", check_start)
     if not isinstance(scenario, str | Path):
         raise RbpInputError("expected a Scenario, a scenario file or a bundled cave's name, got "
                             f"{type(scenario).__name__}", field=field)
@@ -526,10 +535,15 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
     every interface). Returns a `MeshcatView` with the `url` to open; it serves until closed
     (`view.close()` or `with rbp.meshcat(plan) as view:`). Raises `RbpInputError` for a plan
     that cannot be simulated (as `simulate`)."""
+    from planning.plan_model import Plan
     from rb_drake.errors import RbpInputError
     from rb_drake.scenario import Scenario
     from systems.meshcat_view import show_climb, show_scenario, start_meshcat
 
+    if not isinstance(what, Scenario | Plan | dict | SimulationResult):  # named as this
+        # argument: simulate's refusal named its own, `plan`
+        raise RbpInputError("expected a Scenario, a Plan, a plan-file object (a dict) or a "
+                            f"SimulationResult, got {type(what).__name__}", field="what")
     speedup = _number(speedup, "speedup")
     if not 0 < speedup < math.inf:
         raise RbpInputError(f"must be above 0 and finite, got {speedup:g}", field="speedup")

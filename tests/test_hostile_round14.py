@@ -256,7 +256,8 @@ def test_the_joint_checks_defaults_are_the_dataclasses():
     from planning.segmented import SegmentConfig
 
     default = SegmentConfig()
-    assert {"lookahead": default.lookahead, "commit": default.commit} == SEGMENT_DEFAULTS, (
+    assert {"lookahead": default.lookahead, "commit": default.commit,
+            "tolerance": default.tolerance} == SEGMENT_DEFAULTS, (
         "config_ranges.SEGMENT_DEFAULTS differs from SegmentConfig's defaults")
 
 

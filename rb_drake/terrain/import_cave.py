@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rb_drake.errors import RbpInputError
+from rb_drake.scenario import MAX_NAME
 from rb_drake.terrain.polygon_files import MESH_SUFFIXES, UNITS, missing_extra, read_rock
 
 if TYPE_CHECKING:
@@ -58,12 +59,16 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
         if opts.plane_origin is not None or opts.plane_normal is not None:
             raise RbpInputError("only for a mesh or point cloud (.stl, .obj, .ply)",
                                 file=str(path), field="--plane-origin/--plane-normal")
+        if opts.resolution is not None:  # a point cloud's: a drawing's import ignored it
+            raise RbpInputError("only for a point cloud (.ply, .obj): a drawing's outlines are "
+                                "read as drawn", file=str(path), field="--resolution")
         rock = read_rock(path, opts.unit, opts.scale, opts.simplify)
     from rb_drake.input_files import max_input_values
 
     cfg = CaveConfig(anchor_density=opts.anchor_density)
     scn = scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
-                             goal=opts.goal, name=opts.name or path.stem, source=str(path),
+                             goal=opts.goal, name=opts.name or path.stem[:MAX_NAME],
+                             source=str(path),
                              framed=scan,  # a scan's rock is a frame minus the free space
                              max_values=max_input_values())
     _check_readable(path, scn)

@@ -93,6 +93,10 @@ def read_rock(path: str | Path, unit: str | None = None, scale: float = 1.0,
         raise RbpInputError(f"holds up to {numbers:,} numbers, more than a drawing of "
                             f"{MAX_VERTICES:,} outline vertices needs (at most "
                             f"{MAX_NUMBERS:,}); simplify the drawing first", file=name)
+    if unit is None and suffix == ".dxf" and (other := unread_unit(text)) is not None:
+        raise RbpInputError(f"the drawing declares its unit as {other}, which rbp does not "
+                            f"convert: give --unit ({', '.join(sorted(UNITS))}) for its "
+                            "coordinates", file=name, field="$INSUNITS")
     if unit is None:
         unit = declared_unit_of(path, text) or "m"
     factor = UNITS[unit] * scale
@@ -112,6 +116,30 @@ _DIGITS = bytes(48 if chr(b).isdigit() else 32 for b in range(256))  # digit -> 
 # A DXF's $INSUNITS codes for the units rbp reads (AutoCAD's table; 0 is "unitless")
 INSUNITS = {1: "in", 2: "ft", 4: "mm", 5: "cm", 6: "m"}
 _INSUNITS = re.compile(r"^\s*\$INSUNITS\s*\r?\n\s*70\s*\r?\n\s*(-?\d+)\s*$", re.MULTILINE)
+
+
+# the other codes of that table: a drawing that declares one was read as metres, silently (a
+# drawing in decimetres, a cave ten times too large)
+OTHER_INSUNITS = {3: "miles", 7: "kilometres", 8: "microinches", 9: "mils", 10: "yards",
+                  11: "angstroms", 12: "nanometres", 13: "microns", 14: "decimetres",
+                  15: "decametres", 16: "hectometres", 17: "gigametres",
+                  18: "astronomical units", 19: "light years", 20: "parsecs",
+                  21: "US survey feet", 22: "US survey inches", 23: "US survey yards",
+                  24: "US survey miles"}
+
+
+def unread_unit(text: str) -> str | None:
+    """The unit a DXF drawing declares in $INSUNITS when rbp does not read it (a code of
+    another unit, or no unit's code), as words; None when it declares none, unitless or one
+    rbp reads."""
+    match = _INSUNITS.search(text[:200_000])
+    if match is None:
+        return None
+    code = int(match.group(1))
+    if code == 0 or code in INSUNITS:
+        return None
+    return f"{OTHER_INSUNITS[code]} (code {code})" if code in OTHER_INSUNITS else \
+        f"code {code}, no unit's"
 
 
 def declared_unit(text: str) -> str | None:

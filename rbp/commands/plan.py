@@ -40,6 +40,10 @@ OPTION_FIELDS = {"--max-expansions": ("FootstepConfig", "max_expansions"),
 # --partial with a configuration's sampled search, which wrote no partial climb
 PARTIAL_SAMPLED = ("--partial climbs with the complete search (complete or hybrid), and the "
                    "sampled one gives no partial climb")
+# --partial with --min-success (or footstep.min_success), whose search wrote no partial climb
+PARTIAL_MIN_SUCCESS = ("the partial climb is the complete search's, and --min-success's search "
+                       "(the fewest regrasps within a success probability) gives none: give "
+                       "one or the other")
 
 PROVENANCE_KEYS = ("rbp_version", "command", "planner", "motion", "seed", "scenario_source",
                    "config")
@@ -159,6 +163,8 @@ def option_conflict(args: argparse.Namespace, planner: str | None) -> None:
     if partial and args.search == "sampled":
         raise UserError("--partial: the partial climb is the complete search's (the default, "
                         "or --search hybrid), which --search sampled leaves out")
+    if partial and getattr(args, "min_success", None) is not None:  # it wrote none, silently
+        raise UserError(f"--partial: {PARTIAL_MIN_SUCCESS}")
     if planner == "naive":
         given = [flag for flag, on in (
             ("--thorough", args.thorough),
@@ -262,6 +268,12 @@ def plan_setup(args: argparse.Namespace):
             cfg.footstep.search == "sampled":  # it wrote no partial climb, silently
         source = args.config or args.from_plan or "(configuration)"
         raise UserError(f"{source}: footstep.search: {PARTIAL_SAMPLED}")
+    if getattr(args, "partial", False) and planner == "rbp" and \
+            cfg.footstep.min_success is not None:  # a configuration's, or a partial --from-plan
+        source = ("--min-success" if getattr(args, "min_success", None) is not None
+                  else f"{args.config or args.from_plan or '(configuration)'}: "
+                  "footstep.min_success")
+        raise UserError(f"{source}: {PARTIAL_MIN_SUCCESS}")
     anytime = cfg.footstep.anytime
     if anytime is not None:
         source = args.config or args.from_plan or "(configuration)"

@@ -47,7 +47,7 @@ from planning.lattice_search import (
     LatticeMemo,
     SearchGraph,
     best_poses,
-    goal_pose_of,
+    goal_pose_and_r,
     stance_components,
     threads_held,
 )
@@ -115,11 +115,16 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
 
     popped_cost: dict[tuple, float] = {}
     start_pose = np.asarray(scn.start_pose, dtype=float)
+    # The footstep plan's p_path also takes the start configuration and the goal pose's, which
+    # no edge scores: each route's cost starts with the start's -r and ends with its goal
+    # pose's, so that exp(-cost) never exceeds the plan's p_path (docs/model.md).
+    start_term = 0.0 if ignore_grasps else _holding_term(scn, start, start_pose)
     for comp in joined:
-        push((start, comp), 0, 0.0, -1, start_pose, None, None)
+        push((start, comp), 0, start_term, -1, start_pose, None, None)
     expansions = tested = 0
     nearest = math.inf
     found: tuple[int, np.ndarray] | None = None  # (goal label, goal pose)
+    goal_term = 0.0  # the goal pose's -r, added to the found route's cost
     expanded: list[tuple[tuple, np.ndarray]] = []
     stop, reason = Stop.NOROUTE, ""
     while open_list:
@@ -171,11 +176,13 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
         popped_cost[vertex] = cost
         stance, comp = vertex
         lat = memo.components[stance].components[comp]
-        goal_pose = goal_pose_of(scn, lat)
-        if goal_pose is not None:
+        at_goal = goal_pose_and_r(scn, lat)
+        if at_goal is not None and (ignore_grasps or cost + max(0.0, -at_goal[1]) <= slack):
             # Popped in order of (regrasps + bound, cost) with every key a lower bound on what
-            # it leads to: no route left has fewer regrasps, or as few and a lower cost.
-            found = (index, goal_pose)
+            # it leads to: no route left has fewer regrasps. (A goal vertex whose goal pose
+            # takes the route past -log P is expanded: a later goal vertex may hold a better.)
+            found = (index, at_goal[0])
+            goal_term = 0.0 if ignore_grasps else max(0.0, -at_goal[1])
             break
         expansions += 1
         expanded.append((vertex, pose))
@@ -214,7 +221,7 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
                               expanded, [], graph)
     path, poses, probs, others = [], [], [], []
     index = found[0]
-    total = labels[index][2]
+    total = labels[index][2] + goal_term
     while index >= 0:
         vertex, _, _, parent, pose, p4, edge = labels[index]
         path.append(vertex)
@@ -226,6 +233,15 @@ def constrained_search(scn: Scenario, min_success: float, config: CompleteConfig
         index = parent
     return CompleteResult(True, Stop.ROUTE, "", path[::-1], poses[::-1], probs[::-1], found[1],
                           expansions, tested, expanded, [], graph, others[::-1], cost=total)
+
+
+def _holding_term(scn: Scenario, stance: tuple, pose: np.ndarray) -> float:
+    """-r (-log P, at least 0) of `stance` at `pose`: the start configuration's share of the
+    plan's -log p_path."""
+    from rb_drake.feasibility import check_poses
+
+    r = float(check_poses(scn, scn.stance(stance), pose[None, :]).allocation.robustness[0])
+    return max(0.0, -r) if math.isfinite(r) else 0.0
 
 
 def _alternatives(scn: Scenario, memo: LatticeMemo, cfg: LatticeConfig, ignore_grasps: bool,

@@ -304,6 +304,12 @@ def stance_components(scn: Scenario, memo: LatticeMemo, stance: tuple, cfg: Latt
 def goal_pose_of(scn: Scenario, lat: Component) -> np.ndarray | None:
     """The most robust pose of component `lat` within the goal tolerance (None: none is): a
     vertex with one is a goal."""
+    found = goal_pose_and_r(scn, lat)
+    return None if found is None else found[0]
+
+
+def goal_pose_and_r(scn: Scenario, lat: Component) -> tuple[np.ndarray, float] | None:
+    """`goal_pose_of`'s pose and the 4-stance's robustness r (log P) there."""
     goal = np.asarray(scn.goal_position, dtype=float)
     lo, hi = lat.box  # no pose within the tolerance unless its bounding box is
     if float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - goal, goal - hi)))) > \
@@ -312,7 +318,8 @@ def goal_pose_of(scn: Scenario, lat: Component) -> np.ndarray | None:
     near = np.flatnonzero(np.linalg.norm(lat.poses[:, :2] - goal, axis=1) <= scn.goal_tolerance)
     if not len(near):
         return None
-    return lat.poses_at(near[[int(np.argmax(lat.robustness[near]))]])[0]
+    best = near[int(np.argmax(lat.robustness[near]))]
+    return lat.poses_at(np.array([best]))[0], float(lat.robustness[best])
 
 
 def end_pose_of(scn: Scenario, lat: Component) -> np.ndarray:

@@ -312,8 +312,9 @@ def test_as_given_never_rounds_to_another_number():
         assert float(as_given(value)) == value
 
 
-@pytest.mark.parametrize("search, given_up", [("sampled", "gave up after 1e-300 s"),
-                                              ("hybrid", "gave up after 0.001 s")])
+# the hybrid states the limit and both stages' expansions (tests/test_hostile_round20.py)
+@pytest.mark.parametrize("search, given_up", [("sampled", "gave up after 1e-300 s (1 "),
+                                              ("hybrid", "gave up after 1e-300 s (2 ")])
 def test_the_sampled_search_keeps_to_the_time_limit(tmp_path, search, given_up):
     """The sampled search (and the hybrid's sampled stage) ignored --time-limit: with
     candidates_per_boom 1000 a 10 s limit ran 44 s on shaft-1, and the hybrid's complete stage
@@ -324,7 +325,7 @@ def test_the_sampled_search_keeps_to_the_time_limit(tmp_path, search, given_up):
                "--time-limit", "1e-300", "-o", str(out))
     assert done.returncode == 1, f"exit {done.returncode}: {done.stderr[-400:]}"
     summary = done.stdout.strip().splitlines()[-1]
-    assert summary.startswith(f"success: false ({given_up} (1 expansions)"), summary
+    assert summary.startswith(f"success: false ({given_up}expansions)"), summary
     checked = run("check", str(out))
     assert checked.returncode == 0, f"rbp check refused the plan: {checked.stdout[-400:]}"
 

@@ -48,10 +48,22 @@ def fewest(demo: Scenario) -> int:
     return len(found.path) - 1
 
 
+def end_terms(scn: Scenario, found) -> float:
+    """What the constrained search adds to a route's edges: -r of the start configuration and
+    of the last stance at the route's goal pose (the plan's p_path takes both)."""
+    from rb_drake.feasibility import check_poses
+
+    start = check_poses(scn, scn.stance(tuple(scn.start_stance)),
+                        [scn.start_pose]).allocation.robustness[0]
+    goal = check_poses(scn, scn.stance(found.path[-1][0]),
+                       [found.goal_pose]).allocation.robustness[0]
+    return max(0.0, -float(start)) + max(0.0, -float(goal))
+
+
 @pytest.fixture(scope="module")
 def tight(demo: Scenario, optimal):
-    """P just below the optimum's predicted success."""
-    p = math.exp(-optimal.cost) * (1 - 1e-6)
+    """P just below the optimum's predicted success, its start and goal configurations too."""
+    p = math.exp(-(optimal.cost + end_terms(demo, optimal))) * (1 - 1e-6)
     return p, constrained_search(demo, p, CompleteConfig(COARSE))
 
 
@@ -70,6 +82,7 @@ def test_just_below_the_optimum_finds_a_route_within_p(optimal, tight) -> None:
 
 
 def test_above_the_optimum_is_a_proof_of_no_route(demo: Scenario, optimal) -> None:
+    # every route's edges cost at least the optimum's, and its end terms are not negative
     p = math.exp(-optimal.cost) * (1 + 1e-6)
     found = constrained_search(demo, p, CompleteConfig(COARSE))
     assert not found.success and found.stop == "noroute", (
@@ -79,14 +92,14 @@ def test_above_the_optimum_is_a_proof_of_no_route(demo: Scenario, optimal) -> No
     assert as_given(p) in found.reason, f"the reason does not name P as given: {found.reason}"
 
 
-def test_a_loose_p_gives_the_fewest_regrasps(loose, fewest: int) -> None:
+def test_a_loose_p_gives_the_fewest_regrasps(demo: Scenario, loose, fewest: int) -> None:
     assert loose.success
     assert len(loose.path) - 1 == fewest, (
         f"{len(loose.path) - 1} regrasps where the unconstrained fewest is {fewest}")
-    # the edges' costs add up to the reported cost
+    # the edges' costs and the end terms add up to the reported cost
     total = sum(loose.graph.costs[u, v]
                 for u, v in zip(loose.path[:-1], loose.path[1:], strict=True))
-    assert total == pytest.approx(loose.cost, rel=1e-9)
+    assert total + end_terms(demo, loose) == pytest.approx(loose.cost, rel=1e-6)
 
 
 def test_regrasps_never_fall_as_p_rises(loose, tight) -> None:
@@ -94,6 +107,26 @@ def test_regrasps_never_fall_as_p_rises(loose, tight) -> None:
     assert len(loose.path) - 1 <= len(found.path) - 1, "more regrasps for a looser P"
     assert loose.cost >= found.cost - 1e-12 or len(loose.path) < len(found.path), (
         "with as many regrasps, the looser search should have found the cheaper route too")
+
+
+def test_the_plans_p_path_is_at_least_the_success_asked_for() -> None:
+    """A route's edges score its transition poses; the footstep plan's p_path also takes the
+    start configuration and the goal pose. Without them in the cost, `--min-success 0.978` on
+    this cave answered a 2-regrasp route with exp(-cost) 0.9801 and p_path 0.9765 ("success");
+    now the route is one whose p_path reaches P, and exp(-cost) never exceeds p_path."""
+    from planning.footsteps import FootstepConfig, plan_footsteps
+    from planning.plan import build_plan
+    from rbp.api import generate_scenario
+
+    cave = generate_scenario("shaft", seed=3, length=(3.5, 4.0))
+    for p in (0.978, 0.9):
+        fp = plan_footsteps(cave, FootstepConfig(min_success=p))
+        assert fp.success, f"P {p}: {fp.reason}"
+        plan = build_plan(cave, fp, "rbp")
+        assert plan.p_path is not None and plan.p_path >= p, (
+            f"P {p}: the plan's p_path {plan.p_path} misses the success asked for")
+        assert math.exp(-fp.cost) <= plan.p_path * (1 + 1e-9), (
+            f"P {p}: exp(-cost) {math.exp(-fp.cost)} promises more than p_path {plan.p_path}")
 
 
 def test_cli_min_success_is_recorded(tmp_path) -> None:

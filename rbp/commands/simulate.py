@@ -213,5 +213,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if args.meshcat:
             print(f"Meshcat: {meshcat.web_url()}")
             if sys.stdin.isatty():
-                input("press Enter to quit ")
+                try:
+                    input("press Enter to quit ")
+                except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
+                    print(file=sys.stderr)
     return EXIT_OK

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from cli_helpers import run_rbp
 from test_simulation import _args, _short_plan
 
 import rbp
@@ -70,3 +71,35 @@ def test_end_of_input_at_the_meshcat_prompt_quits_as_enter_does(
     assert cmd_simulate(_args(str(path), "--trials", "0", "--meshcat", "--no-verify")) == 0
     out = capsys.readouterr().out
     assert "Meshcat: http://" in out and "press Enter to quit" in out, out
+
+
+@pytest.mark.parametrize("period", [1.0, 0.3])
+def test_rig_run_commands_the_phase_to_its_end(period: float, tmp_path: Path) -> None:
+    """`rbp rig-run rig.json --period 1` sent commands at 0, 1 and 2 s of the rig plan's
+    2.8 s phase and stopped: the rig never got the verified end pose (its last 0.8 s were never
+    commanded) and the run reported its minima without it. The last command now goes out at
+    the first k * period at or after the phase's end, the end pose's boom lengths."""
+    import numpy as np
+
+    from planning.plan_file import plan_from
+    from rb_drake import geometry
+    from systems.rig_interface import body_phase
+    from systems.rig_log import replay_log
+
+    path = tmp_path / "rig.json"
+    path.write_text((DATA / "golden" / "rig.json").read_text())
+    log = tmp_path / "rig.lcm"
+    result = run_rbp("rig-run", str(path), "--sim-rig", "--period", str(period), "--log",
+                     str(log), cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    phase = body_phase(plan_from(json.loads(path.read_text())), 0)
+    read = replay_log(log)
+    assert read.command_time[-1] >= phase.end_time - 1e-9, (
+        f"the last command at {read.command_time[-1]} s, the phase ends at {phase.end_time} s")
+    assert read.command_time[-2] < phase.end_time - 1e-9, "one command past the end, no more"
+    end = geometry.boom_geometry(phase.scenario.robot, phase.pose.value(phase.end_time).ravel(),
+                                 phase.stance.positions).length[0]
+    np.testing.assert_allclose(read.boom_length[-1], end, atol=1e-9,
+                               err_msg="the last command must be the end pose's boom lengths")
+    plain = run_rbp("rig-run", str(path), "--sim-rig", "--log", str(log), cwd=tmp_path)
+    assert "29 commands sent" in plain.stdout, f"0.1 s divides 2.8 s: as before {plain.stdout}"

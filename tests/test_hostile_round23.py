@@ -103,3 +103,34 @@ def test_rig_run_commands_the_phase_to_its_end(period: float, tmp_path: Path) ->
                                err_msg="the last command must be the end pose's boom lengths")
     plain = run_rbp("rig-run", str(path), "--sim-rig", "--log", str(log), cwd=tmp_path)
     assert "29 commands sent" in plain.stdout, f"0.1 s divides 2.8 s: as before {plain.stdout}"
+
+
+def test_trials_stopped_at_a_handover_are_not_counted_as_replanned() -> None:
+    """A plan flown with --no-verify whose release ramp is missing stops at that gripper
+    (`handover`) in every trial that gets there; `rbp simulate --replan retry` said "1 of 50
+    failed climbs saved (50 still held on 3 booms, 1 replans)": 49 of those trials never asked
+    for a replan (no state to replan from). attempted now counts only the trials that asked."""
+    import numpy as np
+
+    from planning.plan_faults import ramp_removed
+    from systems.diagram import ClimbSimulator
+    from systems.montecarlo import monte_carlo, retry_replanner
+    from systems.trajectory import PlanTrajectory, plan_scenario
+
+    golden = json.loads((DATA / "golden" / "demo-shaft-current.json").read_text())
+    fault = next(f for f in (ramp_removed(golden, np.random.default_rng(s)) for s in range(20))
+                 if "release" in f.what)
+    traj = PlanTrajectory(fault.plan, plan_scenario(fault.plan))
+    sim = ClimbSimulator(traj.scenario, plant="body")
+    record = sim.run(traj)
+    assert record.failure is not None and record.failure.cause == "handover", record.failure
+    mc = monte_carlo(record, 50, 0, retry_replanner, "retry", sim)
+    r = mc.replanning
+    assert r is not None
+    failed = mc.trials - mc.successes
+    handover = r.outcomes.get("handover", 0)
+    assert handover > 0, f"the trials stop at the gripper: {r.outcomes}"
+    assert r.attempted == failed - handover - r.outcomes.get("fell", 0), (
+        f"{r.attempted} attempted of {failed} failed, {handover} stopped at the handover")
+    assert r.replans <= r.attempted, f"{r.replans} replans for {r.attempted} asked"
+    assert r.saved + sum(r.outcomes.values()) == failed, "the failed trials add up"

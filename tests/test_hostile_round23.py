@@ -134,3 +134,31 @@ def test_trials_stopped_at_a_handover_are_not_counted_as_replanned() -> None:
         f"{r.attempted} attempted of {failed} failed, {handover} stopped at the handover")
     assert r.replans <= r.attempted, f"{r.replans} replans for {r.attempted} asked"
     assert r.saved + sum(r.outcomes.values()) == failed, "the failed trials add up"
+
+
+def test_a_climb_stopped_at_a_handover_says_so_and_fails(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The demo plan without a release ramp, flown with --no-verify: the deterministic climb
+    stops at that gripper at 87 s, yet `rbp simulate --trials 0` printed "simulated 182.0 s,
+    15 phases", p_sim 0.0000 without a reason, and exit status 0. It now says how far the
+    climb went, one error line names the phase, time and boom, and the exit status is 1 (a
+    failed execution); the --json file is still written."""
+    import numpy as np
+
+    from planning.plan_faults import ramp_removed
+
+    golden = json.loads((DATA / "golden" / "demo-shaft-current.json").read_text())
+    fault = next(f for f in (ramp_removed(golden, np.random.default_rng(s)) for s in range(20))
+                 if "release" in f.what)
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(fault.plan))
+    out = tmp_path / "sim.json"
+    status = cmd_simulate(_args(str(path), "--trials", "0", "--no-verify", "--json", str(out)))
+    text = capsys.readouterr()
+    assert status == 1, f"a climb that cannot go on is a failed execution: {status}"
+    first = text.out.splitlines()[0]
+    assert "simulated 87.0 of 182.0 s" in first and "7 of 15 phases" in first, first
+    errors = [line for line in text.err.splitlines() if line.startswith("error: ")]
+    assert len(errors) == 1, text.err
+    assert f"phase {fault.phase} (body) at t = 87.00 s" in errors[0], errors[0]
+    assert json.loads(out.read_text())["p_sim"] == 0.0

@@ -531,22 +531,24 @@ def meshcat(what: Scenario | Plan | dict[str, Any] | SimulationResult, *,
     """Show a cave or a climb in Meshcat, as `rbp simulate --meshcat` does: a Scenario is drawn
     alone; a plan is simulated once (`simulate(plan)`, the deterministic climb) and replayed;
     a `SimulationResult` replays its run without simulating again. The replay runs `speedup`
-    times faster than the climb. The server listens on 127.0.0.1 and a free port only (never
-    every interface). Returns a `MeshcatView` with the `url` to open; it serves until closed
-    (`view.close()` or `with rbp.meshcat(plan) as view:`). Raises `RbpInputError` for a plan
-    that cannot be simulated (as `simulate`)."""
+    times faster than the climb (0.1 at least: Drake numbers a replay's frames as int). The
+    server listens on 127.0.0.1 and a free port only (never every interface). Returns a
+    `MeshcatView` with the `url` to open; it serves until closed (`view.close()` or `with
+    rbp.meshcat(plan) as view:`). Raises `RbpInputError` for a plan that cannot be simulated
+    (as `simulate`)."""
     from planning.plan_model import Plan
     from rb_drake.errors import RbpInputError
     from rb_drake.scenario import Scenario
-    from systems.meshcat_view import show_climb, show_scenario, start_meshcat
+    from systems.meshcat_view import MIN_SPEEDUP, show_climb, show_scenario, start_meshcat
 
     if not isinstance(what, Scenario | Plan | dict | SimulationResult):  # named as this
         # argument: simulate's refusal named its own, `plan`
         raise RbpInputError("expected a Scenario, a Plan, a plan-file object (a dict) or a "
                             f"SimulationResult, got {type(what).__name__}", field="what")
     speedup = _number(speedup, "speedup")
-    if not 0 < speedup < math.inf:
-        raise RbpInputError(f"must be above 0 and finite, got {speedup:g}", field="speedup")
+    if not MIN_SPEEDUP <= speedup < math.inf:  # slower: Drake's frame numbers wrap round
+        raise RbpInputError(f"must be {MIN_SPEEDUP:g} or more and finite, got {speedup:g}",
+                            field="speedup")
     if isinstance(what, Scenario):
         scn = _scenario(what, "what")
         server = start_meshcat()

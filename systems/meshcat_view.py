@@ -49,6 +49,10 @@ ATTACHED = [0.2, 0.65, 0.25]
 FREE = [0.95, 0.6, 0.1]
 FAILED = [0.9, 0.1, 0.1]
 AMBIENT = 2.6  # the only light; measured: the rock then shows its own colour (tone mapping)
+# The slowest replay: Drake keys an animation by an int frame (time x frames per second), which
+# silently wraps past 2^31 (a frame at 1e12 s became -2^31); the longest plan (t <= 1e7 s) at
+# 20 frames a second stays below it at 0.1x (2e9).
+MIN_SPEEDUP = 0.1
 
 
 def start_meshcat() -> Meshcat:
@@ -201,15 +205,21 @@ def _set_robot(meshcat: Meshcat, record: SimulationRecord, sample: int,
 def animate(meshcat: Meshcat, record: SimulationRecord, frames_per_second: float = 20.0,
             speedup: float = 4.0) -> int:
     """Replay `record` as a Meshcat animation (played `speedup` times faster than simulated
-    time); returns the number of frames. Call `draw_scenario` first for the cave."""
+    time, MIN_SPEEDUP at least); returns the number of frames. Call `draw_scenario` first for
+    the cave."""
+    if not MIN_SPEEDUP <= speedup < math.inf:
+        raise ValueError(f"speedup must be {MIN_SPEEDUP:g} or more and finite, got {speedup:g}")
     _robot_objects(meshcat, record.plan.scenario)
     # The animation only moves the robot once it plays: stand it at its start meanwhile.
     _set_robot(meshcat, record, 0, None)
     meshcat.StartRecording(frames_per_second, False)
     period = speedup / frames_per_second  # simulated seconds per frame
-    samples = np.unique(np.searchsorted(record.times,
-                                        np.arange(0.0, record.times[-1] + 1e-9, period)))
-    samples = samples[samples < len(record.times)]
+    frames = math.floor(float(record.times[-1]) / period + 1e-9) + 1
+    if frames >= len(record.times):  # a frame for every sample: no grid of frame times (at
+        samples = np.arange(len(record.times))  # speedup 1e-300 it asked 1e304 of them)
+    else:
+        samples = np.unique(np.searchsorted(record.times, np.arange(frames) * period))
+        samples = samples[samples < len(record.times)]
     for s in samples:  # at its own time: samples may be sparser than frames
         _set_robot(meshcat, record, int(s), float(record.times[s]) / speedup)
     meshcat.StopRecording()

@@ -335,7 +335,10 @@ def monte_carlo(record: SimulationRecord, trials: int, seed: int,
                 progress(n + 1, len(failed))
         saved = outcomes.pop("success", 0)
         total = successes + saved
-        summary = ReplanSummary(strategy, len(failed) - outcomes.get("fell", 0),
+        # asked for a replan: not those whose 3-stance fell, nor those stopped at a gripper
+        # that could not hand over (no state to replan from: counted "still held" before)
+        asked = len(failed) - outcomes.get("fell", 0) - outcomes.get("handover", 0)
+        summary = ReplanSummary(strategy, asked,
                                 len(rp.cache), saved, total, total / trials,
                                 wilson_interval(total, trials), dict(outcomes))
     p_path = record.plan.plan.p_path

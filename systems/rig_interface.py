@@ -305,14 +305,22 @@ def check_log_size(phase: BodyPhase, period: float) -> None:
     """Refuse (RigInputError on --period), before any command is sent, a run whose log would
     hold more events than rig-replay and rig-report read (MAX_LOG_EVENTS): the setup, and a
     command and a status every period over the phase (as `_simulate` runs it)."""
-    duration = phase.end_time - phase.start_time
-    events = 1 + 2 * (math.floor(duration / period + 1e-9) + 1)
+    events = 1 + 2 * (last_command(phase, period) + 1)
     if events > MAX_LOG_EVENTS:
         # the least period whose run fits, rounded up to 0.1 ms
+        duration = phase.end_time - phase.start_time
         least = math.ceil(duration / ((MAX_LOG_EVENTS - 3) // 2) * 1e4) / 1e4
         raise RigInputError("--period", f"{period:g} s over the phase's {duration:.6g} s "
                             f"would log {events:,} events, more than the {MAX_LOG_EVENTS:,} "
                             f"rbp rig-replay and rig-report read: use at least {least:g} s")
+
+
+def last_command(phase: BodyPhase, period: float) -> int:
+    """The index k of the run's last command, sent at k * period: the first at or after the
+    phase's end, which commands its last step (the motion holds there). Commands stopped at
+    the last k * period within the phase: --period 1 over a 2.8 s phase never commanded its
+    last 0.8 s, the rig stopping short of the verified end pose."""
+    return math.ceil((phase.end_time - phase.start_time) / period - 1e-9)
 
 
 def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
@@ -339,10 +347,9 @@ def _simulate(parts: RigDiagram, phase: BodyPhase, config: RigLcmConfig,
 
     simulator.set_monitor(record)
     simulator.Initialize()
-    # Commands go out at k * period up to the phase's end; the half period after the last
-    # one lets its status come back and reach the monitor.
-    last_command = np.floor((phase.end_time - phase.start_time) / config.period + 1e-9)
-    simulator.AdvanceTo((last_command + 0.5) * config.period)
+    # Commands go out at k * period until one reaches the phase's end; the half period after
+    # the last one lets its status come back and reach the monitor.
+    simulator.AdvanceTo((last_command(phase, config.period) + 0.5) * config.period)
     commands = parts.source.memory(parts.source.GetMyContextFromRoot(root))
     bad = parts.status_filter.current(filter_context).bad
     return _record(rows), SafetyReport(commands.clamped, commands.refused, commands.held, bad,

@@ -147,10 +147,19 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 "rms_position_error": float(np.sqrt(np.mean(err**2))),
                 "max_heading_error": float(heading.max())}
     p_path, p_sim = plan["p_path"], record.implied_p_path()
-    print(f"{path}: simulated {traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}, in "
-          f"{wall:.1f} s; "
+    stop = record.failure  # a gripper that could not hand over: the climb goes no further
+    flown = (f"{traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}" if stop is None
+             else f"{float(record.times[-1]):.1f} of {traj.end_time:.1f} s, "
+                  f"{stop.phase + 1} of {plural(len(traj.phases), 'phase')}")
+    print(f"{path}: simulated {flown}, in {wall:.1f} s; "
           f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
           f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
+    if stop is not None:  # said "simulated 182.0 s, 15 phases" of a climb stopped at 87 s
+        print(one_line(f"error: {path}: the climb stopped in phase {stop.phase} "
+                       f"({traj.phases[stop.phase].kind}) at t = {stop.time:.2f} s: boom "
+                       f"{stop.boom} on {stop.anchor} still pulled {stop.draw:.2f} N where its "
+                       "gripper opens or closes, so it stayed as it was; no climb gets past it "
+                       f"(rbp check {path} tells why)"), file=sys.stderr)
     worst = record.holding_minimum()
     h = int(np.argmin(worst))
     hold = traj.holdings[h]
@@ -213,5 +222,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if args.meshcat:
             print(f"Meshcat: {meshcat.web_url()}")
             if sys.stdin.isatty():
-                input("press Enter to quit ")
-    return EXIT_OK
+                try:
+                    input("press Enter to quit ")
+                except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
+                    print(file=sys.stderr)
+    return EXIT_OK if stop is None else EXIT_FAILED  # a climb that cannot go on failed

@@ -26,6 +26,7 @@ from rb_drake.errors import (
     RbpInputError,
     as_given,
     one_line,
+    utf8_text,
 )
 from rbp.commands.common import RECEIVED as INTERRUPTS_RECEIVED
 from rbp.commands.common import (
@@ -109,6 +110,10 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     from rbp.api import import_scenario
 
     check_seed(args.seed)
+    from rb_drake.terrain.import_cave import name_text_problem
+
+    if args.name is not None and (problem := name_text_problem(args.name)) is not None:
+        raise UserError(f"--name: {problem}")
     check_output(args.output, inputs={"the imported file": args.file})
     from rb_drake.errors import RbpInputError
     from rb_drake.terrain.polygon_files import declared_unit_of
@@ -144,7 +149,8 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
         words += ["--name", args.name]
     # one line: a line break in a file name or --name would end the comment (YAML breaks
     # lines at NEL, LS and PS too)
-    command = re.sub("[\n\r\x85\u2028\u2029]", " ", shlex.join(words))
+    # and a file name that is not UTF-8 escaped (UnicodeEncodeError: a traceback)
+    command = re.sub("[\n\r\x85\u2028\u2029]", " ", utf8_text(shlex.join(words)))
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
                    f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "

@@ -141,6 +141,17 @@ def _whole_threads(value: str) -> bool:
     return value.isdigit() and 1 <= int(value) <= MAX_THREADS
 
 
+# Why matplotlib cannot start here (set by `quiet_matplotlib`), or None: no writable folder
+# for its configuration and cache, and no temporary folder to make one in
+MATPLOTLIB_PROBLEM: list[str] = []
+
+
+def matplotlib_problem() -> str | None:
+    """Why no picture can be drawn in this environment (`quiet_matplotlib` found no folder
+    matplotlib can write), or None: a picture's output is refused with it before any work."""
+    return MATPLOTLIB_PROBLEM[0] if MATPLOTLIB_PROBLEM else None
+
+
 def quiet_matplotlib() -> None:
     """rbp draws only to files: the Agg backend whatever MPLBACKEND says (MPLBACKEND=nosuch
     ended in a traceback at import), and, when matplotlib's config or cache folder cannot be
@@ -164,7 +175,17 @@ def quiet_matplotlib() -> None:
         except (OSError, ValueError):
             usable = False
         if not usable:
-            fresh = tempfile.mkdtemp(prefix="rbp-matplotlib-")
+            try:
+                fresh = tempfile.mkdtemp(prefix="rbp-matplotlib-")
+            except OSError as e:  # no usable temporary folder either: this was a traceback
+                # before any work, even of commands that draw nothing, and importing matplotlib
+                # prints a warning and raises; a picture's output is refused (check_output)
+                named = "MPLCONFIGDIR" if os.environ.get("MPLCONFIGDIR") else "HOME"
+                MATPLOTLIB_PROBLEM[:] = [
+                    f"no picture can be drawn here: matplotlib needs a writable folder, and "
+                    f"neither {folder} ({named}) nor a temporary folder is one "
+                    f"({e.strerror or e}); set MPLCONFIGDIR or TMPDIR to a writable folder"]
+                return
             import atexit
             import shutil
 

@@ -719,7 +719,8 @@ def _main(argv: list[str] | None) -> int:
     except OSError as e:  # an output that cannot be written, an input that cannot be read
         flag = output_flag(e.filename)  # `-o`, `--json`, ...: which option's file failed
         where = f"{e.filename or '(output)'}: {flag}" if flag else (e.filename or "(file)")
-        print(one_line(f"error: {where}: {e.strerror}"), file=sys.stderr)
+        # an OSError made from a message alone (matplotlib's, tempfile's) has no strerror
+        print(one_line(f"error: {where}: {e.strerror or e}"), file=sys.stderr)
         return EXIT_USAGE
 
 

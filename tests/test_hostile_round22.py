@@ -8,6 +8,10 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -73,3 +77,94 @@ def test_import_refuses_a_name_in_bytes(tmp_path: Path) -> None:
                      cwd=tmp_path)
     one_error_line(result, "--name", "not UTF-8 text", "cave\\udcff\\udcfe")
     assert not (tmp_path / "cave.yaml").exists(), "a refused import wrote its cave"
+
+
+# --- no usable temporary folder (TMPDIR, /tmp, /var/tmp and the current folder read-only) ---
+
+GOLDEN = ROOT / "tests" / "data" / "golden"
+
+
+def _namespaces_work() -> bool:
+    if os.geteuid() != 0 or not (shutil.which("unshare") and shutil.which("setpriv")):
+        return False
+    probe = subprocess.run(["unshare", "-m", "true"], capture_output=True, check=False)
+    return probe.returncode == 0
+
+
+needs_root = pytest.mark.skipif(not _namespaces_work() or not os.access("/dev/shm", os.W_OK),
+                                reason="needs root, a mount namespace (unshare -m) and /dev/shm")
+
+
+@pytest.fixture
+def shm_path() -> Iterator[Path]:
+    """A folder outside /tmp, which the namespace hides (pytest's tmp_path is under it)."""
+    folder = Path(tempfile.mkdtemp(prefix="rbp-round22-", dir="/dev/shm"))
+    yield folder
+    for sub in folder.rglob("*"):
+        if sub.is_dir():
+            sub.chmod(0o755)
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def without_temporary_folders(folder: Path, *args: str, home: str = "/tmp/home"
+                              ) -> subprocess.CompletedProcess[str]:
+    """`rbp ARGS` run from the read-only folder FOLDER/ro, in a private mount namespace whose
+    /tmp and /var/tmp are empty read-only filesystems, without root's right to write where
+    modes forbid it: no temporary folder is usable (tempfile's last resort, the current
+    folder, is read-only too). The mounts end with the namespace's one process."""
+    ro = folder / "ro"
+    ro.mkdir(exist_ok=True)
+    ro.chmod(0o555)
+    script = ("mount -t tmpfs -o ro tmpfs /tmp && mount -t tmpfs -o ro tmpfs /var/tmp && "
+              'exec setpriv --inh-caps=-all --ambient-caps=-all --bounding-set=-all "$@"')
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("TMPDIR", "TEMP", "TMP", "MPLCONFIGDIR", "XDG_CONFIG_HOME",
+                        "XDG_CACHE_HOME")}
+    env |= {"HOME": home, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run(["unshare", "-m", "sh", "-c", script, "sh", sys.executable, "-m",
+                           "rbp", *args], cwd=ro, env=env, capture_output=True, text=True,
+                          timeout=600, check=False)
+
+
+@needs_root
+def test_commands_that_draw_nothing_run_without_a_temporary_folder(shm_path: Path) -> None:
+    """With HOME read-only and no temporary folder, every command (even `rbp check`) ended in
+    a traceback at start-up (making matplotlib's folder), and `rbp rig-run` in `error: (file):
+    No usable temporary directory found` (its LCM check's and its log's scratch files)."""
+    shutil.copy(GOLDEN / "demo-shaft-current.json", shm_path / "plan.json")
+    shutil.copy(GOLDEN / "rig.json", shm_path / "rig.json")
+    checked = without_temporary_folders(shm_path, "check", "-q", "../plan.json")
+    assert checked.returncode == 0, checked.stderr[-800:]
+    assert "Traceback" not in checked.stderr, checked.stderr[-800:]
+    run = without_temporary_folders(shm_path, "rig-run", "../rig.json", "--phase", "0",
+                                    "--sim-rig", "--log", "../run.lcm")
+    assert run.returncode == 0, run.stderr[-800:]
+    assert (shm_path / "run.lcm").stat().st_size > 0, "rig-run wrote no log"
+    assert sorted(p.name for p in shm_path.iterdir()) == ["plan.json", "rig.json", "ro",
+                                                          "run.lcm"], "scratch files left"
+
+
+@needs_root
+def test_a_picture_that_matplotlib_cannot_draw_is_refused_in_one_line(shm_path: Path) -> None:
+    """matplotlib needs a writable folder (HOME's, MPLCONFIGDIR, or a temporary one): with
+    none, `rbp scenario show` ended in a traceback; now its -o is refused, naming what to set."""
+    result = without_temporary_folders(shm_path, "scenario", "show", "demo-shaft", "-o",
+                                       "../cave.png")
+    one_error_line(result, "../cave.png: -o: no picture can be drawn here", "MPLCONFIGDIR",
+                   "TMPDIR")
+    assert not (shm_path / "cave.png").exists()
+
+
+@needs_root
+def test_an_animation_is_written_without_a_temporary_folder(shm_path: Path) -> None:
+    """The animation was rendered in a temporary folder only: with none usable it failed after
+    the planning; it is rendered beside its output then."""
+    home = shm_path / "home"
+    home.mkdir()
+    result = without_temporary_folders(shm_path, "plan", "demo-shaft", "--footsteps-only",
+                                       "--quiet", "-o", "../plan.json", "--animate",
+                                       "../climb.gif", home=str(home))
+    assert result.returncode == 0, result.stderr[-800:]
+    assert (shm_path / "climb.gif").read_bytes()[:3] == b"GIF", "no animation written"
+    assert not [p for p in shm_path.iterdir() if p.name.startswith(".")], "scratch left"

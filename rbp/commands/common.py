@@ -159,6 +159,10 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
     if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
+    if problem is None and picture:  # before matplotlib's import raises (no folder for it)
+        from rb_drake.environment import matplotlib_problem
+
+        problem = matplotlib_problem()
     if problem is None and picture and not animation:
         problem = picture_format_problem(path)
     key = os.path.realpath(path)  # missing files too, through the symlinks that exist

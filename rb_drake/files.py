@@ -41,9 +41,14 @@ def output_problem(path: str | Path,
     one of the command's `inputs` ({what: path}: the output would overwrite it). A name given
     as a string that ends with "/" is refused: pathlib drops the slash, and `-o plan.json/`
     wrote the file plan.json."""
+    if str(path) == "-":  # standard output to many tools: rbp wrote a file named '-'
+        return "'-' is not standard output here: rbp writes files (./- names a file called -)"
     try:
         target = output_target(path)
-        if (problem := _not_regular(target)) is not None:
+        # the given name stat-ed too: /dev/stdout, /proc/self/fd/N are links the kernel
+        # follows to a pipe that resolving the name cannot reach ("cannot write a file there
+        # (No such file or directory)")
+        if (problem := _not_regular(Path(path)) or _not_regular(target)) is not None:
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"

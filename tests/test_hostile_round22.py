@@ -168,3 +168,25 @@ def test_an_animation_is_written_without_a_temporary_folder(shm_path: Path) -> N
     assert result.returncode == 0, result.stderr[-800:]
     assert (shm_path / "climb.gif").read_bytes()[:3] == b"GIF", "no animation written"
     assert not [p for p in shm_path.iterdir() if p.name.startswith(".")], "scratch left"
+
+
+# --- standard streams named as files ---
+
+def test_dash_is_refused_as_an_output_and_explained_as_an_input(tmp_path: Path) -> None:
+    """`-o -` wrote a file named '-' (to many tools '-' is standard output), and `rbp check -`
+    said only "no such file"."""
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "-", cwd=tmp_path)
+    one_error_line(result, "-: -o: '-' is not standard output", "./-")
+    assert not (tmp_path / "-").exists(), "a file named '-' was written"
+    one_error_line(run_rbp("check", "-", cwd=tmp_path), "-: (file): no such file",
+                   "not standard input")
+    named = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "./-", cwd=tmp_path)
+    assert named.returncode == 0 and (tmp_path / "-").is_file(), named.stderr
+
+
+def test_dev_stdout_on_a_pipe_is_called_a_pipe(tmp_path: Path) -> None:
+    """`-o /dev/stdout` piped (`| cat`) said "cannot write a file there (No such file or
+    directory)": the name resolved through /proc/self/fd/1 to 'pipe:[N]', which is no file."""
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "/dev/stdout",
+                     cwd=tmp_path)  # run_rbp's standard output is a pipe
+    one_error_line(result, "/dev/stdout: -o: is not a regular file", "pipe")

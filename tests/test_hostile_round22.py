@@ -190,3 +190,43 @@ def test_dev_stdout_on_a_pipe_is_called_a_pipe(tmp_path: Path) -> None:
     result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "/dev/stdout",
                      cwd=tmp_path)  # run_rbp's standard output is a pipe
     one_error_line(result, "/dev/stdout: -o: is not a regular file", "pipe")
+
+
+# --- numba's on-disk cache ---
+
+TINY_KERNEL = """
+import rb_drake.kernel  # installs rbp's cache handling, as every command's kernels do
+from numba import njit
+
+@njit(cache=True)
+def plus_one(x):
+    return x + 1
+
+print(plus_one(41))
+"""
+
+
+@pytest.mark.parametrize("pattern", ["*.nbc", "*.nbi"])
+def test_a_truncated_cache_file_is_compiled_again(tmp_path: Path, pattern: str) -> None:
+    """A cache file cut short (a disk that filled, a copy interrupted) ended every command that
+    plans in pickle's traceback ("pickle data was truncated") until the cache was deleted; it
+    is now a cache miss, compiled again and saved over."""
+    (tmp_path / "tiny.py").write_text(TINY_KERNEL)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+
+    def run() -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-c", "import tiny"], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=300, check=False)
+
+    first = run()
+    assert first.returncode == 0 and first.stdout.strip() == "42", first.stderr[-600:]
+    files = list((tmp_path / "cache").rglob(pattern))
+    assert files, f"numba saved no {pattern} file"
+    for f in files:
+        f.write_bytes(f.read_bytes()[:20])
+    again = run()
+    assert again.returncode == 0 and again.stdout.strip() == "42", again.stderr[-600:]
+    healed = run()  # and the entry was saved again, whole
+    assert healed.returncode == 0 and all(f.stat().st_size > 20 for f in files), \
+        [f.stat().st_size for f in files]

@@ -195,7 +195,8 @@ def quiet_matplotlib() -> None:
 
 
 def standard_streams() -> None:
-    """Make the standard output and error safe to print to, once at start-up.
+    """Make the standard output and error safe to print to, and a closed standard input
+    the null device, once at start-up.
 
     A closed descriptor (`rbp ... >&-`, `2>&-`) leaves sys.stdout or sys.stderr None: the
     exit's flush ended in a traceback after the work was done, and the progress line's terminal
@@ -206,6 +207,16 @@ def standard_streams() -> None:
     of ending a successful command in UnicodeEncodeError."""
     import sys
 
+    try:  # a closed standard input (`<&-`, a daemon's): `rbp simulate --meshcat` ended in an
+        os.fstat(0)  # AttributeError (sys.stdin None) after the simulation, and the first
+    except OSError:  # file rbp opened took descriptor 0: read from the null device instead
+        null = os.open(os.devnull, os.O_RDONLY)
+        if null != 0:
+            os.dup2(null, 0)
+            os.close(null)
+        sys.stdin = open(0, closefd=False)  # noqa: SIM115 (lives on)
+    if sys.stdin is None:
+        sys.stdin = open(os.devnull)  # noqa: SIM115 (lives on)
     for fd, name in ((1, "stdout"), (2, "stderr")):
         try:
             os.fstat(fd)

@@ -230,3 +230,17 @@ def test_a_truncated_cache_file_is_compiled_again(tmp_path: Path, pattern: str) 
     healed = run()  # and the entry was saved again, whole
     assert healed.returncode == 0 and all(f.stat().st_size > 20 for f in files), \
         [f.stat().st_size for f in files]
+
+
+def test_simulate_meshcat_with_standard_input_closed(tmp_path: Path) -> None:
+    """`rbp simulate --meshcat <&-` (a daemon's or a cron job's closed standard input) ended in
+    an AttributeError's traceback after the whole simulation (sys.stdin is None)."""
+    shutil.copy(GOLDEN / "demo-shaft-current.json", tmp_path / "plan.json")
+    env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run(["sh", "-c", 'exec "$@" <&-', "sh", sys.executable, "-m", "rbp",
+                             "simulate", "plan.json", "--trials", "0", "--meshcat"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600,
+                            check=False)
+    assert result.returncode == 0, result.stderr[-800:]
+    assert "Meshcat: http" in result.stdout, result.stdout[-400:]

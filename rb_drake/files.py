@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import errno
 import os
+import secrets
 import stat
-import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO
@@ -73,17 +73,35 @@ def output_problem(path: str | Path,
             return f"is {what}; the output would overwrite it"
     if folder == target.parent:  # the mode says writable, but can a file be made there?
         try:  # (/proc/self/fd refused only after the work): make and remove one
-            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+            fd, tmp = _make_temporary(folder, target.name)
             os.close(fd)
             os.unlink(tmp)
         except OSError as e:
             return f"cannot write a file there ({e.strerror})"
     else:  # and can the missing folders be made in it? (-o /sys/kernel/x/plan.json and an
         try:  # experiment's --out under /sys failed only after the work, naming no option)
-            os.rmdir(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder))
+            os.rmdir(_make_temporary(folder, target.name, folder_too=True)[1])
         except OSError as e:
             return f"cannot make a folder in {folder} ({e.strerror})"
     return None
+
+
+def _make_temporary(folder: Path, name: str, folder_too: bool = False) -> tuple[int, str]:
+    """A new file (or, `folder_too`, folder) `.NAME.XXXXXXXX.tmp` in `folder`, as tempfile's
+    mkstemp makes it (mode 0600, never an existing name): (its descriptor, -1 for a folder;
+    its path). The path stays relative when `folder` is: tempfile makes it absolute, which
+    fails past PATH_MAX, so that a current folder nested deeper than that (reached by relative
+    `cd`s) refused every relative output, "cannot write a file there (File name too long)"."""
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+        try:
+            if folder_too:
+                os.mkdir(tmp, 0o700)
+                return -1, tmp
+            return os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no unused temporary name", str(folder))
 
 
 # The temporary files being written now: a process ended by force (`rbp`'s second SIGTERM,
@@ -124,7 +142,7 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         raise OSError(errno.EEXIST, problem, str(given))
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = _make_temporary(path.parent, path.name)
     except OSError as e:  # name the output, not the temporary file (a folder such as /proc)
         why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
         raise OSError(e.errno, f"cannot write a file there ({why})", str(path)) from None

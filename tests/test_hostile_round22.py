@@ -244,3 +244,35 @@ def test_simulate_meshcat_with_standard_input_closed(tmp_path: Path) -> None:
                             check=False)
     assert result.returncode == 0, result.stderr[-800:]
     assert "Meshcat: http" in result.stdout, result.stdout[-400:]
+
+
+def test_outputs_in_a_current_folder_deeper_than_path_max(tmp_path: Path) -> None:
+    """From a current folder nested past PATH_MAX (4096 bytes, reached by relative `cd`s) every
+    relative output was refused, "cannot write a file there (File name too long)", while the
+    shell and rbp's readers worked there: tempfile made the temporary file's path absolute."""
+    deep = "d" * 200
+    # down by relative steps (a shell's `cd` takes its logical path, which fails), then rbp
+    script = ("import os, sys\nfor _ in range(25):\n    os.mkdir(sys.argv[1])\n"
+              "    os.chdir(sys.argv[1])\n"
+              "os.execv(sys.executable, [sys.executable, *sys.argv[2:]])")
+    env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([sys.executable, "-c", script, deep, "-m", "rbp", "scenario",
+                             "generate", "--kind", "shaft", "-o", "sub/cave.yaml"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+                            check=False)
+    assert result.returncode == 0, result.stderr[-400:]
+    where = tmp_path.joinpath(*[deep] * 25)  # os.walk's file descriptors reach it; open can't
+    fd = os.open(tmp_path, os.O_RDONLY)
+    try:
+        for _ in range(25):
+            sub = os.open(deep, os.O_RDONLY, dir_fd=fd)
+            os.close(fd)
+            fd = sub
+        sub = os.open("sub", os.O_RDONLY, dir_fd=fd)
+        os.close(fd)
+        fd = sub
+        names = sorted(os.listdir(fd))
+    finally:
+        os.close(fd)
+    assert names == ["cave.yaml"], f"{names} in {str(where)[:60]}..."

@@ -276,3 +276,19 @@ def test_outputs_in_a_current_folder_deeper_than_path_max(tmp_path: Path) -> Non
     finally:
         os.close(fd)
     assert names == ["cave.yaml"], f"{names} in {str(where)[:60]}..."
+
+
+# --- file names beginning with '-' ---
+
+def test_a_file_name_beginning_with_a_dash_is_explained(tmp_path: Path) -> None:
+    """`rbp check -plan.json` said only "unrecognized arguments: -plan.json", and `-o
+    -cave.yaml` "expected one argument": argparse reads the name as an option."""
+    shutil.copy(GOLDEN / "demo-shaft-current.json", tmp_path / "-plan.json")
+    one_error_line(run_rbp("check", "-plan.json", cwd=tmp_path), "unrecognized arguments",
+                   "write ./-plan.json")
+    one_error_line(run_rbp("scenario", "generate", "--kind", "shaft", "-o", "-cave.yaml",
+                           cwd=tmp_path), "-o/--output: expected one argument",
+                   "write ./-cave.yaml")
+    plain = run_rbp("plan", "demo-shaft", "--seed", "-1.5", "-o", "x.json", cwd=tmp_path)
+    assert "write ./" not in one_error_line(plain, "--seed"), "a number is no file name"
+    assert run_rbp("check", "-q", "./-plan.json", cwd=tmp_path).returncode == 0

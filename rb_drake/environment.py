@@ -52,11 +52,31 @@ NUMBA_SUPPORTED = ("NUMBA_CACHE_DIR", "NUMBA_NUM_THREADS", "NUMBA_THREADING_LAYE
                    "NUMBA_THREADING_LAYER_PRIORITY")
 
 
+def _text_encoding() -> None:
+    """Refuse a text encoding of ASCII (the C or POSIX locale with Python's UTF-8 mode turned
+    off, PYTHONUTF8=0): pydrake reads its own files in it and its import ended in a
+    UnicodeDecodeError, "ImportError: initialization failed" and 80 lines of traceback."""
+    import codecs
+    import locale
+    import sys
+
+    if sys.flags.utf8_mode or codecs.lookup(locale.getpreferredencoding(False)).name != "ascii":
+        return
+    off = os.environ.get("PYTHONUTF8") == "0"
+    raise RbpInputError(
+        "Python's text encoding is ASCII here (the C locale, Python's UTF-8 mode "
+        f"{'turned off' if off else 'off'}), which Drake cannot start with: "
+        + ("unset PYTHONUTF8 or set it to 1" if off else "run python with -X utf8")
+        + ", or use a UTF-8 locale (LC_ALL=C.UTF-8)",
+        field=f"{'PYTHONUTF8' if off else 'LC_ALL/LANG'} (environment)")
+
+
 def library_settings() -> None:
     """Refuse (RbpInputError naming the variable) the libraries' variables that they would
     meet with a traceback (NUMBA_NUM_THREADS=0, NUMBA_THREADING_LAYER=nosuch) or a warning
     (NUMBA_NUM_THREADS=abc, OMP_NUM_THREADS=abc, printed twice by libgomp). The command line
     calls it before numba is imported; `import rbp` leaves the environment to the caller."""
+    _text_encoding()
     numba_threads = os.environ.get("NUMBA_NUM_THREADS")
     if numba_threads is not None and not _whole_threads(numba_threads):
         raise _bad_threads("NUMBA_NUM_THREADS", numba_threads)

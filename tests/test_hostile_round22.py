@@ -292,3 +292,22 @@ def test_a_file_name_beginning_with_a_dash_is_explained(tmp_path: Path) -> None:
     plain = run_rbp("plan", "demo-shaft", "--seed", "-1.5", "-o", "x.json", cwd=tmp_path)
     assert "write ./" not in one_error_line(plain, "--seed"), "a number is no file name"
     assert run_rbp("check", "-q", "./-plan.json", cwd=tmp_path).returncode == 0
+
+
+# --- the locale ---
+
+def test_an_ascii_text_encoding_is_refused_in_one_line(tmp_path: Path) -> None:
+    """The C locale with Python's UTF-8 mode off (PYTHONUTF8=0): pydrake's import read its own
+    files as ASCII and `rbp plan` ended in 80 lines of traceback ("initialization failed")."""
+    env = {**os.environ, "LC_ALL": "C", "PYTHONUTF8": "0", "LCM_DEFAULT_URL": "memq://",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([sys.executable, "-m", "rbp", "plan", "demo-shaft",
+                             "--footsteps-only", "--no-pictures", "-o", "plan.json"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+                            check=False)
+    one_error_line(result, "PYTHONUTF8 (environment)", "ASCII", "C.UTF-8")
+    env["LC_ALL"] = "C.UTF-8"  # a UTF-8 locale, UTF-8 mode off: as before
+    result = subprocess.run([sys.executable, "-m", "rbp", "scenario", "check", "demo-shaft"],
+                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+                            check=False)
+    assert result.returncode == 0, result.stderr[-400:]

@@ -54,6 +54,9 @@ def output_problem(path: str | Path,
             return "ends with '/', a folder's name: give a file name"
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
+            if folder.is_symlink():  # dangling: no folder can be made there ("error: link:
+                return (f"its folder {folder} is a symlink to {os.readlink(folder)}, which "
+                        "does not exist")  # File exists" after the work)
             folder = folder.parent  # the nearest existing folder must let us create the rest
     except RuntimeError:  # Python 3.11's symlink loop
         return "is a symlink loop"

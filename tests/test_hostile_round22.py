@@ -311,3 +311,15 @@ def test_an_ascii_text_encoding_is_refused_in_one_line(tmp_path: Path) -> None:
                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
                             check=False)
     assert result.returncode == 0, result.stderr[-400:]
+
+
+def test_an_output_folder_that_is_a_dangling_symlink_is_refused_before_the_work(
+        tmp_path: Path) -> None:
+    """`-o link/plan.json` with `link` a symlink to a folder that does not exist passed the
+    check of outputs and failed after the planning, "error: link: File exists" (no option)."""
+    (tmp_path / "link").symlink_to(tmp_path / "gone")
+    result = run_rbp("plan", "demo-shaft", "--footsteps-only", "-o", "link/plan.json",
+                     cwd=tmp_path)
+    one_error_line(result, "link/plan.json: -o: its folder link is a symlink to",
+                   "which does not exist")
+    assert "wrote" not in result.stdout, "the planning ran before the refusal"

@@ -648,11 +648,12 @@ def main(argv: list[str] | None = None) -> int:
 
     standard_streams()  # a closed stdout or stderr, an ASCII-only one
     try:
-        with clean_interrupts():  # Ctrl-C and SIGTERM unwind: no temporary file left
+        with clean_interrupts():  # Ctrl-C, SIGTERM, SIGHUP unwind: no temporary file left
             return _main(argv)
     except KeyboardInterrupt:
         # Outputs are written to a temporary file and renamed, so nothing is left half-written.
-        print("interrupted", file=sys.stderr)
+        with contextlib.suppress(OSError, ValueError):  # a hung-up terminal (SIGHUP): EIO
+            print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader of our output stopped reading (`rbp plan ... | head -1`): stop as if

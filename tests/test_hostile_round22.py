@@ -323,3 +323,43 @@ def test_an_output_folder_that_is_a_dangling_symlink_is_refused_before_the_work(
     one_error_line(result, "link/plan.json: -o: its folder link is a symlink to",
                    "which does not exist")
     assert "wrote" not in result.stdout, "the planning ran before the refusal"
+
+
+# --- signals ---
+
+_HANGUP = r"""
+import os, signal, sys
+from rb_drake.files import atomic_write
+from rbp.commands.common import Terminated, clean_interrupts
+if sys.argv[2] == "nohup":
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+def write(f):
+    f.write(b"half")
+    os.kill(os.getpid(), signal.SIGHUP)  # the terminal hangs up mid-write
+    f.write(b" and the rest")
+
+try:
+    with clean_interrupts():
+        atomic_write(os.path.join(sys.argv[1], "out.json"), write)
+    print("written")
+except Terminated:
+    print("terminated")
+"""
+
+
+@pytest.mark.parametrize("caller", ["terminal", "nohup"])
+def test_a_hangup_unwinds_as_sigterm_does(tmp_path: Path, caller: str) -> None:
+    """SIGHUP (the terminal closed, an ssh session dropped) killed rbp at once: a picture or
+    animation being written left its `.NAME.XXXXXXXX.tmp` behind, exit status 129. It now
+    unwinds as SIGTERM does; under nohup (SIGHUP ignored) it stays ignored."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
+    done = subprocess.run([sys.executable, "-c", _HANGUP, str(tmp_path), caller], env=env,
+                          capture_output=True, text=True, timeout=120, check=False)
+    left = sorted(p.name for p in tmp_path.iterdir())
+    if caller == "nohup":
+        assert done.stdout.strip() == "written" and left == ["out.json"], (done, left)
+        assert (tmp_path / "out.json").read_bytes() == b"half and the rest"
+    else:
+        assert done.stdout.strip() == "terminated", (done.returncode, done.stderr[-300:])
+        assert left == [], f"left behind: {left}"

@@ -48,7 +48,8 @@ def output_problem(path: str | Path,
         # the given name stat-ed too: /dev/stdout, /proc/self/fd/N are links the kernel
         # follows to a pipe that resolving the name cannot reach ("cannot write a file there
         # (No such file or directory)")
-        if (problem := _not_regular(Path(path)) or _not_regular(target)) is not None:
+        if (problem := _not_regular(Path(path)) or _not_regular(target)
+                or _read_only(target)) is not None:
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"
@@ -143,6 +144,9 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     path = output_target(path)
     if (problem := _not_regular(path)) is not None:
         raise OSError(errno.EEXIST, problem, str(given))
+    if (problem := _read_only(path)) is not None:
+        raise OSError(errno.EACCES, problem, str(given))
+    mode = _kept_mode(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         fd, tmp = _make_temporary(path.parent, path.name)
@@ -153,7 +157,7 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        os.chmod(tmp, mode)  # made 0600: the replaced file's permissions, else the usual
         os.replace(tmp, path)
     except OSError as e:
         Path(tmp).unlink(missing_ok=True)
@@ -181,6 +185,28 @@ def _not_regular(target: Path) -> str | None:
     if stat.S_ISDIR(mode):
         return "is a directory; give a file name"
     return "is not a regular file (a device or a pipe?); give a file name"
+
+
+def _read_only(target: Path) -> str | None:
+    """Why an existing `target` (a symlink already followed) must not be replaced, or None: a
+    file its owner made read-only was replaced by the rename, which needs only its folder's
+    permission (`cp` refuses; `rbp check --stamp` of a 0444 plan rewrote it 0644)."""
+    try:
+        if target.is_file() and not os.access(target, os.W_OK):
+            return ("is read-only: rbp does not replace a file it may not write; make it "
+                    "writable (chmod u+w) or give another name")
+    except OSError:
+        pass
+    return None
+
+
+def _kept_mode(target: Path) -> int:
+    """The permissions an output gets: those of the file it replaces (a private 0600 plan
+    became world-readable 0644 when written again), else the usual 0666 less the umask."""
+    try:
+        return stat.S_IMODE(target.stat().st_mode) & 0o777  # no set-id bits
+    except OSError:
+        return 0o666 & ~_umask()
 
 
 def _umask() -> int:

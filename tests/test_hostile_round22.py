@@ -363,3 +363,39 @@ def test_a_hangup_unwinds_as_sigterm_does(tmp_path: Path, caller: str) -> None:
     else:
         assert done.stdout.strip() == "terminated", (done.returncode, done.stderr[-300:])
         assert left == [], f"left behind: {left}"
+
+
+# --- replacing an existing output ---
+
+def test_a_replaced_output_keeps_its_permissions(tmp_path: Path) -> None:
+    """Writing an output again reset its mode to 0644: a plan its owner had made private
+    (0600) became readable by everyone."""
+    cave = tmp_path / "cave.yaml"
+    assert run_rbp("scenario", "generate", "--kind", "shaft", "-o", "cave.yaml",
+                   cwd=tmp_path).returncode == 0
+    cave.chmod(0o600)
+    again = run_rbp("scenario", "generate", "--kind", "shaft", "--seed", "2", "-o", "cave.yaml",
+                    cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert "shaft-2" in cave.read_text(), "not written again"
+    assert oct(cave.stat().st_mode & 0o777) == oct(0o600), oct(cave.stat().st_mode)
+
+
+def test_a_read_only_output_is_refused_before_the_work(tmp_path: Path) -> None:
+    """A file its owner made read-only (0444) was replaced all the same (the rename needs only
+    the folder's permission; `cp` refuses): `rbp check --stamp` rewrote a 0444 plan as 0644."""
+    if os.geteuid() == 0 and not shutil.which("setpriv"):
+        pytest.skip("root writes any file; setpriv is needed to drop that right")
+    plan = tmp_path / "plan.json"
+    shutil.copy(GOLDEN / "demo-shaft-current.json", plan)
+    plan.chmod(0o444)
+    before = plan.read_bytes()
+    prefix = (["setpriv", "--inh-caps=-all", "--ambient-caps=-all", "--bounding-set=-all"]
+              if os.geteuid() == 0 else [])
+    env = {**os.environ, "LCM_DEFAULT_URL": "memq://",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([*prefix, sys.executable, "-m", "rbp", "check", "--stamp",
+                             "plan.json"], cwd=tmp_path, env=env, capture_output=True,
+                            text=True, timeout=300, check=False)
+    one_error_line(result, "plan.json: --stamp: is read-only", "chmod u+w")
+    assert plan.read_bytes() == before and oct(plan.stat().st_mode & 0o777) == oct(0o444)

@@ -399,3 +399,32 @@ def test_a_read_only_output_is_refused_before_the_work(tmp_path: Path) -> None:
                             text=True, timeout=300, check=False)
     one_error_line(result, "plan.json: --stamp: is read-only", "chmod u+w")
     assert plan.read_bytes() == before and oct(plan.stat().st_mode & 0o777) == oct(0o444)
+
+
+def test_a_bundled_cave_from_a_current_folder_that_cannot_be_searched(tmp_path: Path) -> None:
+    """From a current folder its user may not search (`sudo -u someone rbp ...` run from a
+    private home), `rbp scenario check demo-shaft` said "demo-shaft: (file): cannot read:
+    Permission denied": looking for a file of that name failed, and the bundled cave was
+    never tried."""
+    if os.geteuid() == 0 and not shutil.which("setpriv"):
+        pytest.skip("root searches any folder; setpriv is needed to drop that right")
+    prefix = (["setpriv", "--inh-caps=-all", "--ambient-caps=-all", "--bounding-set=-all"]
+              if os.geteuid() == 0 else [])
+    closed = tmp_path / "closed"
+    closed.mkdir()
+    script = "import os, sys\nos.chmod('.', 0)\nos.execvp(sys.argv[1], sys.argv[1:])"
+    env = {**os.environ, "LCM_DEFAULT_URL": "memq://",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    try:
+        result = subprocess.run([sys.executable, "-c", script, *prefix, sys.executable, "-m",
+                                 "rbp", "scenario", "check", "demo-shaft"], cwd=closed,
+                                env=env, capture_output=True, text=True, timeout=300,
+                                check=False)
+        missing = subprocess.run([sys.executable, "-c", script, *prefix, sys.executable, "-m",
+                                  "rbp", "scenario", "check", "nosuch.yaml"], cwd=closed,
+                                 env=env, capture_output=True, text=True, timeout=300,
+                                 check=False)
+    finally:
+        closed.chmod(0o755)
+    assert result.returncode == 0 and "ok: demo-shaft" in result.stdout, result.stderr
+    one_error_line(missing, "nosuch.yaml: (file): cannot read: Permission denied")

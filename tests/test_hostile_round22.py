@@ -428,3 +428,22 @@ def test_a_bundled_cave_from_a_current_folder_that_cannot_be_searched(tmp_path: 
         closed.chmod(0o755)
     assert result.returncode == 0 and "ok: demo-shaft" in result.stdout, result.stderr
     one_error_line(missing, "nosuch.yaml: (file): cannot read: Permission denied")
+
+
+@needs_root
+def test_a_full_disk_under_the_cache_leaves_the_kernel_unsaved(tmp_path: Path) -> None:
+    """A full disk where numba saves its cache ended every planning command in "error: (file):
+    No space left on device" (numba's save raised after compiling); the kernel now runs,
+    unsaved."""
+    (tmp_path / "tiny.py").write_text(TINY_KERNEL)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    script = ('mount -t tmpfs -o size=8k tmpfs "$1" && (cat /dev/zero > "$1/fill") 2>/dev/null;'
+              ' shift; exec "$@"')
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+    result = subprocess.run(["unshare", "-m", "sh", "-c", script, "sh", str(cache),
+                             sys.executable, "-c", "import tiny"], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 0 and result.stdout.strip() == "42", result.stderr[-600:]
+    assert list(cache.iterdir()) == [], "the namespace's mount was seen outside it"

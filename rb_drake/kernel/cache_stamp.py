@@ -128,6 +128,21 @@ def _unreadable_is_missing(method: Callable[..., Any], missing: Any) -> Callable
     return tolerant
 
 
+def _unsaved_on_os_error(method: Callable[..., Any]) -> Callable[..., Any]:
+    """`method` (a cache file's save), with an OSError (a full disk, a quota) leaving the
+    entry unsaved: the kernel compiled in memory runs all the same. A full disk under the
+    cache ended every planning command in "error: (file): No space left on device"."""
+    @functools.wraps(method)
+    def tolerant(self: Any, *args: Any) -> Any:
+        try:
+            return method(self, *args)
+        except OSError:  # numba removes its own temporary file first
+            return None
+
+    tolerant.__rbp_unsaved__ = True  # type: ignore[attr-defined]
+    return tolerant
+
+
 def install() -> None:
     """Put the stamping locators first in numba's list, and make numba's cache files safe for
     several processes (once).
@@ -151,5 +166,6 @@ def install() -> None:
             cache_file.load, lambda: None)
     if not getattr(cache_file.save, "__rbp_locked__", False):
         # numba's methods replaced on purpose (the docstring says why), which mypy refuses
-        cache_file.save = _locked(cache_file.save, exclusive=True)  # type: ignore[method-assign]
+        cache_file.save = _locked(  # type: ignore[method-assign]
+            _unsaved_on_os_error(cache_file.save), exclusive=True)
         cache_file.load = _locked(cache_file.load, exclusive=False)  # type: ignore[method-assign]

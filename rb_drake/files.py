@@ -193,8 +193,9 @@ def _read_only(target: Path) -> str | None:
     permission (`cp` refuses; `rbp check --stamp` of a 0444 plan rewrote it 0644)."""
     try:
         if target.is_file() and not os.access(target, os.W_OK):
-            return ("is read-only: rbp does not replace a file it may not write; make it "
-                    "writable (chmod u+w) or give another name")
+            mode = stat.S_IMODE(target.stat().st_mode)
+            return (f"is read-only (mode {mode:04o}): rbp does not replace a file it may not "
+                    "write; make it writable (chmod u+w) or give another name")
     except OSError:
         pass
     return None

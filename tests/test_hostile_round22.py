@@ -397,7 +397,7 @@ def test_a_read_only_output_is_refused_before_the_work(tmp_path: Path) -> None:
     result = subprocess.run([*prefix, sys.executable, "-m", "rbp", "check", "--stamp",
                              "plan.json"], cwd=tmp_path, env=env, capture_output=True,
                             text=True, timeout=300, check=False)
-    one_error_line(result, "plan.json: --stamp: is read-only", "chmod u+w")
+    one_error_line(result, "plan.json: --stamp: is read-only (mode 0444)", "chmod u+w")
     assert plan.read_bytes() == before and oct(plan.stat().st_mode & 0o777) == oct(0o444)
 
 

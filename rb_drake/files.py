@@ -33,14 +33,16 @@ TEMPORARY_EXTRA = 14  # atomic_write's temporary file is .NAME.XXXXXXXX.tmp: 14 
 
 
 def output_problem(path: str | Path,
-                   inputs: Mapping[str, str | Path | None] | None = None) -> str | None:
+                   inputs: Mapping[str, str | Path | None] | None = None, *,
+                   may_keep: bool = False) -> str | None:
     """Why `path` cannot be written as an output file, or None: checked before any work, so
     that a plan of minutes is not computed for nothing. A symlink is followed to its target; a
     missing folder is fine if it can be created. A name whose temporary file would exceed the
     folder's longest name is refused (it failed only after the work), and so is a path that is
     one of the command's `inputs` ({what: path}: the output would overwrite it). A name given
     as a string that ends with "/" is refused: pathlib drops the slash, and `-o plan.json/`
-    wrote the file plan.json."""
+    wrote the file plan.json. An existing file its user may not write is refused too, unless
+    `may_keep` (a sweep's finished trial record, kept as it is)."""
     if str(path) == "-":  # standard output to many tools: rbp wrote a file named '-'
         return "'-' is not standard output here: rbp writes files (./- names a file called -)"
     try:
@@ -49,7 +51,7 @@ def output_problem(path: str | Path,
         # follows to a pipe that resolving the name cannot reach ("cannot write a file there
         # (No such file or directory)")
         if (problem := _not_regular(Path(path)) or _not_regular(target)
-                or _read_only(target)) is not None:
+                or (None if may_keep else _read_only(target))) is not None:
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"

@@ -447,3 +447,20 @@ def test_a_full_disk_under_the_cache_leaves_the_kernel_unsaved(tmp_path: Path) -
                             capture_output=True, text=True, timeout=300, check=False)
     assert result.returncode == 0 and result.stdout.strip() == "42", result.stderr[-600:]
     assert list(cache.iterdir()) == [], "the namespace's mount was seen outside it"
+
+
+def test_a_finished_trial_record_made_read_only_is_kept(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The read-only refusal is for files rbp would replace: a sweep's finished trial records,
+    kept as they are, may be read-only (results protected with chmod a-w, then resumed)."""
+    from rb_drake import files
+    from rb_drake.files import output_problem
+
+    record = tmp_path / "trial.json"
+    record.write_text("{}\n")
+    record.chmod(0o444)
+    access = os.access  # root may write anything: the record alone is denied to it here
+    monkeypatch.setattr(files.os, "access",
+                        lambda p, mode: Path(p) != record and access(p, mode))
+    assert output_problem(record, may_keep=True) is None
+    assert "is read-only (mode 0444)" in str(output_problem(record))

@@ -55,8 +55,8 @@ EXIT_STATUSES = """exit status:
      simulate or rig-run (nothing to fly)
   2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
      output that cannot be written
-  3  interrupted (Ctrl-C: one line on stderr; or the reader of the output closed it, as
-     `| head` does): no output file is left half-written"""
+  3  interrupted (Ctrl-C, SIGTERM, SIGHUP: one line on stderr; or the reader of the output
+     closed it, as `| head` does): no output file is left half-written"""
 
 
 

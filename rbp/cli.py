@@ -346,6 +346,15 @@ def _print_motion(plan: Plan) -> None:
           f"{t['seed_body'] + t['seed_reach']:.2f} s, SCP {t['scp_body'] + t['scp_reach']:.2f} s")
 
 
+def _file_version(path: Path) -> tuple[int, ...] | None:
+    """What changes when a file is written again or replaced (device, inode, size, time)."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    return (info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns)
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.verify_between import resolution_text
     from rbp.progress import CheckProgress
@@ -354,6 +363,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     path = Path(args.plan)
     if args.stamp:  # before the verification: an unwritable folder was found after its ok line
         check_output(path, "--stamp", picture=None)
+    read_as = _file_version(path)
     plan = read_plan(path)
     if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
         from rbp.commands.plan import check_recorded_config
@@ -394,6 +404,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         from planning.plan import write_plan
         from planning.plan_file import stamp
 
+        if _file_version(path) != read_as:  # another command wrote it during the check: the
+            # stamp replaced that new plan with this old one, stamped as verified
+            raise UserError(f"{path}: --stamp: the file changed while it was being checked "
+                            "(another command wrote it); not stamped: check it again")
         write_plan(stamp(plan), path)
         print(f"{path}: stamped as verified")
     return EXIT_OK

@@ -464,3 +464,30 @@ def test_a_finished_trial_record_made_read_only_is_kept(tmp_path: Path,
                         lambda p, mode: Path(p) != record and access(p, mode))
     assert output_problem(record, may_keep=True) is None
     assert "is read-only (mode 0444)" in str(output_problem(record))
+
+
+# --- a file that changes while it is used ---
+
+def test_stamp_never_replaces_a_plan_written_during_its_check(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """`rbp check --stamp plan.json` while `rbp plan -o plan.json` wrote a new plan: the stamp
+    replaced the new plan with the old one, marked as verified."""
+    import systems.plan_check as plan_check
+    from rbp import cli
+
+    plan = tmp_path / "plan.json"
+    shutil.copy(GOLDEN / "demo-shaft-current.json", plan)
+    newer = b'{"format": "reachbot-plan/2", "written": "meanwhile"}\n'
+    verify = plan_check.plan_problems
+
+    def meanwhile(*args, **kwargs):  # type: ignore[no-untyped-def]
+        found = verify(*args, **kwargs)
+        plan.write_bytes(newer)  # another command writes the plan during the check
+        return found
+
+    monkeypatch.setattr(plan_check, "plan_problems", meanwhile)
+    status = cli.main(["check", "--stamp", "-q", str(plan)])
+    err = capsys.readouterr().err
+    assert status == 2, (status, err)
+    assert "--stamp: the file changed while it was being checked" in err, err
+    assert plan.read_bytes() == newer, "the stamp replaced the plan written meanwhile"

@@ -46,7 +46,27 @@ class OneLineParser(argparse.ArgumentParser):
             # the mistake first (`rbp plan --bad` said -o was missing, `rbp --version` that
             # the command was)
             message = f"unrecognized arguments: {' '.join(unknown)}"
+        if dashed := self._dashed_files():  # `rbp check -plan.json` said only "unrecognized"
+            message += (f"; {dashed[0]}: a file name beginning with '-' is read as an option: "
+                        f"write ./{dashed[0]}")
         self.exit(EXIT_USAGE, f"error: {one_line(message)} (see {self.prog} --help)\n")
+
+    def _dashed_files(self) -> list[str]:
+        """The arguments given that begin with '-' and name an existing file or folder, or
+        look like a file's name (a '.' or '/' in a word that is no number: `-o -cave.yaml`)."""
+        given = self._given[:self._given.index("--")] if "--" in self._given else self._given
+        found = []
+        for arg in given:
+            if arg.startswith("-") and arg not in ("-", "--") and \
+                    arg not in self._option_string_actions:
+                named = ("." in arg or "/" in arg) and not _DECIMAL.fullmatch(arg) \
+                    and not arg.startswith("--")
+                try:
+                    if named or os.path.lexists(arg):
+                        found.append(arg)
+                except ValueError:  # a NUL byte
+                    pass
+        return found
 
     def _unknown_options(self) -> list[str]:
         """The options given to this parser that it does not know (nor abbreviates)."""

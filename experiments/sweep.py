@@ -126,7 +126,8 @@ def finished_record(out: str | Path, trial: Trial) -> dict[str, Any] | None:
     path = trial_path(out, trial.name)
     # before any trial runs: a folder there (or --out a file) failed after the trial's work,
     # and a symlink to a device was replaced by the record
-    if (problem := output_problem(path)) is not None:
+    # a finished record is kept as it is: one made read-only is no reason to refuse the sweep
+    if (problem := output_problem(path, may_keep=True)) is not None:
         raise SweepError(f"{path}: --out: {problem}")
     if not path.exists():
         return None

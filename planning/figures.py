@@ -210,8 +210,16 @@ def animate_plan(scn: Scenario, plan: dict[str, Any], path: str, fps: int = 10,
         import os
         import tempfile
 
-        # matplotlib writers need a file name: render next to the target, then copy.
-        with tempfile.TemporaryDirectory() as tmp:
+        from rb_drake.files import output_target
+
+        # matplotlib writers need a file name: render in a temporary folder, then copy; with
+        # no usable one (TMPDIR), beside the target, whose folder was checked writable
+        try:
+            scratch = tempfile.TemporaryDirectory()
+        except OSError:
+            scratch = tempfile.TemporaryDirectory(prefix=f".{output_target(path).name}.",
+                                                  suffix=".tmp", dir=output_target(path).parent)
+        with scratch as tmp:
             name = os.path.join(tmp, f"anim.{suffix}")
             anim.save(name, writer=writer, fps=fps)
             with open(name, "rb") as src:

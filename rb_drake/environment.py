@@ -52,11 +52,31 @@ NUMBA_SUPPORTED = ("NUMBA_CACHE_DIR", "NUMBA_NUM_THREADS", "NUMBA_THREADING_LAYE
                    "NUMBA_THREADING_LAYER_PRIORITY")
 
 
+def _text_encoding() -> None:
+    """Refuse a text encoding of ASCII (the C or POSIX locale with Python's UTF-8 mode turned
+    off, PYTHONUTF8=0): pydrake reads its own files in it and its import ended in a
+    UnicodeDecodeError, "ImportError: initialization failed" and 80 lines of traceback."""
+    import codecs
+    import locale
+    import sys
+
+    if sys.flags.utf8_mode or codecs.lookup(locale.getpreferredencoding(False)).name != "ascii":
+        return
+    off = os.environ.get("PYTHONUTF8") == "0"
+    raise RbpInputError(
+        "Python's text encoding is ASCII here (the C locale, Python's UTF-8 mode "
+        f"{'turned off' if off else 'off'}), which Drake cannot start with: "
+        + ("unset PYTHONUTF8 or set it to 1" if off else "run python with -X utf8")
+        + ", or use a UTF-8 locale (LC_ALL=C.UTF-8)",
+        field=f"{'PYTHONUTF8' if off else 'LC_ALL/LANG'} (environment)")
+
+
 def library_settings() -> None:
     """Refuse (RbpInputError naming the variable) the libraries' variables that they would
     meet with a traceback (NUMBA_NUM_THREADS=0, NUMBA_THREADING_LAYER=nosuch) or a warning
     (NUMBA_NUM_THREADS=abc, OMP_NUM_THREADS=abc, printed twice by libgomp). The command line
     calls it before numba is imported; `import rbp` leaves the environment to the caller."""
+    _text_encoding()
     numba_threads = os.environ.get("NUMBA_NUM_THREADS")
     if numba_threads is not None and not _whole_threads(numba_threads):
         raise _bad_threads("NUMBA_NUM_THREADS", numba_threads)
@@ -182,6 +202,17 @@ def _whole_threads(value: str) -> bool:
     return value.isdigit() and 1 <= int(value) <= MAX_THREADS
 
 
+# Why matplotlib cannot start here (set by `quiet_matplotlib`), or None: no writable folder
+# for its configuration and cache, and no temporary folder to make one in
+MATPLOTLIB_PROBLEM: list[str] = []
+
+
+def matplotlib_problem() -> str | None:
+    """Why no picture can be drawn in this environment (`quiet_matplotlib` found no folder
+    matplotlib can write), or None: a picture's output is refused with it before any work."""
+    return MATPLOTLIB_PROBLEM[0] if MATPLOTLIB_PROBLEM else None
+
+
 def quiet_matplotlib() -> None:
     """rbp draws only to files: the Agg backend whatever MPLBACKEND says (MPLBACKEND=nosuch
     ended in a traceback at import), and, when matplotlib's config or cache folder cannot be
@@ -205,7 +236,17 @@ def quiet_matplotlib() -> None:
         except (OSError, ValueError):
             usable = False
         if not usable:
-            fresh = tempfile.mkdtemp(prefix="rbp-matplotlib-")
+            try:
+                fresh = tempfile.mkdtemp(prefix="rbp-matplotlib-")
+            except OSError as e:  # no usable temporary folder either: this was a traceback
+                # before any work, even of commands that draw nothing, and importing matplotlib
+                # prints a warning and raises; a picture's output is refused (check_output)
+                named = "MPLCONFIGDIR" if os.environ.get("MPLCONFIGDIR") else "HOME"
+                MATPLOTLIB_PROBLEM[:] = [
+                    f"no picture can be drawn here: matplotlib needs a writable folder, and "
+                    f"neither {folder} ({named}) nor a temporary folder is one "
+                    f"({e.strerror or e}); set MPLCONFIGDIR or TMPDIR to a writable folder"]
+                return
             import atexit
             import shutil
 
@@ -215,7 +256,8 @@ def quiet_matplotlib() -> None:
 
 
 def standard_streams() -> None:
-    """Make the standard output and error safe to print to, once at start-up.
+    """Make the standard output and error safe to print to, and a closed standard input
+    the null device, once at start-up.
 
     A closed descriptor (`rbp ... >&-`, `2>&-`) leaves sys.stdout or sys.stderr None: the
     exit's flush ended in a traceback after the work was done, and the progress line's terminal
@@ -226,6 +268,16 @@ def standard_streams() -> None:
     of ending a successful command in UnicodeEncodeError."""
     import sys
 
+    try:  # a closed standard input (`<&-`, a daemon's): `rbp simulate --meshcat` ended in an
+        os.fstat(0)  # AttributeError (sys.stdin None) after the simulation, and the first
+    except OSError:  # file rbp opened took descriptor 0: read from the null device instead
+        null = os.open(os.devnull, os.O_RDONLY)
+        if null != 0:
+            os.dup2(null, 0)
+            os.close(null)
+        sys.stdin = open(0, closefd=False)  # noqa: SIM115 (lives on)
+    if sys.stdin is None:
+        sys.stdin = open(os.devnull)  # noqa: SIM115 (lives on)
     for fd, name in ((1, "stdout"), (2, "stderr")):
         try:
             os.fstat(fd)

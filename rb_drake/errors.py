@@ -44,6 +44,15 @@ def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def utf8_text(text: str) -> str:
+    """`text` as UTF-8 can hold it: a file name's bytes that are not UTF-8, which Python holds
+    as lone surrogates (`\udcff`), written as backslash escapes (as `one_line` prints them).
+    For what rbp writes into a file from a path: a plan's `provenance.command` held the
+    surrogate, and rbp's readers refuse it (`rbp check` refused the plan `rbp plan` had just
+    written); `rbp scenario import` ended in a UnicodeEncodeError."""
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def apart(value: float, limit: float, decimals: int = 3) -> str:
     """`value` with `decimals` decimals, or as many more as it takes to read on its own side of
     `limit`: a value refused just past a limit is never printed as the limit itself, nor past

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import errno
 import os
+import secrets
 import stat
-import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO
@@ -33,22 +33,33 @@ TEMPORARY_EXTRA = 14  # atomic_write's temporary file is .NAME.XXXXXXXX.tmp: 14 
 
 
 def output_problem(path: str | Path,
-                   inputs: Mapping[str, str | Path | None] | None = None) -> str | None:
+                   inputs: Mapping[str, str | Path | None] | None = None, *,
+                   may_keep: bool = False) -> str | None:
     """Why `path` cannot be written as an output file, or None: checked before any work, so
     that a plan of minutes is not computed for nothing. A symlink is followed to its target; a
     missing folder is fine if it can be created. A name whose temporary file would exceed the
     folder's longest name is refused (it failed only after the work), and so is a path that is
     one of the command's `inputs` ({what: path}: the output would overwrite it). A name given
     as a string that ends with "/" is refused: pathlib drops the slash, and `-o plan.json/`
-    wrote the file plan.json."""
+    wrote the file plan.json. An existing file its user may not write is refused too, unless
+    `may_keep` (a sweep's finished trial record, kept as it is)."""
+    if str(path) == "-":  # standard output to many tools: rbp wrote a file named '-'
+        return "'-' is not standard output here: rbp writes files (./- names a file called -)"
     try:
         target = output_target(path)
-        if (problem := _not_regular(target)) is not None:
+        # the given name stat-ed too: /dev/stdout, /proc/self/fd/N are links the kernel
+        # follows to a pipe that resolving the name cannot reach ("cannot write a file there
+        # (No such file or directory)")
+        if (problem := _not_regular(Path(path)) or _not_regular(target)
+                or (None if may_keep else _read_only(target))) is not None:
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
+            if folder.is_symlink():  # dangling: no folder can be made there ("error: link:
+                return (f"its folder {folder} is a symlink to {os.readlink(folder)}, which "
+                        "does not exist")  # File exists" after the work)
             folder = folder.parent  # the nearest existing folder must let us create the rest
     except RuntimeError:  # Python 3.11's symlink loop
         return "is a symlink loop"
@@ -68,17 +79,35 @@ def output_problem(path: str | Path,
             return f"is {what}; the output would overwrite it"
     if folder == target.parent:  # the mode says writable, but can a file be made there?
         try:  # (/proc/self/fd refused only after the work): make and remove one
-            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+            fd, tmp = _make_temporary(folder, target.name)
             os.close(fd)
             os.unlink(tmp)
         except OSError as e:
             return f"cannot write a file there ({e.strerror})"
     else:  # and can the missing folders be made in it? (-o /sys/kernel/x/plan.json and an
         try:  # experiment's --out under /sys failed only after the work, naming no option)
-            os.rmdir(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder))
+            os.rmdir(_make_temporary(folder, target.name, folder_too=True)[1])
         except OSError as e:
             return f"cannot make a folder in {folder} ({e.strerror})"
     return None
+
+
+def _make_temporary(folder: Path, name: str, folder_too: bool = False) -> tuple[int, str]:
+    """A new file (or, `folder_too`, folder) `.NAME.XXXXXXXX.tmp` in `folder`, as tempfile's
+    mkstemp makes it (mode 0600, never an existing name): (its descriptor, -1 for a folder;
+    its path). The path stays relative when `folder` is: tempfile makes it absolute, which
+    fails past PATH_MAX, so that a current folder nested deeper than that (reached by relative
+    `cd`s) refused every relative output, "cannot write a file there (File name too long)"."""
+    for _ in range(100):
+        tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+        try:
+            if folder_too:
+                os.mkdir(tmp, 0o700)
+                return -1, tmp
+            return os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no unused temporary name", str(folder))
 
 
 # The temporary files being written now: a process ended by force (`rbp`'s second SIGTERM,
@@ -117,9 +146,12 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     path = output_target(path)
     if (problem := _not_regular(path)) is not None:
         raise OSError(errno.EEXIST, problem, str(given))
+    if (problem := _read_only(path)) is not None:
+        raise OSError(errno.EACCES, problem, str(given))
+    mode = _kept_mode(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        fd, tmp = _make_temporary(path.parent, path.name)
     except OSError as e:  # name the output, not the temporary file (a folder such as /proc)
         why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
         raise OSError(e.errno, f"cannot write a file there ({why})", str(path)) from None
@@ -127,7 +159,7 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        os.chmod(tmp, mode)  # made 0600: the replaced file's permissions, else the usual
         os.replace(tmp, path)
     except OSError as e:
         Path(tmp).unlink(missing_ok=True)
@@ -155,6 +187,29 @@ def _not_regular(target: Path) -> str | None:
     if stat.S_ISDIR(mode):
         return "is a directory; give a file name"
     return "is not a regular file (a device or a pipe?); give a file name"
+
+
+def _read_only(target: Path) -> str | None:
+    """Why an existing `target` (a symlink already followed) must not be replaced, or None: a
+    file its owner made read-only was replaced by the rename, which needs only its folder's
+    permission (`cp` refuses; `rbp check --stamp` of a 0444 plan rewrote it 0644)."""
+    try:
+        if target.is_file() and not os.access(target, os.W_OK):
+            mode = stat.S_IMODE(target.stat().st_mode)
+            return (f"is read-only (mode {mode:04o}): rbp does not replace a file it may not "
+                    "write; make it writable (chmod u+w) or give another name")
+    except OSError:
+        pass
+    return None
+
+
+def _kept_mode(target: Path) -> int:
+    """The permissions an output gets: those of the file it replaces (a private 0600 plan
+    became world-readable 0644 when written again), else the usual 0666 less the umask."""
+    try:
+        return stat.S_IMODE(target.stat().st_mode) & 0o777  # no set-id bits
+    except OSError:
+        return 0o666 & ~_umask()
 
 
 def _umask() -> int:

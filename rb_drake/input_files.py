@@ -189,7 +189,10 @@ def check_input_file(path: str | Path, max_bytes: int | None = None) -> int:
         # os.stat of the name as given: Path drops a trailing slash ("plan.json/" is no file)
         info = os.stat(path)  # follows symlinks; never blocks, unlike opening a FIFO
     except FileNotFoundError:
-        raise InputFileError("(file)", "no such file") from None
+        # '-' is standard input to many tools: say that rbp reads files only
+        stdin = " (rbp reads files, not standard input: ./- names a file called -)" \
+            if str(path) == "-" else ""
+        raise InputFileError("(file)", f"no such file{stdin}") from None
     except (OSError, ValueError) as e:  # a loop, a name too long or with a NUL byte, no access
         raise InputFileError("(file)", f"cannot read: {getattr(e, 'strerror', 0) or e}") from None
     if stat.S_ISDIR(info.st_mode):

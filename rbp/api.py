@@ -143,8 +143,10 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
     spec = Path(path_or_name)
     try:
         exists = spec.exists()
-    except (OSError, ValueError):  # a name too long, a NUL byte: the reader names the file
-        exists = True
+    except (OSError, ValueError):  # a name too long, a NUL byte: the reader names the file;
+        # a current folder that cannot be searched (`sudo -u` from a private home) refused
+        # `demo-shaft` itself, "cannot read: Permission denied": a bundled cave's name stands
+        exists = str(path_or_name) not in (*bundled_caves(), "rig")
     if not exists:
         caves = bundled_caves()
         if str(path_or_name) in caves:
@@ -216,11 +218,13 @@ def import_scenario(path: str | Path, *, unit: str | None = None, scale: float =
     the highest free place above it. Needs the extra `rbp[import]`. Raises `RbpInputError`
     (file and reason) for a file that is not closed, simple rock or makes no cave."""
     from rb_drake.errors import MAX_SEED, RbpInputError
-    from rb_drake.terrain.import_cave import ImportOptions, import_cave
+    from rb_drake.terrain.import_cave import ImportOptions, import_cave, name_text_problem
 
     for text, field in ((unit, "unit"), (name, "name")):
         if text is not None and not isinstance(text, str):
             raise RbpInputError(f"must be a string or None, got {text!r:.60}", field=field)
+    if name is not None and (problem := name_text_problem(name)) is not None:
+        raise RbpInputError(problem, field="name")
     return import_cave(_path(path, "path"), ImportOptions(
         unit=unit, scale=_number(scale, "scale"), simplify=_number(simplify, "simplify"),
         anchor_density=_number(anchor_density, "anchor_density"),

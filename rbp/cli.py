@@ -26,6 +26,7 @@ from rb_drake.errors import (
     RbpInputError,
     as_given,
     one_line,
+    utf8_text,
 )
 from rbp.commands.common import RECEIVED as INTERRUPTS_RECEIVED
 from rbp.commands.common import (
@@ -54,8 +55,8 @@ EXIT_STATUSES = """exit status:
      simulate or rig-run (nothing to fly)
   2  bad input: one line on stderr, "error: FILE: FIELD: REASON" (never a traceback); also an
      output that cannot be written
-  3  interrupted (Ctrl-C: one line on stderr; or the reader of the output closed it, as
-     `| head` does): no output file is left half-written"""
+  3  interrupted (Ctrl-C, SIGTERM, SIGHUP: one line on stderr; or the reader of the output
+     closed it, as `| head` does): no output file is left half-written"""
 
 
 
@@ -109,6 +110,10 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
     from rbp.api import import_scenario
 
     check_seed(args.seed)
+    from rb_drake.terrain.import_cave import name_text_problem
+
+    if args.name is not None and (problem := name_text_problem(args.name)) is not None:
+        raise UserError(f"--name: {problem}")
     check_output(args.output, inputs={"the imported file": args.file})
     from rb_drake.errors import RbpInputError
     from rb_drake.terrain.polygon_files import declared_unit_of
@@ -144,7 +149,8 @@ def cmd_scenario_import(args: argparse.Namespace) -> int:
         words += ["--name", args.name]
     # one line: a line break in a file name or --name would end the comment (YAML breaks
     # lines at NEL, LS and PS too)
-    command = re.sub("[\n\r\x85\u2028\u2029]", " ", shlex.join(words))
+    # and a file name that is not UTF-8 escaped (UnicodeEncodeError: a traceback)
+    command = re.sub("[\n\r\x85\u2028\u2029]", " ", utf8_text(shlex.join(words)))
     atomic_write_text(args.output, f"# {command}\n{scenario_to_yaml(scn)}")
     print(one_line(f"wrote {args.output}: {scn.name}, {len(scn.walls)} rock polygons, "
                    f"{len(scn.anchors)} anchors, start {list(scn.start_pose)} in stance "
@@ -340,6 +346,15 @@ def _print_motion(plan: Plan) -> None:
           f"{t['seed_body'] + t['seed_reach']:.2f} s, SCP {t['scp_body'] + t['scp_reach']:.2f} s")
 
 
+def _file_version(path: Path) -> tuple[int, ...] | None:
+    """What changes when a file is written again or replaced (device, inode, size, time)."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    return (info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns)
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     from planning.verify_between import resolution_text
     from rbp.progress import CheckProgress
@@ -348,6 +363,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     path = Path(args.plan)
     if args.stamp:  # before the verification: an unwritable folder was found after its ok line
         check_output(path, "--stamp", picture=None)
+    read_as = _file_version(path)
     plan = read_plan(path)
     if plan.get("provenance") is not None:  # its configuration, as --from-plan reads it
         from rbp.commands.plan import check_recorded_config
@@ -388,6 +404,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         from planning.plan import write_plan
         from planning.plan_file import stamp
 
+        if _file_version(path) != read_as:  # another command wrote it during the check: the
+            # stamp replaced that new plan with this old one, stamped as verified
+            raise UserError(f"{path}: --stamp: the file changed while it was being checked "
+                            "(another command wrote it); not stamped: check it again")
         write_plan(stamp(plan), path)
         print(f"{path}: stamped as verified")
     return EXIT_OK
@@ -642,11 +662,12 @@ def main(argv: list[str] | None = None) -> int:
 
     standard_streams()  # a closed stdout or stderr, an ASCII-only one
     try:
-        with clean_interrupts():  # Ctrl-C and SIGTERM unwind: no temporary file left
+        with clean_interrupts():  # Ctrl-C, SIGTERM, SIGHUP unwind: no temporary file left
             return _main(argv)
     except KeyboardInterrupt:
         # Outputs are written to a temporary file and renamed, so nothing is left half-written.
-        print("interrupted", file=sys.stderr)
+        with contextlib.suppress(OSError, ValueError):  # a hung-up terminal (SIGHUP): EIO
+            print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader of our output stopped reading (`rbp plan ... | head -1`): stop as if
@@ -713,7 +734,8 @@ def _main(argv: list[str] | None) -> int:
     except OSError as e:  # an output that cannot be written, an input that cannot be read
         flag = output_flag(e.filename)  # `-o`, `--json`, ...: which option's file failed
         where = f"{e.filename or '(output)'}: {flag}" if flag else (e.filename or "(file)")
-        print(one_line(f"error: {where}: {e.strerror}"), file=sys.stderr)
+        # an OSError made from a message alone (matplotlib's, tempfile's) has no strerror
+        print(one_line(f"error: {where}: {e.strerror or e}"), file=sys.stderr)
         return EXIT_USAGE
 
 

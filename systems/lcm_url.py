@@ -9,12 +9,13 @@ folded into one line.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import sys
 import tempfile
 from collections.abc import Callable
-from typing import TypeVar
+from typing import IO, TypeVar
 
 LCM_PROVIDERS = ("memq", "udpm", "mpudpm", "tcpq", "file")  # what LCM's C library provides
 UDPM_OPTIONS = {"ttl": (0, 255), "recv_buf_size": (1, 2**31 - 1)}  # name: (least, most)
@@ -76,12 +77,22 @@ def _port_problem(port: str) -> str | None:
     return None
 
 
+def _scratch_file() -> IO[bytes]:
+    """An anonymous file: in memory where the system makes one (Linux's memfd), so that no
+    temporary folder is needed (with none usable, every rig-run ended in "error: (file): No
+    usable temporary directory found"), else a temporary file."""
+    if hasattr(os, "memfd_create"):
+        with contextlib.suppress(OSError):
+            return os.fdopen(os.memfd_create("rbp-lcm-said"), "w+b")
+    return tempfile.TemporaryFile()
+
+
 def quietly(make: Callable[[], T]) -> tuple[T | None, str]:
     """(make(), '') or (None, what it printed) if it raised RuntimeError: LCM's C library
-    writes to file descriptor 2, which is captured into a temporary file while it runs."""
+    writes to file descriptor 2, which is captured into an anonymous file while it runs."""
     sys.stderr.flush()
     saved = os.dup(2)
-    with tempfile.TemporaryFile() as said:
+    with _scratch_file() as said:
         os.dup2(said.fileno(), 2)
         try:
             return make(), ""

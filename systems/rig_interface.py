@@ -42,7 +42,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from planning.plan_model import Plan, plan_of, plan_scenario
 from planning.verify_between import step_motion
 from rb_drake import geometry, grasp
-from rb_drake.files import atomic_write
+from rb_drake.files import atomic_write, output_target
 from rb_drake.scenario import Scenario, ScenarioError
 from rb_drake.stance import Stance
 from systems.lcm_url import open_problem, quietly
@@ -249,6 +249,24 @@ class RigRun(NamedTuple):
     safety: SafetyReport = SafetyReport(0, 0, 0, 0)
 
 
+def _log_scratch(log: str | Path) -> tempfile.TemporaryDirectory[str]:
+    """The folder the log is written to during the run (then copied to `log` atomically): a
+    temporary one, or, with no usable temporary folder (TMPDIR), one beside `log`, whose folder
+    was checked writable (it was "error: (file): No usable temporary directory found")."""
+    try:
+        return tempfile.TemporaryDirectory(prefix="rig-log-")
+    except OSError:
+        pass
+    folder = output_target(log).parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        return tempfile.TemporaryDirectory(prefix=f".{Path(log).name}.", suffix=".tmp",
+                                           dir=folder)
+    except OSError as e:
+        raise OSError(e.errno, f"cannot make a folder for the log during the run "
+                      f"({e.strerror or e})", str(log)) from None
+
+
 def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: str | Path,
             sim_rig: RigSimConfig | None = None, plan_source: str = "",
             accepted: Callable[[], None] | None = None, check_rates: bool = True) -> RigRun:
@@ -274,6 +292,7 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
     bus, said = quietly(lambda: DrakeLcm(config.url))  # tcpq:// says "connecting..."
     if bus is None:
         raise RigInputError("--lcm-url", f"{config.url!r}: LCM cannot open it: {said}")
+    scratch = _log_scratch(log)  # before any command is sent
     if accepted is not None:
         accepted()
     if sim_rig is not None:
@@ -281,7 +300,7 @@ def run_rig(plan: dict[str, Any], phase_index: int, config: RigLcmConfig, log: s
         rig = RigSimulator(phase.scenario.robot, phase.stance.positions, start, sim_rig)
         RigSimulatorLcm(rig, bus, config.command_channel, config.status_channel)
     parts = build_rig_diagram(phase, bus, config)
-    with tempfile.TemporaryDirectory(prefix="rig-log-") as tmp:
+    with scratch as tmp:
         partial = Path(tmp) / "run.lcm"
         writer = LogWriter(bus, config, partial)
         setup = rig_setup_t()

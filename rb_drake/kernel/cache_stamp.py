@@ -112,6 +112,37 @@ def _locked(method: Callable[..., Any], exclusive: bool) -> Callable[..., Any]:
     return locked
 
 
+def _unreadable_is_missing(method: Callable[..., Any], missing: Any) -> Callable[..., Any]:
+    """`method` (a cache file's read), with an entry or index that cannot be read taken as
+    missing (`missing()`), so that the kernel is compiled again and saved over it: a truncated
+    or garbled cache file (a disk that filled, a copy cut short) ended every command that
+    plans in pickle's traceback ("pickle data was truncated") until the cache was deleted."""
+    @functools.wraps(method)
+    def tolerant(self: Any, *args: Any) -> Any:
+        try:
+            return method(self, *args)
+        except Exception:  # whatever unpickling garbage raises: a cache miss
+            return missing()
+
+    tolerant.__rbp_tolerant__ = True  # type: ignore[attr-defined]
+    return tolerant
+
+
+def _unsaved_on_os_error(method: Callable[..., Any]) -> Callable[..., Any]:
+    """`method` (a cache file's save), with an OSError (a full disk, a quota) leaving the
+    entry unsaved: the kernel compiled in memory runs all the same. A full disk under the
+    cache ended every planning command in "error: (file): No space left on device"."""
+    @functools.wraps(method)
+    def tolerant(self: Any, *args: Any) -> Any:
+        try:
+            return method(self, *args)
+        except OSError:  # numba removes its own temporary file first
+            return None
+
+    tolerant.__rbp_unsaved__ = True  # type: ignore[attr-defined]
+    return tolerant
+
+
 def install() -> None:
     """Put the stamping locators first in numba's list, and make numba's cache files safe for
     several processes (once).
@@ -121,12 +152,20 @@ def install() -> None:
     time (a sweep's workers, a test's subprocess beside a user's run on a fresh cache) can both
     choose `.1.nbc`, and the index of one then names the other's code, which crashes the next
     process that loads it (a segmentation fault, seen in `rbp plan rig` after such a race).
-    Saving under an exclusive lock and loading under a shared one, per function, rules it out."""
+    Saving under an exclusive lock and loading under a shared one, per function, rules it out.
+    A cache file that cannot be read is a miss (`_unreadable_is_missing`)."""
     classes = caching.CacheImpl._locator_classes
     if not any(c in classes for c in LOCATORS):
         classes[:0] = LOCATORS
     cache_file = caching.IndexDataCacheFile
+    if not getattr(cache_file._load_index, "__rbp_tolerant__", False):
+        # numba's readers replaced on purpose (`_unreadable_is_missing`), which mypy refuses
+        cache_file._load_index = _unreadable_is_missing(  # type: ignore[method-assign]
+            cache_file._load_index, dict)
+        cache_file.load = _unreadable_is_missing(  # type: ignore[method-assign]
+            cache_file.load, lambda: None)
     if not getattr(cache_file.save, "__rbp_locked__", False):
         # numba's methods replaced on purpose (the docstring says why), which mypy refuses
-        cache_file.save = _locked(cache_file.save, exclusive=True)  # type: ignore[method-assign]
+        cache_file.save = _locked(  # type: ignore[method-assign]
+            _unsaved_on_os_error(cache_file.save), exclusive=True)
         cache_file.load = _locked(cache_file.load, exclusive=False)  # type: ignore[method-assign]

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rb_drake.errors import RbpInputError
+from rb_drake.errors import RbpInputError, utf8_text
 from rb_drake.scenario import MAX_NAME
 from rb_drake.terrain.polygon_files import MESH_SUFFIXES, UNITS, missing_extra, read_rock
 
@@ -66,13 +66,23 @@ def import_cave(path: str | Path, options: ImportOptions | None = None) -> Scena
     from rb_drake.input_files import max_input_values
 
     cfg = CaveConfig(anchor_density=opts.anchor_density)
+    # the default name, the file's: its bytes that are not UTF-8 escaped, so that it reads back
     scn = scenario_from_rock(rock, seed=opts.seed, config=cfg, start=opts.start,
-                             goal=opts.goal, name=opts.name or path.stem[:MAX_NAME],
+                             goal=opts.goal, name=opts.name or utf8_text(path.stem)[:MAX_NAME],
                              source=str(path),
                              framed=scan,  # a scan's rock is a frame minus the free space
                              max_values=max_input_values())
     _check_readable(path, scn)
     return scn
+
+
+def name_text_problem(name: str) -> str | None:
+    """Why `name` cannot be a scenario's name, or None: a lone surrogate (bytes of a command
+    line that are not UTF-8) could not be written as UTF-8 (a traceback), nor read back."""
+    if utf8_text(name) == name:
+        return None
+    return (f"not UTF-8 text ({utf8_text(name)[:80]}: bytes that are not UTF-8, or a lone "
+            "surrogate); give a name in UTF-8")
 
 
 def _check_readable(path: Path, scn: Scenario) -> None:

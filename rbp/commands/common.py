@@ -32,7 +32,10 @@ class UserError(RbpInputError):
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised as an interrupt (`clean_interrupts`)."""
+    """SIGTERM or SIGHUP, raised as an interrupt (`clean_interrupts`)."""
+
+
+HANGUPS = (signal.SIGTERM, signal.SIGHUP)  # the signals raised as `Terminated`
 
 
 SWALLOWED_INTERRUPT_S = 5  # s after an interrupt: if the command has not unwound, it ends by force
@@ -55,13 +58,14 @@ def _importing(frame: Any) -> bool:
 
 @contextlib.contextmanager
 def clean_interrupts() -> Iterator[None]:
-    """Within: Ctrl-C (SIGINT) raises KeyboardInterrupt and SIGTERM `Terminated` in the main
-    thread, so that the command unwinds and an output's temporary file is removed (a killed
-    picture write left a 0-byte .NAME.XXXX.tmp); an interrupt that arrives during an import is
-    raised once the import is done; one that is swallowed, or a second one, ends the command
-    within SWALLOWED_INTERRUPT_S with "interrupted" and status 3. A forked worker that inherits
+    """Within: Ctrl-C (SIGINT) raises KeyboardInterrupt and SIGTERM or SIGHUP (the terminal
+    hung up) `Terminated` in the main thread, so that the command unwinds and an output's
+    temporary file is removed (a killed picture write left a 0-byte .NAME.XXXX.tmp); an
+    interrupt that arrives during an import is raised once the import is done; one that is
+    swallowed, or a second one, ends the command within SWALLOWED_INTERRUPT_S with
+    "interrupted" and status 3. A forked worker that inherits
     the handlers behaves as before (SIGTERM kills it, SIGINT raises KeyboardInterrupt). A
-    SIGINT that the caller ignores (a background job) stays ignored."""
+    SIGINT or SIGHUP that the caller ignores (a background job, nohup) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -75,11 +79,12 @@ def clean_interrupts() -> Iterator[None]:
         matplotlib's were while an animation was written), or came twice: end here, without
         the temporary files an output was being written to."""
         remove_live_temporary()
-        print("interrupted", file=sys.stderr, flush=True)
+        with contextlib.suppress(OSError, ValueError):  # a hung-up terminal
+            print("interrupted", file=sys.stderr, flush=True)
         os._exit(EXIT_INTERRUPTED)
 
     def interrupt() -> KeyboardInterrupt:
-        return Terminated() if received[0] == signal.SIGTERM else KeyboardInterrupt()
+        return Terminated() if received[0] in HANGUPS else KeyboardInterrupt()
 
     def on_alarm(_signum: int, frame: Any) -> None:
         if time.monotonic() >= state["deadline"] or not state["pending"]:
@@ -111,8 +116,9 @@ def clean_interrupts() -> Iterator[None]:
         raise interrupt()
 
     previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, handler)}
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
+    for signum in (signal.SIGINT, signal.SIGHUP):  # a hang-up (the terminal closed) killed
+        if signal.getsignal(signum) is not signal.SIG_IGN:  # rbp with its temporary file
+            previous[signum] = signal.signal(signum, handler)  # left; nohup's stays ignored
     try:
         yield
     finally:
@@ -159,6 +165,10 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
     if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
                    "beside it, named after it)")
+    if problem is None and picture:  # before matplotlib's import raises (no folder for it)
+        from rb_drake.environment import matplotlib_problem
+
+        problem = matplotlib_problem()
     if problem is None and picture and not animation:
         problem = picture_format_problem(path)
     key = os.path.realpath(path)  # missing files too, through the symlinks that exist

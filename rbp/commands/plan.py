@@ -370,13 +370,14 @@ def provenance(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool,
     and load it ran under (its times depend on them)."""
     from planning.config_io import config_to_dict
     from planning.plan_model import Provenance, planner_of
+    from rb_drake.errors import utf8_text
     from rb_drake.kernel.threads import run_conditions
 
-    return Provenance(
+    return Provenance(  # file names that are not UTF-8 escaped: the plan must read back
         rbp_version=rbp_version(),
-        command=shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])]),
+        command=utf8_text(shlex.join(["rbp", *(argv if argv is not None else sys.argv[1:])])),
         planner=planner_of(planner), motion=motion, seed=cfg.footstep.seed,
-        scenario_source=scn.source, config=config_to_dict(cfg), **run_conditions())
+        scenario_source=utf8_text(scn.source), config=config_to_dict(cfg), **run_conditions())
 
 
 class SearchRecord:

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from experiments.arguments import input_file
-from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line
+from rb_drake.errors import EXIT_FAILED, EXIT_OK, one_line, utf8_text
 from rbp.api import MAX_TRIALS
 
 
@@ -166,9 +166,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     print(f"  implied by the simulated forces: p_sim {p_sim:.4f} (plan p_path {p_path:.4f}); "
           f"weakest holding boom {hold.boom} on {hold.anchor} (phases {hold.first}-"
           f"{hold.last}), min P {worst[h]:.4f}")
-    results: dict[str, Any] = {"plan": str(path), "trials": args.trials, "successes": None,
-                               "rate": None, "ci95": None, "p_path": p_path, "p_sim": p_sim,
-                               "seed": args.seed, "tracking": tracking}
+    # the plan's name as UTF-8 holds it (a name that is not UTF-8 wrote a lone surrogate)
+    results: dict[str, Any] = {"plan": utf8_text(str(path)), "trials": args.trials,
+                               "successes": None, "rate": None, "ci95": None,
+                               "p_path": p_path, "p_sim": p_sim, "seed": args.seed,
+                               "tracking": tracking}
     if args.trials > 0:
         replanner, strategy = None, ""
         if args.replan == "retry":
@@ -204,7 +206,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                                                    sorted(r.outcomes.items())))
                      if r.outcomes else ""))
         results |= mc.to_json()
-        results["plan"], results["tracking"] = str(path), tracking
+        results["plan"], results["tracking"] = utf8_text(str(path)), tracking
     if args.json:
         atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.json}")

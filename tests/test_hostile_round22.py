@@ -256,7 +256,9 @@ def test_outputs_in_a_current_folder_deeper_than_path_max(tmp_path: Path) -> Non
               "    os.chdir(sys.argv[1])\n"
               "os.execv(sys.executable, [sys.executable, *sys.argv[2:]])")
     env = {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
-           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+           # no empty entry: Python makes one absolute from the current folder, which fails
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT),
+                                                      os.environ.get("PYTHONPATH", "")]))}
     result = subprocess.run([sys.executable, "-c", script, deep, "-m", "rbp", "scenario",
                              "generate", "--kind", "shaft", "-o", "sub/cave.yaml"],
                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,

@@ -172,9 +172,8 @@ def validated(plan: Any, quick: bool = False) -> dict[str, Any]:
 
 # s: slack on the longest wait, for times rounded to 1 us and a duration rounded with them
 GAP_TOL = 1e-3
-MAX_TURN = 2.0 * math.pi  # rad: the most a body move's turn counts towards its duration
 # rad: the most a step turns the body (the planner's turns are the short way round; slack for
-# rounding)
+# rounding), and so the most a body move's turn counts towards its duration
 MAX_STEP_TURN = math.pi + 1e-9
 
 
@@ -184,7 +183,7 @@ def check_times(plan: dict[str, Any]) -> None:
     last, or whose first step is more than MAX_STEP_GAP from 0 s: the planner writes steps at
     most --dt apart from 0 s, and the simulator and the rig sample the plan over its time. A
     footstep plan's body phase may take longer, at its nominal speeds
-    (planning.plan.build_plan), its turn counted up to MAX_TURN. Times that do not increase
+    (planning.plan.build_plan), its turn counted up to MAX_STEP_TURN. Times that do not increase
     are the verifier's (rule time-order): they stretch nothing. A step turning the body more
     than MAX_STEP_TURN from the step before is refused (PlanFileError on its `pose[2]`)."""
     before: dict[str, Any] | None = None
@@ -199,10 +198,10 @@ def check_times(plan: dict[str, Any]) -> None:
             if before is not None:
                 gap = step["t"] - before["t"]
                 a, b = before["pose"], step["pose"]
-                # a turn counts up to a full turn (the planner's headings lie in [-pi, pi]): a
-                # footstep plan's body spinning 1,500 turns at TURN_SPEED in one move passed
-                # `rbp check` (its motion unverified) and `rbp simulate` ran it for an hour
-                turn = min(abs(b[2] - a[2]), MAX_TURN)
+                # a turn counts up to the most a step may turn: a footstep plan's body spinning
+                # 1,500 turns at TURN_SPEED in one move passed `rbp check` (its motion
+                # unverified) and `rbp simulate` ran it for an hour
+                turn = min(abs(b[2] - a[2]), MAX_STEP_TURN)
                 allowed = max(MAX_STEP_GAP, math.hypot(b[0] - a[0], b[1] - a[1]) / BODY_SPEED,
                               turn / TURN_SPEED)
                 if gap > allowed + GAP_TOL:

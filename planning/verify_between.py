@@ -310,8 +310,6 @@ def straight_travel(world: _World | World, phase: Phase, stance: Stance, s: Samp
     pair[np.isin(pair, list(skip))] = -1  # failing already: not tested again
     out = []
     for j, n, boom in travel_failures(phase_world(world, phase), stance, q, g, pair):
-        if n in skip:
-            continue
         w = (t[j] - times[n]) / (times[n + 1] - times[n])
         out.append((n, travel_text(n, float(t[j]), q[j], w, boom)))
     return out

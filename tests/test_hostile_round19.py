@@ -57,6 +57,18 @@ def spinning_phase(plan: PlanFile, steps: int, turns: int, dt: float) -> dict[st
     return phase
 
 
+def spinning_plan(golden: PlanFile, steps: int, turns: int, dt: float) -> tuple:
+    """A failed plan of one `spinning_phase`, steps `dt` apart, and what the rock test between
+    samples takes of it: (plan, verification world, phase, stance, samples)."""
+    plan = failed_plan(golden, [spinning_phase(golden, steps, turns, dt)])
+    plan["time_step"], plan["limits"] = dt, {"step": 0.1, "turn_step": 1e4}
+    model = Plan.from_dict(plan)
+    scn = plan_scenario(model, "spin")
+    phase = model.phases[0]
+    return (plan, verify_between.verification_world(scn), phase,
+            scn.stance(tuple(phase.stance)), verify_between.phase_samples(scn.robot, phase))
+
+
 def test_the_golden_plan_verifies(golden: PlanFile) -> None:
     assert verify_plan(golden) == [], "the golden demo-shaft plan must verify"
 
@@ -66,14 +78,7 @@ def test_rock_between_samples_is_tested_in_bounded_memory(golden: PlanFile) -> N
     within every bound of rule `between`): its paths' rock test (`travel_failures`) built
     every sample's boom geometry at once, 1.9 GB for a 0.5 MB plan of 10^6 samples (a phase's
     most); it now works in chunks of CHUNK, as the samples' checks do."""
-    plan = failed_plan(golden, [spinning_phase(golden, 100, 3, 48.0)])
-    plan["time_step"], plan["limits"] = 48.0, {"step": 0.1, "turn_step": 1e4}
-    model = Plan.from_dict(plan)
-    scn = plan_scenario(model, "spin")
-    phase = model.phases[0]
-    world = verify_between.verification_world(scn)
-    stance = scn.stance(tuple(phase.stance))
-    s = verify_between.phase_samples(scn.robot, phase)
+    plan, world, phase, stance, s = spinning_plan(golden, 100, 3, 48.0)
     assert len(s.t) > 200_000, f"{len(s.t)} samples: the phase must move far between steps"
     times, poses, _ = verify_between.phase_arrays(phase)
     tracemalloc.start()
@@ -94,14 +99,7 @@ def test_the_chunked_rock_test_finds_what_one_batch_finds(golden: PlanFile,
     """The chunks share their boundary configuration: a crossing there, or in any chunk, is
     found as in one batch, each interval once at its first crossing (the body turning next to
     the wall, its corners through the rock)."""
-    plan = failed_plan(golden, [spinning_phase(golden, 6, 1, 16.0)])
-    plan["time_step"], plan["limits"] = 16.0, {"step": 0.1, "turn_step": 1e4}
-    model = Plan.from_dict(plan)
-    scn = plan_scenario(model, "spin")
-    phase = model.phases[0]
-    world = verify_between.verification_world(scn)
-    stance = scn.stance(tuple(phase.stance))
-    s = verify_between.phase_samples(scn.robot, phase)
+    _, world, phase, stance, s = spinning_plan(golden, 6, 1, 16.0)
     times, poses, _ = verify_between.phase_arrays(phase)
     q = np.vstack([poses, s.poses])[np.argsort(np.concatenate([times, s.t]), kind="stable")]
     q[:, 0] = -0.75  # 0.1 m from the wall: the body's corners, 0.21 m out, sweep through it

@@ -8,6 +8,9 @@ time per cell; and, from 200 poses sampled in each cell, how many cells hold a f
 (no sound bound can prove those) and U - (the largest sampled r), the bound's looseness.
 
     RBP_THREADS=1 python -m experiments.cell_bound_measure [--per-stance 120]
+
+With `--three-stances`: the start stance's four 3-stances instead (each free gripper at its
+anchor), the LP-free `three_stance_bound` beside `robustness_bound` on the same cells.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from scipy.ndimage import binary_dilation
 
 from experiments.common import make_cave
 from rb_drake import cell_bounds as cb
+from rb_drake import cell_exclusion as ce
 from rb_drake.feasibility import Reason, check_poses
 
 CAVES = (("crevasse", 30), ("shaft", 51), ("crevasse", 42))
@@ -56,8 +60,13 @@ def main() -> None:
     ap.add_argument("--neighbours", type=int, default=3)
     ap.add_argument("--depth", type=int, default=0,
                     help="also try splitting unproven cells (branch and bound) to this depth")
+    ap.add_argument("--three-stances", action="store_true",
+                    help="compare the LP-free 3-stance bound with the LP bound on 3-stances")
     args = ap.parse_args()
     rng = np.random.default_rng(30)
+    if args.three_stances:
+        three_stance_comparison(args.per_stance, rng)
+        return
     rows = []
     split_time: list[float] = []
     for kind, seed in CAVES:
@@ -84,7 +93,7 @@ def main() -> None:
                 split = bound.upper < log_p_min
                 if args.depth and not split and not c.feasible.any():
                     t = time.perf_counter()
-                    split = cb.cell_probability_excluded(scn, stance, centre, HALF,
+                    split = ce.cell_probability_excluded(scn, stance, centre, HALF,
                                                          depth=args.depth)
                     split_time.append(time.perf_counter() - t)
                 rows.append((kind, seed, ids, chk.allocation.robustness[k], bound.upper,
@@ -133,6 +142,47 @@ def main() -> None:
         print(f"  cells with r_c < log p_min - {slack}: {sel.sum()}, proven below log p_min: "
               f"{proven[sel].mean():.3f}, U < log p_min - {slack}: "
               f"{(upper[sel] < lpm[sel] - slack).mean():.3f}")
+
+
+def three_stance_comparison(per_stance: int, rng: np.random.Generator) -> None:
+    """On each cave's start 3-stances: cells at lattice points within +-0.3 m and +-30 deg of
+    the start pose, infeasible at their centre and not excluded by geometry; the share that
+    each bound proves (U < log p_min) and its time per cell."""
+    rows = []
+    for kind, seed in CAVES:
+        scn = make_cave(kind, seed, (4.5, 5.0))
+        grid = lattice_around(np.array(scn.start_pose))
+        whole = scn.stance(tuple(scn.start_stance))
+        for j in range(4):
+            stance, tip = whole.without(j), whole.positions[j].copy()
+            chk = check_poses(scn, stance, grid, free_tip=tip)
+            cand = np.flatnonzero(~chk.feasible)
+            rng.shuffle(cand)
+            picked = 0
+            for k in cand:
+                if picked >= per_stance:
+                    break
+                centre = grid[k]
+                geo = cb.cell_geometry(scn.robot, stance, centre, HALF, tip)
+                if cb.cell_geometry_excluded(scn.robot, stance, centre, HALF, tip, geo):
+                    continue
+                picked += 1
+                t = time.perf_counter()
+                fast = ce.three_stance_bound(scn, stance, centre, HALF, tip, geo=geo).upper
+                t_fast = time.perf_counter() - t
+                t = time.perf_counter()
+                lp = cb.robustness_bound(scn, stance, centre, HALF, tip, geo=geo).upper
+                t_lp = time.perf_counter() - t
+                rows.append((fast, lp, t_fast, t_lp, scn.robot.log_p_min))
+            print(f"{kind} {seed} boom {j} free: {picked} cells", flush=True)
+    table = np.array(rows, dtype=float)
+    fast, lp, t_fast, t_lp, lpm = table.T
+    pf, pl = fast < lpm, lp < lpm
+    print(f"cells {len(rows)}: LP proves {pl.mean():.3f}, 3-stance bound {pf.mean():.3f} "
+          f"({(pf & pl).sum()} of the LP's {pl.sum()}; {(pf & ~pl).sum()} the LP does not), "
+          f"either {(pf | pl).mean():.3f}; time per cell: 3-stance median "
+          f"{1e3 * np.median(t_fast):.2f} ms (mean {1e3 * t_fast.mean():.2f}), LP median "
+          f"{1e3 * np.median(t_lp):.1f} ms (mean {1e3 * t_lp.mean():.1f})")
 
 
 if __name__ == "__main__":

@@ -34,6 +34,9 @@ that `feasibility.check_poses` calls feasible) and never used by the planner:
   maximised over the polytope by Kelley's cutting planes: an LP over tangent lines, each an
   upper bound of its concave term, so every LP value is itself a sound bound.
 
+* `rb_drake.cell_exclusion` decides cells with these bounds (and, for a 3-stance, a faster
+  one without a linear program), splitting where they prove nothing.
+
 Rules left out (which keeps the bounds sound, only looser): collisions, the free limb's
 shoulder torque, the conditioning of the wrench matrix. The regulariser of the allocation only
 makes its r smaller than the maximum over the tensions, which U bounds.
@@ -49,7 +52,7 @@ from scipy.optimize import linprog
 from scipy.special import log_ndtr
 
 from rb_drake import grasp
-from rb_drake.feasibility import Reason, World, check_poses
+from rb_drake.feasibility import Reason, World
 from rb_drake.params import NUM_BOOMS, RobotParams
 from rb_drake.stance import Stance
 from rb_drake.statics import STATICS_TOL
@@ -515,40 +518,3 @@ def robustness_bound(world: World, stance: Stance, centre: np.ndarray, half: np.
         gap = 0.0
     upper = min(upper, simple + LP_SLACK)
     return RobustnessBound(upper, simple, f_min, f_max, gap, lps)
-
-
-def cell_probability_excluded(world: World, stance: Stance, centre: np.ndarray,
-                              half: np.ndarray, free_tip: np.ndarray | None = None,
-                              depth: int = 0) -> bool:
-    """Whether no pose of the cell has r >= log p_min (the probability rule, or statics).
-
-    `depth` > 0: where the cell's bound does not prove it, split the cell into its 8 halves
-    and prove each (branch and bound, to that depth); a sub-cell whose centre pose has
-    r >= log p_min stops the search (no bound can prove it)."""
-    log_p_min = world.robot.log_p_min
-    centre = np.asarray(centre, dtype=float)
-    half = np.asarray(half, dtype=float)
-    if robustness_bound(world, stance, centre, half, free_tip).upper < log_p_min:
-        return True
-    if depth <= 0:
-        return False
-    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    subs = centre + signs * (half / 2)
-    r = check_poses(world, stance, subs, free_tip=free_tip, full=True).allocation.robustness
-    if np.any(r >= log_p_min):
-        return False
-    return all(cell_probability_excluded(world, stance, c, half / 2, free_tip, depth - 1)
-               for c in subs)
-
-
-def cell_excluded(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
-                  free_tip: np.ndarray | None = None) -> Reason | None:
-    """A rule no pose of the cell passes (geometry first, then the probability bound; a cell
-    none of whose poses balances within the tension bounds gives PROBABILITY too, as its r is
-    -inf), or None."""
-    geo = cell_geometry(world.robot, stance, centre, half, free_tip)
-    reason = cell_geometry_excluded(world.robot, stance, centre, half, free_tip, geo)
-    if reason is not None:
-        return reason
-    bound = robustness_bound(world, stance, centre, half, free_tip, geo=geo)
-    return Reason.PROBABILITY if bound.upper < world.robot.log_p_min else None

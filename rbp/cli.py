@@ -41,6 +41,7 @@ from rbp.commands.common import (
     plural,
     read_plan,
     refuse_empty_paths,
+    restore_stdout,
 )
 
 if TYPE_CHECKING:
@@ -319,10 +320,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
     plan = plan.replace(provenance=provenance(scn, planner, cfg, motion,
                                               getattr(args, "argv", None)))
     out = Path(args.output)
-    write_plan(plan, out)
-    print(f"wrote {out}{_over_reading_limit(out)}")
-    if not args.no_pictures:
-        write_pictures(scn, plan, out, args.phase_figure, args.animate, search=record.last)
+    from rb_drake.files import output_batch
+
+    late = None
+    with output_batch() as batch:  # the plan and its pictures, or (a full disk) none of them
+        write_plan(plan, out)
+        batch.say(lambda: f"wrote {out}{_over_reading_limit(out)}")
+        if not args.no_pictures:
+            late = write_pictures(scn, plan, out, args.phase_figure, args.animate,
+                                  search=record.last, say=batch.say)
+    if late is not None:  # a --phase-figure known only now: the plan and pictures are kept
+        raise late
     _print_motion(plan)
     print(_summary(plan))
     return EXIT_OK if plan.success else EXIT_FAILED
@@ -683,6 +691,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        restore_stdout()  # the messages of a command that wrote to standard output
 
 
 def _caused_by_interrupt(error: BaseException | None) -> bool:

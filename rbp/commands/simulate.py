@@ -125,7 +125,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if not getattr(args, "verify", True):
         warn_unverified(path)
     # imported once the plan is accepted: a refused plan costs its reading only
-    from rb_drake.files import atomic_write_text
+    from rb_drake.files import atomic_write_text, output_batch
     from systems.diagram import ClimbSimulator, SimulationError
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
 
@@ -207,25 +207,26 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                      if r.outcomes else ""))
         results |= mc.to_json()
         results["plan"], results["tracking"] = utf8_text(str(path)), tracking
-    if args.json:
-        atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {args.json}")
-    if args.meshcat or args.html:
-        from systems.meshcat_view import save_html, show_climb, start_meshcat
+    with output_batch() as batch:  # --json and --html, or (a full disk) neither
+        if args.json:
+            atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
+            batch.say(f"wrote {args.json}")
+        if args.meshcat or args.html:
+            from systems.meshcat_view import save_html, show_climb, start_meshcat
 
-        # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL is
-        # printed below when it is wanted (--meshcat), so an accepted --html run prints nothing
-        logging.getLogger("drake").setLevel(logging.WARNING)
-        meshcat = start_meshcat()
-        show_climb(meshcat, record)
-        if args.html:
-            save_html(meshcat, args.html)
-            print(f"wrote {args.html}")
-        if args.meshcat:
-            print(f"Meshcat: {meshcat.web_url()}")
-            if sys.stdin.isatty():
-                try:
-                    input("press Enter to quit ")
-                except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
-                    print(file=sys.stderr)
+            # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL
+            # is printed below when it is wanted (--meshcat): an accepted --html run prints none
+            logging.getLogger("drake").setLevel(logging.WARNING)
+            meshcat = start_meshcat()
+            show_climb(meshcat, record)
+            if args.html:
+                save_html(meshcat, args.html)
+                batch.say(f"wrote {args.html}")
+    if args.meshcat:
+        print(f"Meshcat: {meshcat.web_url()}")
+        if sys.stdin.isatty():
+            try:
+                input("press Enter to quit ")
+            except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
+                print(file=sys.stderr)
     return EXIT_OK if stop is None else EXIT_FAILED  # a climb that cannot go on failed

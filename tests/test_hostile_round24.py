@@ -1,0 +1,223 @@
+"""Probe 24: what a command leaves behind when it writes (a full disk half-way through its
+outputs, hard links, symlinks, `-o /dev/stdout` appended to a file), partial climbs flown by
+`rbp simulate` as by `rbp rig-run`, and memory that grew with the input (the replan cache, an
+`--html` replay). Each test shows the input, what rbp does with it now, and that valid uses
+still work."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cli_helpers import ROOT, one_error_line, run_rbp
+
+GOLDEN = ROOT / "tests" / "data" / "golden"
+
+
+def _env() -> dict[str, str]:
+    """The environment of an `rbp` child: this tree first, no empty PYTHONPATH entry."""
+    return {**os.environ, "LCM_DEFAULT_URL": "memq://", "MPLBACKEND": "Agg",
+            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT),
+                                                       os.environ.get("PYTHONPATH", "")]))}
+
+
+def _in_shell(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """`sh -c SCRIPT sh ARGS`, where "$@" after the script's own arguments is `python -m rbp`."""
+    return subprocess.run(["sh", "-c", script, "sh", *args, sys.executable, "-m", "rbp"],
+                          cwd=cwd, env=_env(), capture_output=True, text=True, timeout=300,
+                          check=False)
+
+
+# --- a full disk half-way through a command's outputs ---
+
+def _no_space_for_pictures(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every picture fails as on a full disk, inside the writer (as matplotlib's savefig
+    does when the disk fills), after the plan file is written."""
+    from rb_drake import files
+
+    def full(fig: Any, path: str | Path, **kwargs: Any) -> Path:
+        def write(f: Any) -> None:
+            f.write(b"\x89PNG half")
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        return files.atomic_write(path, write)
+
+    monkeypatch.setattr(files, "atomic_save_figure", full)
+
+
+@pytest.mark.parametrize("before", [None, b'{"an": "older plan"}\n'])
+def test_a_full_disk_at_the_picture_leaves_no_plan_written(
+        before: bytes | None, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp plan` on a disk that filled while plan.png was written ended with exit 2 and
+    `error: plan.png: -o's picture: cannot write: No space left on device`, yet plan.json was
+    written: a plan without its picture, from a command that said it failed. A command's
+    outputs are now written together or not at all: no plan.json (or the older one kept)."""
+    from rbp import cli
+
+    plan = tmp_path / "plan.json"
+    if before is not None:
+        plan.write_bytes(before)
+    _no_space_for_pictures(monkeypatch)
+    status = cli.main(["plan", "demo-shaft", "--footsteps-only", "-q", "-o", str(plan)])
+    out, err = capsys.readouterr()
+    assert status == 2, (status, err)
+    assert err.strip().splitlines() == [
+        f"error: {tmp_path / 'plan.png'}: -o's picture: cannot write: No space left on device"
+    ], err
+    assert "wrote" not in out, f"it said it wrote what it did not keep: {out!r}"
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ([] if before is None else ["plan.json"]), f"left behind: {names}"
+    if before is not None:
+        assert plan.read_bytes() == before, "the older plan was replaced"
+
+
+def _namespaces_work() -> bool:
+    if os.geteuid() != 0 or not shutil.which("unshare"):
+        return False
+    probe = subprocess.run(["unshare", "-m", "true"], capture_output=True, check=False)
+    return probe.returncode == 0
+
+
+@pytest.mark.skipif(not _namespaces_work(), reason="needs root and a mount namespace")
+def test_a_real_full_disk_leaves_the_older_plan(tmp_path: Path) -> None:
+    """The same on a 64 kB filesystem (the plan, 44 kB, fits; its picture does not): the
+    older plan.json stays, byte for byte, and nothing else is left."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    script = ('mount -t tmpfs -o size=64k tmpfs "$1" && cd "$1" && echo older > plan.json && '
+              'shift && "$@" plan demo-shaft --footsteps-only -q -o plan.json; '
+              'echo "status $?"; ls -A; cat plan.json')
+    result = subprocess.run(["unshare", "-m", "sh", "-c", script, "sh", str(disk),
+                             sys.executable, "-m", "rbp"], cwd=tmp_path, env=_env(),
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert "No space left on device" in result.stderr, result.stderr[-600:]
+    assert "Traceback" not in result.stderr, result.stderr[-600:]
+    assert result.stdout.split() == ["status", "2", "plan.json", "older"], result.stdout
+
+
+def test_simulate_writes_its_json_and_html_together(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp simulate --json sim.json --html climb.html` whose page cannot be written kept
+    sim.json; now neither is written."""
+    from test_simulation import _short_plan
+
+    from rb_drake import files
+    from rbp import cli
+    from systems import meshcat_view
+
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(_short_plan(json.loads(
+        (GOLDEN / "demo-shaft-current.json").read_text()))))
+
+    def full(meshcat: Any, out: str | Path) -> Path:
+        def write(f: Any) -> None:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        return files.atomic_write(out, write)
+
+    monkeypatch.setattr(meshcat_view, "save_html", full)
+    status = cli.main(["simulate", str(path), "--trials", "0", "--no-verify", "--json",
+                       str(tmp_path / "sim.json"), "--html", str(tmp_path / "climb.html")])
+    err = capsys.readouterr().err
+    assert status == 2 and "climb.html: --html: cannot write: No space left" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.json"]
+
+
+# --- hard links, symlinks, and the descriptors /dev/stdout names ---
+
+def test_an_output_with_a_hard_link_is_written_in_place(tmp_path: Path) -> None:
+    """`rbp scenario generate -o b.yaml`, b.yaml a hard link of a.yaml: the rename gave b.yaml
+    a new file and left a.yaml with the old content (the link broken). The file is now
+    written in place, as `cp` does: both names read the new cave, one inode."""
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a.write_text("old " * 10_000)  # longer than the cave: the rest must go
+    os.link(a, b)
+    inode = a.stat().st_ino
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "b.yaml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert b.stat().st_ino == inode and a.stat().st_nlink == 2, "the hard link was broken"
+    assert a.read_text() == b.read_text() and "format: reachbot-scenario/1" in a.read_text()
+    assert "old old" not in a.read_text(), "the old content's tail was left"
+    checked = run_rbp("scenario", "check", "a.yaml", cwd=tmp_path)
+    assert checked.returncode == 0, checked.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml"]
+
+
+def test_an_output_through_a_symlink_is_written_into_its_target(tmp_path: Path) -> None:
+    """Through a symlink the target's content changes and the target stays the same file
+    (its other names, its owner); the link stays a link."""
+    target = tmp_path / "caves" / "cave.yaml"
+    target.parent.mkdir()
+    target.write_text("old\n")
+    target.chmod(0o640)
+    os.link(target, tmp_path / "caves" / "also.yaml")
+    (tmp_path / "link.yaml").symlink_to(target)
+    inode = target.stat().st_ino
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "link.yaml",
+                     cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "link.yaml").is_symlink()
+    assert target.stat().st_ino == inode and oct(target.stat().st_mode & 0o777) == "0o640"
+    assert (tmp_path / "caves" / "also.yaml").read_text() == target.read_text()
+    assert "name: shaft-0" in target.read_text()
+
+
+def test_a_single_name_is_still_replaced_atomically(tmp_path: Path) -> None:
+    """An output with one name is written as before: a new file renamed over it (a reader
+    never sees it half-written)."""
+    cave = tmp_path / "cave.yaml"
+    cave.write_text("old\n")
+    inode = cave.stat().st_ino
+    assert run_rbp("scenario", "generate", "--kind", "shaft", "-o", "cave.yaml",
+                   cwd=tmp_path).returncode == 0
+    assert cave.stat().st_ino != inode and "name: shaft-0" in cave.read_text()
+
+
+@pytest.mark.parametrize("redirect", [">>", ">"])
+def test_dev_stdout_redirected_to_a_file_is_written_through_it(redirect: str,
+                                                              tmp_path: Path) -> None:
+    """`rbp scenario generate -o /dev/stdout >> log.txt` replaced log.txt (its earlier
+    lines lost), and the "wrote" line went into the replaced file. The output now goes
+    through the descriptor (`>>` appends, `>` writes from its start) and the command's
+    messages to stderr."""
+    log = tmp_path / "log.txt"
+    log.write_text("an earlier line\n")
+    result = _in_shell(f'"$@" scenario generate --kind shaft -o /dev/stdout {redirect} log.txt',
+                       cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    text = log.read_text()
+    if redirect == ">>":
+        assert text.startswith("an earlier line\n# rbp scenario generate"), text[:200]
+        text = text.removeprefix("an earlier line\n")
+    assert text.startswith("# rbp scenario generate") and "wrote" not in text, text[-300:]
+    assert "wrote /dev/stdout: shaft-0" in result.stderr, result.stderr
+    (tmp_path / "cave.yaml").write_text(text)
+    assert run_rbp("scenario", "check", "cave.yaml", cwd=tmp_path).returncode == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cave.yaml", "log.txt"]
+
+
+def test_proc_self_fd_of_an_open_file_is_written_through_it(tmp_path: Path) -> None:
+    """`-o /proc/self/fd/3` with descriptor 3 open for appending: as /dev/stdout."""
+    log = tmp_path / "log.txt"
+    log.write_text("first\n")
+    result = _in_shell('"$@" scenario generate --kind shaft -o /proc/self/fd/3 3>> log.txt',
+                       cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    text = log.read_text()
+    assert text.startswith("first\n# rbp scenario generate") and "name: shaft-0" in text
+    assert "wrote /proc/self/fd/3" in result.stdout, "its messages stay on stdout"
+
+
+def test_dev_stdout_on_a_pipe_is_still_refused(tmp_path: Path) -> None:
+    result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "/dev/stdout",
+                     cwd=tmp_path)
+    one_error_line(result, "/dev/stdout: -o: is not a regular file", "pipe")

@@ -221,3 +221,51 @@ def test_dev_stdout_on_a_pipe_is_still_refused(tmp_path: Path) -> None:
     result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "/dev/stdout",
                      cwd=tmp_path)
     one_error_line(result, "/dev/stdout: -o: is not a regular file", "pipe")
+
+
+# --- partial climbs: rbp simulate flies them, as rbp rig-run does ---
+
+@pytest.fixture(scope="module")
+def partial_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """blocked-shaft's partial climb (no route; 3 regrasps to the stance nearest the goal),
+    without SCP (10 s)."""
+    import rbp
+    from rb_drake.scenario import bundled_caves, load_scenario
+
+    made = rbp.plan(load_scenario(bundled_caves()["blocked-shaft"]),
+                    rbp.PipelineConfig(optimise=False), partial=True)
+    assert made.partial is not None and not made.success
+    path = tmp_path_factory.mktemp("partial") / "partial.json"
+    rbp.write_plan(made, path)
+    return path
+
+
+def test_simulate_flies_a_partial_climb_as_rig_run_does(
+        partial_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp simulate` refused a partial plan ("the plan found no route; nothing to simulate",
+    exit 1) that `rbp check` verifies and `rbp rig-run` flies. Both fly it now, to its end."""
+    import rbp
+    from rbp import cli
+
+    sim = tmp_path / "sim.json"
+    assert cli.main(["simulate", str(partial_plan), "--trials", "20", "--json",
+                     str(sim)]) == 0
+    out = capsys.readouterr().out
+    assert "a partial climb: it ends 2.31 m from the goal" in out, out
+    assert json.loads(sim.read_text())["trials"] == 20
+    assert cli.main(["rig-run", str(partial_plan), "--phase", "0", "--sim-rig", "--log",
+                     str(tmp_path / "rig.lcm")]) == 0
+    result = rbp.simulate(json.loads(partial_plan.read_text()), plant="body")
+    assert result.success, "the API refused it too"
+
+
+def test_a_plan_of_no_route_is_still_nothing_to_simulate(
+        partial_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from rbp import cli
+
+    plan = json.loads(partial_plan.read_text())
+    del plan["partial"]
+    path = tmp_path / "noroute.json"
+    path.write_text(json.dumps(plan))
+    assert cli.main(["simulate", str(path), "--trials", "0"]) == 1
+    assert "success: the plan found no route" in capsys.readouterr().err

@@ -59,7 +59,9 @@ def _load_plan(path: Path, verify: bool = True,
     from rbp.commands.common import read_plan, refuse_wrong_plan
 
     plan = read_plan(path)
-    if not plan["success"]:  # a valid plan of no route: a failed outcome (1), not bad input (2)
+    # a valid plan of no route: a failed outcome (1), not bad input (2); a partial climb
+    # (`rbp plan --partial`) is a verified climb, simulated as `rbp rig-run` flies it
+    if not plan["success"] and plan.get("partial") is None:
         print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
                        "nothing to simulate"), file=sys.stderr)
         return None
@@ -154,6 +156,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     print(f"{path}: simulated {flown}, in {wall:.1f} s; "
           f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
           f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
+    if plan.get("partial") is not None:  # its successes climb to its end, not to the goal
+        print(f"  a partial climb: it ends {plan['partial']['goal_distance_m']:.2f} m from the "
+              "goal; a climb succeeds when it reaches the plan's end")
     if stop is not None:  # said "simulated 182.0 s, 15 phases" of a climb stopped at 87 s
         print(one_line(f"error: {path}: the climb stopped in phase {stop.phase} "
                        f"({traj.phases[stop.phase].kind}) at t = {stop.time:.2f} s: boom "

@@ -269,3 +269,49 @@ def test_a_plan_of_no_route_is_still_nothing_to_simulate(
     path.write_text(json.dumps(plan))
     assert cli.main(["simulate", str(path), "--trials", "0"]) == 1
     assert "success: the plan found no route" in capsys.readouterr().err
+
+
+# --- memory that grew with the input ---
+
+def test_the_replan_cache_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rbp simulate --replan` kept every replanned climb it simulated, one per distinct
+    failure state (a whole demo climb: 3.5 MB; thousands of failures: gigabytes). At most
+    `replan_cache_mb` are kept now; one dropped is made again when asked for, and the
+    results are those of the unbounded cache."""
+    import numpy as np
+    from test_simulation import _short_plan
+
+    from planning import bounded_cache
+    from planning.plan_file import plan_from
+    from systems import montecarlo
+    from systems.diagram import ClimbSimulator
+    from systems.trajectory import PlanTrajectory, plan_scenario
+
+    model = plan_from(_short_plan(json.loads((GOLDEN / "demo-shaft-current.json").read_text())))
+    scn = plan_scenario(model)
+    sim = ClimbSimulator(scn, plant="body")
+    record = sim.run(PlanTrajectory(model, scn))
+    # grasps weakened along the phase: failures at many distinct samples
+    weak = record._replace(probability=record.probability
+                           * np.linspace(1.0, 0.9, len(record.times))[:, None])
+    made: list[Any] = []
+
+    class Kept(montecarlo._Replanning):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(montecarlo, "_Replanning", Kept)
+    monkeypatch.setattr(bounded_cache, "PROTECTED", 2)  # few entries suffice to show it
+    whole = montecarlo.monte_carlo(weak, 300, 0, montecarlo.retry_replanner, "retry", sim,
+                                   replan_cache_mb=1e6)
+    cap_mb = 0.3
+    bounded = montecarlo.monte_carlo(weak, 300, 0, montecarlo.retry_replanner, "retry", sim,
+                                     replan_cache_mb=cap_mb)
+    assert whole.replanning is not None and whole.replanning.replans > 8, whole.replanning
+    assert bounded.replanning == whole.replanning, "bounding changed the results"
+    full, capped = made[0].cache.stats(), made[1].cache.stats()
+    entry = full["peak_bytes"] / full["live"]
+    assert full["peak_bytes"] > 3 * cap_mb * 2**20, f"not enough to bound: {full}"
+    assert capped["peak_bytes"] <= cap_mb * 2**20 + 3 * entry, capped
+    assert capped["drops"] > 0, capped

@@ -315,3 +315,30 @@ def test_the_replan_cache_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     assert full["peak_bytes"] > 3 * cap_mb * 2**20, f"not enough to bound: {full}"
     assert capped["peak_bytes"] <= cap_mb * 2**20 + 3 * entry, capped
     assert capped["drops"] > 0, capped
+
+
+def test_a_long_climbs_replay_is_bounded(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp simulate --html` wrote a frame every 0.2 s of climb (4.4 kB each: the demo's
+    182 s, 4.0 MB), without end: a 10-hour climb's page would be 800 MB. A replay now has at
+    most MAX_REPLAY_FRAMES frames, spread over the climb, and says so (the limit lowered here
+    to 20 so that the 7 s plan reaches it)."""
+    from test_simulation import _short_plan
+
+    from rbp import cli
+    from systems import meshcat_view
+
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(_short_plan(json.loads(
+        (GOLDEN / "demo-shaft-current.json").read_text()))))
+    monkeypatch.setattr(meshcat_view, "MAX_REPLAY_FRAMES", 20)
+    page = tmp_path / "climb.html"
+    assert cli.main(["simulate", str(path), "--trials", "0", "--no-verify", "--html",
+                     str(page)]) == 0
+    out = capsys.readouterr().out
+    assert "replay: 20 frames spread over the 7 s climb, at most 20" in out, out
+    assert "would be 36" in out, out
+    assert page.stat().st_size > 0
+    assert meshcat_view.replay_frames(36_000.0) == 20, "a 10-hour climb"
+    monkeypatch.setattr(meshcat_view, "MAX_REPLAY_FRAMES", 10_000)
+    assert meshcat_view.replay_frames(182.0) == 911, "the demo's replay is as before"

@@ -217,13 +217,24 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
             batch.say(f"wrote {args.json}")
         if args.meshcat or args.html:
-            from systems.meshcat_view import save_html, show_climb, start_meshcat
+            from systems.meshcat_view import (
+                MAX_REPLAY_FRAMES,
+                natural_frames,
+                save_html,
+                show_climb,
+                start_meshcat,
+            )
 
             # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL
             # is printed below when it is wanted (--meshcat): an accepted --html run prints none
             logging.getLogger("drake").setLevel(logging.WARNING)
             meshcat = start_meshcat()
-            show_climb(meshcat, record)
+            frames = show_climb(meshcat, record)
+            natural = natural_frames(float(record.times[-1]))
+            if natural > MAX_REPLAY_FRAMES:  # the page grew without end with the climb
+                batch.say(f"replay: {frames:,} frames spread over the {record.times[-1]:.0f} s "
+                          f"climb, at most {MAX_REPLAY_FRAMES:,} (one every 0.2 s of climb "
+                          f"would be {natural:,}; the limit keeps an --html page near 45 MB)")
             if args.html:
                 save_html(meshcat, args.html)
                 batch.say(f"wrote {args.html}")

@@ -58,6 +58,8 @@ def output_problem(path: str | Path,
     `may_keep` (a sweep's finished trial record, kept as it is)."""
     if str(path) == "-":  # standard output to many tools: rbp wrote a file named '-'
         return "'-' is not standard output here: rbp writes files (./- names a file called -)"
+    if (problem := descriptor_problem(path)) is not None:
+        return problem
     try:
         target = output_target(path)
         # the given name stat-ed too: /dev/stdout, /proc/self/fd/N are links the kernel
@@ -153,27 +155,64 @@ def _same_file(a: str | Path, b: str | Path) -> bool:
 # names of this process's own descriptors: /dev/stdout, /dev/stderr, /dev/fd/N,
 # /proc/self/fd/N, /proc/thread-self/fd/N, /proc/PID/fd/N
 _DESCRIPTOR_NAME = re.compile(
-    r"/dev/(?:(?P<std>stdout|stderr)|fd/(?P<dev>\d+))|"
+    r"/dev/(?:(?P<std>stdin|stdout|stderr)|fd/(?P<dev>\d+))|"
     r"/proc/(?P<pid>self|thread-self|\d+)/fd/(?P<proc>\d+)")
 
 
-def stream_descriptor(path: str | Path) -> int | None:
-    """The descriptor of this process that `path` names (`/dev/stdout`: 1, `/proc/self/fd/3`:
-    3) when it is open on a regular file, else None. Such an output is written through the
-    descriptor, at its offset: renaming over the file it resolves to replaced a file that
-    `>>` appends to (its earlier contents lost), and what the command printed afterwards went
-    to the replaced file."""
+def named_descriptor(path: str | Path) -> int | None:
+    """The descriptor of this process that `path` names (`/dev/stdin`: 0, `/dev/stdout`: 1,
+    `/proc/self/fd/3`: 3), or None."""
     found = _DESCRIPTOR_NAME.fullmatch(os.path.normpath(str(path)))
     if found is None:
         return None
     if found["pid"] not in (None, "self", "thread-self") and int(found["pid"]) != os.getpid():
         return None
-    fd = (1 if found["std"] == "stdout" else 2) if found["std"] else \
-        int(found["dev"] or found["proc"])
+    if found["std"]:
+        return ("stdin", "stdout", "stderr").index(found["std"])
+    return int(found["dev"] or found["proc"])
+
+
+def _writable_descriptor(fd: int) -> bool:
+    import fcntl  # a descriptor's name (/dev/stdout, /proc/self/fd/N) is a Unix one
+
     try:
-        return fd if stat.S_ISREG(os.fstat(fd).st_mode) else None
+        return fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE in (os.O_WRONLY, os.O_RDWR)
+    except (OSError, OverflowError):
+        return False
+
+
+def descriptor_problem(path: str | Path) -> str | None:
+    """Why `path`, a name of one of this process's descriptors, cannot be an output, or None:
+    one open for reading only (`-o /dev/stdin < cave.yaml` replaced cave.yaml, the file given
+    as the command's input)."""
+    fd = named_descriptor(path)
+    if fd is None:
+        return None
+    try:
+        os.fstat(fd)
+    except (OSError, OverflowError):
+        return None  # not open: the name is what the system makes of it (no such file)
+    if not _writable_descriptor(fd):
+        which = "standard input" if fd == 0 else f"descriptor {fd}"
+        return (f"names {which}, open for reading only: rbp would replace the file it reads "
+                "from; give a file name")
+    return None
+
+
+def stream_descriptor(path: str | Path) -> int | None:
+    """The descriptor of this process that `path` names (`/dev/stdout`: 1, `/proc/self/fd/3`:
+    3) when it is open for writing on a regular file, else None. Such an output is written
+    through the descriptor, at its offset: renaming over the file it resolves to replaced a
+    file that `>>` appends to (its earlier contents lost), and what the command printed
+    afterwards went to the replaced file."""
+    fd = named_descriptor(path)
+    if fd is None:
+        return None
+    try:
+        regular = stat.S_ISREG(os.fstat(fd).st_mode)
     except (OSError, OverflowError):
         return None
+    return fd if regular and _writable_descriptor(fd) else None
 
 
 @dataclass

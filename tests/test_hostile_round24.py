@@ -217,6 +217,20 @@ def test_proc_self_fd_of_an_open_file_is_written_through_it(tmp_path: Path) -> N
     assert "wrote /proc/self/fd/3" in result.stdout, "its messages stay on stdout"
 
 
+def test_dev_stdin_is_refused_as_an_output(tmp_path: Path) -> None:
+    """`rbp scenario generate -o /dev/stdin < cave.yaml` replaced cave.yaml (the name resolves
+    to the file standard input reads) with a generated cave. A descriptor open for reading
+    only is refused as an output, before the work."""
+    cave = tmp_path / "cave.yaml"
+    shutil.copy(ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml", cave)
+    before = cave.read_bytes()
+    for name in ("/dev/stdin", "/dev/fd/0", "/proc/self/fd/0"):
+        result = _in_shell(f'"$@" scenario generate --kind shaft -o {name} < cave.yaml',
+                           cwd=tmp_path)
+        one_error_line(result, f"{name}: -o: names standard input, open for reading only")
+        assert cave.read_bytes() == before, f"-o {name} replaced the input"
+
+
 def test_dev_stdout_on_a_pipe_is_still_refused(tmp_path: Path) -> None:
     result = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "/dev/stdout",
                      cwd=tmp_path)
@@ -342,3 +356,4 @@ def test_a_long_climbs_replay_is_bounded(monkeypatch: pytest.MonkeyPatch, tmp_pa
     assert meshcat_view.replay_frames(36_000.0) == 20, "a 10-hour climb"
     monkeypatch.setattr(meshcat_view, "MAX_REPLAY_FRAMES", 10_000)
     assert meshcat_view.replay_frames(182.0) == 911, "the demo's replay is as before"
+

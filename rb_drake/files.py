@@ -265,8 +265,10 @@ def output_batch() -> Iterator[OutputBatch]:
             except BaseException:
                 _discard(batch.pending[n:])
                 raise
-    for message in batch.messages:
-        print(message() if callable(message) else message)
+    from rb_drake.errors import one_line
+
+    for message in batch.messages:  # a file name's newline forged an `error:` line
+        print(one_line(message() if callable(message) else message))
 
 
 def _discard(pending: list[_Pending]) -> None:

@@ -195,7 +195,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     check_dpi(args.dpi)
     check_output(args.output, picture=True, inputs={"the scenario's file": args.scenario})
     draw(load_scenario_spec(args.scenario, check_start=False), args.output, dpi=args.dpi)
-    print(f"wrote {args.output}")
+    print(one_line(f"wrote {args.output}"))
     return EXIT_OK
 
 
@@ -385,10 +385,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
     problems = cave + problems
-    for p in problems:
-        print(f"{path}: {p}")
+    for p in problems:  # the file's name escaped: a newline in it forged an `error:` line
+        print(one_line(f"{path}: {p}"))
     if problems:
-        print(f"{path}: {plural(len(problems), 'problem')}")
+        print(one_line(f"{path}: {plural(len(problems), 'problem')}"))
         return EXIT_FAILED
     from planning.plan_model import Plan
     from planning.verify_climb import check_note
@@ -405,9 +405,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     note = check_note(model)
     if getattr(args, "scenario", None) is not None:
         note = "; ".join(filter(None, [f"made for the cave and robot of {args.scenario}", note]))
-    print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
-          f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")
-          + _summary(model, recorded=True))
+    print(one_line(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
+                   f"{plural(n, 'configuration')} verified, {between}; "
+                   + (f"{note}; " if note else "") + _summary(model, recorded=True)))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp
@@ -417,7 +417,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             raise UserError(f"{path}: --stamp: the file changed while it was being checked "
                             "(another command wrote it); not stamped: check it again")
         write_plan(stamp(plan), path)
-        print(f"{path}: stamped as verified")
+        print(one_line(f"{path}: stamped as verified"))
     return EXIT_OK
 
 

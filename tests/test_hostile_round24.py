@@ -357,3 +357,21 @@ def test_a_long_climbs_replay_is_bounded(monkeypatch: pytest.MonkeyPatch, tmp_pa
     monkeypatch.setattr(meshcat_view, "MAX_REPLAY_FRAMES", 10_000)
     assert meshcat_view.replay_frames(182.0) == 911, "the demo's replay is as before"
 
+
+# --- file names that break a line ---
+
+def test_a_newline_in_a_file_name_forges_no_line(tmp_path: Path) -> None:
+    """`rbp plan -o $'a\\nerror: b.json'` printed "wrote a" and then a line "error: b.json" on
+    stdout, and `rbp check` of such a file "c" and "error: d.json: ok: ...": a script reading
+    the output saw an error the command never had. File names are printed escaped, as error
+    lines print them."""
+    made = run_rbp("plan", "demo-shaft", "--footsteps-only", "-q", "-o", "a\nerror: b.json",
+                   cwd=tmp_path)
+    assert made.returncode == 0, made.stderr
+    lines = made.stdout.splitlines()
+    assert lines[:2] == ["wrote a\\nerror: b.json", "wrote a\\nerror: b.png"], lines
+    checked = run_rbp("check", "-q", "a\nerror: b.json", cwd=tmp_path)
+    assert checked.returncode == 0, checked.stderr
+    assert not any(line.startswith("error") for line in checked.stdout.splitlines()), \
+        checked.stdout
+    assert checked.stdout.startswith("a\\nerror: b.json: ok: "), checked.stdout[:80]

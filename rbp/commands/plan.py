@@ -413,6 +413,7 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
     the caller to raise once they are written."""
     from planning.figures import animate_plan, phase_figure, search_figure, snapshots_figure
     from planning.plan_model import plan_dict
+    from rb_drake.errors import one_line
     from rb_drake.files import atomic_save_figure
     from rbp.commands.common import UserError
 
@@ -434,8 +435,8 @@ def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
         atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
         say(f"wrote {fig}")
     if animate and not any(p.steps for p in model.phases):  # a search that found no route
-        print(f"--animate: {animate} not written: the plan has no configurations to animate",
-              file=sys.stderr)
+        print(one_line(f"--animate: {animate} not written: the plan has no configurations to "
+                       "animate"), file=sys.stderr)
     elif animate:
         animate_plan(scn, plan, animate)
         say(f"wrote {animate}")

@@ -144,8 +144,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None
     stance = plan["phases"][args.phase]["stance"]
-    print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "
-          f"{run.statuses} statuses received; wrote {run.log}")
+    print(one_line(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands "
+                   f"sent, {run.statuses} statuses received; wrote {run.log}"))
     for line in run.safety.messages(config):  # what the safety guards did, if anything
         print(f"  safety: {line}")
     if not len(run.live.time):
@@ -197,5 +197,5 @@ def cmd_rig_report(args: argparse.Namespace) -> int:
         channel = RigLcmConfig().status_channel
         raise UserError(f"{args.log}: {channel}: no status messages to plot")
     atomic_save_figure(report_figure(log), args.output, dpi=args.dpi)
-    print(f"wrote {args.output}")
+    print(one_line(f"wrote {args.output}"))
     return EXIT_OK

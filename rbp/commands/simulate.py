@@ -153,9 +153,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     flown = (f"{traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}" if stop is None
              else f"{float(record.times[-1]):.1f} of {traj.end_time:.1f} s, "
                   f"{stop.phase + 1} of {plural(len(traj.phases), 'phase')}")
-    print(f"{path}: simulated {flown}, in {wall:.1f} s; "
-          f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
-          f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
+    print(one_line(f"{path}: simulated {flown}, in {wall:.1f} s; "
+                   f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
+                   f"heading {np.degrees(tracking['max_heading_error']):.2f} deg"))
     if plan.get("partial") is not None:  # its successes climb to its end, not to the goal
         print(f"  a partial climb: it ends {plan['partial']['goal_distance_m']:.2f} m from the "
               "goal; a climb succeeds when it reaches the plan's end")

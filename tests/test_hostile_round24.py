@@ -171,6 +171,38 @@ def test_an_output_through_a_symlink_is_written_into_its_target(tmp_path: Path) 
     assert "name: shaft-0" in target.read_text()
 
 
+@pytest.mark.skipif(not _namespaces_work(), reason="needs root and a mount namespace")
+def test_a_full_disk_leaves_a_hard_linked_output_as_it_was(tmp_path: Path) -> None:
+    """Written in place, a file is not replaced whole: on a 20 kB filesystem (room for the
+    cave's temporary file, not for a second copy) the space is asked for before the file is
+    touched, so both names keep the old content and the error names the output."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    script = ('mount -t tmpfs -o size=20k tmpfs "$1" && cd "$1" && echo old > a.yaml && '
+              'ln a.yaml b.yaml && shift && "$@" scenario generate --kind shaft -o b.yaml; '
+              'echo "status $?"; ls -A; cat a.yaml b.yaml')
+    result = subprocess.run(["unshare", "-m", "sh", "-c", script, "sh", str(disk),
+                             sys.executable, "-m", "rbp"], cwd=tmp_path, env=_env(),
+                            capture_output=True, text=True, timeout=300, check=False)
+    assert result.stderr.strip() == ("error: b.yaml: -o: cannot write: No space left on "
+                                     "device"), result.stderr[-600:]
+    assert result.stdout.split() == ["status", "2", "a.yaml", "b.yaml", "old", "old"], \
+        result.stdout
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="root makes a file another user owns")
+def test_a_file_of_another_user_keeps_its_owner(tmp_path: Path) -> None:
+    """Root replacing a user's plan by the rename made it root's (the user could no longer
+    write it); it is written in place now, as `cp` does."""
+    cave = tmp_path / "cave.yaml"
+    cave.write_text("old\n")
+    os.chown(cave, 12345, 12345)
+    assert run_rbp("scenario", "generate", "--kind", "shaft", "-o", "cave.yaml",
+                   cwd=tmp_path).returncode == 0
+    assert (cave.stat().st_uid, cave.stat().st_gid) == (12345, 12345)
+    assert "name: shaft-0" in cave.read_text()
+
+
 def test_a_single_name_is_still_replaced_atomically(tmp_path: Path) -> None:
     """An output with one name is written as before: a new file renamed over it (a reader
     never sees it half-written)."""

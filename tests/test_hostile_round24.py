@@ -317,6 +317,28 @@ def test_a_plan_of_no_route_is_still_nothing_to_simulate(
     assert "success: the plan found no route" in capsys.readouterr().err
 
 
+def test_simulate_refuses_a_footstep_plan_whose_straight_lines_cross_rock(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp rig-run` refuses demo-shaft's footstep plan (its straight lines between steps put
+    a boom through rock: rule `between`), yet `rbp simulate`, which follows the same lines,
+    flew it, exit 0. Both refuse it now, through the same verifier; --no-verify flies it."""
+    import rbp
+    from rbp import cli
+    from systems.plan_check import executed_motion_problems
+
+    plan = rbp.plan("demo-shaft", footsteps_only=True)
+    assert executed_motion_problems(plan.to_dict()), "its straight lines no longer cross rock"
+    path = tmp_path / "fs.json"
+    rbp.write_plan(plan, path)
+    assert cli.main(["simulate", str(path), "--trials", "0"]) == 1
+    err = capsys.readouterr().err
+    assert ": between: " in err and "which rig-run commands and simulate follows" in err, err
+    assert cli.main(["rig-run", str(path), "--phase", "0", "--sim-rig", "--log",
+                     str(tmp_path / "rig.lcm")]) == 1
+    assert "which rig-run commands and simulate follows" in capsys.readouterr().err
+    assert cli.main(["simulate", str(path), "--trials", "0", "--no-verify"]) == 0
+
+
 # --- memory that grew with the input ---
 
 def test_the_replan_cache_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -306,8 +306,9 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
     since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
     `warn_unverified`, once the plan is accepted). `executes` (rig-run, which commands the
-    straight motion between steps): a footstep plan's motion, which `rbp check` and its stamp
-    leave unverified, must pass rule `between` too (`executed_motion_problems`). `scenario`
+    straight motion between steps, and simulate, which follows it at minimum-jerk rates): a
+    footstep plan's motion, which `rbp check` and its stamp leave unverified, must pass rule
+    `between` too (`executed_motion_problems`). `scenario`
     (--scenario CAVE): the plan must have been made for CAVE's cave and robot (rule
     `scenario`, `cave_problems`), stamped, or with --no-verify, alike."""
     from planning.plan_file import has_valid_stamp
@@ -344,8 +345,8 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
         print(one_line(
             f"error: {path}: a footstep plan whose motion between steps, which rig-run "
-            f"commands, fails rule between ({count}{shown}; rbp check verifies its end "
-            "configurations only); refused: plan with motion (rbp plan without "
+            f"commands and simulate follows, fails rule between ({count}{shown}; rbp check "
+            "verifies its end configurations only); refused: plan with motion (rbp plan without "
             "--footsteps-only)" if footstep else
             f"error: {path}: the plan fails verification ({count}{shown}); "
             f"refused (rbp check {path} lists them all)"), file=sys.stderr)

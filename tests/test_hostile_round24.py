@@ -203,6 +203,42 @@ def test_a_file_of_another_user_keeps_its_owner(tmp_path: Path) -> None:
     assert "name: shaft-0" in cave.read_text()
 
 
+_HANGUP_IN_PLACE = r"""
+import os, signal, sys
+from rb_drake import files
+from rbp.commands.common import Terminated, clean_interrupts
+
+copy = files._copy_in_place
+
+def hung_up_midway(tmp, target):
+    os.kill(os.getpid(), signal.SIGHUP)  # the terminal hangs up as the copy starts
+    copy(tmp, target)
+
+files._copy_in_place = hung_up_midway
+try:
+    with clean_interrupts():
+        files.atomic_write(sys.argv[1], lambda f: f.write(b"new content " * 100_000))
+    print("written")
+except Terminated:
+    print("terminated")
+"""
+
+
+def test_a_hangup_during_a_copy_in_place_waits_for_its_end(tmp_path: Path) -> None:
+    """A copy in place cannot be undone half-way (the rename could: the old file stayed
+    whole): a hang-up as it starts is held until it ends, then unwinds as before (status
+    3), the file whole and no temporary file left."""
+    target = tmp_path / "plan.json"
+    target.write_bytes(b"old")
+    os.link(target, tmp_path / "also.json")
+    env = {**_env(), "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "tests")])}
+    done = subprocess.run([sys.executable, "-c", _HANGUP_IN_PLACE, str(target)], env=env,
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.stdout.strip() == "terminated", (done.returncode, done.stderr[-300:])
+    assert target.read_bytes() == b"new content " * 100_000, "the copy was cut short"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["also.json", "plan.json"]
+
+
 def test_a_single_name_is_still_replaced_atomically(tmp_path: Path) -> None:
     """An output with one name is written as before: a new file renamed over it (a reader
     never sees it half-written)."""

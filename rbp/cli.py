@@ -435,12 +435,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from rb_drake.draw import scenario_figure
     from rb_drake.feasibility import check_poses
-    from rb_drake.files import atomic_save_figure, atomic_write_text
+    from rb_drake.files import atomic_save_figure, atomic_write_text, output_batch
 
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
     alloc = check.allocation
-    picture = atomic_save_figure(scenario_figure(scn), out / "cave.png", dpi=120)
     report = {
         "scenario": scn.to_dict(resolved=True),
         "start": {
@@ -452,9 +451,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
             "p_success": float(check.probability[0]),
         },
     }
-    data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
-    print(one_line(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
-                   f"wrote {picture} and {data}"))
+    with output_batch() as batch:  # the cave's picture and report, or neither
+        picture = atomic_save_figure(scenario_figure(scn), out / "cave.png", dpi=120)
+        data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
+        batch.say(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
+                  f"wrote {picture} and {data}")
     if args.plan:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig
@@ -465,14 +466,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
         plan = run_planner(scn, "rbp", cfg)
         plan = plan.replace(provenance=provenance(scn, "rbp", cfg, True,
                                                   getattr(args, "argv", None)))
-        write_plan(plan, out / "plan.json")
-        print(f"wrote {out / 'plan.json'}")
         from planning.pipeline import motion_summary
 
         # Fig. 6 for the phase where SCP gained most
         rows = motion_summary(plan)
         best = max(rows, key=lambda r: r["mean"] - r["seed_mean"])["phase"] if rows else None
-        write_pictures(scn, plan, out / "plan.json", best, None)
+        with output_batch() as batch:  # the plan and its pictures, or none of them
+            write_plan(plan, out / "plan.json")
+            batch.say(f"wrote {out / 'plan.json'}")
+            write_pictures(scn, plan, out / "plan.json", best, None, say=batch.say)
         _print_motion(plan)
         print(_summary(plan))
         if not plan.success:

@@ -103,6 +103,20 @@ def test_a_real_full_disk_leaves_the_older_plan(tmp_path: Path) -> None:
     assert result.stdout.split() == ["status", "2", "plan.json", "older"], result.stdout
 
 
+def test_demo_writes_its_cave_picture_and_report_together(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`rbp demo` wrote cave.png and start.json one after the other (and later plan.json
+    and its pictures): a full disk between them left some. Each group is written whole."""
+    from rbp import cli
+
+    _no_space_for_pictures(monkeypatch)
+    out = tmp_path / "demo"
+    assert cli.main(["demo", "--out", str(out)]) == 2
+    assert "cave.png: --out: cannot write: No space left on device" in capsys.readouterr().err
+    assert not out.exists() or list(out.iterdir()) == [], list(out.iterdir())
+
+
 def test_simulate_writes_its_json_and_html_together(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:

@@ -70,6 +70,8 @@ def output_problem(path: str | Path,
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"
+        if (problem := _dots_problem(str(path))) is not None:  # a Path keeps its ".."
+            return problem
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
             if folder.is_symlink():  # dangling: no folder can be made there ("error: link:
@@ -104,6 +106,23 @@ def output_problem(path: str | Path,
             os.rmdir(_make_temporary(folder, target.name, folder_too=True)[1])
         except OSError as e:
             return f"cannot make a folder in {folder} ({e.strerror})"
+    return None
+
+
+def _dots_problem(path: str) -> str | None:
+    """Why a name with `.` or `..` parts cannot be an output as the system reads it, or None:
+    pathlib drops a last `/.` (`-o cave.yaml/.` wrote cave.yaml, where the system says "Not a
+    directory"), and a folder made for `x/../cave.yaml` (x missing: the system says "No such
+    file or directory") was left behind, empty."""
+    parts = path.split(os.sep)
+    if parts[-1] in (".", ".."):
+        return f"ends with '/{parts[-1]}', a folder's name: give a file name"
+    for n, part in enumerate(parts[:-1]):
+        if part == ".." and n > 0:
+            head = os.sep.join(parts[:n]) or os.sep
+            if not os.path.isdir(head):
+                return (f"goes up out of {head} ('..'), which is not a folder: give the "
+                        "file's name without it")
     return None
 
 

@@ -155,7 +155,7 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
             from systems.rig import RIG_SCENARIO
 
             return load(RIG_SCENARIO, check_start=check_start)
-    return load(spec, check_start=check_start)
+    return load(path_or_name, check_start=check_start)  # as given: Path drops a last "/."
 
 
 def generate_scenario(kind: str = "shaft", seed: int = 0,

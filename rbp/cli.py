@@ -491,7 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run the main job on the bundled demo cave")
-    demo.add_argument("--scenario", default="demo-shaft",
+    demo.add_argument("--scenario", default="demo-shaft", type=input_file,
                       help="scenario file or bundled cave name (default: demo-shaft)")
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     demo.add_argument("--no-plan", dest="plan", action="store_false",
@@ -567,7 +567,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("-q", "--quiet", action="store_true",
                        help="no progress line (shown only when stderr is a terminal and the "
                             "check takes over a second)")
-    check.add_argument("--scenario", metavar="CAVE",
+    check.add_argument("--scenario", metavar="CAVE", type=input_file,
                        help="a scenario file or a bundled cave's name: the plan must also "
                             "have been made for this cave and robot (the plan is verified "
                             "against the cave and robot it embeds, which an edit can change)")

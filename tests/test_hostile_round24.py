@@ -479,3 +479,54 @@ def test_a_newline_in_a_file_name_forges_no_line(tmp_path: Path) -> None:
     assert not any(line.startswith("error") for line in checked.stdout.splitlines()), \
         checked.stdout
     assert checked.stdout.startswith("a\\nerror: b.json: ok: "), checked.stdout[:80]
+
+
+# --- names with '.' and '..' that pathlib reads otherwise than the system ---
+
+@pytest.mark.parametrize("output,why", [
+    ("cave.yaml/.", "ends with '/.', a folder's name"),
+    ("cave.yaml/..", "ends with '/..', a folder's name"),
+    ("x/../cave.yaml", "goes up out of x ('..'), which is not a folder")])
+def test_an_output_name_pathlib_reads_otherwise_is_refused(output: str, why: str,
+                                                           tmp_path: Path) -> None:
+    """`-o cave.yaml/.` wrote cave.yaml (pathlib drops a last '/.'; the system says "Not a
+    directory"), and `-o x/../cave.yaml`, x missing, made the folder x to climb out of it
+    and left it behind, empty (the system says "No such file or directory"). Refused before
+    the work now, as `-o cave.yaml/` was."""
+    one_error_line(run_rbp("scenario", "generate", "--kind", "shaft", "-o", output,
+                           cwd=tmp_path), f"{output}: -o: {why}")
+    assert list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+    (tmp_path / "x").mkdir()
+    done = run_rbp("scenario", "generate", "--kind", "shaft", "-o", "x/../cave.yaml",
+                   cwd=tmp_path)
+    assert done.returncode == 0 and (tmp_path / "cave.yaml").is_file(), done.stderr
+
+
+@pytest.mark.parametrize("command", [["check"], ["simulate", "--trials", "0"],
+                                     ["check", "p.json", "--scenario"]])
+@pytest.mark.parametrize("tail", ["/.", "/..", "/x"])
+def test_an_input_name_going_on_after_a_file_is_refused(command: list[str], tail: str,
+                                                        tmp_path: Path) -> None:
+    """`rbp check plan.json/.` read plan.json (pathlib drops '/.'), where the system says
+    "Not a directory"; `--scenario cave.yaml/` and `/.` were read as cave.yaml (the check of
+    a trailing '/' had not been given to --scenario)."""
+    shutil.copy(GOLDEN / "demo-shaft-current.json", tmp_path / "p.json")
+    shutil.copy(ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml", tmp_path / "c.yaml")
+    name = ("c.yaml" if command[-1] == "--scenario" else "p.json") + tail
+    result = run_rbp(*command, name, cwd=tmp_path)
+    one_error_line(result, f"'{name}' goes on after '{name[:-len(tail)]}', which is a file, "
+                   "not a directory")
+
+
+def test_the_api_reads_a_name_as_the_system_does(tmp_path: Path) -> None:
+    """`rbp.load_scenario("cave.yaml/.")` and `("cave.yaml/")` read cave.yaml (made a Path
+    first), where `rbp.read_plan` and the commands refuse such names."""
+    import rbp
+    from rb_drake.scenario import ScenarioError
+
+    cave = tmp_path / "cave.yaml"
+    shutil.copy(ROOT / "rb_drake" / "data" / "caves" / "demo-shaft.yaml", cave)
+    for tail in ("/.", "/"):
+        with pytest.raises(ScenarioError, match="cannot read: Not a directory"):
+            rbp.load_scenario(f"{cave}{tail}")
+    assert rbp.load_scenario(str(cave)).name == "demo-shaft"

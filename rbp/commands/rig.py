@@ -47,7 +47,7 @@ def add_rig_commands(subparsers) -> None:
                      help="seconds between commands, 0.01 to 1 (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
-    run.add_argument("--scenario", metavar="CAVE",
+    run.add_argument("--scenario", metavar="CAVE", type=input_file,
                      help="a scenario file or a bundled cave's name: refuse the plan unless it "
                           "was made for this cave and robot (the rig's boom length and tension "
                           "clamps are the plan's robot's)")

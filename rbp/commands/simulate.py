@@ -44,7 +44,7 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="simulate the plan without verifying it first (experiments only; "
                         "warns on stderr)")
-    p.add_argument("--scenario", metavar="CAVE",
+    p.add_argument("--scenario", metavar="CAVE", type=input_file,
                    help="a scenario file or a bundled cave's name: refuse the plan unless it "
                         "was made for this cave and robot (the simulation uses the ones the "
                         "plan embeds)")

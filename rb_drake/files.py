@@ -413,9 +413,15 @@ _CHUNK = 1 << 20
 
 
 def _copy_in_place(tmp: str, target: Path) -> None:
+    """Copy `tmp` into `target`, holding an exclusive lock on it (`flock`: two rbp commands
+    writing one file at once interleaved their copies; the rename needed none)."""
+    import fcntl  # Unix: hard links and symlinks are written in place there
+
     size = os.path.getsize(tmp)
     fd = os.open(target, os.O_WRONLY | os.O_CLOEXEC)
     try:
+        with contextlib.suppress(OSError):  # a filesystem without locks: as before
+            fcntl.flock(fd, fcntl.LOCK_EX)
         old = os.fstat(fd).st_size
         if size > old and hasattr(os, "posix_fallocate"):
             try:  # the space first: a full disk refuses here, the file untouched

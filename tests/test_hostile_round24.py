@@ -253,6 +253,36 @@ def test_a_hangup_during_a_copy_in_place_waits_for_its_end(tmp_path: Path) -> No
     assert sorted(p.name for p in tmp_path.iterdir()) == ["also.json", "plan.json"]
 
 
+def test_two_writers_of_one_file_in_place_take_turns(tmp_path: Path) -> None:
+    """Two commands writing one hard-linked file at once interleaved their copies in place
+    (the rename needed no turn-taking); a copy in place now holds an exclusive lock (flock)
+    on the file. Here the test holds it: the command waits, the file unchanged, until it is
+    released."""
+    import fcntl
+    import time
+
+    a = tmp_path / "a.yaml"
+    a.write_text("old\n")
+    os.link(a, tmp_path / "b.yaml")
+    with a.open("rb+") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        writer = subprocess.Popen([sys.executable, "-m", "rbp", "scenario", "generate",
+                                   "--kind", "shaft", "-o", "b.yaml"], cwd=tmp_path,
+                                  env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True)
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".b.yaml.*.tmp")) and writer.poll() is None:
+            assert time.monotonic() < deadline, "the command never began its output"
+            time.sleep(0.05)
+        time.sleep(2.0)  # long enough for an unlocked copy of 11 kB to be done
+        assert a.read_text() == "old\n", "the file was written while another held it"
+        fcntl.flock(held, fcntl.LOCK_UN)
+    _, err = writer.communicate(timeout=120)
+    assert writer.returncode == 0, err
+    assert "name: shaft-0" in a.read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml"]
+
+
 def test_a_single_name_is_still_replaced_atomically(tmp_path: Path) -> None:
     """An output with one name is written as before: a new file renamed over it (a reader
     never sees it half-written)."""

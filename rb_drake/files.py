@@ -243,6 +243,7 @@ class _Pending:
     target: Path
     how: str  # "rename", "in place" (other names see it), "stream" (an open descriptor)
     fd: int | None = None
+    locked: int | None = None  # in place: the target, open and locked (`_lock`)
 
 
 @dataclass
@@ -277,6 +278,12 @@ def output_batch() -> Iterator[OutputBatch]:
         _discard(batch.pending)
         raise
     _BATCHES.remove(batch)
+    try:  # waiting for another writer stays interruptible; the copies do not
+        for pending in batch.pending:
+            _lock(pending)
+    except BaseException:
+        _discard(batch.pending)
+        raise
     with _interrupts_held():
         for n, pending in enumerate(batch.pending):
             try:
@@ -294,6 +301,26 @@ def _discard(pending: list[_Pending]) -> None:
     for p in pending:
         Path(p.tmp).unlink(missing_ok=True)
         LIVE_TEMPORARY.discard(p.tmp)
+        if p.locked is not None:
+            os.close(p.locked)
+            p.locked = None
+
+
+def _lock(p: _Pending) -> None:
+    """Open an in-place write's target and take an exclusive lock on it (`flock`: two rbp
+    commands writing one file at once interleaved their copies; the rename needed none),
+    waiting for another writer's turn before interrupts are held (`_interrupts_held`)."""
+    if p.how != "in place" or p.locked is not None:
+        return
+    import fcntl  # Unix: hard links and symlinks are written in place there
+
+    try:
+        p.locked = os.open(p.target, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        raise OSError(e.errno, f"cannot write: {why}", p.given) from None
+    with contextlib.suppress(OSError):  # a filesystem without locks: as before
+        fcntl.flock(p.locked, fcntl.LOCK_EX)
 
 
 @contextlib.contextmanager
@@ -358,6 +385,7 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         if _BATCHES:  # finished with the others, at the batch's end
             _BATCHES[-1].pending.append(pending)
             return path
+        _lock(pending)
         with _interrupts_held():
             _finish(pending)
     except OSError as e:
@@ -395,7 +423,10 @@ def _finish(p: _Pending) -> None:
         if p.how == "rename":
             os.replace(p.tmp, p.target)
         elif p.how == "in place":
-            _copy_in_place(p.tmp, p.target)
+            _lock(p)
+            assert p.locked is not None
+            fd, p.locked = p.locked, None
+            _copy_in_place(p.tmp, fd)
         else:
             assert p.fd is not None
             _copy_to_descriptor(p.tmp, p.fd)
@@ -412,16 +443,10 @@ def _finish(p: _Pending) -> None:
 _CHUNK = 1 << 20
 
 
-def _copy_in_place(tmp: str, target: Path) -> None:
-    """Copy `tmp` into `target`, holding an exclusive lock on it (`flock`: two rbp commands
-    writing one file at once interleaved their copies; the rename needed none)."""
-    import fcntl  # Unix: hard links and symlinks are written in place there
-
+def _copy_in_place(tmp: str, fd: int) -> None:
+    """Copy `tmp` into the file open (and locked) as `fd`, then close it."""
     size = os.path.getsize(tmp)
-    fd = os.open(target, os.O_WRONLY | os.O_CLOEXEC)
     try:
-        with contextlib.suppress(OSError):  # a filesystem without locks: as before
-            fcntl.flock(fd, fcntl.LOCK_EX)
         old = os.fstat(fd).st_size
         if size > old and hasattr(os, "posix_fallocate"):
             try:  # the space first: a full disk refuses here, the file untouched

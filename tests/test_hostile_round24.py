@@ -283,6 +283,35 @@ def test_two_writers_of_one_file_in_place_take_turns(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml"]
 
 
+def test_a_writer_waiting_for_its_turn_can_be_interrupted(tmp_path: Path) -> None:
+    """The wait for another writer's lock comes before interrupts are held: SIGTERM ends
+    the waiting command as usual (`interrupted`, status 3), the file as it was, no temporary
+    file left (held, it would have waited without end)."""
+    import fcntl
+    import signal
+    import time
+
+    a = tmp_path / "a.yaml"
+    a.write_text("old\n")
+    os.link(a, tmp_path / "b.yaml")
+    with a.open("rb+") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        writer = subprocess.Popen([sys.executable, "-m", "rbp", "scenario", "generate",
+                                   "--kind", "shaft", "-o", "b.yaml"], cwd=tmp_path,
+                                  env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                  text=True)
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".b.yaml.*.tmp")) and writer.poll() is None:
+            assert time.monotonic() < deadline, "the command never began its output"
+            time.sleep(0.05)
+        time.sleep(1.0)  # at the lock by now
+        writer.send_signal(signal.SIGTERM)
+        _, err = writer.communicate(timeout=60)
+    assert writer.returncode == 3 and err.strip() == "interrupted", (writer.returncode, err)
+    assert a.read_text() == "old\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml"]
+
+
 def test_a_single_name_is_still_replaced_atomically(tmp_path: Path) -> None:
     """An output with one name is written as before: a new file renamed over it (a reader
     never sees it half-written)."""

@@ -102,12 +102,33 @@ decimal.__name__ = "number"
 
 def input_file(text: str) -> str:
     """A file's name as given; a name that ends with "/" after a file ("plan.json/") is refused
-    here, since pathlib drops the slash and would read the file."""
+    here, since pathlib drops the slash and would read the file, and so is one that goes on
+    after a file in any way the system refuses ("plan.json/.", which pathlib also reads as
+    plan.json; "plan.json/.."): the system says "Not a directory"."""
     if text.endswith(("/", os.sep)) and os.path.exists(text.rstrip("/" + os.sep)) \
             and not os.path.isdir(text):
         raise argparse.ArgumentTypeError(f"{text!r} ends with '/' but "
                                          f"{text.rstrip('/' + os.sep)!r} is a file, not a "
                                          "directory")
+    try:
+        os.stat(text)
+    except NotADirectoryError:
+        file = _file_on_the_way(text)
+        raise argparse.ArgumentTypeError(f"{text!r} goes on after {file!r}, which is a file, "
+                                         "not a directory") from None
+    except (OSError, ValueError):
+        pass  # missing, or another reason: the reader says which
+    return text
+
+
+def _file_on_the_way(text: str) -> str:
+    """The first leading part of path `text` that is not a folder (what the system's "Not a
+    directory" is about)."""
+    parts = text.split(os.sep)
+    for n in range(1, len(parts)):
+        head = os.sep.join(parts[:n]) or os.sep
+        if os.path.exists(head) and not os.path.isdir(head):
+            return head
     return text
 
 

@@ -1,15 +1,28 @@
 """Atomic output: write to a temporary file beside the target, then rename over it.
 
 An interrupted run therefore leaves either the old file or the complete new one, never half.
+An existing output that has other names (reached through a symlink, or with hard links) or
+another owner keeps its identity: once the new content is complete in the temporary file it
+is copied into the file in place, as `cp` and editors do, so that every name sees it. An
+output named by one of the process's own descriptors (`/dev/stdout` redirected to a file,
+`/proc/self/fd/N`) is written through that descriptor (its offset: `>>` appends). Inside
+`output_batch()` the last step of every write waits until the batch ends: a command's
+outputs are all written, or (an error, a full disk, an interrupt) none is.
 """
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
+import re
 import secrets
+import signal
 import stat
-from collections.abc import Callable, Mapping
+import sys
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
@@ -45,6 +58,8 @@ def output_problem(path: str | Path,
     `may_keep` (a sweep's finished trial record, kept as it is)."""
     if str(path) == "-":  # standard output to many tools: rbp wrote a file named '-'
         return "'-' is not standard output here: rbp writes files (./- names a file called -)"
+    if (problem := descriptor_problem(path)) is not None:
+        return problem
     try:
         target = output_target(path)
         # the given name stat-ed too: /dev/stdout, /proc/self/fd/N are links the kernel
@@ -55,6 +70,8 @@ def output_problem(path: str | Path,
             return problem
         if isinstance(path, str) and path.endswith(("/", os.sep)):
             return "ends with '/', a folder's name: give a file name"
+        if (problem := _dots_problem(str(path))) is not None:  # a Path keeps its ".."
+            return problem
         folder = target.parent
         while not folder.exists() and folder != folder.parent:
             if folder.is_symlink():  # dangling: no folder can be made there ("error: link:
@@ -89,6 +106,23 @@ def output_problem(path: str | Path,
             os.rmdir(_make_temporary(folder, target.name, folder_too=True)[1])
         except OSError as e:
             return f"cannot make a folder in {folder} ({e.strerror})"
+    return None
+
+
+def _dots_problem(path: str) -> str | None:
+    """Why a name with `.` or `..` parts cannot be an output as the system reads it, or None:
+    pathlib drops a last `/.` (`-o cave.yaml/.` wrote cave.yaml, where the system says "Not a
+    directory"), and a folder made for `x/../cave.yaml` (x missing: the system says "No such
+    file or directory") was left behind, empty."""
+    parts = path.split(os.sep)
+    if parts[-1] in (".", ".."):
+        return f"ends with '/{parts[-1]}', a folder's name: give a file name"
+    for n, part in enumerate(parts[:-1]):
+        if part == ".." and n > 0:
+            head = os.sep.join(parts[:n]) or os.sep
+            if not os.path.isdir(head):
+                return (f"goes up out of {head} ('..'), which is not a folder: give the "
+                        "file's name without it")
     return None
 
 
@@ -137,17 +171,204 @@ def _same_file(a: str | Path, b: str | Path) -> bool:
         return False
 
 
+# names of this process's own descriptors: /dev/stdout, /dev/stderr, /dev/fd/N,
+# /proc/self/fd/N, /proc/thread-self/fd/N, /proc/PID/fd/N
+_DESCRIPTOR_NAME = re.compile(
+    r"/dev/(?:(?P<std>stdin|stdout|stderr)|fd/(?P<dev>\d+))|"
+    r"/proc/(?P<pid>self|thread-self|\d+)/fd/(?P<proc>\d+)")
+
+
+def named_descriptor(path: str | Path) -> int | None:
+    """The descriptor of this process that `path` names (`/dev/stdin`: 0, `/dev/stdout`: 1,
+    `/proc/self/fd/3`: 3), or None."""
+    found = _DESCRIPTOR_NAME.fullmatch(os.path.normpath(str(path)))
+    if found is None:
+        return None
+    if found["pid"] not in (None, "self", "thread-self") and int(found["pid"]) != os.getpid():
+        return None
+    if found["std"]:
+        return ("stdin", "stdout", "stderr").index(found["std"])
+    return int(found["dev"] or found["proc"])
+
+
+def _writable_descriptor(fd: int) -> bool:
+    import fcntl  # a descriptor's name (/dev/stdout, /proc/self/fd/N) is a Unix one
+
+    try:
+        return fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE in (os.O_WRONLY, os.O_RDWR)
+    except (OSError, OverflowError):
+        return False
+
+
+def descriptor_problem(path: str | Path) -> str | None:
+    """Why `path`, a name of one of this process's descriptors, cannot be an output, or None:
+    one open for reading only (`-o /dev/stdin < cave.yaml` replaced cave.yaml, the file given
+    as the command's input)."""
+    fd = named_descriptor(path)
+    if fd is None:
+        return None
+    try:
+        os.fstat(fd)
+    except (OSError, OverflowError):
+        return None  # not open: the name is what the system makes of it (no such file)
+    if not _writable_descriptor(fd):
+        which = "standard input" if fd == 0 else f"descriptor {fd}"
+        return (f"names {which}, open for reading only: rbp would replace the file it reads "
+                "from; give a file name")
+    return None
+
+
+def stream_descriptor(path: str | Path) -> int | None:
+    """The descriptor of this process that `path` names (`/dev/stdout`: 1, `/proc/self/fd/3`:
+    3) when it is open for writing on a regular file, else None. Such an output is written
+    through the descriptor, at its offset: renaming over the file it resolves to replaced a
+    file that `>>` appends to (its earlier contents lost), and what the command printed
+    afterwards went to the replaced file."""
+    fd = named_descriptor(path)
+    if fd is None:
+        return None
+    try:
+        regular = stat.S_ISREG(os.fstat(fd).st_mode)
+    except (OSError, OverflowError):
+        return None
+    return fd if regular and _writable_descriptor(fd) else None
+
+
+@dataclass
+class _Pending:
+    """A write whose temporary file is complete, waiting for its last step (`_finish`)."""
+
+    tmp: str
+    given: str
+    target: Path
+    how: str  # "rename", "in place" (other names see it), "stream" (an open descriptor)
+    fd: int | None = None
+    locked: int | None = None  # in place: the target, open and locked (`_lock`)
+
+
+@dataclass
+class OutputBatch:
+    """The outputs of one `output_batch()`, finished together when it ends; `say(text)` is
+    printed once they are (a callable is called then: a size read from the file written)."""
+
+    pending: list[_Pending] = field(default_factory=list)
+    messages: list[str | Callable[[], str]] = field(default_factory=list)
+
+    def say(self, text: str | Callable[[], str]) -> None:
+        self.messages.append(text)
+
+
+_BATCHES: list[OutputBatch] = []
+
+
+@contextlib.contextmanager
+def output_batch() -> Iterator[OutputBatch]:
+    """Write every output of the block, or none: each `atomic_write` inside it writes its
+    temporary file and waits; when the block ends normally they are renamed (or copied, see
+    `atomic_write`) one after the other with interrupts held, then the batch's messages are
+    printed. An error or an interrupt inside the block removes every temporary file, so that
+    no output is left (an earlier file of that name stays as it was): `rbp plan` on a full
+    disk ended with `error: plan.png: ... No space left on device` and plan.json written."""
+    batch = OutputBatch()
+    _BATCHES.append(batch)
+    try:
+        yield batch
+    except BaseException:
+        _BATCHES.remove(batch)
+        _discard(batch.pending)
+        raise
+    _BATCHES.remove(batch)
+    try:  # waiting for another writer stays interruptible; the copies do not
+        for pending in batch.pending:
+            _lock(pending)
+    except BaseException:
+        _discard(batch.pending)
+        raise
+    with _interrupts_held():
+        for n, pending in enumerate(batch.pending):
+            try:
+                _finish(pending)
+            except BaseException:
+                _discard(batch.pending[n:])
+                raise
+    from rb_drake.errors import one_line
+
+    for message in batch.messages:  # a file name's newline forged an `error:` line
+        print(one_line(message() if callable(message) else message))
+
+
+def _discard(pending: list[_Pending]) -> None:
+    for p in pending:
+        Path(p.tmp).unlink(missing_ok=True)
+        LIVE_TEMPORARY.discard(p.tmp)
+        if p.locked is not None:
+            os.close(p.locked)
+            p.locked = None
+
+
+def _lock(p: _Pending) -> None:
+    """Open an in-place write's target and take an exclusive lock on it (`flock`: two rbp
+    commands writing one file at once interleaved their copies; the rename needed none),
+    waiting for another writer's turn before interrupts are held (`_interrupts_held`)."""
+    if p.how != "in place" or p.locked is not None:
+        return
+    import fcntl  # Unix: hard links and symlinks are written in place there
+
+    try:
+        p.locked = os.open(p.target, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        raise OSError(e.errno, f"cannot write: {why}", p.given) from None
+    with contextlib.suppress(OSError):  # a filesystem without locks: as before
+        fcntl.flock(p.locked, fcntl.LOCK_EX)
+
+
+@contextlib.contextmanager
+def _interrupts_held() -> Iterator[None]:
+    """Ctrl-C, SIGTERM and SIGHUP held until the block ends, then acted on as before: the
+    last steps of a write (a copy in place, a batch's renames) are not cut in half."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    kept = {}
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        handler = signal.getsignal(sig)
+        if handler in (signal.SIG_IGN, None):
+            continue  # ignored (nohup) stays ignored
+        kept[sig] = handler
+        signal.signal(sig, lambda number, frame: arrived.append(number))
+    try:
+        yield
+    finally:
+        for sig, handler in kept.items():
+            signal.signal(sig, handler)
+        for number in arrived[:1]:
+            handler = kept[signal.Signals(number)]
+            if callable(handler):
+                handler(number, None)
+            else:  # SIG_DFL: as it would have been
+                os.kill(os.getpid(), number)
+
+
 def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path:
     """Call `write(f)` on a temporary binary file, then rename it to `path` (to a symlink's
     target: the link stays). A target that exists and is not a regular file is refused
     (OSError naming `path`): renaming over it replaced a device such as /dev/zero, run as root,
-    with a regular file, and a folder gave an error naming the temporary file."""
+    with a regular file, and a folder gave an error naming the temporary file. An existing
+    target reached through a symlink, with other hard links or owned by another user is
+    written in place once the temporary file is complete; a name of one of the process's own
+    descriptors (`stream_descriptor`) through it. Inside `output_batch()` that last step waits
+    for the batch's end."""
     given = path
+    fd_out = stream_descriptor(given)
     path = output_target(path)
     if (problem := _not_regular(path)) is not None:
         raise OSError(errno.EEXIST, problem, str(given))
     if (problem := _read_only(path)) is not None:
         raise OSError(errno.EACCES, problem, str(given))
+    how = "stream" if fd_out is not None else "in place" if _has_other_names(given, path) \
+        else "rename"
     mode = _kept_mode(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -156,24 +377,115 @@ def atomic_write(path: str | Path, write: Callable[[IO[bytes]], object]) -> Path
         why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
         raise OSError(e.errno, f"cannot write a file there ({why})", str(path)) from None
     LIVE_TEMPORARY.add(tmp)
+    pending = _Pending(tmp, str(given), path, how, fd_out)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
         os.chmod(tmp, mode)  # made 0600: the replaced file's permissions, else the usual
-        os.replace(tmp, path)
+        if _BATCHES:  # finished with the others, at the batch's end
+            _BATCHES[-1].pending.append(pending)
+            return path
+        _lock(pending)
+        with _interrupts_held():
+            _finish(pending)
     except OSError as e:
-        Path(tmp).unlink(missing_ok=True)
+        _discard([pending])
         if e.filename is not None or isinstance(e, BrokenPipeError):
             raise
         # a full disk: name the output (the error had no file: "error: : No space left")
         why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
         raise OSError(e.errno, f"cannot write: {why}", str(given)) from None
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        _discard([pending])
         raise
-    finally:
-        LIVE_TEMPORARY.discard(tmp)
     return path
+
+
+def _has_other_names(given: str | Path, target: Path) -> bool:
+    """Whether the existing file `target` (reached by the name `given`) is known by other
+    names (`given` is a symlink, or it has hard links) or belongs to another user: renaming a
+    new file over it would leave those names on the old content (or change its owner)."""
+    try:
+        if Path(given).is_symlink():
+            return target.exists()
+        st = target.stat()
+    except OSError:
+        return False
+    return stat.S_ISREG(st.st_mode) and (st.st_nlink > 1 or st.st_uid != os.geteuid())
+
+
+def _finish(p: _Pending) -> None:
+    """The last step of a write: rename the complete temporary file, or copy it into the file
+    in place or through the descriptor; OSError (naming the output) leaves the file as it was
+    (in place: the space is reserved before the file is touched; through a descriptor: cut
+    back to where it was)."""
+    try:
+        if p.how == "rename":
+            os.replace(p.tmp, p.target)
+        elif p.how == "in place":
+            _lock(p)
+            assert p.locked is not None
+            fd, p.locked = p.locked, None
+            _copy_in_place(p.tmp, fd)
+        else:
+            assert p.fd is not None
+            _copy_to_descriptor(p.tmp, p.fd)
+    except OSError as e:
+        if e.filename is not None or isinstance(e, BrokenPipeError):
+            raise
+        why = e.strerror or (str(e.args[0]) if e.args else type(e).__name__)
+        raise OSError(e.errno, f"cannot write: {why}", p.given) from None
+    finally:
+        Path(p.tmp).unlink(missing_ok=True)
+        LIVE_TEMPORARY.discard(p.tmp)
+
+
+_CHUNK = 1 << 20
+
+
+def _copy_in_place(tmp: str, fd: int) -> None:
+    """Copy `tmp` into the file open (and locked) as `fd`, then close it."""
+    size = os.path.getsize(tmp)
+    try:
+        old = os.fstat(fd).st_size
+        if size > old and hasattr(os, "posix_fallocate"):
+            try:  # the space first: a full disk refuses here, the file untouched
+                os.posix_fallocate(fd, 0, size)
+            except OSError as e:
+                os.ftruncate(fd, old)
+                if e.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                    raise
+        with open(tmp, "rb") as src:
+            while chunk := src.read(_CHUNK):
+                _write_all(fd, chunk)
+        os.ftruncate(fd, size)
+    finally:
+        os.close(fd)
+
+
+def _copy_to_descriptor(tmp: str, fd: int) -> None:
+    import fcntl  # a descriptor's name (/dev/stdout, /proc/self/fd/N) is a Unix one
+
+    for stream in (sys.stdout, sys.stderr):  # what was printed before comes first
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            stream.flush()
+    appending = bool(fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_APPEND)
+    start = os.fstat(fd).st_size if appending else os.lseek(fd, 0, os.SEEK_CUR)
+    try:
+        with open(tmp, "rb") as src:
+            while chunk := src.read(_CHUNK):
+                _write_all(fd, chunk)
+    except OSError:
+        with contextlib.suppress(OSError):  # a full disk: the file as it was
+            os.ftruncate(fd, start)
+            os.lseek(fd, start, os.SEEK_SET)
+        raise
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
 
 def _not_regular(target: Path) -> str | None:

@@ -155,7 +155,7 @@ def load_scenario(path_or_name: str | Path, check_start: bool = True) -> Scenari
             from systems.rig import RIG_SCENARIO
 
             return load(RIG_SCENARIO, check_start=check_start)
-    return load(spec, check_start=check_start)
+    return load(path_or_name, check_start=check_start)  # as given: Path drops a last "/."
 
 
 def generate_scenario(kind: str = "shaft", seed: int = 0,
@@ -425,8 +425,10 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
     alone (faster, less faithful).
 
     The plan is not verified here: `check(plan)` first (the command line refuses a plan that
-    fails it). Raises `RbpInputError` for a plan without a route or one that cannot be
-    flown, and `systems.diagram.SimulationError` when the solver fails."""
+    fails it). A partial climb (`plan(..., partial=True)`) is flown to its end, as `rbp
+    rig-run` flies it (a trial succeeds when it gets there). Raises `RbpInputError` for a plan
+    without a route or one that cannot be flown, and `systems.diagram.SimulationError` when
+    the solver fails."""
     import numpy as np
 
     from planning.plan_file import plan_from
@@ -444,7 +446,7 @@ def simulate(plan: Plan | dict[str, Any], *, trials: int = 0, seed: int = 0,
         raise RbpInputError("replanning continues failed trials; give trials > 0",
                             field="replan")
     model = plan_from(plan)  # a dict as a plan file: a NaN pose aborted Drake
-    if not model.success:
+    if not model.success and model.partial is None:  # a partial climb is flown to its end
         raise RbpInputError(f"the plan found no route ({model.reason}); nothing to simulate",
                             field="success")
     scn = plan_scenario(model)

@@ -41,6 +41,7 @@ from rbp.commands.common import (
     plural,
     read_plan,
     refuse_empty_paths,
+    restore_stdout,
 )
 
 if TYPE_CHECKING:
@@ -194,7 +195,7 @@ def cmd_scenario_show(args: argparse.Namespace) -> int:
     check_dpi(args.dpi)
     check_output(args.output, picture=True, inputs={"the scenario's file": args.scenario})
     draw(load_scenario_spec(args.scenario, check_start=False), args.output, dpi=args.dpi)
-    print(f"wrote {args.output}")
+    print(one_line(f"wrote {args.output}"))
     return EXIT_OK
 
 
@@ -319,10 +320,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
     plan = plan.replace(provenance=provenance(scn, planner, cfg, motion,
                                               getattr(args, "argv", None)))
     out = Path(args.output)
-    write_plan(plan, out)
-    print(f"wrote {out}{_over_reading_limit(out)}")
-    if not args.no_pictures:
-        write_pictures(scn, plan, out, args.phase_figure, args.animate, search=record.last)
+    from rb_drake.files import output_batch
+
+    late = None
+    with output_batch() as batch:  # the plan and its pictures, or (a full disk) none of them
+        write_plan(plan, out)
+        batch.say(lambda: f"wrote {out}{_over_reading_limit(out)}")
+        if not args.no_pictures:
+            late = write_pictures(scn, plan, out, args.phase_figure, args.animate,
+                                  search=record.last, say=batch.say)
+    if late is not None:  # a --phase-figure known only now: the plan and pictures are kept
+        raise late
     _print_motion(plan)
     print(_summary(plan))
     return EXIT_OK if plan.success else EXIT_FAILED
@@ -377,10 +385,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     with CheckProgress(f"checking {path}", quiet=getattr(args, "quiet", False)) as bar:
         problems, departure = plan_problems(plan, str(path), progress=bar)
     problems = cave + problems
-    for p in problems:
-        print(f"{path}: {p}")
+    for p in problems:  # the file's name escaped: a newline in it forged an `error:` line
+        print(one_line(f"{path}: {p}"))
     if problems:
-        print(f"{path}: {plural(len(problems), 'problem')}")
+        print(one_line(f"{path}: {plural(len(problems), 'problem')}"))
         return EXIT_FAILED
     from planning.plan_model import Plan
     from planning.verify_climb import check_note
@@ -397,9 +405,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     note = check_note(model)
     if getattr(args, "scenario", None) is not None:
         note = "; ".join(filter(None, [f"made for the cave and robot of {args.scenario}", note]))
-    print(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
-          f"{plural(n, 'configuration')} verified, {between}; " + (f"{note}; " if note else "")
-          + _summary(model, recorded=True))
+    print(one_line(f"{path}: ok: {plural(len(model.phases), 'phase')}, "
+                   f"{plural(n, 'configuration')} verified, {between}; "
+                   + (f"{note}; " if note else "") + _summary(model, recorded=True)))
     if args.stamp:
         from planning.plan import write_plan
         from planning.plan_file import stamp
@@ -409,7 +417,7 @@ def cmd_check(args: argparse.Namespace) -> int:
             raise UserError(f"{path}: --stamp: the file changed while it was being checked "
                             "(another command wrote it); not stamped: check it again")
         write_plan(stamp(plan), path)
-        print(f"{path}: stamped as verified")
+        print(one_line(f"{path}: stamped as verified"))
     return EXIT_OK
 
 
@@ -427,12 +435,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from rb_drake.draw import scenario_figure
     from rb_drake.feasibility import check_poses
-    from rb_drake.files import atomic_save_figure, atomic_write_text
+    from rb_drake.files import atomic_save_figure, atomic_write_text, output_batch
 
     stance = scn.stance(scn.start_stance)
     check = check_poses(scn, stance, np.array(scn.start_pose))
     alloc = check.allocation
-    picture = atomic_save_figure(scenario_figure(scn), out / "cave.png", dpi=120)
     report = {
         "scenario": scn.to_dict(resolved=True),
         "start": {
@@ -444,9 +451,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
             "p_success": float(check.probability[0]),
         },
     }
-    data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
-    print(one_line(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
-                   f"wrote {picture} and {data}"))
+    with output_batch() as batch:  # the cave's picture and report, or neither
+        picture = atomic_save_figure(scenario_figure(scn), out / "cave.png", dpi=120)
+        data = atomic_write_text(out / "start.json", json.dumps(report, indent=1))
+        batch.say(f"{scn.name}: start stance P = {check.probability[0]:.5f}; "
+                  f"wrote {picture} and {data}")
     if args.plan:
         from planning.footsteps import FootstepConfig
         from planning.pipeline import PipelineConfig
@@ -457,14 +466,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
         plan = run_planner(scn, "rbp", cfg)
         plan = plan.replace(provenance=provenance(scn, "rbp", cfg, True,
                                                   getattr(args, "argv", None)))
-        write_plan(plan, out / "plan.json")
-        print(f"wrote {out / 'plan.json'}")
         from planning.pipeline import motion_summary
 
         # Fig. 6 for the phase where SCP gained most
         rows = motion_summary(plan)
         best = max(rows, key=lambda r: r["mean"] - r["seed_mean"])["phase"] if rows else None
-        write_pictures(scn, plan, out / "plan.json", best, None)
+        with output_batch() as batch:  # the plan and its pictures, or none of them
+            write_plan(plan, out / "plan.json")
+            batch.say(f"wrote {out / 'plan.json'}")
+            write_pictures(scn, plan, out / "plan.json", best, None, say=batch.say)
         _print_motion(plan)
         print(_summary(plan))
         if not plan.success:
@@ -481,7 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="run the main job on the bundled demo cave")
-    demo.add_argument("--scenario", default="demo-shaft",
+    demo.add_argument("--scenario", default="demo-shaft", type=input_file,
                       help="scenario file or bundled cave name (default: demo-shaft)")
     demo.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
     demo.add_argument("--no-plan", dest="plan", action="store_false",
@@ -557,7 +567,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("-q", "--quiet", action="store_true",
                        help="no progress line (shown only when stderr is a terminal and the "
                             "check takes over a second)")
-    check.add_argument("--scenario", metavar="CAVE",
+    check.add_argument("--scenario", metavar="CAVE", type=input_file,
                        help="a scenario file or a bundled cave's name: the plan must also "
                             "have been made for this cave and robot (the plan is verified "
                             "against the cave and robot it embeds, which an edit can change)")
@@ -683,6 +693,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        restore_stdout()  # the messages of a command that wrote to standard output
 
 
 def _caused_by_interrupt(error: BaseException | None) -> bool:

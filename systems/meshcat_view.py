@@ -53,6 +53,9 @@ AMBIENT = 2.6  # the only light; measured: the rock then shows its own colour (t
 # silently wraps past 2^31 (a frame at 1e12 s became -2^31); the longest plan (t <= 1e7 s) at
 # 20 frames a second stays below it at 0.1x (2e9).
 MIN_SPEEDUP = 0.1
+# A replay's frames at most: `--html` holds about 4.4 kB a frame (the demo's 182 s climb at 4x:
+# 911 frames, 4.0 MB), and its page grew without end with the climb (a 10-hour climb: 800 MB)
+MAX_REPLAY_FRAMES = 10_000
 
 
 def start_meshcat() -> Meshcat:
@@ -202,11 +205,26 @@ def _set_robot(meshcat: Meshcat, record: SimulationRecord, sample: int,
         meshcat.SetTransform(f"{ROOT}/robot/gripper{i}", RigidTransform([*tips[i], FRONT]), *at)
 
 
+def replay_frames(duration: float, speedup: float = 4.0,
+                  frames_per_second: float = 20.0) -> int:
+    """The frames of a replay of a climb of `duration` s: one every `speedup /
+    frames_per_second` s of the climb, at most MAX_REPLAY_FRAMES (a long climb's frames are
+    spread evenly over it: its replay plays as long, less smoothly)."""
+    return min(natural_frames(duration, speedup, frames_per_second), MAX_REPLAY_FRAMES)
+
+
+def natural_frames(duration: float, speedup: float = 4.0,
+                   frames_per_second: float = 20.0) -> int:
+    """A replay's frames without MAX_REPLAY_FRAMES (one every `speedup / frames_per_second` s
+    of the climb)."""
+    return math.floor(duration * frames_per_second / speedup + 1e-9) + 1
+
+
 def animate(meshcat: Meshcat, record: SimulationRecord, frames_per_second: float = 20.0,
             speedup: float = 4.0) -> int:
     """Replay `record` as a Meshcat animation (played `speedup` times faster than simulated
-    time, MIN_SPEEDUP at least); returns the number of frames. Call `draw_scenario` first for
-    the cave."""
+    time, MIN_SPEEDUP at least) of at most MAX_REPLAY_FRAMES frames (`replay_frames`);
+    returns the number of frames. Call `draw_scenario` first for the cave."""
     if not MIN_SPEEDUP <= speedup < math.inf:
         raise ValueError(f"speedup must be {MIN_SPEEDUP:g} or more and finite, got {speedup:g}")
     _robot_objects(meshcat, record.plan.scenario)
@@ -214,11 +232,15 @@ def animate(meshcat: Meshcat, record: SimulationRecord, frames_per_second: float
     _set_robot(meshcat, record, 0, None)
     meshcat.StartRecording(frames_per_second, False)
     period = speedup / frames_per_second  # simulated seconds per frame
-    frames = math.floor(float(record.times[-1]) / period + 1e-9) + 1
+    frames = replay_frames(float(record.times[-1]), speedup, frames_per_second)
     if frames >= len(record.times):  # a frame for every sample: no grid of frame times (at
         samples = np.arange(len(record.times))  # speedup 1e-300 it asked 1e304 of them)
     else:
-        samples = np.unique(np.searchsorted(record.times, np.arange(frames) * period))
+        grid = np.arange(frames) * period
+        if frames < natural_frames(float(record.times[-1]), speedup, frames_per_second):
+            # a long climb: sparser frames, evenly over it
+            grid = np.linspace(0.0, float(record.times[-1]), frames)
+        samples = np.unique(np.searchsorted(record.times, grid))
         samples = samples[samples < len(record.times)]
     for s in samples:  # at its own time: samples may be sparser than frames
         _set_robot(meshcat, record, int(s), float(record.times[s]) / speedup)

@@ -43,6 +43,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.special import ndtri
 
+from planning.bounded_cache import BoundedCache, array_bytes
 from rb_drake import grasp
 from systems.diagram import ClimbSimulator, SimulationRecord
 from systems.monitors import Cause
@@ -241,18 +242,43 @@ class MonteCarloResult(NamedTuple):
         return out
 
 
+REPLAN_CACHE_MB = 256  # the replanned climbs kept at once (a whole demo climb: about 3.5 MB)
+
+
+def _replan_bytes(value: tuple[ReplanRequest, SimulationRecord | None]) -> int:
+    """What a replanned climb holds: its samples, a quarter more for its plan and trajectory
+    (measured on the demo plan), and its request."""
+    record = value[1]
+    return 1024 + (0 if record is None else array_bytes(record) * 5 // 4)
+
+
 class _Replanning:
     """Continues failed trials on replanned climbs (see the module docstring)."""
 
     def __init__(self, simulator: ClimbSimulator, replanner: Replanner, seed: int,
-                 max_replans: int, progress: Callable[[int, int], None] | None):
+                 max_replans: int, progress: Callable[[int, int], None] | None,
+                 cap_mb: float = REPLAN_CACHE_MB):
         self.simulator = simulator
         self.replanner = replanner
         self.seed = seed
         self.max_replans = max_replans
         self.progress = progress
-        # replans by the failure state they continue from (`_replanned`)
-        self.cache: dict[tuple, SimulationRecord | None] = {}
+        # replans by the failure state they continue from (`_replanned`): (the request, its
+        # simulated climb or None), at most `cap_mb` of climbs kept; one dropped is planned
+        # and simulated again from its request when asked for (the replanners are
+        # deterministic). Kept whole, 1,000 distinct failures of a long climb held gigabytes.
+        self.cache: BoundedCache[tuple, tuple[ReplanRequest, SimulationRecord | None]] = \
+            BoundedCache(_replan_bytes, lambda key, request: self._replan(request),
+                         tombstone=lambda value: value[0], cap_bytes=cap_mb * 2**20,
+                         name="replans")
+
+    def _replan(self, request: ReplanRequest) -> tuple[ReplanRequest, SimulationRecord | None]:
+        new_plan = self.replanner(request)
+        if new_plan is None:
+            return request, None
+        traj = PlanTrajectory(new_plan, request.scenario)
+        return request, self.simulator.run(
+            traj, initial_state=np.concatenate([request.pose, np.zeros(3)]))
 
     def _replanned(self, record: SimulationRecord, sample: int, boom: int, anchor: str,
                    cause: str) -> tuple[SimulationRecord | None, str]:
@@ -267,16 +293,10 @@ class _Replanning:
         key = (record.plan.content_key, float(record.times[sample]),
                record.state[sample].tobytes(), boom, cause)
         if key not in self.cache:
-            request = ReplanRequest(scn, record.plan.plan, k,
-                                    float(record.times[sample]), pose.copy(), stance, boom,
-                                    anchor, cause)
-            new_plan = self.replanner(request)
-            self.cache[key] = None
-            if new_plan is not None:
-                traj = PlanTrajectory(new_plan, scn)
-                self.cache[key] = self.simulator.run(
-                    traj, initial_state=np.concatenate([pose, np.zeros(3)]))
-        new = self.cache[key]
+            self.cache[key] = self._replan(ReplanRequest(
+                scn, record.plan.plan, k, float(record.times[sample]), pose.copy(), stance,
+                boom, anchor, cause))
+        new = self.cache[key][1]
         return new, ("no plan" if new is None else "")
 
     def continue_trial(self, trial: int, record: SimulationRecord, first: FirstFailures,
@@ -312,10 +332,12 @@ class _Replanning:
 def monte_carlo(record: SimulationRecord, trials: int, seed: int,
                 replanner: Replanner | None = None, strategy: str = "",
                 simulator: ClimbSimulator | None = None, max_replans: int = 3,
-                progress: Callable[[int, int], None] | None = None) -> MonteCarloResult:
+                progress: Callable[[int, int], None] | None = None,
+                replan_cache_mb: float = REPLAN_CACHE_MB) -> MonteCarloResult:
     """`trials` stochastic executions of the simulated plan (`record`, a deterministic run);
     with a `replanner` (and the `simulator` to run its plans), failed trials whose remaining
-    3-stance holds are continued, with the same draws, to count the climbs replanning saves."""
+    3-stance holds are continued, with the same draws, to count the climbs replanning saves
+    (at most `replan_cache_mb` of replanned climbs kept at once: one dropped is made again)."""
     rng = np.random.default_rng(seed)
     quantiles, attach_draws = draw_strengths(rng, trials, len(record.plan.holdings))
     first = first_failures(record, quantiles, attach_draws)
@@ -325,7 +347,8 @@ def monte_carlo(record: SimulationRecord, trials: int, seed: int,
     if replanner is not None:
         if simulator is None:
             raise ValueError("replanning needs the simulator that runs the new plans")
-        rp = _Replanning(simulator, replanner, seed, max_replans, progress)
+        rp = _Replanning(simulator, replanner, seed, max_replans, progress,
+                         replan_cache_mb)
         outcomes: Counter[str] = Counter()
         failed = np.flatnonzero(first.sample >= 0)
         for n, trial in enumerate(failed):

@@ -275,7 +275,10 @@ def test_html_replay_renders_in_chromium(meshcat, plan: dict[str, Any], record: 
     html = tmp_path / "out" / "climb.html"
     parser = argparse.ArgumentParser()
     add_simulate_command(parser.add_subparsers())
-    args = parser.parse_args(["simulate", str(plan_file), "--trials", "0", "--html", str(html)])
+    # a hand-made footstep plan: its reach's straight line puts a boom through rock (rule
+    # between, which simulate verifies as rig-run does); the page is what is tested here
+    args = parser.parse_args(["simulate", str(plan_file), "--trials", "0", "--no-verify",
+                              "--html", str(html)])
     assert cmd_simulate(args) == 0
     text = html.read_text()
     assert text.lstrip().lower().startswith("<!doctype html") or "<html" in text[:200]

@@ -20,7 +20,8 @@ from planning.plan_model import Plan
 from rbp.cli import main
 from systems.plan_check import executed_motion_problems
 
-REFUSAL = "a footstep plan whose motion between steps, which rig-run commands, fails rule between"
+REFUSAL = ("a footstep plan whose motion between steps, which rig-run commands and simulate "
+           "follows, fails rule between")
 
 
 @pytest.fixture(scope="module")

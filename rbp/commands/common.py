@@ -16,7 +16,7 @@ import threading
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from rb_drake.errors import EXIT_INTERRUPTED, MAX_SEED, RbpInputError, one_line
 from rb_drake.files import MAX_DPI, MIN_DPI, remove_live_temporary
@@ -157,10 +157,17 @@ def check_output(path: str | Path, flag: str = "-o", picture: bool | None = Fals
     plan and its picture never share a path; a picture's suffix must be a format matplotlib
     writes (an animation's writer is chosen by `check_animation`); `picture` None takes any
     suffix (an HTML page)."""
-    from rb_drake.files import IMAGE_SUFFIXES, output_problem, picture_format_problem
+    from rb_drake.files import (
+        IMAGE_SUFFIXES,
+        output_problem,
+        picture_format_problem,
+        stream_descriptor,
+    )
 
     given = str(path)  # named as given: Path drops a trailing "/"
     problem = output_problem(given, inputs)
+    if problem is None and stream_descriptor(given) == 1:
+        messages_to_stderr()  # `-o /dev/stdout >> FILE`: "wrote ..." followed the output
     path = Path(path)
     if problem is None and picture is False and path.suffix.lower() in IMAGE_SUFFIXES:
         problem = (f"is a picture's name; {flag} names the data file (its pictures are written "
@@ -191,6 +198,25 @@ def output_flag(path: str | Path | None) -> str | None:
 def forget_outputs() -> None:
     """Start a command: no output checked yet (`check_output`)."""
     _OUTPUTS.clear()
+    restore_stdout()
+
+
+_STDOUT: list[TextIO] = []  # standard output, while the messages go to stderr
+
+
+def messages_to_stderr() -> None:
+    """The command writes an output through standard output (`-o /dev/stdout > FILE`): its
+    messages ("wrote ...") go to stderr from now on, so that they are not written into the
+    output's file after it (`restore_stdout` ends this)."""
+    if not _STDOUT:
+        sys.stdout.flush()
+        _STDOUT.append(sys.stdout)
+        sys.stdout = sys.stderr
+
+
+def restore_stdout() -> None:
+    if _STDOUT:
+        sys.stdout = _STDOUT.pop()
 
 
 NOT_PATHS = {"name", "lcm_url"}  # the string arguments that do not name a file
@@ -280,8 +306,9 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
     verifier, whose problems go to stderr. A plan stamped by `rbp check --stamp` and unchanged
     since is not verified again; `verify=False` (--no-verify) skips the check (the caller warns,
     `warn_unverified`, once the plan is accepted). `executes` (rig-run, which commands the
-    straight motion between steps): a footstep plan's motion, which `rbp check` and its stamp
-    leave unverified, must pass rule `between` too (`executed_motion_problems`). `scenario`
+    straight motion between steps, and simulate, which follows it at minimum-jerk rates): a
+    footstep plan's motion, which `rbp check` and its stamp leave unverified, must pass rule
+    `between` too (`executed_motion_problems`). `scenario`
     (--scenario CAVE): the plan must have been made for CAVE's cave and robot (rule
     `scenario`, `cave_problems`), stamped, or with --no-verify, alike."""
     from planning.plan_file import has_valid_stamp
@@ -318,8 +345,8 @@ def refuse_wrong_plan(plan: dict, path: Path, verify: bool = True,
         shown = ", the first 20 shown above" if len(problems) > 20 else ""
         print(one_line(
             f"error: {path}: a footstep plan whose motion between steps, which rig-run "
-            f"commands, fails rule between ({count}{shown}; rbp check verifies its end "
-            "configurations only); refused: plan with motion (rbp plan without "
+            f"commands and simulate follows, fails rule between ({count}{shown}; rbp check "
+            "verifies its end configurations only); refused: plan with motion (rbp plan without "
             "--footsteps-only)" if footstep else
             f"error: {path}: the plan fails verification ({count}{shown}); "
             f"refused (rbp check {path} lists them all)"), file=sys.stderr)

@@ -13,6 +13,7 @@ import argparse
 import dataclasses
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,6 +24,7 @@ if TYPE_CHECKING:
     from planning.pipeline import PipelineConfig
     from planning.plan_model import Plan, Provenance
     from rb_drake.scenario import Scenario
+    from rbp.commands.common import UserError
 
 # --dt's range, a plan's time_step's (planning.plan_model): the planner's steps keep within
 # rule `speed` (`_check_speed`); a step of the plan is at least one of the simulator's plant
@@ -402,37 +404,43 @@ def run_planner(scn: Scenario, planner: str, cfg: PipelineConfig, motion: bool =
 
 
 def write_pictures(scn: Scenario, model: Plan, out: Path, phase: int | None,
-                   animate: str | None, search: FootstepPlan | None = None) -> None:
+                   animate: str | None, search: FootstepPlan | None = None,
+                   say: Callable[[str], None] = print) -> UserError | None:
     """The snapshots (PLAN.png), the failed search's picture (PLAN-search.png) when the
-    footstep search failed, Fig. 6 of phase `phase`, and the animation."""
+    footstep search failed, Fig. 6 of phase `phase`, and the animation; `say` tells each
+    written (inside an `output_batch`, once they all are). Returns the refusal of a `phase`
+    without a trajectory (known only now: the plan and its pictures so far are kept), for
+    the caller to raise once they are written."""
     from planning.figures import animate_plan, phase_figure, search_figure, snapshots_figure
     from planning.plan_model import plan_dict
+    from rb_drake.errors import one_line
     from rb_drake.files import atomic_save_figure
     from rbp.commands.common import UserError
 
     plan = plan_dict(model)  # planning.figures draws the plan-file object
     with_motion = [k for k, p in enumerate(model.phases) if p.motion is not None]
     picture = atomic_save_figure(snapshots_figure(scn, plan), out.with_suffix(".png"), dpi=110)
-    print(f"wrote {picture}")
+    say(f"wrote {picture}")
     if search is not None and not search.success:
         path = out.with_name(f"{out.stem}-search.png")
         atomic_save_figure(search_figure(scn, search), path, dpi=110)
-        print(f"wrote {path}")
-    if phase is not None and phase not in with_motion:  # known only now: the plan is kept
+        say(f"wrote {path}")
+    if phase is not None and phase not in with_motion:
         count = len(model.phases)
-        raise UserError(f"--phase-figure: the plan has {count} phase{'' if count == 1 else 's'}"
-                        f" ({out} is written), and phase {phase} has no trajectory; phases "
-                        f"with one: {with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
+        return UserError(f"--phase-figure: the plan has {count} phase{'' if count == 1 else 's'}"
+                         f" ({out} is written), and phase {phase} has no trajectory; phases "
+                         f"with one: {with_motion[:10]}{'...' if len(with_motion) > 10 else ''}")
     if phase is not None:
         fig = out.with_name(f"{out.stem}-phase{phase}.png")
         atomic_save_figure(phase_figure(plan, phase), fig, dpi=110)
-        print(f"wrote {fig}")
+        say(f"wrote {fig}")
     if animate and not any(p.steps for p in model.phases):  # a search that found no route
-        print(f"--animate: {animate} not written: the plan has no configurations to animate",
-              file=sys.stderr)
+        print(one_line(f"--animate: {animate} not written: the plan has no configurations to "
+                       "animate"), file=sys.stderr)
     elif animate:
         animate_plan(scn, plan, animate)
-        print(f"wrote {animate}")
+        say(f"wrote {animate}")
+    return None
 
 
 ANIMATION_SUFFIXES = (".gif", ".mp4")

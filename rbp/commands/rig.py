@@ -47,7 +47,7 @@ def add_rig_commands(subparsers) -> None:
                      help="seconds between commands, 0.01 to 1 (default 0.1)")
     run.add_argument("--log", default="rig.lcm",
                      help="LCM log of every message (default rig.lcm)")
-    run.add_argument("--scenario", metavar="CAVE",
+    run.add_argument("--scenario", metavar="CAVE", type=input_file,
                      help="a scenario file or a bundled cave's name: refuse the plan unless it "
                           "was made for this cave and robot (the rig's boom length and tension "
                           "clamps are the plan's robot's)")
@@ -144,8 +144,8 @@ def cmd_rig_run(args: argparse.Namespace) -> int:
         where = "" if (e.field or "").startswith("--") else f"{path}: "
         raise UserError(f"{where}{e}") from None
     stance = plan["phases"][args.phase]["stance"]
-    print(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands sent, "
-          f"{run.statuses} statuses received; wrote {run.log}")
+    print(one_line(f"{path}: phase {args.phase} on {run.lcm_url}: {run.commands} commands "
+                   f"sent, {run.statuses} statuses received; wrote {run.log}"))
     for line in run.safety.messages(config):  # what the safety guards did, if anything
         print(f"  safety: {line}")
     if not len(run.live.time):
@@ -197,5 +197,5 @@ def cmd_rig_report(args: argparse.Namespace) -> int:
         channel = RigLcmConfig().status_channel
         raise UserError(f"{args.log}: {channel}: no status messages to plot")
     atomic_save_figure(report_figure(log), args.output, dpi=args.dpi)
-    print(f"wrote {args.output}")
+    print(one_line(f"wrote {args.output}"))
     return EXIT_OK

@@ -44,7 +44,7 @@ def add_simulate_command(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--no-verify", dest="verify", action="store_false",
                    help="simulate the plan without verifying it first (experiments only; "
                         "warns on stderr)")
-    p.add_argument("--scenario", metavar="CAVE",
+    p.add_argument("--scenario", metavar="CAVE", type=input_file,
                    help="a scenario file or a bundled cave's name: refuse the plan unless it "
                         "was made for this cave and robot (the simulation uses the ones the "
                         "plan embeds)")
@@ -59,11 +59,17 @@ def _load_plan(path: Path, verify: bool = True,
     from rbp.commands.common import read_plan, refuse_wrong_plan
 
     plan = read_plan(path)
-    if not plan["success"]:  # a valid plan of no route: a failed outcome (1), not bad input (2)
+    # a valid plan of no route: a failed outcome (1), not bad input (2); a partial climb
+    # (`rbp plan --partial`) is a verified climb, simulated as `rbp rig-run` flies it
+    if not plan["success"] and plan.get("partial") is None:
         print(one_line(f"error: {path}: success: the plan found no route ({plan['reason']}); "
                        "nothing to simulate"), file=sys.stderr)
         return None
-    return None if refuse_wrong_plan(plan, path, verify, scenario=scenario) else plan
+    # executes: a footstep plan is flown along the straight lines between its steps, as
+    # rig-run commands them, which rbp check leaves unverified (simulate flew one whose booms
+    # crossed rock between steps, while rig-run refused it)
+    return None if refuse_wrong_plan(plan, path, verify, executes=True,
+                                     scenario=scenario) else plan
 
 
 def _progress(label: str):
@@ -125,7 +131,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if not getattr(args, "verify", True):
         warn_unverified(path)
     # imported once the plan is accepted: a refused plan costs its reading only
-    from rb_drake.files import atomic_write_text
+    from rb_drake.files import atomic_write_text, output_batch
     from systems.diagram import ClimbSimulator, SimulationError
     from systems.montecarlo import FootstepReplanner, monte_carlo, retry_replanner
 
@@ -151,9 +157,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     flown = (f"{traj.end_time:.1f} s, {plural(len(traj.phases), 'phase')}" if stop is None
              else f"{float(record.times[-1]):.1f} of {traj.end_time:.1f} s, "
                   f"{stop.phase + 1} of {plural(len(traj.phases), 'phase')}")
-    print(f"{path}: simulated {flown}, in {wall:.1f} s; "
-          f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
-          f"heading {np.degrees(tracking['max_heading_error']):.2f} deg")
+    print(one_line(f"{path}: simulated {flown}, in {wall:.1f} s; "
+                   f"tracking error max {1000 * tracking['max_position_error']:.2f} mm, "
+                   f"heading {np.degrees(tracking['max_heading_error']):.2f} deg"))
+    if plan.get("partial") is not None:  # its successes climb to its end, not to the goal
+        print(f"  a partial climb: it ends {plan['partial']['goal_distance_m']:.2f} m from the "
+              "goal; a climb succeeds when it reaches the plan's end")
     if stop is not None:  # said "simulated 182.0 s, 15 phases" of a climb stopped at 87 s
         print(one_line(f"error: {path}: the climb stopped in phase {stop.phase} "
                        f"({traj.phases[stop.phase].kind}) at t = {stop.time:.2f} s: boom "
@@ -207,25 +216,37 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                      if r.outcomes else ""))
         results |= mc.to_json()
         results["plan"], results["tracking"] = utf8_text(str(path)), tracking
-    if args.json:
-        atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {args.json}")
-    if args.meshcat or args.html:
-        from systems.meshcat_view import save_html, show_climb, start_meshcat
+    with output_batch() as batch:  # --json and --html, or (a full disk) neither
+        if args.json:
+            atomic_write_text(args.json, json.dumps(results, indent=1, allow_nan=False) + "\n")
+            batch.say(f"wrote {args.json}")
+        if args.meshcat or args.html:
+            from systems.meshcat_view import (
+                MAX_REPLAY_FRAMES,
+                natural_frames,
+                save_html,
+                show_climb,
+                start_meshcat,
+            )
 
-        # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL is
-        # printed below when it is wanted (--meshcat), so an accepted --html run prints nothing
-        logging.getLogger("drake").setLevel(logging.WARNING)
-        meshcat = start_meshcat()
-        show_climb(meshcat, record)
-        if args.html:
-            save_html(meshcat, args.html)
-            print(f"wrote {args.html}")
-        if args.meshcat:
-            print(f"Meshcat: {meshcat.web_url()}")
-            if sys.stdin.isatty():
-                try:
-                    input("press Enter to quit ")
-                except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
-                    print(file=sys.stderr)
+            # Drake logs "Meshcat listening for connections at ..." at INFO on stderr; the URL
+            # is printed below when it is wanted (--meshcat): an accepted --html run prints none
+            logging.getLogger("drake").setLevel(logging.WARNING)
+            meshcat = start_meshcat()
+            frames = show_climb(meshcat, record)
+            natural = natural_frames(float(record.times[-1]))
+            if natural > MAX_REPLAY_FRAMES:  # the page grew without end with the climb
+                batch.say(f"replay: {frames:,} frames spread over the {record.times[-1]:.0f} s "
+                          f"climb, at most {MAX_REPLAY_FRAMES:,} (one every 0.2 s of climb "
+                          f"would be {natural:,}; the limit keeps an --html page near 45 MB)")
+            if args.html:
+                save_html(meshcat, args.html)
+                batch.say(f"wrote {args.html}")
+    if args.meshcat:
+        print(f"Meshcat: {meshcat.web_url()}")
+        if sys.stdin.isatty():
+            try:
+                input("press Enter to quit ")
+            except EOFError:  # Ctrl-D at the prompt quits as Enter does (a traceback)
+                print(file=sys.stderr)
     return EXIT_OK if stop is None else EXIT_FAILED  # a climb that cannot go on failed

@@ -9,8 +9,9 @@ time per cell; and, from 200 poses sampled in each cell, how many cells hold a f
 
     RBP_THREADS=1 python -m experiments.cell_bound_measure [--per-stance 120]
 
-With `--three-stances`: the start stance's four 3-stances instead (each free gripper at its
-anchor), the LP-free `three_stance_bound` beside `robustness_bound` on the same cells.
+With `--lp-free`: the start stance and its four 3-stances (each free gripper at its anchor),
+the LP-free bounds (`three_stance_bound`, `four_stance_bound`) beside `robustness_bound` on
+the same cells.
 """
 
 from __future__ import annotations
@@ -60,12 +61,13 @@ def main() -> None:
     ap.add_argument("--neighbours", type=int, default=3)
     ap.add_argument("--depth", type=int, default=0,
                     help="also try splitting unproven cells (branch and bound) to this depth")
-    ap.add_argument("--three-stances", action="store_true",
-                    help="compare the LP-free 3-stance bound with the LP bound on 3-stances")
+    ap.add_argument("--lp-free", action="store_true",
+                    help="compare the LP-free bounds with the LP bound on the start stance and "
+                         "its 3-stances")
     args = ap.parse_args()
     rng = np.random.default_rng(30)
-    if args.three_stances:
-        three_stance_comparison(args.per_stance, rng)
+    if args.lp_free:
+        lp_free_comparison(args.per_stance, rng)
         return
     rows = []
     split_time: list[float] = []
@@ -144,17 +146,18 @@ def main() -> None:
               f"{(upper[sel] < lpm[sel] - slack).mean():.3f}")
 
 
-def three_stance_comparison(per_stance: int, rng: np.random.Generator) -> None:
-    """On each cave's start 3-stances: cells at lattice points within +-0.3 m and +-30 deg of
-    the start pose, infeasible at their centre and not excluded by geometry; the share that
-    each bound proves (U < log p_min) and its time per cell."""
-    rows = []
+def lp_free_comparison(per_stance: int, rng: np.random.Generator) -> None:
+    """On each cave's start stance and its 3-stances: cells at lattice points within +-0.3 m
+    and +-30 deg of the start pose, infeasible at their centre and not excluded by geometry;
+    the share that each bound proves (U < log p_min) and its time per cell."""
+    rows: dict[str, list] = {"4-stance": [], "3-stance": []}
     for kind, seed in CAVES:
         scn = make_cave(kind, seed, (4.5, 5.0))
         grid = lattice_around(np.array(scn.start_pose))
         whole = scn.stance(tuple(scn.start_stance))
-        for j in range(4):
-            stance, tip = whole.without(j), whole.positions[j].copy()
+        configs = [(whole, None)] + [(whole.without(j), whole.positions[j].copy())
+                                     for j in range(4)]
+        for stance, tip in configs:
             chk = check_poses(scn, stance, grid, free_tip=tip)
             cand = np.flatnonzero(~chk.feasible)
             rng.shuffle(cand)
@@ -168,21 +171,25 @@ def three_stance_comparison(per_stance: int, rng: np.random.Generator) -> None:
                     continue
                 picked += 1
                 t = time.perf_counter()
-                fast = ce.three_stance_bound(scn, stance, centre, HALF, tip, geo=geo).upper
+                fast = (ce.four_stance_bound(scn, stance, centre, HALF, geo=geo) if tip is None
+                        else ce.three_stance_bound(scn, stance, centre, HALF, tip,
+                                                   geo=geo).upper)
                 t_fast = time.perf_counter() - t
                 t = time.perf_counter()
                 lp = cb.robustness_bound(scn, stance, centre, HALF, tip, geo=geo).upper
                 t_lp = time.perf_counter() - t
-                rows.append((fast, lp, t_fast, t_lp, scn.robot.log_p_min))
-            print(f"{kind} {seed} boom {j} free: {picked} cells", flush=True)
-    table = np.array(rows, dtype=float)
-    fast, lp, t_fast, t_lp, lpm = table.T
-    pf, pl = fast < lpm, lp < lpm
-    print(f"cells {len(rows)}: LP proves {pl.mean():.3f}, 3-stance bound {pf.mean():.3f} "
-          f"({(pf & pl).sum()} of the LP's {pl.sum()}; {(pf & ~pl).sum()} the LP does not), "
-          f"either {(pf | pl).mean():.3f}; time per cell: 3-stance median "
-          f"{1e3 * np.median(t_fast):.2f} ms (mean {1e3 * t_fast.mean():.2f}), LP median "
-          f"{1e3 * np.median(t_lp):.1f} ms (mean {1e3 * t_lp.mean():.1f})")
+                rows["4-stance" if tip is None else "3-stance"].append(
+                    (fast, lp, t_fast, t_lp, scn.robot.log_p_min))
+            print(f"{kind} {seed} {stance.ids}: {picked} cells", flush=True)
+    for label, got in rows.items():
+        table = np.array(got, dtype=float)
+        fast, lp, t_fast, t_lp, lpm = table.T
+        pf, pl = fast < lpm, lp < lpm
+        print(f"{label}, {len(got)} cells: LP proves {pl.mean():.3f}, LP-free bound "
+              f"{pf.mean():.3f} ({(pf & pl).sum()} of the LP's {pl.sum()}; {(pf & ~pl).sum()} "
+              f"the LP does not); time per cell: LP-free median {1e3 * np.median(t_fast):.2f} "
+              f"ms (mean {1e3 * t_fast.mean():.2f}), LP median {1e3 * np.median(t_lp):.1f} ms "
+              f"(mean {1e3 * t_lp.mean():.1f})")
 
 
 if __name__ == "__main__":

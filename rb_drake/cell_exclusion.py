@@ -5,8 +5,8 @@ by the search).
   cell without a linear program: an interval enclosure of the tensions (the Taylor model's
   equilibrium, contracted within the tension bounds) and a tangent of the concave sum of log P
   that keeps their correlation. About 0.5 ms a cell against `robustness_bound`'s 1.7 ms median
-  (6.7 ms mean), and looser where the wrench matrix is nearly singular: on the start 3-stances
-  of three benchmark caves without a route it proves 85 % of the cells the LP bound proves
+  (7.8 ms mean), and looser where the wrench matrix is nearly singular: on the start 3-stances
+  of three benchmark caves without a route it proves 86 % of the cells the LP bound proves
   (`python -m experiments.cell_bound_measure --lp-free`, docs/benchmarks.md).
 * `four_stance_bound`: for a 4-stance, whose tensions form a line `p + t n` (n the null
   vector of the wrench matrix), the same without a linear program: t bounded by the tension
@@ -141,43 +141,6 @@ def three_stance_bound(world: World, stance: Stance, centre: np.ndarray, half: n
     return ThreeStanceBound(upper, f_lo, f_hi)
 
 
-def cell_probability_excluded(world: World, stance: Stance, centre: np.ndarray,
-                              half: np.ndarray, free_tip: np.ndarray | None = None,
-                              depth: int = 0) -> bool:
-    """Whether no pose of the cell has r >= log p_min (the probability rule, or statics).
-
-    `depth` > 0: where the cell's bound does not prove it, split the cell into its 8 halves
-    and prove each (branch and bound, to that depth); a sub-cell whose centre pose has
-    r >= log p_min stops the search (no bound can prove it)."""
-    log_p_min = world.robot.log_p_min
-    centre = np.asarray(centre, dtype=float)
-    half = np.asarray(half, dtype=float)
-    if probability_upper(world, stance, centre, half, free_tip) < log_p_min:
-        return True
-    if depth <= 0:
-        return False
-    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    subs = centre + signs * (half / 2)
-    r = check_poses(world, stance, subs, free_tip=free_tip, full=True).allocation.robustness
-    if np.any(r >= log_p_min):
-        return False
-    return all(cell_probability_excluded(world, stance, c, half / 2, free_tip, depth - 1)
-               for c in subs)
-
-
-def cell_excluded(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
-                  free_tip: np.ndarray | None = None) -> Reason | None:
-    """A rule no pose of the cell passes (geometry first, then the probability bound; a cell
-    none of whose poses balances within the tension bounds gives PROBABILITY too, as its r is
-    -inf), or None."""
-    geo = cell_geometry(world.robot, stance, centre, half, free_tip)
-    reason = cell_geometry_excluded(world.robot, stance, centre, half, free_tip, geo)
-    if reason is not None:
-        return reason
-    upper = probability_upper(world, stance, centre, half, free_tip, geo=geo)
-    return Reason.PROBABILITY if upper < world.robot.log_p_min else None
-
-
 FOUR_STANCE_GRID = 64  # pieces of the null-space interval over which r is bounded
 
 
@@ -253,6 +216,43 @@ def four_stance_bound(world: World, stance: Stance, centre: np.ndarray, half: np
     terms = np.stack([grasp_upper(f_least[:, i], gb, i) for i in range(NUM_BOOMS)], axis=1)
     piece = np.maximum(terms[:-1], terms[1:]).sum(axis=1)
     return float(piece.max()) + LP_SLACK
+
+
+def cell_probability_excluded(world: World, stance: Stance, centre: np.ndarray,
+                              half: np.ndarray, free_tip: np.ndarray | None = None,
+                              depth: int = 0) -> bool:
+    """Whether no pose of the cell has r >= log p_min (the probability rule, or statics).
+
+    `depth` > 0: where the cell's bound does not prove it, split the cell into its 8 halves
+    and prove each (branch and bound, to that depth); a sub-cell whose centre pose has
+    r >= log p_min stops the search (no bound can prove it)."""
+    log_p_min = world.robot.log_p_min
+    centre = np.asarray(centre, dtype=float)
+    half = np.asarray(half, dtype=float)
+    if probability_upper(world, stance, centre, half, free_tip) < log_p_min:
+        return True
+    if depth <= 0:
+        return False
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    subs = centre + signs * (half / 2)
+    r = check_poses(world, stance, subs, free_tip=free_tip, full=True).allocation.robustness
+    if np.any(r >= log_p_min):
+        return False
+    return all(cell_probability_excluded(world, stance, c, half / 2, free_tip, depth - 1)
+               for c in subs)
+
+
+def cell_excluded(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
+                  free_tip: np.ndarray | None = None) -> Reason | None:
+    """A rule no pose of the cell passes (geometry first, then the probability bound; a cell
+    none of whose poses balances within the tension bounds gives PROBABILITY too, as its r is
+    -inf), or None."""
+    geo = cell_geometry(world.robot, stance, centre, half, free_tip)
+    reason = cell_geometry_excluded(world.robot, stance, centre, half, free_tip, geo)
+    if reason is not None:
+        return reason
+    upper = probability_upper(world, stance, centre, half, free_tip, geo=geo)
+    return Reason.PROBABILITY if upper < world.robot.log_p_min else None
 
 
 def probability_upper(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,

@@ -33,6 +33,8 @@ from rb_drake.cell_bounds import (
     LP_SLACK,
     TENSION_SLACK,
     CellGeometry,
+    CellStatics,
+    GraspBounds,
     cell_geometry,
     cell_geometry_excluded,
     cell_statics,
@@ -57,6 +59,37 @@ class ThreeStanceBound(NamedTuple):
     f_hi: np.ndarray
 
 
+class _CellModel(NamedTuple):
+    """What both LP-free bounds start from, on the attached booms' columns: the grasp bounds,
+    the interval load, and the Taylor model A_0 + sum_k J[k] dq_k (+-E) of the wrench matrix."""
+
+    gb: GraspBounds
+    cs: CellStatics
+    A0: np.ndarray
+    J: list[np.ndarray]
+    E: np.ndarray
+
+
+def _cell_model(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
+                free_tip: np.ndarray | None, geo: CellGeometry | None) -> _CellModel | float:
+    """The cell's model, or the bound it already settles: -inf where some grasp is dead at
+    every pose (log P = -inf), inf where the Taylor model is not finite (no bound)."""
+    robot = world.robot
+    g = geo if geo is not None else cell_geometry(robot, stance, centre, half, free_tip)
+    gb = grasp_bounds(stance, g)
+    if gb.dead.any():
+        return -math.inf
+    att = stance.attached
+    cs = cell_statics(robot, world.gravity_vector, stance, centre, half, g)
+    tm = cell_taylor(robot, stance, centre, half, g)
+    A0, E = tm.A0[:, att], tm.E[:, att]
+    J = [tm.J[:, att, k] for k in range(3)]
+    if not (np.isfinite(A0).all() and np.isfinite(E).all()
+            and all(np.isfinite(j).all() for j in J)):
+        return math.inf
+    return _CellModel(gb, cs, A0, J, E)
+
+
 def three_stance_bound(world: World, stance: Stance, centre: np.ndarray, half: np.ndarray,
                        free_tip: np.ndarray, rounds: int = 8,
                        geo: CellGeometry | None = None) -> ThreeStanceBound:
@@ -79,22 +112,14 @@ def three_stance_bound(world: World, stance: Stance, centre: np.ndarray, half: n
     (`robustness_bound` takes 3-15 ms); looser where A_0 is nearly singular."""
     robot = world.robot
     nan4 = np.full(NUM_BOOMS, np.nan)
-    g = geo if geo is not None else cell_geometry(robot, stance, centre, half, free_tip)
-    gb = grasp_bounds(stance, g)
-    if gb.dead.any():
-        return ThreeStanceBound(-math.inf, nan4, nan4)
-    att = stance.attached
-    idx = np.flatnonzero(att)
+    idx = np.flatnonzero(stance.attached)
     if len(idx) != 3:
         raise ValueError(f"three_stance_bound needs a 3-stance, this one holds {len(idx)} anchors")
-    cs = cell_statics(robot, world.gravity_vector, stance, centre, half, g)
-    tm = cell_taylor(robot, stance, centre, half, g)
-    A0, E = tm.A0[:, att], tm.E[:, att]
-    J = [tm.J[:, att, k] for k in range(3)]
+    model = _cell_model(world, stance, centre, half, free_tip, geo)
+    if not isinstance(model, _CellModel):
+        return ThreeStanceBound(model, nan4, nan4)
+    gb, cs, A0, J, E = model
     unbounded = ThreeStanceBound(math.inf, nan4, nan4)
-    if not (np.isfinite(A0).all() and np.isfinite(E).all() and all(np.isfinite(j).all()
-                                                                     for j in J)):
-        return unbounded
     with np.errstate(all="ignore"):
         try:
             C = np.linalg.inv(A0)
@@ -159,22 +184,16 @@ def four_stance_bound(world: World, stance: Stance, centre: np.ndarray, half: np
     values bounds it, and the largest piece's bound is returned. Looser than the LP bound
     (the d_i move independently), far cheaper."""
     robot = world.robot
-    g = geo if geo is not None else cell_geometry(robot, stance, centre, half)
-    gb = grasp_bounds(stance, g)
-    if gb.dead.any():
-        return -math.inf
     if not stance.attached.all():
         raise ValueError("four_stance_bound needs a 4-stance")
-    cs = cell_statics(robot, world.gravity_vector, stance, centre, half, g)
-    tm = cell_taylor(robot, stance, centre, half, g)
-    A0, E, J = tm.A0, tm.E, [tm.J[:, :, k] for k in range(3)]
-    if not (np.isfinite(A0).all() and np.isfinite(E).all()
-            and all(np.isfinite(j).all() for j in J)):
-        return math.inf
-    _, sing, vt = np.linalg.svd(A0)
+    model = _cell_model(world, stance, centre, half, None, geo)
+    if not isinstance(model, _CellModel):
+        return model
+    gb, cs, A0, J, E = model
+    u, sing, vt = np.linalg.svd(A0)
     if sing[-1] <= 1e-9 * max(sing[0], 1e-300):
         return math.inf
-    P = np.linalg.pinv(A0)
+    P = vt[:3].T @ (u.T / sing[:, None])  # the pseudo-inverse, from the SVD already made
     aP = np.abs(P)
     n = vt[-1]
     p = P @ cs.b_c

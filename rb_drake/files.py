@@ -455,9 +455,7 @@ def _copy_in_place(tmp: str, fd: int) -> None:
                 os.ftruncate(fd, old)
                 if e.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
                     raise
-        with open(tmp, "rb") as src:
-            while chunk := src.read(_CHUNK):
-                _write_all(fd, chunk)
+        _copy_into(tmp, fd)
         os.ftruncate(fd, size)
     finally:
         os.close(fd)
@@ -472,9 +470,7 @@ def _copy_to_descriptor(tmp: str, fd: int) -> None:
     appending = bool(fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_APPEND)
     start = os.fstat(fd).st_size if appending else os.lseek(fd, 0, os.SEEK_CUR)
     try:
-        with open(tmp, "rb") as src:
-            while chunk := src.read(_CHUNK):
-                _write_all(fd, chunk)
+        _copy_into(tmp, fd)
     except OSError:
         with contextlib.suppress(OSError):  # a full disk: the file as it was
             os.ftruncate(fd, start)
@@ -482,10 +478,13 @@ def _copy_to_descriptor(tmp: str, fd: int) -> None:
         raise
 
 
-def _write_all(fd: int, data: bytes) -> None:
-    view = memoryview(data)
-    while view:
-        view = view[os.write(fd, view):]
+def _copy_into(tmp: str, fd: int) -> None:
+    """Write the whole of file `tmp` to `fd` at its offset, a chunk at a time."""
+    with open(tmp, "rb") as src:
+        while chunk := src.read(_CHUNK):
+            view = memoryview(chunk)
+            while view:
+                view = view[os.write(fd, view):]
 
 
 def _not_regular(target: Path) -> str | None:
